@@ -1,0 +1,1 @@
+"""Offline analysis: flight records, replay and reports (the same code as onboard)."""

@@ -1,0 +1,113 @@
+"""`sysid identify`: CSV records in, one batch identification out."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from agent.analysis.records import Record, RecordError, read_record, select, trim_values
+from agent.config import Identification as IdentConfig
+from agent.ident import Experiment, Identification, Settings, identify
+
+# Two records are one batch only if their sample times agree this closely.
+DT_TOLERANCE = 0.01
+
+
+@dataclass(frozen=True)
+class Request:
+    """What to identify, as given on the command line (already merged with config)."""
+
+    paths: tuple[Path, ...]
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    start: float | None = None
+    end: float | None = None
+    trim_seconds: float = 0.5  # 0: no trim removal
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """The identification with what it was computed from."""
+
+    result: Identification
+    trim: list[dict[str, float]]  # per record, in order
+    records: int
+    samples: int
+
+
+def parse_trim(text: str) -> float:
+    """`first:SECONDS` → SECONDS, `none` → 0 (no trim removal); ValueError otherwise."""
+    if text.strip().lower() == "none":
+        return 0.0
+    kind, _, value = text.partition(":")
+    if kind.strip().lower() != "first" or not value:
+        raise ValueError(f"--trim must be first:SECONDS or none, got {text!r}")
+    seconds = float(value)
+    if not seconds > 0:
+        raise ValueError(f"--trim first:SECONDS needs SECONDS > 0, got {value}")
+    return seconds
+
+
+def load_experiments(
+    request: Request,
+) -> tuple[list[Experiment], float, list[dict[str, float]], int]:
+    """Read, select and de-trim every record; all must share one sample time."""
+    overlap = set(request.inputs) & set(request.outputs)
+    if overlap:
+        raise RecordError(f"column(s) {', '.join(sorted(overlap))} are both input and output")
+    names = list(request.inputs) + list(request.outputs)
+    records: list[Record] = []
+    for path in request.paths:
+        records.append(select(read_record(path, names), request.start, request.end))
+    dt = records[0].dt
+    for rec in records[1:]:
+        if abs(rec.dt - dt) > DT_TOLERANCE * dt:
+            raise RecordError(
+                f"{rec.path} is sampled every {rec.dt:.6g} s but {records[0].path} every "
+                f"{dt:.6g} s; a batch needs one sample rate"
+            )
+    experiments, trim = [], []
+    for rec in records:
+        offsets = (
+            trim_values(rec, names, request.trim_seconds)
+            if request.trim_seconds > 0
+            else dict.fromkeys(names, 0.0)
+        )
+        trim.append(offsets)
+        u = rec.matrix(request.inputs) - [offsets[n] for n in request.inputs]
+        y = rec.matrix(request.outputs) - [offsets[n] for n in request.outputs]
+        experiments.append(Experiment(u=u, y=y))
+    return experiments, dt, trim, sum(r.time.size for r in records)
+
+
+def settings_from(config: IdentConfig, markov: int | None, order: int | None) -> Settings:
+    """Identification settings: command-line values override the config file."""
+    return Settings(
+        markov=markov if markov is not None else _auto(config.markov),
+        markov_max=config.markov_max,
+        order=order if order is not None else _auto(config.order),
+        order_max=config.order_max,
+        estimate_d=config.estimate_d,
+        regularization=config.regularization,
+        hankel_blocks=config.hankel_blocks,
+    )
+
+
+def _auto(value: int | str) -> int | None:
+    return None if value == "auto" else int(value)
+
+
+def run(request: Request, config: IdentConfig, settings: Settings) -> Outcome:
+    """Identify the request's records as one batch."""
+    experiments, dt, trim, samples = load_experiments(request)
+    roles: Sequence[str | None] = [config.channels.role_of(n) for n in request.outputs]
+    result = identify(
+        experiments,
+        dt,
+        input_names=request.inputs,
+        output_names=request.outputs,
+        output_roles=roles,
+        settings=settings,
+    )
+    return Outcome(result=result, trim=trim, records=len(experiments), samples=samples)

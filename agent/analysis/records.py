@@ -1,0 +1,148 @@
+"""Flight records as CSV: reading, validation, time selection and trim removal.
+
+A record is a CSV file with a header row, a `time` column in seconds (uniformly sampled) and
+named numeric columns. Every problem is reported as a `RecordError` naming the file, the line
+and the column, so a bad file is fixed rather than debugged.
+"""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+# Sampling jitter allowed, as a fraction of the median step: loggers stamp samples with some
+# scheduling noise, but beyond 1 % the record is not uniformly sampled and OKID's
+# discrete-time model would be wrong.
+MAX_JITTER = 0.01
+# Larger files are not flight records of one excitation; refuse rather than exhaust memory.
+MAX_ROWS = 5_000_000
+
+
+class RecordError(ValueError):
+    """A record cannot be used as given; the message says where and why."""
+
+
+@dataclass(frozen=True)
+class Record:
+    """Selected columns of one CSV record, uniformly sampled."""
+
+    path: Path
+    time: np.ndarray
+    columns: dict[str, np.ndarray]
+    dt: float
+
+    def matrix(self, names: Sequence[str]) -> np.ndarray:
+        """The named columns as an (l × len(names)) array."""
+        return np.column_stack([self.columns[n] for n in names])
+
+
+def read_record(path: str | Path, names: Sequence[str]) -> Record:
+    """Read `time` and the named columns; check they are finite and uniformly sampled."""
+    path = Path(path)
+    try:
+        with path.open(newline="", encoding="utf-8") as handle:
+            reader = csv.reader(handle)
+            header = next(reader, None)
+            if header is None:
+                raise RecordError(f"{path}: the file is empty; expected a header row")
+            header = [h.strip() for h in header]
+            index = _column_index(path, header, ["time", *names])
+            values = _read_rows(path, reader, len(header), index, ["time", *names])
+    except OSError as exc:
+        raise RecordError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
+    except UnicodeDecodeError as exc:
+        raise RecordError(f"{path}: not a text CSV file ({exc.reason})") from exc
+    time = values[:, 0]
+    columns = {name: values[:, j + 1] for j, name in enumerate(names)}
+    return Record(path=path, time=time, columns=columns, dt=_sample_time(path, time))
+
+
+def _column_index(path: Path, header: list[str], wanted: list[str]) -> list[int]:
+    missing = [n for n in dict.fromkeys(wanted) if n not in header]
+    if missing:
+        raise RecordError(
+            f"{path}: no column(s) {', '.join(repr(n) for n in missing)}; "
+            f"the header has {', '.join(header)}"
+        )
+    duplicated = sorted({n for n in wanted if header.count(n) > 1})
+    if duplicated:
+        raise RecordError(f"{path}: column(s) {', '.join(duplicated)} appear more than once")
+    return [header.index(n) for n in wanted]
+
+
+def _read_rows(
+    path: Path, reader: csv.reader, width: int, index: list[int], names: list[str]
+) -> np.ndarray:
+    rows: list[list[float]] = []
+    for line_no, row in enumerate(reader, start=2):
+        if not row or all(not cell.strip() for cell in row):
+            continue
+        if len(row) != width:
+            raise RecordError(f"{path} line {line_no}: {len(row)} fields, the header has {width}")
+        if len(rows) >= MAX_ROWS:
+            raise RecordError(f"{path}: more than {MAX_ROWS} rows; split the record")
+        parsed = []
+        for j, name in zip(index, names, strict=True):
+            cell = row[j].strip()
+            try:
+                value = float(cell)
+            except ValueError:
+                raise RecordError(
+                    f"{path} line {line_no}: {cell!r} in column '{name}' is not a number"
+                ) from None
+            if not np.isfinite(value):
+                raise RecordError(
+                    f"{path} line {line_no}: non-finite value {cell!r} in column '{name}'; "
+                    "remove or repair the row — gaps cannot be identified across"
+                )
+            parsed.append(value)
+        rows.append(parsed)
+    if len(rows) < 2:
+        raise RecordError(f"{path}: {len(rows)} data row(s); a record needs at least 2")
+    return np.asarray(rows)
+
+
+def _sample_time(path: Path, time: np.ndarray) -> float:
+    steps = np.diff(time)
+    if np.any(steps <= 0):
+        k = int(np.argmax(steps <= 0))
+        raise RecordError(
+            f"{path}: time does not increase at data row {k + 2} "
+            f"({time[k]:.6g} s → {time[k + 1]:.6g} s)"
+        )
+    dt = float(np.median(steps))
+    jitter = np.abs(steps - dt) / dt
+    if jitter.max() > MAX_JITTER:
+        k = int(np.argmax(jitter))
+        raise RecordError(
+            f"{path}: sampling is not uniform: step {steps[k]:.6g} s at {time[k]:.6g} s against "
+            f"a median of {dt:.6g} s ({100 * jitter[k]:.1f} % > {100 * MAX_JITTER:.0f} %); "
+            "resample the record or cut out the gap with --start/--end"
+        )
+    return dt
+
+
+def select(record: Record, start: float | None, end: float | None) -> Record:
+    """The samples with start ≤ time ≤ end."""
+    keep = np.ones(record.time.size, dtype=bool)
+    if start is not None:
+        keep &= record.time >= start
+    if end is not None:
+        keep &= record.time <= end
+    if keep.sum() < 2:
+        raise RecordError(
+            f"{record.path}: fewer than 2 samples between {start} s and {end} s "
+            f"(the record spans {record.time[0]:.6g}…{record.time[-1]:.6g} s)"
+        )
+    columns = {name: values[keep] for name, values in record.columns.items()}
+    return Record(path=record.path, time=record.time[keep], columns=columns, dt=record.dt)
+
+
+def trim_values(record: Record, names: Sequence[str], seconds: float) -> dict[str, float]:
+    """Mean of each named column over the first `seconds` of the record (at least one sample)."""
+    count = max(1, int(np.sum(record.time < record.time[0] + seconds - 1e-9 * record.dt)))
+    return {name: float(np.mean(record.columns[name][:count])) for name in names}

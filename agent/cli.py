@@ -1,0 +1,147 @@
+"""The `sysid` command: parse arguments, load config, call in. Exit 0 ok, 1 failed, 2 bad input."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from agent.analysis import identify as identify_cmd
+from agent.analysis.records import RecordError
+from agent.config import Config, ConfigError, load_config
+from agent.ident import DataError, IdentificationFailed
+from agent.ident.summary import format_text, to_dict
+
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
+DEFAULT_CONFIG = Path("config.toml")
+
+
+def _names(text: str) -> tuple[str, ...]:
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    if not names:
+        raise argparse.ArgumentTypeError("expected comma-separated column names")
+    return names
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {value}")
+    return value
+
+
+def _trim(text: str) -> float:
+    try:
+        return identify_cmd.parse_trim(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="sysid", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    ident = sub.add_parser(
+        "identify",
+        help="identify a linear model from CSV flight records (OKID/ERA)",
+        description="Identify one linear model from one or more CSV records (a batch).",
+    )
+    ident.add_argument("data", nargs="+", type=Path, metavar="DATA.csv")
+    ident.add_argument("--inputs", type=_names, metavar="NAMES", help="input columns, a,b,…")
+    ident.add_argument("--outputs", type=_names, metavar="NAMES", help="output columns, a,b,…")
+    ident.add_argument(
+        "--axes",
+        choices=("lateral", "longitudinal", "full"),
+        help="take inputs/outputs from the config's channel names for this axis set",
+    )
+    ident.add_argument("--order", type=_positive_int, metavar="N", help="model order")
+    ident.add_argument("--markov", type=_positive_int, metavar="P", help="Markov parameters")
+    ident.add_argument("--start", type=float, metavar="T0", help="first time used, s")
+    ident.add_argument("--end", type=float, metavar="T1", help="last time used, s")
+    ident.add_argument(
+        "--trim",
+        type=_trim,
+        metavar="first:SECONDS|none",
+        help="trim = mean of the first SECONDS of each record (default from config: 0.5)",
+    )
+    ident.add_argument("--config", type=Path, help="config file (default ./config.toml if any)")
+    ident.add_argument("--json", action="store_true", help="print one JSON object")
+
+    config = sub.add_parser("config", help="configuration tools")
+    config_sub = config.add_subparsers(dest="config_command", required=True)
+    check = config_sub.add_parser("check", help="validate a config file")
+    check.add_argument("file", nargs="?", type=Path, default=DEFAULT_CONFIG)
+    return parser
+
+
+def _error(command: str, message: str) -> None:
+    print(f"sysid {command}: error: {message}", file=sys.stderr)
+
+
+def _load_optional_config(path: Path | None) -> Config:
+    if path is not None:
+        return load_config(path)
+    return load_config(DEFAULT_CONFIG) if DEFAULT_CONFIG.exists() else Config()
+
+
+def cmd_identify(args: argparse.Namespace) -> int:
+    try:
+        config = _load_optional_config(args.config).identification
+    except ConfigError as exc:
+        _error("identify", str(exc))
+        return EXIT_BAD_INPUT
+    inputs, outputs = args.inputs, args.outputs
+    if args.axes is not None:
+        axis_inputs, axis_outputs = config.channels.axis_set(args.axes)
+        inputs, outputs = inputs or axis_inputs, outputs or axis_outputs
+    if not inputs or not outputs:
+        _error("identify", "give --inputs and --outputs, or --axes lateral|longitudinal|full")
+        return EXIT_BAD_INPUT
+    trim = config.trim_seconds if args.trim is None else args.trim
+    request = identify_cmd.Request(
+        paths=tuple(args.data),
+        inputs=inputs,
+        outputs=outputs,
+        start=args.start,
+        end=args.end,
+        trim_seconds=trim,
+    )
+    settings = identify_cmd.settings_from(config, args.markov, args.order)
+    try:
+        outcome = identify_cmd.run(request, config, settings)
+    except (RecordError, DataError) as exc:
+        return _fail(args, "bad input", str(exc), EXIT_BAD_INPUT)
+    except IdentificationFailed as exc:
+        return _fail(args, "identification failed", str(exc), EXIT_FAILED)
+    if args.json:
+        print(json.dumps(to_dict(outcome.result, outcome.trim)))
+    else:
+        print(format_text(outcome.result, outcome.records, outcome.samples))
+    return EXIT_OK
+
+
+def _fail(args: argparse.Namespace, kind: str, message: str, code: int) -> int:
+    _error("identify", f"{kind}: {message}")
+    if args.json:
+        print(json.dumps({"error": {"kind": kind, "message": message, "exit": code}}))
+    return code
+
+
+def cmd_config_check(args: argparse.Namespace) -> int:
+    try:
+        load_config(args.file)
+    except ConfigError as exc:
+        _error("config check", str(exc))
+        return EXIT_BAD_INPUT
+    print(f"{args.file}: ok")
+    return EXIT_OK
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the `sysid` console script."""
+    args = build_parser().parse_args(argv)
+    if args.command == "identify":
+        return cmd_identify(args)
+    return cmd_config_check(args)

@@ -1,0 +1,25 @@
+"""The identification core: OKID, ERA, modes and quality indicators, fit — pure numpy/scipy."""
+
+from agent.ident.errors import (
+    ConstantChannelError,
+    ContinuousConversionError,
+    DataError,
+    IdentError,
+    IdentificationFailed,
+    InsufficientDataError,
+)
+from agent.ident.okid import Experiment
+from agent.ident.pipeline import Identification, Settings, identify
+
+__all__ = [
+    "ConstantChannelError",
+    "ContinuousConversionError",
+    "DataError",
+    "Experiment",
+    "IdentError",
+    "Identification",
+    "IdentificationFailed",
+    "InsufficientDataError",
+    "Settings",
+    "identify",
+]

@@ -1,0 +1,115 @@
+"""Discrete ↔ continuous time and state coordinates of identified models.
+
+The measured inputs are sampled and held, so the discrete model is the zero-order-hold
+equivalent of a continuous one: exp([[Ac, Bc], [0, 0]]·Δt) = [[A, B], [0, I]]. Inverting it
+with the principal matrix logarithm (Higham, *Functions of Matrices*, SIAM 2008, ch. 11),
+
+    [[Ac, Bc], [0, 0]] = log([[A, B], [0, I]]) / Δt,
+
+is exact for any A without eigenvalues on the closed negative real axis, including
+eigenvalues at 1 (integrators), where the textbook Bc = (A − I)⁻¹ Ac B is singular.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from agent.ident.errors import ContinuousConversionError, DataError
+
+# A discrete eigenvalue whose imaginary part is below this fraction of its modulus, with a
+# negative real part, lies on the negative real axis for all practical purposes: its
+# logarithm has imaginary part ±π and no real-valued continuous model reproduces it.
+NEGATIVE_AXIS_TOLERANCE = 1e-9
+# Relative round-trip error ‖expm(logm(M)) − M‖₁/‖M‖₁ above which the logarithm is refused.
+LOGM_MAX_ERROR = 1e-6
+# C with a condition number above this is not trusted to map states onto outputs.
+OUTPUT_COORDINATES_MAX_COND = 1e8
+
+
+def discretize(Ac: np.ndarray, Bc: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Zero-order-hold discrete (A, B) of a continuous (Ac, Bc) with step dt."""
+    n, r = Bc.shape
+    block = np.zeros((n + r, n + r))
+    block[:n, :n] = Ac
+    block[:n, n:] = Bc
+    phi = scipy.linalg.expm(block * dt)
+    return phi[:n, :n], phi[:n, n:]
+
+
+def continuous_eigenvalues(discrete: np.ndarray, dt: float) -> np.ndarray:
+    """s = ln(z)/Δt, principal branch (a negative real z maps to the Nyquist line Im s = π/Δt)."""
+    return np.log(np.asarray(discrete, dtype=complex)) / dt
+
+
+def negative_axis_eigenvalues(A: np.ndarray) -> np.ndarray:
+    """Eigenvalues of A on the closed negative real axis (zero included)."""
+    z = np.linalg.eigvals(A)
+    on_axis = (np.abs(z.imag) <= NEGATIVE_AXIS_TOLERANCE * np.abs(z)) & (z.real <= 0)
+    return z[on_axis]
+
+
+def to_continuous(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Continuous (Ac, Bc) whose zero-order-hold discretisation at dt is (A, B)."""
+    if dt <= 0:
+        raise DataError(f"sample time must be positive, got {dt}")
+    bad = negative_axis_eigenvalues(A)
+    if bad.size:
+        raise ContinuousConversionError(
+            "the discrete model has eigenvalue(s) "
+            + ", ".join(f"{z.real:.4g}" for z in bad)
+            + " on the negative real axis: no real continuous-time model has them. They are "
+            "usually a spurious mode at the Nyquist frequency; lower the order or the "
+            "number of Markov parameters"
+        )
+    n, r = B.shape
+    block = np.eye(n + r)
+    block[:n, :n] = A
+    block[:n, n:] = B
+    with warnings.catch_warnings():
+        # scipy warns on its own error estimate; we check the round trip ourselves below.
+        warnings.simplefilter("ignore", RuntimeWarning)
+        log = scipy.linalg.logm(block)
+    if np.iscomplexobj(log):
+        scale = max(np.abs(log).max(), 1.0)
+        if np.abs(log.imag).max() > 1e-9 * scale:
+            raise ContinuousConversionError("the matrix logarithm of the model is not real")
+        log = log.real
+    roundtrip = np.linalg.norm(scipy.linalg.expm(log) - block, 1) / np.linalg.norm(block, 1)
+    if roundtrip > LOGM_MAX_ERROR:
+        raise ContinuousConversionError(
+            f"the matrix logarithm is inaccurate (relative round-trip error {roundtrip:.1e}); "
+            "the model is too ill-conditioned for a continuous-time equivalent"
+        )
+    log = log / dt
+    return log[:n, :n], log[:n, n:]
+
+
+@dataclass(frozen=True)
+class StateSpace:
+    """A state-space model (discrete or continuous, as the caller says)."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+
+    def transformed(self, T: np.ndarray) -> StateSpace:
+        """The same system in coordinates z = T x: (T A T⁻¹, T B, C T⁻¹, D)."""
+        Tinv = np.linalg.inv(T)
+        return StateSpace(T @ self.A @ Tinv, T @ self.B, self.C @ Tinv, self.D)
+
+
+def output_coordinates_transform(C: np.ndarray) -> np.ndarray | None:
+    """T = C when every state is measured (m = n, C well conditioned), else None.
+
+    In coordinates z = C x the states are the measured outputs and A, B read like the
+    thesis's appendix A models.
+    """
+    m, n = C.shape
+    if m != n or np.linalg.cond(C) > OUTPUT_COORDINATES_MAX_COND:
+        return None
+    return C.copy()

@@ -1,0 +1,216 @@
+"""Modes of an identified model and their quality indicators (thesis section 5.2).
+
+In modal coordinates (eq. 5.1) Λ = Ψ⁻¹ A Ψ, B_m = Ψ⁻¹ B (rows b_i), C_m = C Ψ (columns c_i).
+A complex pair is one mode (reported once, Im s > 0); a real eigenvalue is its own mode and
+is never merged with another into a fake pair.
+
+Indicators, each in percent (0–100):
+- MSV, modal singular value: the norm of the mode's share of the pulse response,
+  ‖[c_i b_i, c_i λ_i b_i, …, c_i λ_i^{l−1} b_i]‖ (eq. 5.3–5.4; Juang, *Applied System
+  Identification*, §5.8), over the l = α + β − 1 steps the Hankel matrix spans, relative to the
+  largest. The finite sum is kept on purpose: the closed form ‖c‖‖b‖/(1 − |λ|) of eq. 5.2 is
+  undefined for unstable modes (the thesis's objection to MSV), the finite sum is not.
+- MCI / MOI, modal controllability / observability (eq. 5.2): ‖b_i‖ and ‖c_i‖ relative to the
+  largest. Eigenvectors are scaled to unit length in the model's internally balanced
+  coordinates (the coordinates ERA itself returns), which makes both independent of the state
+  coordinates the model happens to be written in.
+- EMAC, extended modal amplitude coherence (Pappa, Elliott & Schenk, "Consistent-mode
+  indicator for the eigensystem realization algorithm", JGCD 16(5), 1993; eq. 5.8–5.14): the
+  mode's last block of the data's Hankel observability factor P_n Σ^{1/2} Ψ is compared with
+  its first block extrapolated by λ^{α−1}; per output, amplitude ratio (≤ 1) times the phase
+  weight max(0, 1 − |Δφ|/(π/4)); outputs averaged with weights |c_ij|². The same on the
+  controllability factor's last block column gives the input EMAC; EMAC = output × input.
+- MPC, modal phase collinearity (eq. 5.15–5.18): ((λ₁ − λ₂)/(λ₁ + λ₂))² of the 2 × 2 matrix
+  [Re c, Im c]ᵀ[Re c, Im c]. We use the *uncentred* variant: Pappa et al. subtract the mean of
+  the real and imaginary parts, which suits many like sensors on one structure, but the mean of
+  β, p, r and φ is not a physical quantity and with four channels it dominates the result.
+  A real mode has MPC = 100.
+- CMI, consistent mode indicator (eq. 5.7): EMAC × MPC.
+
+Inputs and outputs are first divided by scales (by default the RMS of the measured
+channels), so indicators and mode shapes do not depend on units (rad vs m/s vs degrees).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from agent.ident.convert import continuous_eigenvalues
+from agent.ident.errors import IdentificationFailed
+
+# An eigenvalue with |Im z| below this fraction of |z| is real.
+REAL_TOLERANCE = 1e-10
+# Eigenvector matrices worse conditioned than this mean a defective A (no modal basis).
+MAX_EIGENVECTOR_COND = 1e12
+
+
+@dataclass(frozen=True)
+class HankelFactors:
+    """ERA's data factors P_n Σ^{1/2} (α·m × n) and Σ^{1/2} Q_nᵀ (n × β·r), model coordinates."""
+
+    observability: np.ndarray
+    controllability: np.ndarray
+
+    def transformed(self, T: np.ndarray) -> HankelFactors:
+        """The factors in coordinates z = T x, to go with `StateSpace.transformed(T)`."""
+        return HankelFactors(self.observability @ np.linalg.inv(T), T @ self.controllability)
+
+
+@dataclass(frozen=True)
+class Mode:
+    """One mode: a real eigenvalue or a complex pair, with its indicators in percent."""
+
+    eigenvalue: complex  # continuous, 1/s, Im ≥ 0
+    discrete: complex  # z = exp(s Δt)
+    pair: bool
+    frequency: float  # natural frequency |s|, rad/s
+    damping: float  # −Re s / |s| (±1 for real modes)
+    time_constant: float | None  # −1/s for real modes (negative: divergent), None for pairs
+    msv: float
+    mci: float
+    moi: float
+    emac: float | None  # None without Hankel factors
+    mpc: float
+    cmi: float | None
+    shape: np.ndarray  # scaled output mode shape c_i, largest component 1 with zero phase
+    name: str | None = None
+
+    @property
+    def stable(self) -> bool:
+        return abs(self.discrete) < 1.0
+
+
+def modal_analysis(
+    A: np.ndarray,
+    B: np.ndarray,
+    C: np.ndarray,
+    dt: float,
+    *,
+    factors: HankelFactors | None = None,
+    input_scale: np.ndarray | None = None,
+    output_scale: np.ndarray | None = None,
+    horizon: tuple[int, int] = (20, 20),
+) -> list[Mode]:
+    """Modes of the discrete model (A, B, C) sorted by natural frequency, with indicators.
+
+    `horizon` (α, β) is the Hankel span for balancing and MSV; with `factors` it is taken
+    from their shapes. Without `factors`, EMAC and CMI are None.
+    """
+    m, r = C.shape[0], B.shape[1]
+    su = np.ones(r) if input_scale is None else np.asarray(input_scale, dtype=float)
+    sy = np.ones(m) if output_scale is None else np.asarray(output_scale, dtype=float)
+    Bs, Cs = B * su, C / sy[:, None]
+    if factors is not None:
+        horizon = (factors.observability.shape[0] // m, factors.controllability.shape[1] // r)
+    z, Psi = scipy.linalg.eig(A)
+    if np.linalg.cond(Psi) > MAX_EIGENVECTOR_COND:
+        raise IdentificationFailed(
+            "the identified A is defective (repeated eigenvalues without a full set of "
+            "eigenvectors), so it has no modal decomposition; try another order"
+        )
+    Psi = Psi / _balanced_norms(A, Bs, Cs, Psi, horizon)
+    Psi_inv = np.linalg.inv(Psi)
+    Bm, Cm = Psi_inv @ Bs, Cs @ Psi
+    keep = [i for i in range(z.size) if z[i].imag >= -REAL_TOLERANCE * abs(z[i])]
+    msv = np.array([_pulse_norm(z[i], Bm[i], Cm[:, i], sum(horizon) - 1) for i in keep])
+    bnorm = np.array([np.linalg.norm(Bm[i]) for i in keep])
+    cnorm = np.array([np.linalg.norm(Cm[:, i]) for i in keep])
+    emac = None
+    if factors is not None:
+        Pm = (factors.observability / np.tile(sy, horizon[0])[:, None]) @ Psi
+        Qm = Psi_inv @ (factors.controllability * np.tile(su, horizon[1])[None, :])
+        emac = [_emac(z[i], Pm[:, i], Qm[i], m, r) for i in keep]
+    modes = []
+    for j, i in enumerate(keep):
+        s = complex(continuous_eigenvalues(z[i], dt))
+        pair = abs(z[i].imag) > REAL_TOLERANCE * abs(z[i])
+        mpc = _mpc(Cm[:, i])
+        e = None if emac is None else 100.0 * emac[j]
+        modes.append(
+            Mode(
+                eigenvalue=s,
+                discrete=complex(z[i]),
+                pair=pair,
+                frequency=abs(s),
+                damping=-s.real / abs(s) if abs(s) > 0 else 1.0,
+                time_constant=None if pair or s.real == 0 else -1.0 / s.real,
+                msv=100.0 * (msv[j] / msv.max()) if msv.max() > 0 else 0.0,
+                mci=100.0 * (bnorm[j] / bnorm.max()) if bnorm.max() > 0 else 0.0,
+                moi=100.0 * (cnorm[j] / cnorm.max()) if cnorm.max() > 0 else 0.0,
+                emac=e,
+                mpc=100.0 * mpc,
+                cmi=None if e is None else e * mpc,
+                shape=_normalised_shape(Cm[:, i]),
+            )
+        )
+    return sorted(modes, key=lambda mode: (mode.frequency, mode.eigenvalue.imag))
+
+
+def _balanced_norms(
+    A: np.ndarray, B: np.ndarray, C: np.ndarray, Psi: np.ndarray, horizon: tuple[int, int]
+) -> np.ndarray:
+    """Length of each eigenvector in the internally balanced coordinates over the horizon.
+
+    With O and R the α-step observability and β-step controllability matrices and
+    O R = U Σ Vᵀ, the balanced state is x_b = Σ^{−1/2} Uᵀ O x (so O T = U Σ^{1/2}).
+    For a non-minimal model (Σ has zeros) there is no balanced form: lengths in the given
+    coordinates are used instead.
+    """
+    n = A.shape[0]
+    alpha, beta = horizon
+    O = np.vstack([C @ np.linalg.matrix_power(A, k) for k in range(alpha)])
+    R = np.hstack([np.linalg.matrix_power(A, k) @ B for k in range(beta)])
+    U, sv, _ = np.linalg.svd(O @ R, full_matrices=False)
+    if sv.size < n or sv[n - 1] <= 1e-12 * sv[0]:
+        return np.linalg.norm(Psi, axis=0)
+    to_balanced = (U[:, :n] / np.sqrt(sv[:n])).T @ O
+    return np.linalg.norm(to_balanced @ Psi, axis=0)
+
+
+def _pulse_norm(z: complex, b: np.ndarray, c: np.ndarray, steps: int) -> float:
+    """Frobenius norm of the mode's real pulse-response share over `steps` samples."""
+    powers = z ** np.arange(steps)
+    block = np.einsum("k,i,j->kij", powers, c, b)
+    block = 2.0 * block.real if abs(z.imag) > REAL_TOLERANCE * abs(z) else block.real
+    return float(np.linalg.norm(block))
+
+
+def _coherence(first: np.ndarray, last: np.ndarray, z_power: complex) -> float:
+    """Weighted amplitude-and-phase agreement of `last` with `first`·z_power (Pappa 1993)."""
+    predicted = first * z_power
+    weights = np.abs(first) ** 2
+    if weights.sum() == 0:
+        return 0.0
+    a, p = np.abs(last), np.abs(predicted)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where((a > 0) & (p > 0), np.minimum(a, p) / np.maximum(a, p), 0.0)
+        phase = np.angle(np.where(p > 0, last / np.where(p > 0, predicted, 1.0), 0.0))
+    weight = np.maximum(0.0, 1.0 - np.abs(phase) / (np.pi / 4))
+    return float(np.sum(ratio * weight * weights) / weights.sum())
+
+
+def _emac(z: complex, obs_col: np.ndarray, ctrl_row: np.ndarray, m: int, r: int) -> float:
+    """Output EMAC × input EMAC of one mode from its columns of the modal Hankel factors."""
+    alpha, beta = obs_col.size // m, ctrl_row.size // r
+    out = _coherence(obs_col[:m], obs_col[(alpha - 1) * m :], z ** (alpha - 1))
+    inp = _coherence(ctrl_row[:r], ctrl_row[(beta - 1) * r :], z ** (beta - 1))
+    return out * inp
+
+
+def _mpc(c: np.ndarray) -> float:
+    """Uncentred modal phase collinearity ((λ₁ − λ₂)/(λ₁ + λ₂))² of the shape c (eq. 5.15–5.18)."""
+    X = np.column_stack([c.real, c.imag])
+    lam = np.linalg.eigvalsh(X.T @ X)
+    total = lam.sum()
+    if total <= 0:
+        return 0.0
+    return float(((lam[1] - lam[0]) / total) ** 2)
+
+
+def _normalised_shape(c: np.ndarray) -> np.ndarray:
+    """c scaled so its largest component is 1 with zero phase."""
+    k = int(np.argmax(np.abs(c)))
+    return c / c[k] if abs(c[k]) > 0 else c.astype(complex)

@@ -1,0 +1,44 @@
+"""Shared fixtures: reference records and a guard against leaked threads."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+from agent.ident import Experiment, reference
+
+DT = 0.02  # 50 Hz, as the thesis's appendix models are used in the known-answer tests
+LEAD_IN = 1.0
+
+
+@pytest.fixture(autouse=True)
+def no_leaked_threads():
+    """Fail a test that leaves threads running (STYLE.md item 4)."""
+    before = set(threading.enumerate())
+    yield
+    leaked = [t for t in threading.enumerate() if t not in before and t.is_alive()]
+    assert not leaked, f"test leaked threads: {leaked}"
+
+
+def detrimmed(record: reference.Record, seconds: float = 0.5) -> Experiment:
+    """The record with the mean of its first `seconds` removed, as `sysid identify` does."""
+    count = round(seconds / DT)
+    u = record.inputs - record.inputs[:count].mean(axis=0)
+    y = record.outputs - record.outputs[:count].mean(axis=0)
+    return Experiment(u=u, y=y)
+
+
+def true_eigenvalues(model: reference.ReferenceModel) -> np.ndarray:
+    return np.linalg.eigvals(model.A)
+
+
+def matched_relative_errors(found: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Relative error of each true eigenvalue against its nearest found one (one-to-one)."""
+    remaining = list(found)
+    errors = []
+    for t in sorted(truth, key=abs):
+        k = int(np.argmin([abs(f - t) for f in remaining]))
+        errors.append(abs(remaining.pop(k) - t) / abs(t))
+    return np.array(errors)

@@ -1,0 +1,137 @@
+"""Modes and their indicators: known values, and independence from the state coordinates."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from agent.ident import identify, reference
+from agent.ident.convert import StateSpace, discretize
+from agent.ident.modal import HankelFactors, Mode, _mpc, modal_analysis
+from agent.ident.naming import name_modes
+from tests.conftest import DT, detrimmed
+
+
+@pytest.fixture(scope="module")
+def lateral():
+    return identify(detrimmed(reference.make_record(reference.LATERAL)), DT)
+
+
+def _indicators(modes):
+    return np.array(
+        [[m.frequency, m.damping, m.msv, m.mci, m.moi, m.emac, m.mpc, m.cmi] for m in modes]
+    )
+
+
+def test_noise_free_well_excited_modes_have_full_emac(lateral):
+    for mode in lateral.modes:
+        assert mode.emac == pytest.approx(100.0, abs=1e-6)
+        assert 0 < mode.msv <= 100
+        assert 0 < mode.mci <= 100
+        assert 0 < mode.moi <= 100
+    assert max(m.msv for m in lateral.modes) == pytest.approx(100.0)
+
+
+def test_real_modes_have_full_mpc_and_cmi_equals_emac_times_mpc(lateral):
+    real = [m for m in lateral.modes if not m.pair]
+    assert len(real) == 2
+    for mode in real:
+        assert mode.mpc == pytest.approx(100.0, abs=1e-9)
+    for mode in lateral.modes:
+        assert mode.cmi == pytest.approx(mode.emac * mode.mpc / 100)
+
+
+def test_mpc_of_known_shapes():
+    assert _mpc(np.array([1.0, 2.0, -3.0], dtype=complex)) == pytest.approx(1.0)
+    assert _mpc(np.array([1, 2, -3], dtype=complex) * np.exp(0.7j)) == pytest.approx(1.0)
+    assert _mpc(np.array([1.0, 1.0j])) == pytest.approx(0.0, abs=1e-12)  # circular
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_eigenvalues_and_indicators_do_not_depend_on_state_coordinates(lateral, seed):
+    rng = np.random.default_rng(seed)
+    model = StateSpace(lateral.era.A, lateral.era.B, lateral.era.C, lateral.era.D)
+    factors = HankelFactors(lateral.era.observability, lateral.era.controllability)
+    T = rng.normal(size=(4, 4)) + 4 * np.eye(4)
+    moved, moved_factors = model.transformed(T), factors.transformed(T)
+    scales = {"input_scale": np.array([2.0, 3.0]), "output_scale": np.array([0.05, 0.1, 0.1, 0.05])}
+    before = modal_analysis(model.A, model.B, model.C, DT, factors=factors, **scales)
+    after = modal_analysis(moved.A, moved.B, moved.C, DT, factors=moved_factors, **scales)
+    assert np.allclose([m.eigenvalue for m in before], [m.eigenvalue for m in after], rtol=1e-9)
+    assert np.allclose(_indicators(before), _indicators(after), rtol=1e-6, atol=1e-6)
+
+
+def test_indicators_without_hankel_factors_leave_emac_unset(lateral):
+    model = lateral.discrete
+    modes = modal_analysis(model.A, model.B, model.C, DT)
+    assert all(m.emac is None and m.cmi is None for m in modes)
+    assert all(0 < m.msv <= 100 for m in modes)
+
+
+def test_inconsistent_mode_has_low_emac():
+    """A mode that the data's Hankel factor does not continue as λ^k predicts loses EMAC."""
+    Ac = np.diag([-1.0, -3.0])
+    A, B = discretize(Ac, np.array([[1.0], [1.0]]), DT)
+    C = np.eye(2)
+    alpha = beta = 20
+    obs = np.vstack([C @ np.linalg.matrix_power(A, k) for k in range(alpha)])
+    ctrl = np.hstack([np.linalg.matrix_power(A, k) @ B for k in range(beta)])
+    good = modal_analysis(A, B, C, DT, factors=HankelFactors(obs, ctrl))
+    obs_bad = obs.copy()
+    obs_bad[-2:, 1] *= -1  # the last block flips phase for state 2 only
+    bad = modal_analysis(A, B, C, DT, factors=HankelFactors(obs_bad, ctrl))
+    assert [m.emac for m in good] == pytest.approx([100.0, 100.0])
+    assert min(m.emac for m in bad) < 10.0
+
+
+def _mode(eigenvalue: complex, shape, msv=50.0, emac=100.0) -> Mode:
+    return Mode(
+        eigenvalue=eigenvalue,
+        discrete=np.exp(eigenvalue * DT),
+        pair=abs(eigenvalue.imag) > 0,
+        frequency=abs(eigenvalue),
+        damping=-eigenvalue.real / abs(eigenvalue),
+        time_constant=None if eigenvalue.imag else -1 / eigenvalue.real,
+        msv=msv,
+        mci=50.0,
+        moi=50.0,
+        emac=emac,
+        mpc=100.0,
+        cmi=emac,
+        shape=np.asarray(shape, dtype=complex),
+    )
+
+
+def test_longitudinal_names_from_frequency_and_shape():
+    roles = ("airspeed", "alpha", "q", "theta")
+    phugoid = _mode(-0.05 + 0.4j, [1, 0.01, 0.05, 0.8])
+    short = _mode(-4 + 3j, [0.05, 1, 0.9, 0.2])
+    named = name_modes([phugoid, short], roles)
+    assert [m.name for m in named] == ["phugoid", "short period"]
+    only_short = name_modes([short], roles)
+    assert only_short[0].name == "short period"
+    only_phugoid = name_modes([phugoid], roles)
+    assert only_phugoid[0].name == "phugoid"
+
+
+def test_unclear_modes_stay_unnamed():
+    roles = ("airspeed", "alpha", "q", "theta")
+    reals = [_mode(-0.5 + 0j, [1, 0.1, 0.1, 1]), _mode(-6 + 0j, [0.1, 1, 1, 0.1])]
+    assert [m.name for m in name_modes(reals, roles)] == [None, None]  # relaxed stability
+    noise = _mode(-30 + 120j, [0.1, 0.2, 1, 0.1])  # far above rigid-body frequencies
+    inconsistent = _mode(-4 + 3j, [0.05, 1, 0.9, 0.2], emac=5.0)
+    assert [m.name for m in name_modes([noise, inconsistent], roles)] == [None, None]
+    lat_roles = ("beta", "p", "r", "phi")
+    middle = _mode(-0.6 + 0j, [0.1, 1, 0.2, 1])  # τ = 1.7 s: neither clearly roll nor spiral
+    assert name_modes([middle], lat_roles)[0].name is None
+    mixed = _mode(-2 + 2j, [1, 1, 1, 1, 1, 1, 1, 1])  # equal energy in both axes
+    full_roles = ("airspeed", "alpha", "q", "theta", "beta", "p", "r", "phi")
+    assert name_modes([mixed], full_roles)[0].name is None
+
+
+def test_no_roles_no_names(lateral):
+    named = name_modes(lateral.modes, [None, None, None, None])
+    assert all(m.name is None for m in named)
+    assert [dataclasses.replace(m, name=None) for m in named] == list(named)

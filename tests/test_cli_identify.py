@@ -1,0 +1,267 @@
+"""`sysid identify`: the JSON contract, batches, and every kind of bad input.
+
+Bad input tried: NaN and inf rows, a non-numeric cell, a constant input column, a record too
+short for the requested p, a column that does not exist, a row with too many fields,
+non-uniform time, time going backwards, an empty file, two files at different rates, a
+missing file, an input also given as output, and no --inputs at all. Each gives a clear
+message and exit 2 (bad input) — never a traceback.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agent.cli import main
+from agent.ident import reference
+
+ROOT = Path(__file__).resolve().parents[1]
+LAT = ["--inputs", "aileron,rudder", "--outputs", "beta,p,r,phi"]
+CONTRACT = {
+    "dt",
+    "order",
+    "markov",
+    "inputs",
+    "outputs",
+    "A",
+    "B",
+    "C",
+    "D",
+    "Ac",
+    "Bc",
+    "singular_values",
+    "stable",
+    "tic",
+    "tic_avg",
+    "modes",
+}
+MODE_KEYS = {
+    "name",
+    "eigenvalue",
+    "frequency_rad_s",
+    "damping",
+    "time_constant_s",
+    "msv",
+    "mci",
+    "moi",
+    "emac",
+    "mpc",
+    "cmi",
+}
+
+
+def write(path: Path, columns: dict[str, np.ndarray]) -> Path:
+    with path.open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(columns)
+        for row in zip(*columns.values(), strict=True):
+            writer.writerow([repr(float(v)) for v in row])
+    return path
+
+
+@pytest.fixture
+def lateral_csv(tmp_path):
+    return write(tmp_path / "lat.csv", reference.make_record(reference.LATERAL).columns())
+
+
+def run_json(capsys, *args) -> tuple[int, dict]:
+    code = main(["identify", *args, "--json"])
+    out = capsys.readouterr().out
+    assert out.count("\n") == 1, "exactly one JSON object on stdout"
+    return code, json.loads(out)
+
+
+def test_json_contract_on_a_noise_free_record(capsys, lateral_csv):
+    code, doc = run_json(capsys, str(lateral_csv), *LAT)
+    assert code == 0
+    assert set(doc) >= CONTRACT
+    assert doc["dt"] == pytest.approx(0.02)
+    assert doc["order"] == 4
+    assert doc["inputs"] == ["aileron", "rudder"]
+    assert np.allclose(doc["Ac"], reference.LATERAL.A, rtol=0, atol=1e-6)
+    assert np.allclose(doc["Bc"], reference.LATERAL.B, rtol=0, atol=1e-6)
+    assert doc["stable"] is True
+    assert doc["tic_avg"] < 1e-6
+    assert set(doc["tic"]) == {"beta", "p", "r", "phi"}
+    assert all(set(m) == MODE_KEYS for m in doc["modes"])
+    names = {m["name"] for m in doc["modes"]}
+    assert names == {"Dutch roll", "roll", "spiral"}
+    dutch = next(m for m in doc["modes"] if m["name"] == "Dutch roll")
+    assert dutch["eigenvalue"] == pytest.approx([-3.69210903, 3.18186935], rel=1e-6)
+    assert dutch["time_constant_s"] is None
+    trim = doc["trim"][0]
+    assert trim["beta"] == pytest.approx(reference.LATERAL.trim_outputs[0], rel=1e-9)
+
+
+def test_text_output_has_the_mode_table(capsys, lateral_csv):
+    assert main(["identify", str(lateral_csv), *LAT, "--markov", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "Dutch roll" in out
+    assert "spiral" in out
+    assert "TIC:" in out
+    assert "EMAC" in out
+
+
+def test_axes_from_config_and_given_order(capsys, lateral_csv):
+    code, doc = run_json(capsys, str(lateral_csv), "--axes", "lateral", "--order", "2")
+    assert code == 0
+    assert doc["order"] == 2
+    assert doc["outputs"] == ["beta", "p", "r", "phi"]
+    assert doc["Ac"] is None  # two states for four outputs: no output coordinates
+    assert doc["coordinates"] == "era"
+
+
+def test_batch_of_two_files_and_time_window(capsys, tmp_path):
+    files = [
+        write(tmp_path / f"r{s}.csv", reference.make_record(reference.LATERAL, seed=s).columns())
+        for s in (1, 2)
+    ]
+    code, doc = run_json(capsys, *map(str, files), *LAT, "--start", "0.2", "--end", "25")
+    assert code == 0
+    assert len(doc["trim"]) == 2
+    assert np.allclose(doc["Ac"], reference.LATERAL.A, atol=1e-6)
+
+
+def test_trim_none_keeps_the_offset_and_fails_honestly(capsys, lateral_csv):
+    """Without trim removal the constant trim offsets are unmodelled: the fit is poor."""
+    code, doc = run_json(capsys, str(lateral_csv), *LAT, "--trim", "none", "--markov", "2")
+    assert code == 0
+    assert doc["trim"] == [dict.fromkeys(["aileron", "rudder", "beta", "p", "r", "phi"], 0.0)]
+    assert doc["tic_avg"] > 0.01
+
+
+def _corrupt(tmp_path, name, edit) -> Path:
+    record = reference.make_record(reference.LATERAL, duration=10.0)
+    columns = {k: v.astype(object) for k, v in record.columns().items()}
+    rows = [list(r) for r in zip(*columns.values(), strict=True)]
+    header = list(columns)
+    header, rows = edit(header, rows)
+    path = tmp_path / name
+    with path.open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(header)
+        writer.writerows(rows)
+    return path
+
+
+def _set(row_index, column, value):
+    def edit(header, rows):
+        rows[row_index][header.index(column)] = value
+        return header, rows
+
+    return edit
+
+
+def _constant_rudder(header, rows):
+    for row in rows:
+        row[header.index("rudder")] = 0.0
+    return header, rows
+
+
+def _jitter(header, rows):
+    rows[100][0] = float(rows[100][0]) + 0.005
+    return header, rows
+
+
+def _backwards(header, rows):
+    rows[50][0], rows[51][0] = rows[51][0], rows[50][0]
+    return header, rows
+
+
+def _extra_field(header, rows):
+    rows[10].append(1.0)
+    return header, rows
+
+
+def _rename_p(header, rows):
+    header[header.index("p")] = "P"
+    return header, rows
+
+
+def _empty(header, rows):
+    return header, []
+
+
+BAD = [
+    ("nan.csv", _set(200, "p", "nan"), [], "line 202: non-finite value 'nan' in column 'p'"),
+    ("inf.csv", _set(30, "beta", "inf"), [], "non-finite value 'inf' in column 'beta'"),
+    ("text.csv", _set(5, "r", "n/a"), [], "'n/a' in column 'r' is not a number"),
+    ("const.csv", _constant_rudder, [], "input 'rudder' is constant"),
+    ("short.csv", lambda h, r: (h, r[:60]), ["--markov", "10"], "need at least"),
+    ("missing.csv", _rename_p, [], "no column(s) 'p'"),
+    ("fields.csv", _extra_field, [], "line 12: 8 fields, the header has 7"),
+    ("jitter.csv", _jitter, [], "sampling is not uniform"),
+    ("back.csv", _backwards, [], "time does not increase"),
+    ("empty.csv", _empty, [], "0 data row(s)"),
+]
+
+
+@pytest.mark.parametrize(("name", "edit", "extra", "message"), BAD, ids=[b[0] for b in BAD])
+def test_bad_data_is_a_clear_error_with_exit_2(tmp_path, capsys, name, edit, extra, message):
+    path = _corrupt(tmp_path, name, edit)
+    assert main(["identify", str(path), *LAT, *extra]) == 2
+    err = capsys.readouterr().err
+    assert message in err, err
+    assert "Traceback" not in err
+    code = main(["identify", str(path), *LAT, *extra, "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    assert code == 2
+    assert doc["error"]["exit"] == 2
+    assert message in doc["error"]["message"]
+
+
+def test_files_at_different_rates_cannot_be_batched(tmp_path, capsys):
+    a = write(tmp_path / "a.csv", reference.make_record(reference.LATERAL).columns())
+    b = write(tmp_path / "b.csv", reference.make_record(reference.LATERAL, dt=0.01).columns())
+    assert main(["identify", str(a), str(b), *LAT]) == 2
+    assert "a batch needs one sample rate" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["nowhere.csv", *LAT], "cannot be read"),
+        (["{lat}", "--inputs", "aileron,beta", "--outputs", "beta,p"], "both input and output"),
+        (["{lat}"], "give --inputs and --outputs"),
+    ],
+)
+def test_bad_usage_exit_2(capsys, lateral_csv, args, message):
+    args = [a.replace("{lat}", str(lateral_csv)) for a in args]
+    assert main(["identify", *args]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_bad_option_values_are_usage_errors(lateral_csv):
+    for bad in (["--markov", "0"], ["--trim", "last:3"], ["--order", "x"]):
+        with pytest.raises(SystemExit) as caught:
+            main(["identify", str(lateral_csv), *LAT, *bad])
+        assert caught.value.code == 2
+
+
+def test_identification_failure_is_exit_1(tmp_path, capsys):
+    """Order above what the data holds: the data is fine, the identification is not."""
+    path = write(tmp_path / "lat.csv", reference.make_record(reference.LATERAL).columns())
+    assert main(["identify", str(path), *LAT, "--markov", "1", "--order", "6"]) == 1
+    err = capsys.readouterr().err
+    assert "identification failed" in err
+    assert "rank" in err
+
+
+def test_console_script_and_module_entry_point(lateral_csv):
+    """The real entry point, in a subprocess: `python -m agent identify … --json`."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "agent", "identify", str(lateral_csv), *LAT, "--json"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+        cwd=ROOT,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout)["order"] == 4

@@ -1,0 +1,69 @@
+"""Config: defaults, the bundled file, and bad files reported by key path with exit 2."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from pydantic import ValidationError
+
+from agent.cli import main
+from agent.config import Config, ConfigError, load_config
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_bundled_config_is_valid_and_equals_the_defaults():
+    assert load_config(ROOT / "config.toml") == Config()
+
+
+def test_sections_are_frozen_and_documented():
+    config = Config()
+    with pytest.raises(ValidationError):
+        config.identification.markov = 3
+    for name, field in type(config.identification).model_fields.items():
+        assert field.description, f"identification.{name} has no docstring"
+    for name, field in type(config.identification.channels).model_fields.items():
+        assert field.description, f"channels.{name} has no docstring"
+
+
+def test_axis_sets_use_configured_channel_names(tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text('[identification.channels]\nbeta = "sideslip"\nairspeed = "tas"\n')
+    channels = load_config(path).identification.channels
+    assert channels.axis_set("lateral") == (("aileron", "rudder"), ("sideslip", "p", "r", "phi"))
+    assert channels.axis_set("full")[1][0] == "tas"
+    assert channels.role_of("sideslip") == "beta"
+
+
+@pytest.mark.parametrize(
+    ("text", "key", "reason"),
+    [
+        ("[identification]\nmarkov = 0\n", "identification.markov", "integer ≥ 1"),
+        ("[identification]\nmarkov = 'many'\n", "identification.markov", '"auto"'),
+        ("[identification]\norder_max = 'x'\n", "identification.order_max", "valid integer"),
+        ("[identification]\ntrim_seconds = -1\n", "identification.trim_seconds", "greater"),
+        ("[identification]\nmarkv = 3\n", "identification.markv", "Extra inputs"),
+        ("[identification]\naxes = 'yaw'\n", "identification.axes", "lateral"),
+        ('[identification.channels]\np = "r"\n', "identification.channels", "repeated: r"),
+        ("[identification\n", "(syntax)", "line 1"),
+    ],
+)
+def test_bad_config_names_key_and_reason(tmp_path, capsys, text, key, reason):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as caught:
+        load_config(path)
+    assert any(k == key and reason in why for k, why in caught.value.problems)
+    assert main(["config", "check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert key in err
+    assert reason in err
+    assert "Traceback" not in err
+
+
+def test_config_check_ok_and_missing_file(tmp_path, capsys):
+    assert main(["config", "check", str(ROOT / "config.toml")]) == 0
+    assert "ok" in capsys.readouterr().out
+    assert main(["config", "check", str(tmp_path / "nope.toml")]) == 2
+    assert "no such file" in capsys.readouterr().err
