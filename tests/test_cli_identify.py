@@ -1,10 +1,11 @@
 """`sysid identify`: the JSON contract, batches, and every kind of bad input.
 
 Bad input tried: NaN and inf rows, a non-numeric cell, a constant input column, a record too
-short for the requested p, a column that does not exist, a row with too many fields,
-non-uniform time, time going backwards, an empty file, two files at different rates, a
-missing file, an input also given as output, and no --inputs at all. Each gives a clear
-message and exit 2 (bad input) — never a traceback.
+short for the requested p and one too short even for the automatic p = 1, a column that
+does not exist, a row with too many fields, non-uniform time, time going backwards, an
+empty file, two files at different rates, a missing file, an input also given as output,
+and no --inputs at all. Each gives a clear message and exit 2 (bad input), never a
+traceback.
 """
 
 from __future__ import annotations
@@ -194,6 +195,12 @@ BAD = [
     ("text.csv", _set(5, "r", "n/a"), [], "'n/a' in column 'r' is not a number"),
     ("const.csv", _constant_rudder, [], "input 'rudder' is constant"),
     ("short.csv", lambda h, r: (h, r[:60]), ["--markov", "10"], "need at least"),
+    (
+        "short_auto.csv",
+        lambda h, r: (h, r[100:112]),
+        ["--trim", "none"],
+        "12 samples give 11 regression rows",
+    ),
     ("missing.csv", _rename_p, [], "no column(s) 'p'"),
     ("fields.csv", _extra_field, [], "line 12: 8 fields, the header has 7"),
     ("jitter.csv", _jitter, [], "sampling is not uniform"),
