@@ -272,3 +272,50 @@ def test_console_script_and_module_entry_point(lateral_csv):
     )
     assert proc.returncode == 0, proc.stderr
     assert json.loads(proc.stdout)["order"] == 4
+
+
+def test_more_bad_records_each_named(tmp_path, capsys, lateral_csv):
+    """Empty time window, trim covering the record, duplicated column, non-UTF-8 bytes,
+    a constant output, an oversized file: each exit 2 with the reason."""
+    cases = [
+        ([str(lateral_csv), *LAT, "--start", "40", "--end", "50"], "fewer than 2 samples"),
+        ([str(lateral_csv), *LAT, "--end", "0.3"], "trim window covers the whole"),
+    ]
+    dup = tmp_path / "dup.csv"
+    dup.write_text(lateral_csv.read_text().replace("phi", "p", 1))
+    cases.append(([str(dup), "--inputs", "aileron,rudder", "--outputs", "p,r"], "more than once"))
+    binary = tmp_path / "binary.csv"
+    binary.write_bytes(b"time,aileron\n\xff\xfe\x00garbage\n")
+    cases.append(([str(binary), *LAT], "not a text CSV file"))
+    record = reference.make_record(reference.LATERAL)
+    columns = record.columns()
+    columns["phi"] = np.full_like(columns["phi"], 0.01)
+    flat = write(tmp_path / "flat.csv", columns)
+    cases.append(([str(flat), *LAT], "output 'phi' is constant"))
+    for args, message in cases:
+        assert main(["identify", *args]) == 2, message
+        err = capsys.readouterr().err
+        assert message in err, err
+        assert "Traceback" not in err
+
+
+def test_oversized_record_is_refused(monkeypatch, capsys, lateral_csv):
+    monkeypatch.setattr("agent.analysis.records.MAX_ROWS", 100)
+    assert main(["identify", str(lateral_csv), *LAT]) == 2
+    assert "more than 100 rows" in capsys.readouterr().err
+
+
+def test_invalid_config_in_working_directory_stops_identify(tmp_path, monkeypatch, capsys):
+    path = write(tmp_path / "lat.csv", reference.make_record(reference.LATERAL).columns())
+    (tmp_path / "config.toml").write_text("[identification]\nmarkov = -3\n")
+    monkeypatch.chdir(tmp_path)
+    assert main(["identify", str(path), *LAT]) == 2
+    assert "identification.markov" in capsys.readouterr().err
+
+
+def test_short_record_in_a_batch_is_named_not_dropped(tmp_path, capsys):
+    long_ = write(tmp_path / "long.csv", reference.make_record(reference.LATERAL).columns())
+    cols = reference.make_record(reference.LATERAL).columns()
+    short = write(tmp_path / "short.csv", {k: v[100:104] for k, v in cols.items()})
+    assert main(["identify", str(long_), str(short), *LAT, "--markov", "5", "--trim", "none"]) == 2
+    assert "experiment 1 has 4 samples, too few for 5 Markov" in capsys.readouterr().err

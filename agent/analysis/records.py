@@ -143,6 +143,15 @@ def select(record: Record, start: float | None, end: float | None) -> Record:
 
 
 def trim_values(record: Record, names: Sequence[str], seconds: float) -> dict[str, float]:
-    """Mean of each named column over the first `seconds` of the record (at least one sample)."""
+    """Mean of each named column over the first `seconds` of the record (at least one sample).
+
+    A window reaching the end of the record would average the excitation into the trim, so it
+    is refused.
+    """
     count = max(1, int(np.sum(record.time < record.time[0] + seconds - 1e-9 * record.dt)))
+    if count >= record.time.size:
+        raise RecordError(
+            f"{record.path}: the {seconds:g} s trim window covers the whole selected record "
+            f"({record.time[-1] - record.time[0]:.6g} s); shorten --trim or widen --start/--end"
+        )
     return {name: float(np.mean(record.columns[name][:count])) for name in names}

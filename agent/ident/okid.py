@@ -109,31 +109,27 @@ def minimum_length(r: int, m: int, p: int, estimate_d: bool) -> int:
 
 
 def build_regression(
-    experiments: Sequence[Experiment], p: int, estimate_d: bool, first_row: int | None = None
+    experiments: Sequence[Experiment], p: int, estimate_d: bool
 ) -> tuple[np.ndarray, np.ndarray]:
     """Stack the OKID regression Φ Θ = Y over experiments (eq. 4.11, transposed).
 
     Row k of an experiment is [u(k) (if D), v(k−1), v(k−2), …, v(k−p)] → y(k) for
-    k = first_row … l−1 (first_row defaults to p). Rows never straddle two experiments:
-    each experiment contributes only rows whose whole history lies inside it.
+    k = p … l−1. Rows never straddle two experiments: each experiment contributes only rows
+    whose whole history lies inside it. Every experiment must be longer than p
+    (`_check_length`), so none is dropped silently.
     """
-    first = p if first_row is None else first_row
     blocks_phi, blocks_y = [], []
     for exp in experiments:
         l = exp.length
-        if l <= first:
-            continue
         v = np.hstack([exp.u, exp.y])
-        cols = [exp.u[first:l]] if estimate_d else []
-        cols += [v[first - i : l - i] for i in range(1, p + 1)]
+        cols = [exp.u[p:l]] if estimate_d else []
+        cols += [v[p - i : l - i] for i in range(1, p + 1)]
         blocks_phi.append(np.hstack(cols))
-        blocks_y.append(exp.y[first:l])
-    if not blocks_phi:
-        raise InsufficientDataError(f"no experiment is longer than {first} samples")
+        blocks_y.append(exp.y[p:l])
     return np.vstack(blocks_phi), np.vstack(blocks_y)
 
 
-def _column_scales(experiments: Sequence[Experiment]) -> tuple[np.ndarray, np.ndarray]:
+def channel_rms(experiments: Sequence[Experiment]) -> tuple[np.ndarray, np.ndarray]:
     """RMS of every input and output channel over the batch (1 where a channel is all zero)."""
     u = np.vstack([e.u for e in experiments])
     y = np.vstack([e.y for e in experiments])
@@ -144,8 +140,14 @@ def _column_scales(experiments: Sequence[Experiment]) -> tuple[np.ndarray, np.nd
 
 def _check_length(experiments: Sequence[Experiment], p: int, estimate_d: bool) -> None:
     r, m = experiments[0].u.shape[1], experiments[0].y.shape[1]
+    for index, exp in enumerate(experiments):
+        if exp.length <= p:
+            raise InsufficientDataError(
+                f"experiment {index} has {exp.length} samples, too few for {p} Markov "
+                "parameters (it would add no regression row); drop it or lower p"
+            )
     unknowns = regression_columns(r, m, p, estimate_d)
-    rows = sum(max(e.length - p, 0) for e in experiments)
+    rows = sum(e.length - p for e in experiments)
     needed = MIN_ROWS_PER_UNKNOWN * unknowns
     if rows < needed:
         samples = sum(e.length for e in experiments)
@@ -178,7 +180,7 @@ def observer_markov(
         raise DataError(f"regularization must be ≥ 0, got {regularization}")
     _check_length(batch, p, estimate_d)
     r, m = batch[0].u.shape[1], batch[0].y.shape[1]
-    su, sy = _column_scales(batch)
+    su, sy = channel_rms(batch)
     phi, target = build_regression(batch, p, estimate_d)
     col_scale = np.concatenate(([su] if estimate_d else []) + [np.concatenate([su, sy])] * p)
     phi_s = phi / col_scale
@@ -272,11 +274,14 @@ def observer_gain(A: np.ndarray, C: np.ndarray, Yo: np.ndarray) -> np.ndarray:
 
 
 def supported_markov(batch: Sequence[Experiment], p_max: int, estimate_d: bool) -> int:
-    """Largest p ≤ p_max for which the batch has enough regression rows (0: not even p = 1)."""
+    """Largest p ≤ p_max for which every experiment adds rows and the batch has enough of them.
+
+    0 means not even p = 1.
+    """
     r, m = batch[0].u.shape[1], batch[0].y.shape[1]
-    p = p_max
+    p = min(p_max, min(e.length for e in batch) - 1)
     while p >= 1:
-        rows = sum(max(e.length - p, 0) for e in batch)
+        rows = sum(e.length - p for e in batch)
         if rows >= MIN_ROWS_PER_UNKNOWN * regression_columns(r, m, p, estimate_d):
             return p
         p -= 1

@@ -198,51 +198,25 @@ def identify(
     batch = okid.as_experiments(experiments)
     if dt <= 0:
         raise DataError(f"sample time must be positive, got {dt}")
-    r, m = batch[0].u.shape[1], batch[0].y.shape[1]
-    inputs = tuple(input_names or (f"u{j}" for j in range(r)))
-    outputs = tuple(output_names or (f"y{j}" for j in range(m)))
-    if len(inputs) != r or len(outputs) != m:
-        raise DataError(f"{len(inputs)} input and {len(outputs)} output names for {r} × {m} data")
+    inputs, outputs = _names(batch, input_names, output_names)
     check_channels(batch, inputs, outputs)
-    warnings: list[str] = []
-
-    choice = None
     if settings.markov is None:
         candidate, choice = choose_markov(batch, settings)
     else:
-        candidate = run_candidate(batch, settings.markov, settings)
-    p, realised = candidate.markov, candidate.era
-    n = realised.order
-    gain_steps = max(p, -(-n // m) + 1)
-    G = okid.observer_gain(
-        realised.A, realised.C, okid.observer_gain_markov(candidate.omp, gain_steps)
-    )
-
-    model = StateSpace(realised.A, realised.B, realised.C, realised.D)
-    factors = HankelFactors(realised.observability, realised.controllability)
-    T = output_coordinates_transform(realised.C)
-    coordinates = "era"
-    if T is not None:
-        model, factors, G = model.transformed(T), factors.transformed(T), T @ G
-        coordinates = "outputs"
+        candidate, choice = run_candidate(batch, settings.markov, settings), None
+    model, factors, G, coordinates = _reported_model(candidate)
+    warnings: list[str] = []
     continuous = None
     try:
         Ac, Bc = to_continuous(model.A, model.B, dt)
         continuous = StateSpace(Ac, Bc, model.C, model.D)
     except ContinuousConversionError as exc:
         warnings.append(str(exc))
-
-    u_all = np.vstack([e.u for e in batch])
-    y_all = np.vstack([e.y for e in batch])
+    input_rms, output_rms = okid.channel_rms(batch)
     modes = modal_analysis(
-        model.A,
-        model.B,
-        model.C,
-        dt,
-        factors=factors,
-        input_scale=np.sqrt(np.mean(u_all**2, axis=0)),
-        output_scale=np.sqrt(np.mean(y_all**2, axis=0)),
-    )
+        model.A, model.B, model.C, dt,
+        factors=factors, input_scale=input_rms, output_scale=output_rms,
+    )  # fmt: skip
     if output_roles is not None:
         modes = name_modes(modes, output_roles)
     if any(not mode.stable for mode in modes):
@@ -253,9 +227,9 @@ def identify(
         dt=dt,
         input_names=inputs,
         output_names=outputs,
-        markov=p,
+        markov=candidate.markov,
         markov_choice=choice,
-        era=realised,
+        era=candidate.era,
         discrete=model,
         continuous=continuous,
         coordinates=coordinates,
@@ -264,3 +238,33 @@ def identify(
         fit=candidate.fit,
         warnings=tuple(warnings),
     )
+
+
+def _names(
+    batch: Sequence[okid.Experiment],
+    input_names: Sequence[str] | None,
+    output_names: Sequence[str] | None,
+) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    r, m = batch[0].u.shape[1], batch[0].y.shape[1]
+    inputs = tuple(input_names or (f"u{j}" for j in range(r)))
+    outputs = tuple(output_names or (f"y{j}" for j in range(m)))
+    if len(inputs) != r or len(outputs) != m:
+        raise DataError(f"{len(inputs)} input and {len(outputs)} output names for {r} × {m} data")
+    return inputs, outputs
+
+
+def _reported_model(
+    candidate: Candidate,
+) -> tuple[StateSpace, HankelFactors, np.ndarray, str]:
+    """Model, Hankel factors and observer gain in output coordinates when possible, else ERA's."""
+    realised, m = candidate.era, candidate.era.C.shape[0]
+    gain_steps = max(candidate.markov, -(-realised.order // m) + 1)
+    G = okid.observer_gain(
+        realised.A, realised.C, okid.observer_gain_markov(candidate.omp, gain_steps)
+    )
+    model = StateSpace(realised.A, realised.B, realised.C, realised.D)
+    factors = HankelFactors(realised.observability, realised.controllability)
+    T = output_coordinates_transform(realised.C)
+    if T is None:
+        return model, factors, G, "era"
+    return model.transformed(T), factors.transformed(T), T @ G, "outputs"
