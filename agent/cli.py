@@ -66,6 +66,18 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="first:SECONDS|none",
         help="trim = mean of the first SECONDS of each record (default from config: 0.5)",
     )
+    ident.add_argument(
+        "--decimation",
+        type=_positive_int,
+        metavar="Q",
+        help="decimation factor after the anti-alias filter (default: automatic; 1 = none)",
+    )
+    ident.add_argument(
+        "--refine",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="output-error refinement with Cramér–Rao standard errors (default from config: on)",
+    )
     ident.add_argument("--config", type=Path, help="config file (default ./config.toml if any)")
     ident.add_argument("--json", action="store_true", help="print one JSON object")
 
@@ -108,7 +120,9 @@ def cmd_identify(args: argparse.Namespace) -> int:
         end=args.end,
         trim_seconds=trim,
     )
-    settings = identify_cmd.settings_from(config, args.markov, args.order)
+    settings = identify_cmd.settings_from(
+        config, args.markov, args.order, decimation=args.decimation, refine=args.refine
+    )
     try:
         outcome = identify_cmd.run(request, config, settings)
     except (RecordError, DataError) as exc:

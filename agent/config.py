@@ -112,6 +112,19 @@ class Identification(_Section):
     of the normalised regression; 0 is plain least squares."""
     hankel_blocks: int | None = Field(None, ge=2, le=500)
     """Block rows (= columns) of the ERA Hankel matrix; unset: 20, more if order_max needs."""
+    decimation: AutoOrCount = "auto"
+    """Decimation factor after the anti-alias filter; "auto" brings the rate down to 25 × the
+    band of interest; 1 keeps the record rate."""
+    band_hz: float | None = Field(None, gt=0.0)
+    """Band of interest in Hz; unset: where 99 % of every input's power lies (≥ 0.5 Hz)."""
+    held_inputs: bool = True
+    """Inputs are held between samples (commands; a zero-order hold). false: they are samples
+    of continuously varying signals (e.g. surface potentiometers)."""
+    smoothing_s: float | None = Field(None, gt=0.0)
+    """Savitzky–Golay smoothing window in seconds (cubic), on inputs and outputs; unset: none."""
+    refine: bool = True
+    """Refine the OKID/ERA model by output error (maximum likelihood) and report Cramér–Rao
+    standard errors; false reports the OKID/ERA model as is."""
 
 
 class Config(_Section):

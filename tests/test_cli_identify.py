@@ -54,6 +54,9 @@ MODE_KEYS = {
     "emac",
     "mpc",
     "cmi",
+    "eigenvalue_std",
+    "frequency_std_rad_s",
+    "damping_std",
 }
 
 
@@ -98,6 +101,29 @@ def test_json_contract_on_a_noise_free_record(capsys, lateral_csv):
     assert dutch["time_constant_s"] is None
     trim = doc["trim"][0]
     assert trim["beta"] == pytest.approx(reference.LATERAL.trim_outputs[0], rel=1e-9)
+
+
+def test_json_reports_cramer_rao_uncertainty_and_preprocessing(capsys, tmp_path):
+    model = reference.LATERAL
+    noise = {"beta": 0.002, "p": 0.005, "r": 0.005, "phi": 0.002}
+    path = write(tmp_path / "noisy.csv", reference.make_record(model, noise=noise).columns())
+    code, doc = run_json(capsys, str(path), *LAT)
+    assert code == 0
+    assert doc["refinement"]["hold"] == "zoh"
+    assert doc["preprocessing"]["record_dt"] == pytest.approx(0.02)
+    for mode in doc["modes"]:
+        re_std, _im_std = mode["eigenvalue_std"]
+        assert 0 < re_std < 0.05 * abs(mode["eigenvalue"][0])
+        assert mode["frequency_std_rad_s"] > 0
+    # The estimated noise is what the record carries.
+    assert doc["refinement"]["noise_std"]["p"] == pytest.approx(0.005, rel=0.15)
+    assert np.array(doc["refinement"]["Ac_std"]).shape == (4, 4)
+
+    code, doc = run_json(capsys, str(path), *LAT, "--no-refine", "--decimation", "2")
+    assert code == 0
+    assert doc["refinement"] is None
+    assert doc["dt"] == pytest.approx(0.04)
+    assert all(m["eigenvalue_std"] is None for m in doc["modes"])
 
 
 def test_text_output_has_the_mode_table(capsys, lateral_csv):

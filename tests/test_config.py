@@ -46,6 +46,9 @@ def test_axis_sets_use_configured_channel_names(tmp_path):
         ("[identification]\nmarkv = 3\n", "identification.markv", "Extra inputs"),
         ("[identification]\naxes = 'yaw'\n", "identification.axes", "lateral"),
         ('[identification.channels]\np = "r"\n', "identification.channels", "repeated: r"),
+        ("[identification]\ndecimation = 0\n", "identification.decimation", "integer ≥ 1"),
+        ("[identification]\nband_hz = -1\n", "identification.band_hz", "greater than 0"),
+        ("[identification]\nrefine = 'maybe'\n", "identification.refine", "valid boolean"),
         ("[identification\n", "(syntax)", "line 1"),
     ],
 )

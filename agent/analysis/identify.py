@@ -81,8 +81,15 @@ def load_experiments(
     return experiments, dt, trim, sum(r.time.size for r in records)
 
 
-def settings_from(config: IdentConfig, markov: int | None, order: int | None) -> Settings:
-    """Identification settings: command-line values override the config file."""
+def settings_from(
+    config: IdentConfig,
+    markov: int | None,
+    order: int | None,
+    *,
+    decimation: int | None = None,
+    refine: bool | None = None,
+) -> Settings:
+    """Identification settings: command-line values (not None) override the config file."""
     return Settings(
         markov=markov if markov is not None else _auto(config.markov),
         markov_max=config.markov_max,
@@ -91,6 +98,11 @@ def settings_from(config: IdentConfig, markov: int | None, order: int | None) ->
         estimate_d=config.estimate_d,
         regularization=config.regularization,
         hankel_blocks=config.hankel_blocks,
+        decimation=decimation if decimation is not None else _auto(config.decimation),
+        band_hz=config.band_hz,
+        held_inputs=config.held_inputs,
+        smoothing_s=config.smoothing_s,
+        refine=config.refine if refine is None else refine,
     )
 
 

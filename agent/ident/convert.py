@@ -40,6 +40,48 @@ def discretize(Ac: np.ndarray, Bc: np.ndarray, dt: float) -> tuple[np.ndarray, n
     return phi[:n, :n], phi[:n, n:]
 
 
+def hold_block(Ac: np.ndarray, Bc: np.ndarray, dt: float) -> np.ndarray:
+    """[[Ac, Bc, 0], [0, 0, I/Δt], [0, 0, 0]]·Δt, whose exponential gives the first-order hold.
+
+    With u linear between samples, [x; u; Δu/Δt] obeys these dynamics over one step, so
+    expm of this block has top row [Φ, Γa, Γ2] with x(k+1) = Φ x(k) + Γa u(k) + Γ2 Δu(k)
+    (Franklin, Powell & Workman, *Digital Control of Dynamic Systems*, 3rd ed., §6.3.2).
+    """
+    n, r = Bc.shape
+    M = np.zeros((n + 2 * r, n + 2 * r))
+    M[:n, :n] = Ac
+    M[:n, n : n + r] = Bc
+    M[n : n + r, n + r :] = np.eye(r) / dt
+    return M * dt
+
+
+def discretize_hold(
+    Ac: np.ndarray, Bc: np.ndarray, C: np.ndarray, D: np.ndarray, dt: float, hold: str
+) -> StateSpace:
+    """Discrete model with a zero-order ("zoh") or first-order ("foh") hold of the inputs."""
+    if hold == "zoh":
+        A, B = discretize(Ac, Bc, dt)
+        return StateSpace(A, B, C, D)
+    if hold == "foh":
+        return discretize_foh(Ac, Bc, C, D, dt)
+    raise ValueError(f"hold must be 'zoh' or 'foh', not {hold!r}")
+
+
+def discretize_foh(
+    Ac: np.ndarray, Bc: np.ndarray, C: np.ndarray, D: np.ndarray, dt: float
+) -> StateSpace:
+    """Discrete model of a continuous one whose inputs are linear between samples.
+
+    x(k+1) = Φ x + Γa u(k) + Γ2 (u(k+1) − u(k)) in the state ξ = x − Γ2 u becomes the standard
+    ξ(k+1) = Φ ξ + (Φ Γ2 + Γa − Γ2) u(k), y = C ξ + (D + C Γ2) u(k): same eigenvalues as the
+    zero-order-hold model, but no half-sample lag for smooth (filtered, servo-driven) inputs.
+    """
+    n, r = Bc.shape
+    E = scipy.linalg.expm(hold_block(Ac, Bc, dt))
+    Phi, Ga, G2 = E[:n, :n], E[:n, n : n + r], E[:n, n + r :]
+    return StateSpace(Phi, Phi @ G2 + Ga - G2, C, D + C @ G2)
+
+
 def continuous_eigenvalues(discrete: np.ndarray, dt: float) -> np.ndarray:
     """s = ln(z)/Δt, principal branch (a negative real z maps to the Nyquist line Im s = π/Δt)."""
     return np.log(np.asarray(discrete, dtype=complex)) / dt

@@ -22,34 +22,136 @@ import numpy as np
 from agent.ident.convert import StateSpace
 from agent.ident.okid import Experiment
 
+# Samples per block of the lifted simulation (below): long enough that the per-block Python
+# work is amortised, short enough that the block Toeplitz matrix stays small.
+BLOCK_MIN, BLOCK_MAX = 8, 96
+
+
+def _block_length(samples: int) -> int:
+    return int(np.clip(np.sqrt(samples), BLOCK_MIN, BLOCK_MAX))
+
+
+def _powers(A: np.ndarray, count: int) -> np.ndarray:
+    """A⁰ … A^(count−1) stacked: (count × n × n)."""
+    n = A.shape[0]
+    out = np.empty((count, n, n))
+    out[0] = np.eye(n)
+    for k in range(1, count):
+        out[k] = out[k - 1] @ A
+    return out
+
 
 def simulate(model: StateSpace, u: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:
-    """Outputs y(k) = C x(k) + D u(k) of the discrete model driven by u (l × r) from x0."""
-    n = model.A.shape[0]
+    """Outputs y(k) = C x(k) + D u(k) of the discrete model driven by u (l × r) from x0.
+
+    Exact, but lifted to blocks of L samples so that the Python loop runs l/L times: within a
+    block, y = O x(start) + T u_block with O = [C; CA; …; CA^(L−1)] and T the block Toeplitz
+    matrix of the Markov parameters; between blocks x ← A^L x + [A^(L−1)B … B] u_block.
+    """
+    u = np.asarray(u, dtype=float)
+    length, r = u.shape
+    n, m = model.A.shape[0], model.C.shape[0]
     x = np.zeros(n) if x0 is None else np.asarray(x0, dtype=float)
-    states = np.empty((u.shape[0], n))
-    for k in range(u.shape[0]):
-        states[k] = x
-        x = model.A @ x + model.B @ u[k]
-    return states @ model.C.T + u @ model.D.T
+    if length == 0:
+        return np.zeros((0, m))
+    L = min(_block_length(length), length)
+    blocks = -(-length // L)
+    padded = np.zeros((blocks * L, r))
+    padded[:length] = u
+    powers = _powers(model.A, L + 1)
+    O = (model.C @ powers[:L]).reshape(L * m, n)  # (L·m × n)
+    markov = model.C @ powers[: L - 1] @ model.B  # C A^(k) B, k < L−1: (L−1 × m × r)
+    T = np.zeros((L, L, m, r))
+    for lag in range(L):
+        block = model.D if lag == 0 else markov[lag - 1]
+        idx = np.arange(lag, L)
+        T[idx, idx - lag] = block
+    T = T.transpose(0, 2, 1, 3).reshape(L * m, L * r)
+    reach = (powers[L - 1 :: -1][:L] @ model.B).transpose(1, 0, 2).reshape(n, L * r)
+    AL = powers[L]
+    U = padded.reshape(blocks, L * r)
+    starts = np.empty((blocks, n))
+    for b in range(blocks):
+        starts[b] = x
+        x = AL @ x + reach @ U[b]
+    y = starts @ O.T + U @ T.T
+    return y.reshape(blocks * L, m)[:length]
+
+
+def simulate_states(model: StateSpace, u: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:
+    """States x(k) (l × n) of the discrete model driven by u from x0."""
+    n, r = model.B.shape
+    return simulate(StateSpace(model.A, model.B, np.eye(n), np.zeros((n, r))), u, x0)
+
+
+def state_convolution(A: np.ndarray, C: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """out[k, :, i, j] = Σ_{t<k} (C A^(k−1−t))[:, i] z[t, j]: (l × m × n × q).
+
+    The output, at every step, of the system (A, e_i, C) driven by each scalar signal z_j: the
+    sensitivity of a simulated output to the (i, j) entry of A (with z = states) or of B (with
+    z = inputs). Lifted to blocks like `simulate`.
+    """
+    z = np.asarray(z, dtype=float)
+    length, q = z.shape
+    n, m = A.shape[0], C.shape[0]
+    if length == 0:
+        return np.zeros((0, m, n, q))
+    L = min(_block_length(length), length)
+    blocks = -(-length // L)
+    padded = np.zeros((blocks * L, q))
+    padded[:length] = z
+    powers = _powers(A, L + 1)
+    obs = (C @ powers[:L]).reshape(L * m, n)  # C A^k, k < L
+    markov = C @ powers[: L - 1]  # C A^k, k < L−1: (L−1 × m × n)
+    T = np.zeros((L, L, m, n))
+    for lag in range(1, L):
+        idx = np.arange(lag, L)
+        T[idx, idx - lag] = markov[lag - 1]
+    T = T.transpose(0, 2, 3, 1).reshape(L * m * n, L)  # (k, m, i) × t
+    reach = powers[L - 1 :: -1][:L].transpose(1, 2, 0).reshape(n * n, L)  # A^(L−1−t)
+    Z = padded.reshape(blocks, L, q)
+    forced = (T @ Z.transpose(1, 0, 2).reshape(L, blocks * q)).reshape(L, m, n, blocks, q)
+    start = np.zeros((n, n, q))
+    free = np.empty((blocks, L * m, n * q))
+    for b in range(blocks):
+        free[b] = obs @ start.reshape(n, n * q)
+        start = (powers[L] @ start.reshape(n, n * q)).reshape(n, n, q) + (reach @ Z[b]).reshape(
+            n, n, q
+        )
+    out = forced.transpose(3, 0, 1, 2, 4) + free.reshape(blocks, L, m, n, q)
+    return out.reshape(blocks * L, m, n, q)[:length]
 
 
 def free_response_basis(model: StateSpace, length: int) -> np.ndarray:
     """Stacked C A^k for k < length: (length·m × n), the map from x(0) to the free response."""
-    n = model.A.shape[0]
-    blocks = np.empty((length, model.C.shape[0], n))
-    power = model.C.copy()
-    for k in range(length):
-        blocks[k] = power
-        power = power @ model.A
-    return blocks.reshape(-1, n)
+    n, m = model.A.shape[0], model.C.shape[0]
+    if length == 0:
+        return np.zeros((0, n))
+    L = min(_block_length(length), length)
+    blocks = -(-length // L)
+    powers = _powers(model.A, L + 1)
+    O = (model.C @ powers[:L]).reshape(L * m, n)
+    out = np.empty((blocks, L * m, n))
+    step = np.eye(n)
+    for b in range(blocks):
+        out[b] = O @ step
+        step = powers[L] @ step
+    return out.reshape(blocks * L * m, n)[: length * m]
 
 
 def estimate_initial_state(model: StateSpace, u: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """x(0) minimising ‖y − ŷ‖² over the record, by linear least squares."""
-    forced = simulate(model, u)
-    basis = free_response_basis(model, u.shape[0])
-    return np.linalg.lstsq(basis, (y - forced).reshape(-1), rcond=None)[0]
+    """x(0) minimising ‖y − ŷ‖² over the record, by linear least squares.
+
+    A strongly unstable model overflows over a long record; its x(0) is then zero (its fit is
+    worthless anyway, and `fit` scores it so).
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        forced = simulate(model, u)
+        basis = free_response_basis(model, u.shape[0])
+        target = (y - forced).reshape(-1)
+    if not (np.all(np.isfinite(basis)) and np.all(np.isfinite(target))):
+        return np.zeros(model.A.shape[0])
+    return np.linalg.lstsq(basis, target, rcond=None)[0]
 
 
 def theil(predicted: np.ndarray, measured: np.ndarray) -> np.ndarray:
@@ -79,7 +181,12 @@ def fit(model: StateSpace, experiments: Sequence[Experiment]) -> Fit:
     for exp in experiments:
         x0 = estimate_initial_state(model, exp.u, exp.y)
         states.append(x0)
-        predictions.append(simulate(model, exp.u, x0))
+        with np.errstate(over="ignore", invalid="ignore"):
+            predictions.append(simulate(model, exp.u, x0))
     measured = np.vstack([e.y for e in experiments])
-    tic = theil(np.vstack(predictions), measured)
+    predicted = np.vstack(predictions)
+    if not np.all(np.isfinite(predicted)):
+        # The simulation diverged: as bad a fit as TIC can say.
+        return Fit(tuple(predictions), tuple(states), np.ones(measured.shape[1]))
+    tic = theil(predicted, measured)
     return Fit(predictions=tuple(predictions), initial_states=tuple(states), tic=tic)

@@ -33,6 +33,7 @@ channels), so indicators and mode shapes do not depend on units (rad vs m/s vs d
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,6 +61,16 @@ class HankelFactors:
 
 
 @dataclass(frozen=True)
+class EigenvalueStd:
+    """1-σ uncertainty of one continuous eigenvalue s = ln(z)/Δt and of what it implies."""
+
+    real: float
+    imag: float
+    frequency: float  # of |s|, rad/s
+    damping: float  # of −Re s/|s|
+
+
+@dataclass(frozen=True)
 class Mode:
     """One mode: a real eigenvalue or a complex pair, with its indicators in percent."""
 
@@ -77,6 +88,7 @@ class Mode:
     cmi: float | None
     shape: np.ndarray  # scaled output mode shape c_i, largest component 1 with zero phase
     name: str | None = None
+    uncertainty: EigenvalueStd | None = None  # Cramér–Rao 1-σ, after refinement
 
     @property
     def stable(self) -> bool:
@@ -214,3 +226,41 @@ def _normalised_shape(c: np.ndarray) -> np.ndarray:
     """c scaled so its largest component is 1 with zero phase."""
     k = int(np.argmax(np.abs(c)))
     return c / c[k] if abs(c[k]) > 0 else c.astype(complex)
+
+
+def modal_subspace(A: np.ndarray, keep: Sequence[complex]) -> tuple[np.ndarray, np.ndarray]:
+    """Real bases (V: n × k, W: k × n, W V = I) of the invariant subspace of the kept modes.
+
+    `keep` lists discrete eigenvalues (one per complex pair); each pair contributes the real
+    and imaginary parts of its eigenvector, so W A V, W B, C V is a real model holding those
+    modes exactly (modal truncation).
+    """
+    z, vecs = scipy.linalg.eig(A)
+    used = np.zeros(z.size, dtype=bool)
+    chosen = set()
+    for target in keep:
+        k = int(np.argmin(np.where(used, np.inf, np.abs(z - target))))
+        chosen.add(k)
+        used[k] = True
+    order_real, kept = [], []
+    done = np.zeros(z.size, dtype=bool)
+    for k in range(z.size):
+        if done[k]:
+            continue
+        pair = abs(z[k].imag) > REAL_TOLERANCE * abs(z[k])
+        partner = None
+        if pair:
+            rest = np.where(done, np.inf, np.abs(z - z[k].conj()))
+            rest[k] = np.inf
+            partner = int(np.argmin(rest))
+            done[partner] = True
+            order_real.extend([vecs[:, k].real, vecs[:, k].imag])
+            kept.extend([k in chosen or partner in chosen] * 2)
+        else:
+            order_real.append(vecs[:, k].real)
+            kept.append(k in chosen)
+        done[k] = True
+    T = np.column_stack(order_real)
+    Tinv = np.linalg.inv(T)
+    mask = np.array(kept)
+    return T[:, mask], Tinv[mask]

@@ -1,22 +1,25 @@
 """One identification: experiments in, model, modes, quality indicators and fit out.
 
-OKID (observer Markov parameters, p chosen by BIC unless given) → system Markov parameters →
-ERA (order from the Hankel singular values unless given) → observer gain → output coordinates
-when every state is measured → continuous time → modes with indicators and aircraft names →
-simulation fit (TIC) and stability. Every caller (command line, onboard job, offline
+Preprocessing (band of interest, anti-alias decimation, optional smoothing) → OKID (observer
+Markov parameters, p chosen by simulation fit unless given) → system Markov parameters → ERA
+(order from the Hankel singular values unless given) → observer gain → output coordinates
+when every state is measured → continuous time → output-error refinement with Cramér–Rao
+standard errors (unless turned off) → modes with indicators, uncertainties and aircraft
+names → simulation fit (TIC) and stability. Every caller (command line, onboard job, offline
 analysis) goes through `identify`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from agent.ident import okid
 from agent.ident.convert import (
     StateSpace,
+    discretize,
     output_coordinates_transform,
     to_continuous,
 )
@@ -27,9 +30,11 @@ from agent.ident.errors import (
     DataError,
     IdentificationFailed,
 )
-from agent.ident.fit import Fit, fit
-from agent.ident.modal import HankelFactors, Mode, modal_analysis
-from agent.ident.naming import name_modes
+from agent.ident.fit import Fit, fit, theil
+from agent.ident.modal import HankelFactors, Mode, modal_analysis, modal_subspace
+from agent.ident.naming import MIN_EMAC, MIN_MSV, name_modes
+from agent.ident.preprocess import Preprocessing, preprocess
+from agent.ident.refine import Refinement, eigenvalue_std, refine, simulate_refined
 
 # A decent fit has TIC below this (thesis §5.3, ref. [67]).
 TIC_DECENT = 0.3
@@ -39,6 +44,14 @@ MARKOV_CANDIDATES = (1, 2, 3, 4, 5, 6, 8, 10, 12, 15, 20, 25, 30)
 # Candidates within this fraction of the best simulation TIC count as equally good; the
 # smallest of them is chosen.
 PARSIMONY = 0.10
+# The search over p stops after this many candidates in a row no better than the best so far
+# (beyond the parsimony margin): larger p only adds noise modes.
+STALL = 3
+# With the order automatic, ERA's modes are kept only if the data support them: temporally
+# consistent (EMAC ≥ naming.MIN_EMAC), a real share of the response (MSV ≥ naming.MIN_MSV),
+# and no faster than BAND_MULTIPLE × the band of interest, since a mode far above every
+# excited frequency shapes the response in band only through its static gain.
+BAND_MULTIPLE = 5.0
 
 
 @dataclass(frozen=True)
@@ -52,13 +65,19 @@ class Settings:
     estimate_d: bool = False
     regularization: float = 0.0
     hankel_blocks: int | None = None
+    decimation: int | None = None  # None: automatic from the band; 1: none
+    band_hz: float | None = None  # None: from the inputs' spectra
+    held_inputs: bool = True  # inputs held between samples (commands, zero-order hold)
+    smoothing_s: float | None = None  # Savitzky–Golay window; None: no smoothing
+    refine: bool = True  # output-error refinement of the OKID/ERA model
 
 
 @dataclass(frozen=True)
 class Identification:
     """Everything one identification produced."""
 
-    dt: float
+    dt: float  # analysis sample time (after decimation)
+    preprocessing: Preprocessing
     input_names: tuple[str, ...]
     output_names: tuple[str, ...]
     markov: int
@@ -70,6 +89,8 @@ class Identification:
     observer_gain: np.ndarray  # G in reported coordinates: A + G C is the OKID observer
     modes: tuple[Mode, ...]
     fit: Fit
+    refinement: Refinement | None  # None when turned off or impossible (see warnings)
+    okid_fit: Fit  # the OKID/ERA model's own fit, before refinement
     warnings: tuple[str, ...]
 
     @property
@@ -128,8 +149,18 @@ class MarkovChoice:
     failed: tuple[tuple[int, str], ...]  # (p, reason)
 
 
-def run_candidate(batch: Sequence[okid.Experiment], p: int, settings: Settings) -> Candidate:
-    """OKID with p Markov parameters, ERA at the given or suggested order, open-loop fit."""
+def run_candidate(
+    batch: Sequence[okid.Experiment],
+    p: int,
+    settings: Settings,
+    dt: float = 1.0,
+    band_hz: float | None = None,
+) -> Candidate:
+    """OKID with p Markov parameters, ERA at the given or suggested order, open-loop fit.
+
+    With the order automatic and `band_hz` known, modes the data do not support are cut
+    (modal truncation, see BAND_MULTIPLE).
+    """
     r, m = batch[0].u.shape[1], batch[0].y.shape[1]
     omp = okid.observer_markov(
         batch, p, estimate_d=settings.estimate_d, regularization=settings.regularization
@@ -146,12 +177,50 @@ def run_candidate(batch: Sequence[okid.Experiment], p: int, settings: Settings) 
         max_order=max_order,
         structural_rank=p * m if p > 1 else None,
     )
+    if settings.order is None and band_hz is not None:
+        realised = _supported_modes(realised, batch, dt, band_hz)
     model = StateSpace(realised.A, realised.B, realised.C, realised.D)
     return Candidate(markov=p, omp=omp, era=realised, fit=fit(model, batch))
 
 
+def _supported_modes(
+    realised: EraResult, batch: Sequence[okid.Experiment], dt: float, band_hz: float
+) -> EraResult:
+    """The realisation cut to the modes the data support (unchanged if none or all are)."""
+    input_rms, output_rms = okid.channel_rms(batch)
+    try:
+        modes = modal_analysis(
+            realised.A, realised.B, realised.C, dt,
+            factors=HankelFactors(realised.observability, realised.controllability),
+            input_scale=input_rms, output_scale=output_rms,
+        )  # fmt: skip
+    except IdentificationFailed:
+        return realised  # defective A: no modal decomposition to cut with
+    limit = 2 * np.pi * BAND_MULTIPLE * band_hz
+    keep = [
+        mode.discrete
+        for mode in modes
+        if (mode.emac or 0.0) >= MIN_EMAC and mode.msv >= MIN_MSV and mode.frequency <= limit
+    ]
+    if not keep or len(keep) == len(modes):
+        return realised
+    V, W = modal_subspace(realised.A, keep)
+    return replace(
+        realised,
+        A=W @ realised.A @ V,
+        B=W @ realised.B,
+        C=realised.C @ V,
+        order=V.shape[1],
+        observability=realised.observability @ V,
+        controllability=W @ realised.controllability,
+    )
+
+
 def choose_markov(
-    batch: Sequence[okid.Experiment], settings: Settings
+    batch: Sequence[okid.Experiment],
+    settings: Settings,
+    dt: float = 1.0,
+    band_hz: float | None = None,
 ) -> tuple[Candidate, MarkovChoice]:
     """Automatic p: the smallest model whose simulation TIC is within PARSIMONY of the best.
 
@@ -169,11 +238,18 @@ def choose_markov(
         okid.observer_markov(batch, 1, estimate_d=settings.estimate_d)  # raises with the reason
     ps = [p for p in MARKOV_CANDIDATES if p <= supported] or [supported]
     candidates, failed = [], []
+    stalled = 0
     for p in ps:
         try:
-            candidates.append(run_candidate(batch, p, settings))
+            candidate = run_candidate(batch, p, settings, dt, band_hz)
         except IdentificationFailed as exc:
             failed.append((p, str(exc)))
+            continue
+        best = min((c.tic_avg for c in candidates), default=np.inf)
+        stalled = stalled + 1 if candidate.tic_avg > best * (1 + PARSIMONY) else 0
+        candidates.append(candidate)
+        if stalled >= STALL:
+            break
     if not candidates:
         reasons = "; ".join(f"p = {p}: {why}" for p, why in failed)
         raise IdentificationFailed(f"no number of Markov parameters gave a model ({reasons})")
@@ -195,15 +271,25 @@ def identify(
 ) -> Identification:
     """Identify one model from a batch of experiments sampled every `dt` seconds."""
     settings = settings or Settings()
-    batch = okid.as_experiments(experiments)
+    raw = okid.as_experiments(experiments)
     if dt <= 0:
         raise DataError(f"sample time must be positive, got {dt}")
-    inputs, outputs = _names(batch, input_names, output_names)
-    check_channels(batch, inputs, outputs)
+    inputs, outputs = _names(raw, input_names, output_names)
+    check_channels(raw, inputs, outputs)
+    batch, prep = preprocess(
+        raw,
+        dt,
+        decimation=settings.decimation,
+        band_hz=settings.band_hz,
+        held_inputs=settings.held_inputs,
+        smoothing_s=settings.smoothing_s,
+    )
+    dt = prep.dt
     if settings.markov is None:
-        candidate, choice = choose_markov(batch, settings)
+        candidate, choice = choose_markov(batch, settings, dt, prep.band_hz)
     else:
-        candidate, choice = run_candidate(batch, settings.markov, settings), None
+        candidate = run_candidate(batch, settings.markov, settings, dt, prep.band_hz)
+        choice = None
     model, factors, G, coordinates = _reported_model(candidate)
     warnings: list[str] = []
     continuous = None
@@ -212,19 +298,33 @@ def identify(
         continuous = StateSpace(Ac, Bc, model.C, model.D)
     except ContinuousConversionError as exc:
         warnings.append(str(exc))
+    refinement, fitted = None, candidate.fit
+    if settings.refine and continuous is None:
+        warnings.append("no output-error refinement: it needs a continuous-time model")
+    elif settings.refine:
+        refinement, fitted = _refine(continuous, dt, batch, prep, coordinates, settings)
+        if refinement is None:
+            warnings.append("output-error refinement did not improve the OKID/ERA fit")
+        else:
+            continuous = refinement.continuous
+            A, B = _zoh(continuous, dt)
+            model = StateSpace(A, B, continuous.C, continuous.D)
     input_rms, output_rms = okid.channel_rms(batch)
     modes = modal_analysis(
         model.A, model.B, model.C, dt,
         factors=factors, input_scale=input_rms, output_scale=output_rms,
     )  # fmt: skip
+    if refinement is not None:
+        modes = _with_uncertainty(modes, refinement)
     if output_roles is not None:
         modes = name_modes(modes, output_roles)
     if any(not mode.stable for mode in modes):
         warnings.append("the identified model has unstable modes")
-    if candidate.tic_avg >= TIC_DECENT:
-        warnings.append(f"average TIC {candidate.tic_avg:.3f} is not below {TIC_DECENT}")
+    if fitted.tic_avg >= TIC_DECENT:
+        warnings.append(f"average TIC {fitted.tic_avg:.3f} is not below {TIC_DECENT}")
     return Identification(
         dt=dt,
+        preprocessing=prep,
         input_names=inputs,
         output_names=outputs,
         markov=candidate.markov,
@@ -235,9 +335,60 @@ def identify(
         coordinates=coordinates,
         observer_gain=G,
         modes=tuple(modes),
-        fit=candidate.fit,
+        fit=fitted,
+        refinement=refinement,
+        okid_fit=candidate.fit,
         warnings=tuple(warnings),
     )
+
+
+def _zoh(model: StateSpace, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    return discretize(model.A, model.B, dt)
+
+
+def _refine(
+    continuous: StateSpace,
+    dt: float,
+    batch: Sequence[okid.Experiment],
+    prep: Preprocessing,
+    coordinates: str,
+    settings: Settings,
+) -> tuple[Refinement | None, Fit]:
+    """Output-error refinement; None (and the OKID fit) if it does not lower the error.
+
+    Held inputs at the record rate are exactly a zero-order hold; decimated (filtered, hence
+    smooth) or sampled-continuous inputs are modelled with a first-order hold.
+    """
+    hold = "zoh" if prep.factor == 1 and settings.held_inputs else "foh"
+    refinement = refine(
+        continuous,
+        dt,
+        batch,
+        output_coordinates=coordinates == "outputs",
+        estimate_d=settings.estimate_d,
+        hold=hold,
+    )
+    predictions = simulate_refined(refinement, batch)
+    measured = np.vstack([e.y for e in batch])
+    result = Fit(
+        predictions=tuple(predictions),
+        initial_states=refinement.initial_states,
+        tic=theil(np.vstack(predictions), measured),
+    )
+    if refinement.cost > refinement.cost_initial or not np.all(np.isfinite(result.tic)):
+        return None, fit(StateSpace(*_zoh(continuous, dt), continuous.C, continuous.D), batch)
+    return refinement, result
+
+
+def _with_uncertainty(modes: Sequence[Mode], refinement: Refinement) -> list[Mode]:
+    """Attach the Cramér–Rao 1-σ of each mode's eigenvalue (nearest eigenvalue of Ac)."""
+    lam = np.linalg.eigvals(refinement.continuous.A)
+    stds = eigenvalue_std(refinement.continuous.A, refinement.covariance_of_a())
+    out = []
+    for mode in modes:
+        k = int(np.argmin(np.abs(lam - mode.eigenvalue)))
+        out.append(replace(mode, uncertainty=stds[k]))
+    return out
 
 
 def _names(

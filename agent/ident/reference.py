@@ -199,3 +199,28 @@ def make_record(
         input_names=model.inputs,
         output_names=model.outputs,
     )
+
+
+def thesis_multisine(
+    model: ReferenceModel, dt: float = 0.02, duration: float = 30.0, period: float = 20.0
+) -> np.ndarray:
+    """The thesis's flown excitation: Schroeder multisines on the table 6.4 harmonics.
+
+    Each surface plays its own four harmonics of a `period`-second base (aileron 3, 6, 9, 12;
+    rudder 5, 10, 15, 20; elevator 7, 14, 21, 28) at its AMPLITUDE; throttle, which the
+    thesis does not excite with a multisine, gets the harmonics 2, 4 (steps are issue 4's).
+    """
+    from agent.excitation.signals import THESIS_HARMONICS, multisine
+
+    columns = []
+    for name in model.inputs:
+        harmonics = THESIS_HARMONICS.get(name, (2, 4))
+        columns.append(multisine(harmonics, period, dt, duration, AMPLITUDE.get(name, 1.0)))
+    return np.column_stack(columns)
+
+
+def with_output_noise(y: np.ndarray, fraction: float, seed: int) -> np.ndarray:
+    """y plus white noise of `fraction` × each output's RMS (the issue-3 noise convention)."""
+    rng = np.random.default_rng(seed)
+    scale = fraction * np.sqrt(np.mean(y**2, axis=0))
+    return y + rng.normal(size=y.shape) * scale

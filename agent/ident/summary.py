@@ -32,6 +32,12 @@ def mode_to_dict(mode: Mode) -> dict[str, Any]:
         "emac": _num(mode.emac),
         "mpc": float(mode.mpc),
         "cmi": _num(mode.cmi),
+        # Cramér–Rao 1-σ after output-error refinement (None without refinement).
+        "eigenvalue_std": None
+        if mode.uncertainty is None
+        else [mode.uncertainty.real, mode.uncertainty.imag],
+        "frequency_std_rad_s": None if mode.uncertainty is None else mode.uncertainty.frequency,
+        "damping_std": None if mode.uncertainty is None else mode.uncertainty.damping,
     }
 
 
@@ -66,13 +72,48 @@ def to_dict(result: Identification, trim: list[dict[str, float]] | None = None) 
         if result.markov_choice is None
         else [{"markov": p, "order": n, "tic_avg": t} for p, n, t in result.markov_choice.tried],
         "trim": trim or [],
+        "preprocessing": _preprocessing(result),
+        "refinement": _refinement(result),
         "warnings": list(result.warnings),
+    }
+
+
+def _preprocessing(result: Identification) -> dict[str, Any]:
+    prep = result.preprocessing
+    return {
+        "record_dt": prep.record_dt,
+        "decimation": prep.factor,
+        "band_hz": prep.band_hz,
+        "held_inputs_shifted": prep.held_inputs,
+        "smoothing_s": prep.smoothing_s,
+        "dropped_samples_per_end": prep.dropped_samples,
+    }
+
+
+def _refinement(result: Identification) -> dict[str, Any] | None:
+    ref = result.refinement
+    if ref is None:
+        return None
+    std = ref.matrix_std()
+    out_coords = result.coordinates == "outputs"
+    return {
+        "hold": ref.hold,
+        "iterations": ref.iterations,
+        "noise_std": {n: float(v) for n, v in zip(result.output_names, ref.noise_std, strict=True)},
+        "okid_tic_avg": float(result.okid_fit.tic_avg),
+        "Ac_std": _rows(std.A) if out_coords else None,
+        "Bc_std": _rows(std.B) if out_coords else None,
     }
 
 
 def _fmt_eig(mode: Mode) -> str:
     s = mode.eigenvalue
     return f"{s.real:9.4f} ± {s.imag:.4f}j" if mode.pair else f"{s.real:9.4f}"
+
+
+def _fmt_std(mode: Mode) -> str:
+    u = mode.uncertainty
+    return "" if u is None else f"   {u.frequency:9.4f} {u.damping:9.4f}"
 
 
 def _pct(value: float | None) -> str:
@@ -84,22 +125,31 @@ def format_text(result: Identification, records: int, samples: int) -> str:
     lines = [
         f"{len(result.input_names)} inputs ({', '.join(result.input_names)}) → "
         f"{len(result.output_names)} outputs ({', '.join(result.output_names)}); "
-        f"{records} record(s), {samples} samples at {1 / result.dt:.4g} Hz",
+        f"{records} record(s), {samples} samples at "
+        f"{1 / result.preprocessing.record_dt:.4g} Hz, analysed at {1 / result.dt:.4g} Hz"
+        f" (decimation {result.preprocessing.factor}, band {result.preprocessing.band_hz:.3g} Hz)",
         f"Markov parameters p = {result.markov}"
         + (" (automatic)" if result.markov_choice is not None else "")
-        + f"; order n = {result.order}; model in {result.coordinates} coordinates",
+        + f"; order n = {result.order}; model in {result.coordinates} coordinates; "
+        + (
+            f"refined by output error ({result.refinement.hold} hold; "
+            f"OKID/ERA TIC {result.okid_fit.tic_avg:.3f})"
+            if result.refinement is not None
+            else "not refined"
+        ),
         "Hankel singular values: "
         + " ".join(f"{v:.3g}" for v in result.singular_values[: result.order + 3]),
         "",
         f"{'mode':<13}{'eigenvalue 1/s':<24}{'ωn rad/s':>9}{'ζ':>7}{'τ s':>8}"
-        f"{'MSV':>6}{'MCI':>5}{'MOI':>5}{'EMAC':>6}{'MPC':>5}{'CMI':>5}",
+        f"{'MSV':>6}{'MCI':>5}{'MOI':>5}{'EMAC':>6}{'MPC':>5}{'CMI':>5}"
+        + ("   1-σ ωn      1-σ ζ" if result.refinement is not None else ""),
     ]
     for mode in result.modes:
         tau = "" if mode.time_constant is None else f"{mode.time_constant:8.3f}"
         lines.append(
             f"{mode.name or '—':<13}{_fmt_eig(mode):<24}{mode.frequency:9.3f}{mode.damping:7.3f}"
             f"{tau:>8}{_pct(mode.msv):>6}{_pct(mode.mci):>5}{_pct(mode.moi):>5}"
-            f"{_pct(mode.emac):>6}{_pct(mode.mpc):>5}{_pct(mode.cmi):>5}"
+            f"{_pct(mode.emac):>6}{_pct(mode.mpc):>5}{_pct(mode.cmi):>5}" + _fmt_std(mode)
         )
     tic = "  ".join(
         f"{n} {v:.3f}" for n, v in zip(result.output_names, result.fit.tic, strict=True)

@@ -101,8 +101,10 @@ def test_observer_gain_is_deadbeat_for_noise_free_full_state_data():
 
 def test_tikhonov_regularization_damps_but_keeps_dominant_dynamics():
     exp = detrimmed(reference.make_record(reference.LATERAL))
-    plain = identify(exp, DT, settings=Settings(markov=10, order=4))
-    ridge = identify(exp, DT, settings=Settings(markov=10, order=4, regularization=1e-3))
+    plain = identify(exp, DT, settings=Settings(markov=10, order=4, refine=False))
+    ridge = identify(
+        exp, DT, settings=Settings(markov=10, order=4, regularization=1e-3, refine=False)
+    )
     truth = true_eigenvalues(reference.LATERAL)
 
     def err(result):
