@@ -348,6 +348,32 @@ def refine(
     )
 
 
+def cramer_rao(
+    model: StateSpace,
+    dt: float,
+    batch: Sequence[Experiment],
+    noise_std: np.ndarray,
+    *,
+    output_coordinates: bool = True,
+    estimate_d: bool = False,
+    hold: str = "zoh",
+    initial_states: Sequence[np.ndarray] | None = None,
+) -> np.ndarray:
+    """Cramér–Rao covariance of [vec Ac, vec Bc, vec C, vec D] at a known continuous model.
+
+    The bound for white output noise of standard deviations `noise_std`, with the same free
+    parameters as `refine` (initial states estimated too): what no unbiased estimator can
+    beat on this input. Only the inputs of `batch` matter.
+    """
+    x0s = initial_states or [np.zeros(model.A.shape[0]) for _ in batch]
+    problem = _Problem(
+        model, dt, batch, x0s, free_c=not output_coordinates, free_d=estimate_d, hold=hold
+    )
+    problem.weights = 1.0 / np.asarray(noise_std, dtype=float)
+    _, jac = problem.evaluate(np.zeros(problem.basis.shape[1]), with_jacobian=True)
+    return _covariance(jac, problem.basis[: problem.matrix_size])
+
+
 def _covariance(jac: np.ndarray, basis: np.ndarray) -> np.ndarray:
     """Cramér–Rao covariance of the model matrices: basis (JᵀJ)⁻¹ basisᵀ, by SVD."""
     _, s, vt = np.linalg.svd(jac, full_matrices=False)
