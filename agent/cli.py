@@ -73,6 +73,17 @@ def build_parser() -> argparse.ArgumentParser:
         help="decimation factor after the anti-alias filter (default: automatic; 1 = none)",
     )
     ident.add_argument(
+        "--method",
+        choices=("time", "frequency"),
+        help="OKID in the time domain (default) or from averaged spectra (thesis §4.3.1)",
+    )
+    ident.add_argument(
+        "--period",
+        type=float,
+        metavar="SECONDS",
+        help="excitation period for --method frequency (default: detected from the inputs)",
+    )
+    ident.add_argument(
         "--refine",
         action=argparse.BooleanOptionalAction,
         default=None,
@@ -121,7 +132,13 @@ def cmd_identify(args: argparse.Namespace) -> int:
         trim_seconds=trim,
     )
     settings = identify_cmd.settings_from(
-        config, args.markov, args.order, decimation=args.decimation, refine=args.refine
+        config,
+        args.markov,
+        args.order,
+        decimation=args.decimation,
+        refine=args.refine,
+        method=args.method,
+        period_s=args.period,
     )
     try:
         outcome = identify_cmd.run(request, config, settings)

@@ -122,6 +122,11 @@ class Identification(_Section):
     of continuously varying signals (e.g. surface potentiometers)."""
     smoothing_s: float | None = Field(None, gt=0.0)
     """Savitzky–Golay smoothing window in seconds (cubic), on inputs and outputs; unset: none."""
+    method: Literal["time", "frequency"] = "time"
+    """OKID from the time-domain regression, or from averaged spectra and the frequency
+    response over whole excitation periods (thesis §4.3.1)."""
+    period_s: float | None = Field(None, gt=0.0)
+    """Excitation period for the frequency method; unset: detected from the inputs."""
     refine: bool = True
     """Refine the OKID/ERA model by output error (maximum likelihood) and report Cramér–Rao
     standard errors; false reports the OKID/ERA model as is."""

@@ -126,6 +126,25 @@ def test_json_reports_cramer_rao_uncertainty_and_preprocessing(capsys, tmp_path)
     assert all(m["eigenvalue_std"] is None for m in doc["modes"])
 
 
+def test_frequency_method_from_the_command_line(capsys, tmp_path):
+    model = reference.LATERAL
+    u = reference.thesis_multisine(model, 0.02, duration=60.0)
+    y = reference.simulate(model, u, 0.02)
+    columns = {"time": np.arange(u.shape[0]) * 0.02, "aileron": u[:, 0], "rudder": u[:, 1]}
+    columns.update({name: y[:, j] for j, name in enumerate(model.outputs)})
+    path = write(tmp_path / "periodic.csv", columns)
+    code, doc = run_json(capsys, str(path), *LAT, "--method", "frequency", "--trim", "none")
+    assert code == 0
+    assert doc["method"] == "frequency"
+    assert doc["frequency"]["periodic"] is True
+    assert doc["frequency"]["segment_s"] == pytest.approx(20.0)
+    assert doc["frequency"]["markov_from"] == "observer fit to the FRF"
+    assert np.allclose(doc["Ac"], model.A, rtol=0.01, atol=0.01)
+    code, doc = run_json(capsys, str(path), *LAT, "--method", "frequency", "--period", "7.3")
+    assert code == 0  # a wrong period is not an error: it leaks, and says so
+    assert any("leakage" in w or "period" in w for w in doc["warnings"])
+
+
 def test_text_output_has_the_mode_table(capsys, lateral_csv):
     assert main(["identify", str(lateral_csv), *LAT, "--markov", "2"]) == 0
     out = capsys.readouterr().out

@@ -88,6 +88,8 @@ def settings_from(
     *,
     decimation: int | None = None,
     refine: bool | None = None,
+    method: str | None = None,
+    period_s: float | None = None,
 ) -> Settings:
     """Identification settings: command-line values (not None) override the config file."""
     return Settings(
@@ -103,6 +105,8 @@ def settings_from(
         held_inputs=config.held_inputs,
         smoothing_s=config.smoothing_s,
         refine=config.refine if refine is None else refine,
+        method=method or config.method,
+        period_s=period_s if period_s is not None else config.period_s,
     )
 
 

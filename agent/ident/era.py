@@ -56,11 +56,8 @@ def hankel_matrix(markov: np.ndarray, shift: int, rows: int, cols: int) -> np.nd
     needed = rows + cols + shift
     if count < needed:
         raise DataError(f"a {rows}×{cols} block Hankel H({shift}) needs {needed} Markov parameters")
-    H = np.empty((rows * m, cols * r))
-    for i in range(rows):
-        for j in range(cols):
-            H[i * m : (i + 1) * m, j * r : (j + 1) * r] = markov[1 + shift + i + j]
-    return H
+    index = 1 + shift + np.arange(rows)[:, None] + np.arange(cols)[None, :]
+    return markov[index].transpose(0, 2, 1, 3).reshape(rows * m, cols * r)
 
 
 def suggest_order(

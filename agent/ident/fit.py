@@ -61,12 +61,10 @@ def simulate(model: StateSpace, u: np.ndarray, x0: np.ndarray | None = None) -> 
     powers = _powers(model.A, L + 1)
     O = (model.C @ powers[:L]).reshape(L * m, n)  # (L·m × n)
     markov = model.C @ powers[: L - 1] @ model.B  # C A^(k) B, k < L−1: (L−1 × m × r)
-    T = np.zeros((L, L, m, r))
-    for lag in range(L):
-        block = model.D if lag == 0 else markov[lag - 1]
-        idx = np.arange(lag, L)
-        T[idx, idx - lag] = block
-    T = T.transpose(0, 2, 1, 3).reshape(L * m, L * r)
+    # Block (k, l) of T is D at lag k − l = 0, C A^(k−l−1) B above, zero below.
+    stack = np.concatenate([np.zeros((1, m, r)), model.D[None], markov])
+    lag = np.arange(L)[:, None] - np.arange(L)[None, :]
+    T = stack[np.where(lag >= 0, lag + 1, 0)].transpose(0, 2, 1, 3).reshape(L * m, L * r)
     reach = (powers[L - 1 :: -1][:L] @ model.B).transpose(1, 0, 2).reshape(n, L * r)
     AL = powers[L]
     U = padded.reshape(blocks, L * r)
@@ -103,10 +101,9 @@ def state_convolution(A: np.ndarray, C: np.ndarray, z: np.ndarray) -> np.ndarray
     powers = _powers(A, L + 1)
     obs = (C @ powers[:L]).reshape(L * m, n)  # C A^k, k < L
     markov = C @ powers[: L - 1]  # C A^k, k < L−1: (L−1 × m × n)
-    T = np.zeros((L, L, m, n))
-    for lag in range(1, L):
-        idx = np.arange(lag, L)
-        T[idx, idx - lag] = markov[lag - 1]
+    stack = np.concatenate([np.zeros((1, m, n)), markov])
+    lag = np.arange(L)[:, None] - np.arange(L)[None, :]
+    T = stack[np.where(lag >= 1, lag, 0)]  # block (k, t): C A^(k−t−1) for k > t
     T = T.transpose(0, 2, 3, 1).reshape(L * m * n, L)  # (k, m, i) × t
     reach = powers[L - 1 :: -1][:L].transpose(1, 2, 0).reshape(n * n, L)  # A^(L−1−t)
     Z = padded.reshape(blocks, L, q)

@@ -127,20 +127,21 @@ def modal_analysis(
     Psi_inv = np.linalg.inv(Psi)
     Bm, Cm = Psi_inv @ Bs, Cs @ Psi
     keep = [i for i in range(z.size) if z[i].imag >= -REAL_TOLERANCE * abs(z[i])]
-    msv = np.array([_pulse_norm(z[i], Bm[i], Cm[:, i], sum(horizon) - 1) for i in keep])
-    bnorm = np.array([np.linalg.norm(Bm[i]) for i in keep])
-    cnorm = np.array([np.linalg.norm(Cm[:, i]) for i in keep])
+    msv = _pulse_norms(z[keep], Bm[keep], Cm[:, keep], sum(horizon) - 1)
+    bnorm = np.linalg.norm(Bm[keep], axis=1)
+    cnorm = np.linalg.norm(Cm[:, keep], axis=0)
+    mpcs = _mpc(Cm[:, keep])
     emac = None
     if factors is not None:
-        Pm = (factors.observability / np.tile(sy, horizon[0])[:, None]) @ Psi
-        Qm = Psi_inv @ (factors.controllability * np.tile(su, horizon[1])[None, :])
-        emac = [_emac(z[i], Pm[:, i], Qm[i], m, r) for i in keep]
+        Pm = (factors.observability / np.tile(sy, horizon[0])[:, None]) @ Psi[:, keep]
+        Qm = Psi_inv[keep] @ (factors.controllability * np.tile(su, horizon[1])[None, :])
+        emac = _emac(z[keep], Pm, Qm, m, r)
     modes = []
     for j, i in enumerate(keep):
         s = complex(continuous_eigenvalues(z[i], dt))
         pair = abs(z[i].imag) > REAL_TOLERANCE * abs(z[i])
-        mpc = _mpc(Cm[:, i])
-        e = None if emac is None else 100.0 * emac[j]
+        mpc = float(mpcs[j])
+        e = None if emac is None else 100.0 * float(emac[j])
         modes.append(
             Mode(
                 eigenvalue=s,
@@ -149,9 +150,9 @@ def modal_analysis(
                 frequency=abs(s),
                 damping=-s.real / abs(s) if abs(s) > 0 else 1.0,
                 time_constant=None if pair or s.real == 0 else -1.0 / s.real,
-                msv=100.0 * (msv[j] / msv.max()) if msv.max() > 0 else 0.0,
-                mci=100.0 * (bnorm[j] / bnorm.max()) if bnorm.max() > 0 else 0.0,
-                moi=100.0 * (cnorm[j] / cnorm.max()) if cnorm.max() > 0 else 0.0,
+                msv=100.0 * float(msv[j] / msv.max()) if msv.max() > 0 else 0.0,
+                mci=100.0 * float(bnorm[j] / bnorm.max()) if bnorm.max() > 0 else 0.0,
+                moi=100.0 * float(cnorm[j] / cnorm.max()) if cnorm.max() > 0 else 0.0,
                 emac=e,
                 mpc=100.0 * mpc,
                 cmi=None if e is None else e * mpc,
@@ -173,8 +174,11 @@ def _balanced_norms(
     """
     n = A.shape[0]
     alpha, beta = horizon
-    O = np.vstack([C @ np.linalg.matrix_power(A, k) for k in range(alpha)])
-    R = np.hstack([np.linalg.matrix_power(A, k) @ B for k in range(beta)])
+    powers = [np.eye(n)]
+    for _ in range(max(alpha, beta) - 1):
+        powers.append(powers[-1] @ A)
+    O = np.vstack([C @ P for P in powers[:alpha]])
+    R = np.hstack([P @ B for P in powers[:beta]])
     U, sv, _ = np.linalg.svd(O @ R, full_matrices=False)
     if sv.size < n or sv[n - 1] <= 1e-12 * sv[0]:
         return np.linalg.norm(Psi, axis=0)
@@ -182,44 +186,52 @@ def _balanced_norms(
     return np.linalg.norm(to_balanced @ Psi, axis=0)
 
 
-def _pulse_norm(z: complex, b: np.ndarray, c: np.ndarray, steps: int) -> float:
-    """Frobenius norm of the mode's real pulse-response share over `steps` samples."""
-    powers = z ** np.arange(steps)
-    block = np.einsum("k,i,j->kij", powers, c, b)
-    block = 2.0 * block.real if abs(z.imag) > REAL_TOLERANCE * abs(z) else block.real
-    return float(np.linalg.norm(block))
+def _pulse_norms(z: np.ndarray, Bm: np.ndarray, Cm: np.ndarray, steps: int) -> np.ndarray:
+    """Frobenius norm of each mode's real pulse-response share over `steps` samples.
+
+    z (k,), Bm (k × r) rows and Cm (m × k) columns of the kept modes; a complex mode stands
+    for its pair, so its share is twice the real part.
+    """
+    powers = z[None, :] ** np.arange(steps)[:, None]  # (steps × k)
+    block = np.einsum("tk,ik,kj->tijk", powers, Cm, Bm).real
+    pair = np.abs(z.imag) > REAL_TOLERANCE * np.abs(z)
+    return np.sqrt(np.sum(block**2, axis=(0, 1, 2))) * np.where(pair, 2.0, 1.0)
 
 
-def _coherence(first: np.ndarray, last: np.ndarray, z_power: complex) -> float:
-    """Weighted amplitude-and-phase agreement of `last` with `first`·z_power (Pappa 1993)."""
-    predicted = first * z_power
+def _coherence(first: np.ndarray, last: np.ndarray, z_power: np.ndarray) -> np.ndarray:
+    """Weighted amplitude-and-phase agreement of `last` with `first`·z_power (Pappa 1993).
+
+    Columns are modes: first, last (len × k), z_power (k,); one value per mode.
+    """
+    predicted = first * z_power[None, :]
     weights = np.abs(first) ** 2
-    if weights.sum() == 0:
-        return 0.0
     a, p = np.abs(last), np.abs(predicted)
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where((a > 0) & (p > 0), np.minimum(a, p) / np.maximum(a, p), 0.0)
         phase = np.angle(np.where(p > 0, last / np.where(p > 0, predicted, 1.0), 0.0))
     weight = np.maximum(0.0, 1.0 - np.abs(phase) / (np.pi / 4))
-    return float(np.sum(ratio * weight * weights) / weights.sum())
+    total = weights.sum(axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(total > 0, np.sum(ratio * weight * weights, axis=0) / total, 0.0)
 
 
-def _emac(z: complex, obs_col: np.ndarray, ctrl_row: np.ndarray, m: int, r: int) -> float:
-    """Output EMAC × input EMAC of one mode from its columns of the modal Hankel factors."""
-    alpha, beta = obs_col.size // m, ctrl_row.size // r
-    out = _coherence(obs_col[:m], obs_col[(alpha - 1) * m :], z ** (alpha - 1))
-    inp = _coherence(ctrl_row[:r], ctrl_row[(beta - 1) * r :], z ** (beta - 1))
+def _emac(z: np.ndarray, Pm: np.ndarray, Qm: np.ndarray, m: int, r: int) -> np.ndarray:
+    """Output EMAC × input EMAC of each mode from its columns (rows) of the Hankel factors."""
+    alpha, beta = Pm.shape[0] // m, Qm.shape[1] // r
+    out = _coherence(Pm[:m], Pm[(alpha - 1) * m :], z ** (alpha - 1))
+    inp = _coherence(Qm[:, :r].T, Qm[:, (beta - 1) * r :].T, z ** (beta - 1))
     return out * inp
 
 
-def _mpc(c: np.ndarray) -> float:
-    """Uncentred modal phase collinearity ((λ₁ − λ₂)/(λ₁ + λ₂))² of the shape c (eq. 5.15–5.18)."""
-    X = np.column_stack([c.real, c.imag])
-    lam = np.linalg.eigvalsh(X.T @ X)
-    total = lam.sum()
-    if total <= 0:
-        return 0.0
-    return float(((lam[1] - lam[0]) / total) ** 2)
+def _mpc(Cm: np.ndarray) -> np.ndarray:
+    """Uncentred modal phase collinearity ((λ₁ − λ₂)/(λ₁ + λ₂))² of each shape column (eq.
+    5.15–5.18), λ the eigenvalues of XᵀX with X = [Re c, Im c]."""
+    a = np.sum(Cm.real**2, axis=0)
+    d = np.sum(Cm.imag**2, axis=0)
+    b = np.sum(Cm.real * Cm.imag, axis=0)
+    total = a + d
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(total > 0, (4 * (((a - d) / 2) ** 2 + b**2)) / total**2, 0.0)
 
 
 def _normalised_shape(c: np.ndarray) -> np.ndarray:

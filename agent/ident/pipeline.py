@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from agent.ident import okid
+from agent.ident import frequency, okid
 from agent.ident.convert import (
     StateSpace,
     discretize,
@@ -70,6 +70,8 @@ class Settings:
     held_inputs: bool = True  # inputs held between samples (commands, zero-order hold)
     smoothing_s: float | None = None  # Savitzky–Golay window; None: no smoothing
     refine: bool = True  # output-error refinement of the OKID/ERA model
+    method: str = "time"  # "time": OKID regression; "frequency": spectra → FRF (thesis §4.3.1)
+    period_s: float | None = None  # excitation period for "frequency"; None: detected
 
 
 @dataclass(frozen=True)
@@ -92,6 +94,8 @@ class Identification:
     refinement: Refinement | None  # None when turned off or impossible (see warnings)
     okid_fit: Fit  # the OKID/ERA model's own fit, before refinement
     warnings: tuple[str, ...]
+    method: str = "time"
+    frequency_data: frequency.FrequencyData | None = None  # spectra and FRF for "frequency"
 
     @property
     def order(self) -> int:
@@ -155,32 +159,47 @@ def run_candidate(
     settings: Settings,
     dt: float = 1.0,
     band_hz: float | None = None,
+    freq: frequency.FrequencyData | None = None,
 ) -> Candidate:
     """OKID with p Markov parameters, ERA at the given or suggested order, open-loop fit.
 
-    With the order automatic and `band_hz` known, modes the data do not support are cut
-    (modal truncation, see BAND_MULTIPLE).
+    With `freq` the observer Markov parameters come from the frequency response (or, for a
+    broadband FRF, the system Markov parameters straight from its inverse FFT; p is then the
+    number of them). With the order automatic and `band_hz` known, modes the data do not
+    support are cut (modal truncation, see BAND_MULTIPLE).
     """
     r, m = batch[0].u.shape[1], batch[0].y.shape[1]
-    omp = okid.observer_markov(
-        batch, p, estimate_d=settings.estimate_d, regularization=settings.regularization
-    )
     blocks = settings.hankel_blocks or default_blocks(m, r, settings.order_max)
-    markov = okid.system_markov(omp, 2 * blocks + 2)
+    broadband = freq is not None and freq.frf.broadband
+    if broadband:
+        markov = frequency.inverse_fft_markov(freq.frf, 2 * blocks + 2)
+        omp = frequency.markov_observer(markov)
+        structural = None
+    else:
+        if freq is not None:
+            omp = frequency.observer_markov_from_frf(freq.frf, p, settings.estimate_d)
+        else:
+            omp = okid.observer_markov(
+                batch, p, estimate_d=settings.estimate_d, regularization=settings.regularization
+            )
+        markov = okid.system_markov(omp, 2 * blocks + 2)
+        structural = p * m if p > 1 else None
     # An ARX model with p lags has McMillan degree ≤ p·m, so its Markov sequence has no more.
-    max_order = min(settings.order_max, p * m, blocks * m, blocks * r)
+    max_order = min(settings.order_max, blocks * m, blocks * r)
+    if not broadband:
+        max_order = min(max_order, p * m)
     realised = era(
         markov,
         settings.order,
         rows=blocks,
         cols=blocks,
         max_order=max_order,
-        structural_rank=p * m if p > 1 else None,
+        structural_rank=structural,
     )
     if settings.order is None and band_hz is not None:
         realised = _supported_modes(realised, batch, dt, band_hz)
     model = StateSpace(realised.A, realised.B, realised.C, realised.D)
-    return Candidate(markov=p, omp=omp, era=realised, fit=fit(model, batch))
+    return Candidate(markov=omp.markov, omp=omp, era=realised, fit=fit(model, batch))
 
 
 def _supported_modes(
@@ -221,6 +240,7 @@ def choose_markov(
     settings: Settings,
     dt: float = 1.0,
     band_hz: float | None = None,
+    freq: frequency.FrequencyData | None = None,
 ) -> tuple[Candidate, MarkovChoice]:
     """Automatic p: the smallest model whose simulation TIC is within PARSIMONY of the best.
 
@@ -233,7 +253,16 @@ def choose_markov(
     the smallest p) wins.
     """
     _r, _m = batch[0].u.shape[1], batch[0].y.shape[1]
-    supported = okid.supported_markov(batch, settings.markov_max, settings.estimate_d)
+    if freq is not None:
+        supported = min(settings.markov_max, frequency.max_markov(freq.frf, settings.estimate_d))
+        if freq.frf.broadband:
+            candidate = run_candidate(batch, 1, settings, dt, band_hz, freq)
+            tried = ((candidate.markov, candidate.era.order, candidate.tic_avg),)
+            return candidate, MarkovChoice(chosen=candidate.markov, tried=tried, failed=())
+        if supported < 1:
+            frequency.observer_markov_from_frf(freq.frf, 1, settings.estimate_d)  # raises
+    else:
+        supported = okid.supported_markov(batch, settings.markov_max, settings.estimate_d)
     if supported < 1:
         okid.observer_markov(batch, 1, estimate_d=settings.estimate_d)  # raises with the reason
     ps = [p for p in MARKOV_CANDIDATES if p <= supported] or [supported]
@@ -241,8 +270,8 @@ def choose_markov(
     stalled = 0
     for p in ps:
         try:
-            candidate = run_candidate(batch, p, settings, dt, band_hz)
-        except IdentificationFailed as exc:
+            candidate = run_candidate(batch, p, settings, dt, band_hz, freq)
+        except (IdentificationFailed, DataError) as exc:
             failed.append((p, str(exc)))
             continue
         best = min((c.tic_avg for c in candidates), default=np.inf)
@@ -285,13 +314,20 @@ def identify(
         smoothing_s=settings.smoothing_s,
     )
     dt = prep.dt
+    warnings: list[str] = []
+    freq = None
+    if settings.method == "frequency":
+        period = None if settings.period_s is None else round(settings.period_s / dt)
+        freq = frequency.analyse(batch, period)
+        warnings.extend(freq.warnings)
+    elif settings.method != "time":
+        raise DataError(f"method must be 'time' or 'frequency', not {settings.method!r}")
     if settings.markov is None:
-        candidate, choice = choose_markov(batch, settings, dt, prep.band_hz)
+        candidate, choice = choose_markov(batch, settings, dt, prep.band_hz, freq)
     else:
-        candidate = run_candidate(batch, settings.markov, settings, dt, prep.band_hz)
+        candidate = run_candidate(batch, settings.markov, settings, dt, prep.band_hz, freq)
         choice = None
     model, factors, G, coordinates = _reported_model(candidate)
-    warnings: list[str] = []
     continuous = None
     try:
         Ac, Bc = to_continuous(model.A, model.B, dt)
@@ -339,6 +375,8 @@ def identify(
         refinement=refinement,
         okid_fit=candidate.fit,
         warnings=tuple(warnings),
+        method=settings.method,
+        frequency_data=freq,
     )
 
 

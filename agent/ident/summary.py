@@ -73,6 +73,8 @@ def to_dict(result: Identification, trim: list[dict[str, float]] | None = None) 
         else [{"markov": p, "order": n, "tic_avg": t} for p, n, t in result.markov_choice.tried],
         "trim": trim or [],
         "preprocessing": _preprocessing(result),
+        "method": result.method,
+        "frequency": _frequency(result),
         "refinement": _refinement(result),
         "warnings": list(result.warnings),
     }
@@ -87,6 +89,20 @@ def _preprocessing(result: Identification) -> dict[str, Any]:
         "held_inputs_shifted": prep.held_inputs,
         "smoothing_s": prep.smoothing_s,
         "dropped_samples_per_end": prep.dropped_samples,
+    }
+
+
+def _frequency(result: Identification) -> dict[str, Any] | None:
+    data = result.frequency_data
+    if data is None:
+        return None
+    spectra = data.spectra
+    return {
+        "periodic": spectra.periodic,
+        "segment_s": spectra.segment_length * result.dt,
+        "segments": spectra.segments,
+        "leakage": spectra.leakage,
+        "markov_from": "inverse FFT" if data.frf.broadband else "observer fit to the FRF",
     }
 
 
