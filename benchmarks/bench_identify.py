@@ -11,7 +11,8 @@ a separate record (aileron doublet, then rudder doublet, 20 s, same noise level)
 
 Methods, all on the same records:
 - suas-sysid default: automatic everything, output-error refinement (what `sysid identify`
-  does); and the same with refinement off (OKID/ERA after preprocessing).
+  does); the same with refinement off (OKID/ERA after preprocessing); and both again with
+  frequency-domain OKID (`--method frequency`).
 - textbook OKID: OKID/ERA at the record rate, true order 4, no preprocessing, no truncation,
   no refinement, at the p (from 1…20) with the lowest median error — an oracle choice.
 - python-control 0.10: `markov` (m = 100, 2 s of FIR) + `eigensys_realization` (n = 4).
@@ -140,9 +141,9 @@ def validation_tic(outcome: Outcome, val: Experiment) -> float:
     with np.errstate(all="ignore"):
         x0 = estimate_initial_state(disc, val.u, val.y)
         predicted = simulate(disc, val.u, x0)
-    if not np.all(np.isfinite(predicted)):
-        return 1.0
-    return float(np.mean(theil(predicted, val.y)))
+        if not np.all(np.isfinite(predicted)):
+            return 1.0
+        return float(np.mean(theil(predicted, val.y)))
 
 
 def records(noise: float, seed: int) -> tuple[Experiment, Experiment]:
@@ -211,6 +212,11 @@ def main() -> None:
     methods: list[tuple[str, Callable[[Experiment], Outcome]]] = [
         ("suas-sysid default (OKID/ERA + output error)", run_ours(Settings())),
         ("suas-sysid OKID/ERA, no refinement", run_ours(Settings(refine=False))),
+        ("suas-sysid frequency OKID + output error", run_ours(Settings(method="frequency"))),
+        (
+            "suas-sysid frequency OKID, no refinement",
+            run_ours(Settings(method="frequency", refine=False)),
+        ),
         ("python-control markov+ERA", run_python_control),
         ("SIPPY N4SID", run_sippy("N4SID")),
         ("SIPPY MOESP", run_sippy("MOESP")),

@@ -346,12 +346,22 @@ def identify(
             A, B = _zoh(continuous, dt)
             model = StateSpace(A, B, continuous.C, continuous.D)
     input_rms, output_rms = okid.channel_rms(batch)
-    modes = modal_analysis(
-        model.A, model.B, model.C, dt,
-        factors=factors, input_scale=input_rms, output_scale=output_rms,
-    )  # fmt: skip
-    if refinement is not None:
-        modes = _with_uncertainty(modes, refinement)
+    if refinement is None:
+        modes = modal_analysis(
+            model.A, model.B, model.C, dt,
+            factors=factors, input_scale=input_rms, output_scale=output_rms,
+        )  # fmt: skip
+    else:
+        okid_model = _reported_model(candidate)[0]
+        okid_modes = modal_analysis(
+            okid_model.A, okid_model.B, okid_model.C, dt,
+            factors=factors, input_scale=input_rms, output_scale=output_rms,
+        )  # fmt: skip
+        modes = modal_analysis(
+            model.A, model.B, model.C, dt, input_scale=input_rms, output_scale=output_rms,
+            horizon=(candidate.era.rows, candidate.era.cols),
+        )  # fmt: skip
+        modes = _with_uncertainty(_with_consistency(modes, okid_modes), refinement)
     if output_roles is not None:
         modes = name_modes(modes, output_roles)
     if any(not mode.stable for mode in modes):
@@ -416,6 +426,34 @@ def _refine(
     if refinement.cost > refinement.cost_initial or not np.all(np.isfinite(result.tic)):
         return None, fit(StateSpace(*_zoh(continuous, dt), continuous.C, continuous.D), batch)
     return refinement, result
+
+
+# A refined mode inherits the temporal consistency (EMAC) of the OKID/ERA mode it came from
+# when their eigenvalues lie within this relative distance; otherwise its EMAC is unknown.
+CONSISTENCY_MATCH = 0.2
+
+
+def _with_consistency(modes: Sequence[Mode], okid_modes: Sequence[Mode]) -> list[Mode]:
+    """EMAC (and CMI) of refined modes from the OKID/ERA modes they started as.
+
+    EMAC compares a mode with the Hankel matrix of the data's Markov parameters through the
+    ERA realisation's factors; a refined model has different eigenvectors, so the factors do
+    not apply to it. Each refined mode takes the EMAC of the nearest OKID/ERA mode (one to
+    one) when that lies within CONSISTENCY_MATCH of it.
+    """
+    remaining = list(okid_modes)
+    out = []
+    for mode in sorted(modes, key=lambda m: -m.msv):
+        emac = None
+        if remaining:
+            k = int(np.argmin([abs(o.eigenvalue - mode.eigenvalue) for o in remaining]))
+            if abs(remaining[k].eigenvalue - mode.eigenvalue) <= CONSISTENCY_MATCH * max(
+                abs(mode.eigenvalue), 1e-12
+            ):
+                emac = remaining.pop(k).emac
+        cmi = None if emac is None else emac * mode.mpc / 100.0
+        out.append(replace(mode, emac=emac, cmi=cmi))
+    return sorted(out, key=lambda mode: (mode.frequency, mode.eigenvalue.imag))
 
 
 def _with_uncertainty(modes: Sequence[Mode], refinement: Refinement) -> list[Mode]:

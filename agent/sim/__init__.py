@@ -1,0 +1,1 @@
+"""Hardware-free flight: the JSBSim plant (issue 6 adds the emulated autopilot, sensors, radios)."""

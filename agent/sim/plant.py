@@ -1,0 +1,171 @@
+"""JSBSim as the plant: trimmed flight, surface commands in, aircraft states out, and its own
+linearisation as the truth an identified model is measured against.
+
+JSBSim (Berndt et al., https://jsbsim.sourceforge.net; the `jsbsim` pip package carries the
+aircraft) integrates here at 200 Hz, a whole multiple of the 50 and 100 Hz record rates. The
+J-3 Cub is the default aircraft: the nearest relative of the thesis's Super Cub in JSBSim's
+fleet. Commands are JSBSim's normalised ones
+(−1 … 1; throttle 0 … 1) held over each step, added to the trim values found by JSBSim's
+trim routine. Outputs follow agent.channels in SI units: airspeed Vt (m/s), α, β, θ, φ (rad),
+p, q, r (rad/s).
+
+Turbulence is JSBSim's MIL-F-8785C Dryden model (turb-type 3), "light" being severity 1 with
+the 20 ft wind that goes with it (15 kt, MIL-HDBK-1797), seeded through
+`simulation/randomseed` so runs repeat.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+FT = 0.3048
+KT = 0.514444
+INPUTS = ("throttle", "elevator", "aileron", "rudder")
+COMMAND_PROPERTY = {
+    "throttle": "fcs/throttle-cmd-norm",
+    "elevator": "fcs/elevator-cmd-norm",
+    "aileron": "fcs/aileron-cmd-norm",
+    "rudder": "fcs/rudder-cmd-norm",
+}
+# Output channel → (JSBSim property, scale to SI).
+OUTPUT_PROPERTY = {
+    "Vt": ("velocities/vt-fps", FT),
+    "alpha": ("aero/alpha-rad", 1.0),
+    "q": ("velocities/q-rad_sec", 1.0),
+    "theta": ("attitude/theta-rad", 1.0),
+    "beta": ("aero/beta-rad", 1.0),
+    "p": ("velocities/p-rad_sec", 1.0),
+    "r": ("velocities/r-rad_sec", 1.0),
+    "phi": ("attitude/phi-rad", 1.0),
+}
+OUTPUTS = tuple(OUTPUT_PROPERTY)
+# JSBSim's linearisation states and inputs that correspond to our channels.
+LINEAR_STATES = {
+    "Vt": "Vt",
+    "alpha": "Alpha",
+    "q": "Q",
+    "theta": "Theta",
+    "beta": "Beta",
+    "p": "P",
+    "r": "R",
+    "phi": "Phi",
+}
+LINEAR_INPUTS = {"throttle": "ThtlCmd", "elevator": "DeCmd", "aileron": "DaCmd", "rudder": "DrCmd"}
+LIGHT_TURBULENCE_WIND_FPS = 15 * KT / FT
+
+
+class PlantError(RuntimeError):
+    """JSBSim could not load, trim or linearise the aircraft."""
+
+
+@dataclass(frozen=True)
+class Linearisation:
+    """JSBSim's own linear model at the trim point (continuous, its units and state order)."""
+
+    A: np.ndarray
+    B: np.ndarray
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+
+    def eigenvalues(
+        self, exclude: tuple[str, ...] = ("Psi", "Latitude", "Longitude")
+    ) -> np.ndarray:
+        """Eigenvalues of the dynamics without the states nothing depends on (heading and
+        position: pure integrators that no identification from body-axis data can see)."""
+        keep = [i for i, n in enumerate(self.state_names) if n not in exclude]
+        return np.linalg.eigvals(self.A[np.ix_(keep, keep)])
+
+
+class Plant:
+    """One JSBSim aircraft in trimmed straight and level flight."""
+
+    def __init__(
+        self,
+        aircraft: str = "J3Cub",
+        *,
+        airspeed_kts: float = 60.0,
+        altitude_ft: float = 1000.0,
+        turbulence: float = 0.0,
+        seed: int = 0,
+        integration_hz: float = 200.0,
+    ):
+        import jsbsim  # imported here: the identification core does not need it
+
+        self.fdm = jsbsim.FGFDMExec(None)
+        self.fdm.set_debug_level(0)
+        if not self.fdm.load_model(aircraft):
+            raise PlantError(f"JSBSim has no aircraft {aircraft!r}")
+        self.fdm.set_dt(1.0 / integration_hz)
+        self.fdm["simulation/randomseed"] = seed
+        self.fdm["ic/h-sl-ft"] = altitude_ft
+        self.fdm["ic/vc-kts"] = airspeed_kts
+        self.fdm["ic/gamma-deg"] = 0.0
+        if not self.fdm.run_ic():
+            raise PlantError("JSBSim rejected the initial conditions")
+        self.fdm["propulsion/set-running"] = -1
+        self.fdm.run()
+        self.dt = self.fdm.get_delta_t()
+        try:
+            self.fdm["simulation/do_simple_trim"] = 1
+        except Exception as exc:  # JSBSim raises its own TrimFailureException
+            raise PlantError(
+                f"JSBSim could not trim {aircraft} at {airspeed_kts} kt: {exc}"
+            ) from exc
+        self.trim = {name: float(self.fdm[prop]) for name, prop in COMMAND_PROPERTY.items()}
+        self.linearisation = self._linearise()
+        if turbulence > 0:
+            self.fdm["atmosphere/turb-type"] = 3
+            self.fdm["atmosphere/turbulence/milspec/severity"] = turbulence
+            self.fdm["atmosphere/turbulence/milspec/windspeed_at_20ft_AGL-fps"] = (
+                LIGHT_TURBULENCE_WIND_FPS
+            )
+
+    def _linearise(self) -> Linearisation:
+        import jsbsim
+
+        lin = jsbsim.FGLinearization(self.fdm)
+        # FGLinearization leaves the integration step at 0 (a frozen simulation): restore it.
+        self.fdm.set_dt(self.dt)
+        return Linearisation(
+            A=np.array(lin.system_matrix),
+            B=np.array(lin.input_matrix),
+            state_names=tuple(lin.x_names),
+            input_names=tuple(lin.u_names),
+        )
+
+    @property
+    def time(self) -> float:
+        return float(self.fdm.get_sim_time())
+
+    def command(self, deltas: Mapping[str, float]) -> None:
+        """Set each command to trim + delta (normalised units), clipped to JSBSim's range."""
+        for name, delta in deltas.items():
+            low = 0.0 if name == "throttle" else -1.0
+            self.fdm[COMMAND_PROPERTY[name]] = float(np.clip(self.trim[name] + delta, low, 1.0))
+
+    def step(self) -> None:
+        if not self.fdm.run():
+            raise PlantError("JSBSim stopped")
+
+    def outputs(self) -> np.ndarray:
+        """The aircraft's outputs in OUTPUTS order, SI units."""
+        return np.array([float(self.fdm[prop]) * scale for prop, scale in OUTPUT_PROPERTY.values()])
+
+    def fly(self, inputs: np.ndarray, sample_time: float) -> np.ndarray:
+        """Play `inputs` (samples × INPUTS, deltas from trim) at `sample_time`, holding each
+        sample, and return the outputs sampled at the same instants (before the sample acts)."""
+        steps = round(sample_time / self.dt)
+        if steps < 1 or abs(steps * self.dt - sample_time) > 1e-9:
+            raise PlantError(
+                f"sample time {sample_time} s is not a whole number of {self.dt} s steps"
+            )
+        out = np.empty((inputs.shape[0], len(OUTPUTS)))
+        for k, row in enumerate(inputs):
+            out[k] = self.outputs()
+            self.command(dict(zip(INPUTS, row, strict=True)))
+            for _ in range(steps):
+                self.step()
+        return out
