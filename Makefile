@@ -2,6 +2,10 @@
 #   make demo   set up .venv, identify the bundled example flight record, print the modes
 #   make test   set up .venv, lint, run the test suite
 PYTHON ?= python3
+# One BLAS thread: the identification's matrices are small, and on two cores OpenBLAS's
+# threads cost more than they give (measured: the case (a) benchmark identification takes
+# 18 ms with one thread and 23-27 ms with two, with a second process running).
+export OPENBLAS_NUM_THREADS ?= 1
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed

@@ -204,10 +204,44 @@ def fmt_pct(x: float) -> str:
     return f"{100 * x:.2f}" if x < 10 else f"{100 * x:.0f}"
 
 
+def scaling(durations: list[float]) -> None:
+    """Time per identification against record length: A.4 (8 outputs, 4 inputs), 100 Hz."""
+    model, dt = reference.FULL, 0.01
+    print()
+    print("record length scaling: A.4 full model (4 inputs, 8 outputs), 100 Hz, 5 % noise")
+    print(
+        f"{'seconds':>8}{'samples':>9}{'no refinement ms':>18}{'default ms':>12}{'decimation':>12}"
+    )
+    for seconds in durations:
+        u = reference.multisine_inputs(model.inputs, dt, seconds, 1, (0.05, 1.5))
+        y = reference.with_output_noise(reference.simulate(model, u, dt), 0.05, 1)
+        exp = Experiment(u, y)
+        row = []
+        for settings in (Settings(refine=False), Settings()):
+            identify(exp, dt, settings=settings)  # warm
+            times = []
+            for _ in range(3):
+                t0 = time.perf_counter()
+                result = identify(exp, dt, settings=settings)
+                times.append(time.perf_counter() - t0)
+            row.append(1e3 * statistics.median(times))
+        print(
+            f"{seconds:>8.0f}{u.shape[0]:>9}{row[0]:>18.1f}{row[1]:>12.1f}"
+            f"{result.preprocessing.factor:>12}"
+        )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--noise", type=float, nargs="+", default=[0.0, 0.05, 0.2])
+    parser.add_argument(
+        "--scaling",
+        type=float,
+        nargs="*",
+        default=[30.0, 60.0, 150.0, 300.0],
+        help="record lengths (s) for the time-versus-length table; none to skip",
+    )
     args = parser.parse_args()
     methods: list[tuple[str, Callable[[Experiment], Outcome]]] = [
         ("suas-sysid default (OKID/ERA + output error)", run_ours(Settings())),
@@ -263,6 +297,8 @@ def main() -> None:
             worst_mode = float(np.median(errors.max(axis=1)))
             ms = 1e3 * statistics.median(o.seconds for o in outcomes)
             print(f"{name:<46}{cells}{fmt_pct(worst_mode):>10}{ratio:>22}{tic:>9.3f}{ms:>8.1f}")
+    if args.scaling:
+        scaling(args.scaling)
 
 
 if __name__ == "__main__":

@@ -136,19 +136,48 @@ def free_response_basis(model: StateSpace, length: int) -> np.ndarray:
     return out.reshape(blocks * L * m, n)[: length * m]
 
 
+def observability_gramian(A: np.ndarray, C: np.ndarray, length: int) -> np.ndarray:
+    """Σ_{k<length} (A^k)ᵀ Cᵀ C A^k by doubling (log₂ length matrix products)."""
+    n = A.shape[0]
+    total, offset = np.zeros((n, n)), np.eye(n)
+    block, power = C.T @ C, A.copy()  # block: the sum over 2^j steps; power: A^(2^j)
+    remaining = length
+    while remaining:
+        if remaining & 1:
+            total += offset.T @ block @ offset
+            offset = power @ offset
+        remaining >>= 1
+        if remaining:
+            block = block + power.T @ block @ power
+            power = power @ power
+    return total
+
+
 def estimate_initial_state(model: StateSpace, u: np.ndarray, y: np.ndarray) -> np.ndarray:
     """x(0) minimising ‖y − ŷ‖² over the record, by linear least squares.
 
-    A strongly unstable model overflows over a long record; its x(0) is then zero (its fit is
-    worthless anyway, and `fit` scores it so).
+    The normal equations W x(0) = Σ_k (A^k)ᵀ Cᵀ e(k) (e = y minus the forced response) are
+    formed without the (length·m × n) free-response matrix: W is the observability Gramian
+    (by doubling) and the right side is the end state of the adjoint system driven by e in
+    reverse time. Solved by eigen-decomposition with tiny eigenvalues (unobservable
+    directions) dropped. A strongly unstable model overflows over a long record; its x(0) is
+    then zero (its fit is worthless anyway, and `fit` scores it so).
     """
+    n = model.A.shape[0]
     with np.errstate(over="ignore", invalid="ignore"):
-        forced = simulate(model, u)
-        basis = free_response_basis(model, u.shape[0])
-        target = (y - forced).reshape(-1)
-    if not (np.all(np.isfinite(basis)) and np.all(np.isfinite(target))):
-        return np.zeros(model.A.shape[0])
-    return np.linalg.lstsq(basis, target, rcond=None)[0]
+        error = y - simulate(model, u)
+        adjoint = StateSpace(model.A.T, model.C.T, np.eye(n), np.zeros((n, model.C.shape[0])))
+        reverse = np.vstack([error[::-1], np.zeros((1, error.shape[1]))])
+        rhs = simulate(adjoint, reverse)[-1]
+        gramian = observability_gramian(model.A, model.C, u.shape[0])
+    if not (np.all(np.isfinite(gramian)) and np.all(np.isfinite(rhs))):
+        return np.zeros(n)
+    gramian = 0.5 * (gramian + gramian.T)
+    values, vectors = np.linalg.eigh(gramian)
+    keep = values > 1e-12 * max(values.max(), 0.0)
+    if not keep.any():
+        return np.zeros(n)
+    return vectors[:, keep] @ ((vectors[:, keep].T @ rhs) / values[keep])
 
 
 def theil(predicted: np.ndarray, measured: np.ndarray) -> np.ndarray:

@@ -207,7 +207,16 @@ def observer_markov(
 def _tikhonov_solve(
     phi: np.ndarray, target: np.ndarray, regularization: float
 ) -> tuple[np.ndarray, np.ndarray, int]:
-    """Θ = V diag(f) Uᵀ Y with Tikhonov filter factors f = σ/(σ² + λ) (or 1/σ above RCOND)."""
+    """Θ = V diag(f) Uᵀ Y with Tikhonov filter factors f = σ/(σ² + λ) (or 1/σ above RCOND).
+
+    A tall Φ is first reduced by the QR factorisation of [Φ | Y] (never forming Q): with
+    Φ = Q R and R = U_R Σ Vᵀ, the SVD of Φ is (Q U_R) Σ Vᵀ and Uᵀ Y = U_Rᵀ (Qᵀ Y), the top
+    right block of the triangular factor. Same singular values, a fraction of the work.
+    """
+    k = phi.shape[1]
+    if phi.shape[0] > 2 * (k + target.shape[1]):
+        triangle = scipy.linalg.qr(np.hstack([phi, target]), mode="r")[0]
+        phi, target = triangle[:k, :k], triangle[:k, k:]
     U, sv, Vt = scipy.linalg.svd(phi, full_matrices=False, lapack_driver="gesdd")
     if sv.size == 0 or sv[0] == 0.0:
         raise IdentificationFailed("the OKID regression matrix is all zeros: nothing moved")

@@ -218,35 +218,42 @@ class _Problem:
         cont, x0s = self.unpack(beta)
         n, m, r = self.n, self.m, self.r
         disc = discretize_hold(cont.A, cont.B, cont.C, cont.D, self.dt, self.hold)
-        chain = _chain(cont, self.dt, self.hold) if with_jacobian else None
+        # The Jacobian in β is (∂ŷ/∂discrete)(∂discrete/∂continuous)(∂continuous/∂β): the
+        # last two are small, so they are multiplied first, and the sparse C and D blocks of
+        # ∂ŷ/∂discrete are applied by einsum instead of being built.
+        G = None
+        if with_jacobian:
+            G = _chain(cont, self.dt, self.hold) @ self.basis[: self.matrix_size]
+            q = G.shape[1]
+            k_ab = n * n + n * r
+            G_ab = np.concatenate(
+                [G[: n * n].reshape(n, n, q), G[n * n : k_ab].reshape(n, r, q)], axis=1
+            )
+            # ŷ_a(k) depends on C_aj through x_j(k) and on D_aj through u_j(k).
+            G_c = G[k_ab : k_ab + m * n].reshape(m, n, q).transpose(1, 0, 2).reshape(n, m * q)
+            G_d = G[k_ab + m * n :].reshape(m, r, q).transpose(1, 0, 2).reshape(r, m * q)
         residuals, jacobians = [], []
         with np.errstate(over="ignore", invalid="ignore"):
             for index, (exp, x0) in enumerate(zip(self.batch, x0s, strict=True)):
                 states = simulate_states(disc, exp.u, x0)
                 predicted = states @ disc.C.T + exp.u @ disc.D.T
                 residuals.append(((predicted - exp.y) * self.weights).ravel())
-                if chain is None:
+                if G is None:
                     continue
                 length = exp.u.shape[0]
-                sens = state_convolution(disc.A, disc.C, np.hstack([states, exp.u]))
-                discrete_jac = np.hstack(
-                    [
-                        sens[..., :n].reshape(length * m, n * n),
-                        sens[..., n:].reshape(length * m, n * r),
-                        np.einsum("ab,kj->kabj", np.eye(m), states).reshape(length * m, m * n),
-                        np.einsum("ab,kj->kabj", np.eye(m), exp.u).reshape(length * m, m * r),
-                    ]
-                )
-                jac = np.zeros((length * m, self.full0.size))
-                jac[:, : self.matrix_size] = discrete_jac @ chain
-                cols = slice(self.matrix_size + index * n, self.matrix_size + (index + 1) * n)
-                jac[:, cols] = free_response_basis(disc, length)
+                z = np.hstack([states, exp.u])
+                sens = state_convolution(disc.A, disc.C, z)  # (length, m, n, n + r)
+                jac = sens.reshape(length * m, n * (n + r)) @ G_ab.reshape(n * (n + r), q)
+                jac += (states @ G_c).reshape(length * m, q)
+                jac += (exp.u @ G_d).reshape(length * m, q)
+                rows = slice(self.matrix_size + index * n, self.matrix_size + (index + 1) * n)
+                jac += free_response_basis(disc, length) @ self.basis[rows]
                 jac *= np.tile(self.weights, length)[:, None]
-                jacobians.append(jac @ self.basis)
+                jacobians.append(jac)
         res = np.concatenate(residuals)
         if not np.all(np.isfinite(res)):
             return np.full(res.shape, np.inf), None
-        return res, (np.vstack(jacobians) if chain is not None else None)
+        return res, (np.vstack(jacobians) if G is not None else None)
 
     def rms_errors(self, beta: np.ndarray) -> np.ndarray:
         """RMS simulation error per output (unweighted)."""
