@@ -205,7 +205,7 @@ def run_candidate(
 def _supported_modes(
     realised: EraResult, batch: Sequence[okid.Experiment], dt: float, band_hz: float
 ) -> EraResult:
-    """The realisation cut to the modes the data support (unchanged if none or all are)."""
+    """The realisation cut to the modes the data support; IdentificationFailed if none is."""
     input_rms, output_rms = okid.channel_rms(batch)
     try:
         modes = modal_analysis(
@@ -216,12 +216,17 @@ def _supported_modes(
     except IdentificationFailed:
         return realised  # defective A: no modal decomposition to cut with
     limit = 2 * np.pi * BAND_MULTIPLE * band_hz
-    keep = [
-        mode.discrete
-        for mode in modes
-        if (mode.emac or 0.0) >= MIN_EMAC and mode.msv >= MIN_MSV and mode.frequency <= limit
-    ]
-    if not keep or len(keep) == len(modes):
+    # MSV is relative to the largest mode; noise modes can be the largest, so the share is
+    # judged among the consistent, in-band modes only.
+    plausible = [m for m in modes if (m.emac or 0.0) >= MIN_EMAC and m.frequency <= limit]
+    top = max((m.msv for m in plausible), default=0.0)
+    keep = [m.discrete for m in plausible if top > 0 and 100.0 * m.msv / top >= MIN_MSV]
+    if not keep:
+        raise IdentificationFailed(
+            f"none of the {len(modes)} modes is consistent (EMAC ≥ {MIN_EMAC:.0f} %) and "
+            f"below {limit:.1f} rad/s"
+        )
+    if len(keep) == len(modes):
         return realised
     V, W = modal_subspace(realised.A, keep)
     return replace(
@@ -273,6 +278,9 @@ def choose_markov(
             candidate = run_candidate(batch, p, settings, dt, band_hz, freq)
         except (IdentificationFailed, DataError) as exc:
             failed.append((p, str(exc)))
+            stalled += 1 if candidates else 0
+            if stalled >= STALL:
+                break
             continue
         best = min((c.tic_avg for c in candidates), default=np.inf)
         stalled = stalled + 1 if candidate.tic_avg > best * (1 + PARSIMONY) else 0

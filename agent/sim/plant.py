@@ -100,6 +100,7 @@ class Plant:
             raise PlantError(f"JSBSim has no aircraft {aircraft!r}")
         self.fdm.set_dt(1.0 / integration_hz)
         self.fdm["simulation/randomseed"] = seed
+        self.fdm["atmosphere/randomseed"] = seed
         self.fdm["ic/h-sl-ft"] = altitude_ft
         self.fdm["ic/vc-kts"] = airspeed_kts
         self.fdm["ic/gamma-deg"] = 0.0

@@ -1,0 +1,78 @@
+"""The JSBSim plant: trim, linearisation truth, flying, turbulence seeds, bad requests.
+
+Real JSBSim (the pip package and its J-3 Cub), no stand-ins.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agent.sim.plant import INPUTS, LINEAR_INPUTS, LINEAR_STATES, OUTPUTS, Plant, PlantError
+
+DT = 0.02
+
+
+@pytest.fixture(scope="module")
+def cub():
+    return Plant()
+
+
+def test_trim_and_linearisation_leave_a_flying_simulation(cub):
+    assert 0.0 < cub.trim["throttle"] < 1.0
+    # FGLinearization sets the step to 0; the plant restores it, so time advances.
+    assert cub.dt == pytest.approx(1 / 200)
+    start = cub.time
+    cub.fly(np.zeros((10, len(INPUTS))), DT)
+    assert cub.time == pytest.approx(start + 10 * DT)
+    lin = cub.linearisation
+    assert lin.A.shape == (len(lin.state_names),) * 2
+    assert {LINEAR_STATES[o] for o in OUTPUTS} <= set(lin.state_names)
+    assert {LINEAR_INPUTS[i] for i in INPUTS} <= set(lin.input_names)
+
+
+def test_linearisation_has_the_aircraft_modes():
+    lam = Plant().linearisation.eigenvalues()
+    pairs = lam[lam.imag > 1e-6]
+    # A Dutch roll (ωn 1–4 rad/s) and a phugoid (ωn < 0.6 rad/s), both stable.
+    assert any(1.0 < abs(s) < 4.0 and s.real < 0 for s in pairs)
+    assert any(abs(s) < 0.6 and s.real < 0 for s in pairs)
+
+
+def test_trimmed_flight_stays_trimmed_without_inputs():
+    plant = Plant()
+    y = plant.fly(np.zeros((500, len(INPUTS))), DT)
+    drift = np.abs(y - y[0]).max(axis=0)
+    assert drift[OUTPUTS.index("Vt")] < 0.05  # m/s over 10 s
+    assert drift[OUTPUTS.index("q")] < 1e-3
+
+
+def test_elevator_response_has_the_sign_of_the_linearisation():
+    plant = Plant()
+    lin = plant.linearisation
+    b = lin.B[lin.state_names.index("Q"), lin.input_names.index("DeCmd")]
+    u = np.zeros((50, len(INPUTS)))
+    u[5:, INPUTS.index("elevator")] = 0.05
+    y = plant.fly(u, DT)
+    dq = y[10, OUTPUTS.index("q")] - y[0, OUTPUTS.index("q")]
+    assert np.sign(dq) == np.sign(b)
+    assert abs(dq) > 1e-4
+
+
+def test_turbulence_is_repeatable_per_seed_and_differs_between_seeds():
+    u = np.zeros((300, len(INPUTS)))
+    a = Plant(turbulence=1.0, seed=3).fly(u, DT)
+    b = Plant(turbulence=1.0, seed=3).fly(u, DT)
+    c = Plant(turbulence=1.0, seed=4).fly(u, DT)
+    assert np.array_equal(a, b)
+    assert not np.allclose(a, c)
+    assert np.std(a[:, OUTPUTS.index("p")]) > 1e-3  # it is felt
+
+
+def test_bad_requests_are_refused_with_the_reason(cub):
+    """Bad input tried: an aircraft JSBSim does not have; a sample time that is not a whole
+    number of integration steps."""
+    with pytest.raises(PlantError, match="no aircraft"):
+        Plant("NoSuchPlane")
+    with pytest.raises(PlantError, match="whole number"):
+        cub.fly(np.zeros((2, len(INPUTS))), 0.0123)
