@@ -127,6 +127,10 @@ class Identification(_Section):
     response over whole excitation periods (thesis §4.3.1)."""
     period_s: float | None = Field(None, gt=0.0)
     """Excitation period for the frequency method; unset: detected from the inputs."""
+    noise_model: Literal["auto", "output", "innovation"] = "auto"
+    """Refinement criterion: "output" error (white sensor noise), "innovation" (prediction
+    error of the Kalman predictor: turbulence as process noise), or "auto": output error,
+    switching to the innovation form when its residuals are coloured and its fit poor."""
     refine: bool = True
     """Refine the OKID/ERA model by output error (maximum likelihood) and report Cramér–Rao
     standard errors; false reports the OKID/ERA model as is."""

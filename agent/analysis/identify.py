@@ -105,6 +105,7 @@ def settings_from(
         held_inputs=config.held_inputs,
         smoothing_s=config.smoothing_s,
         refine=config.refine if refine is None else refine,
+        noise_model=config.noise_model,
         method=method or config.method,
         period_s=period_s if period_s is not None else config.period_s,
     )

@@ -182,10 +182,11 @@ def estimate_initial_state(model: StateSpace, u: np.ndarray, y: np.ndarray) -> n
 
 def theil(predicted: np.ndarray, measured: np.ndarray) -> np.ndarray:
     """Theil inequality coefficient of each column (0 perfect, 1 worst)."""
-    err = np.sqrt(np.mean((predicted - measured) ** 2, axis=0))
-    scale = np.sqrt(np.mean(predicted**2, axis=0)) + np.sqrt(np.mean(measured**2, axis=0))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(scale > 0, err / scale, 0.0)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        err = np.sqrt(np.mean((predicted - measured) ** 2, axis=0))
+        scale = np.sqrt(np.mean(predicted**2, axis=0)) + np.sqrt(np.mean(measured**2, axis=0))
+        tic = np.where(scale > 0, err / scale, 0.0)
+    return np.where(np.isfinite(tic), tic, 1.0)  # an overflowing prediction fits not at all
 
 
 @dataclass(frozen=True)

@@ -72,6 +72,7 @@ class Settings:
     refine: bool = True  # output-error refinement of the OKID/ERA model
     method: str = "time"  # "time": OKID regression; "frequency": spectra → FRF (thesis §4.3.1)
     period_s: float | None = None  # excitation period for "frequency"; None: detected
+    noise_model: str = "auto"  # refinement: "output" error, "innovation" (PEM), or "auto"
 
 
 @dataclass(frozen=True)
@@ -346,7 +347,7 @@ def identify(
     if settings.refine and continuous is None:
         warnings.append("no output-error refinement: it needs a continuous-time model")
     elif settings.refine:
-        refinement, fitted = _refine(continuous, dt, batch, prep, coordinates, settings)
+        refinement, fitted = _refine(continuous, dt, batch, prep, coordinates, settings, G)
         if refinement is None:
             warnings.append("output-error refinement did not improve the OKID/ERA fit")
         else:
@@ -409,31 +410,76 @@ def _refine(
     prep: Preprocessing,
     coordinates: str,
     settings: Settings,
+    observer_gain: np.ndarray,
 ) -> tuple[Refinement | None, Fit]:
-    """Output-error refinement; None (and the OKID fit) if it does not lower the error.
+    """Maximum-likelihood refinement; None (and the OKID fit) if it does not lower the error.
 
     Held inputs at the record rate are exactly a zero-order hold; decimated (filtered, hence
-    smooth) or sampled-continuous inputs are modelled with a first-order hold.
+    smooth) or sampled-continuous inputs are modelled with a first-order hold. Output error
+    first; when its fit is poor and its residuals coloured (COLOURED, PROCESS_NOISE_TIC: the
+    response carries process noise such as turbulence, which output error does not model),
+    the prediction-error fit of the innovation form instead, started
+    from the OKID/ERA model and its observer (K = −G). `noise_model` forces either.
     """
     hold = "zoh" if prep.factor == 1 and settings.held_inputs else "foh"
-    refinement = refine(
-        continuous,
-        dt,
-        batch,
-        output_coordinates=coordinates == "outputs",
-        estimate_d=settings.estimate_d,
-        hold=hold,
-    )
-    predictions = simulate_refined(refinement, batch)
-    measured = np.vstack([e.y for e in batch])
-    result = Fit(
-        predictions=tuple(predictions),
-        initial_states=refinement.initial_states,
-        tic=theil(np.vstack(predictions), measured),
-    )
+
+    def run(gain: np.ndarray | None) -> Refinement:
+        return refine(
+            continuous,
+            dt,
+            batch,
+            output_coordinates=coordinates == "outputs",
+            estimate_d=settings.estimate_d,
+            hold=hold,
+            gain=gain,
+        )
+
+    refinement = None
+    if settings.noise_model in ("auto", "output"):
+        try:
+            refinement = run(None)
+        except IdentificationFailed:
+            return None, fit(StateSpace(*_zoh(continuous, dt), continuous.C, continuous.D), batch)
+        predictions = simulate_refined(refinement, batch)
+        measured = np.vstack([e.y for e in batch])
+        poor = float(np.mean(theil(np.vstack(predictions), measured))) > PROCESS_NOISE_TIC
+        if (
+            settings.noise_model == "auto"
+            and poor
+            and residual_colour(predictions, batch) > COLOURED
+        ):
+            refinement = None
+    if refinement is None:
+        try:
+            refinement = run(-observer_gain)
+        except IdentificationFailed:
+            return None, fit(StateSpace(*_zoh(continuous, dt), continuous.C, continuous.D), batch)
+    result = fit(refinement.discrete, batch)
     if refinement.cost > refinement.cost_initial or not np.all(np.isfinite(result.tic)):
         return None, fit(StateSpace(*_zoh(continuous, dt), continuous.C, continuous.D), batch)
     return refinement, result
+
+
+# Output-error residuals whose lag-1 autocorrelation (averaged over outputs) exceeds COLOURED
+# are coloured: white sensor noise after the decimation filter stays near 0.2 (a low-pass at
+# 0.8 of Nyquist), turbulence gives 0.9 and more. A tiny deterministic misfit (a noise-free
+# record, the hold approximation) is coloured too but harmless, so the innovation form is
+# used only when the output-error fit is also poorer than TIC PROCESS_NOISE_TIC.
+COLOURED = 0.5
+PROCESS_NOISE_TIC = 0.05
+
+
+def residual_colour(predictions: Sequence[np.ndarray], batch: Sequence[okid.Experiment]) -> float:
+    """Lag-1 autocorrelation of the simulation residuals, averaged over outputs."""
+    num, den = 0.0, 0.0
+    for predicted, exp in zip(predictions, batch, strict=True):
+        e = exp.y - predicted
+        e = e - e.mean(axis=0)
+        num = num + np.sum(e[1:] * e[:-1], axis=0)
+        den = den + np.sum(e**2, axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = np.where(den > 0, num / den, 0.0)
+    return float(np.mean(rho))
 
 
 # A refined mode inherits the temporal consistency (EMAC) of the OKID/ERA mode it came from

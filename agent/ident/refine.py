@@ -14,8 +14,16 @@ unknowns and the noise variances σ_i² re-estimated from the residuals between 
 relaxation algorithm of RP-1138 §5.3). The Jacobian is exact, from the output sensitivities
 of the discrete model (`fit.state_convolution`), and the minimisation is scipy's trust-region
 least squares. At the optimum (Jᵀ J)⁻¹ of the weighted Jacobian is the Cramér–Rao bound of
-the parameters; it assumes white residuals, so with turbulence or unmodelled dynamics the
-true scatter is larger (Klein & Morelli §6.5).
+the parameters; it assumes white residuals, so with unmodelled dynamics the true scatter is
+larger (Klein & Morelli §6.5).
+
+With process noise (turbulence) the simulation error is not white and output error, though
+consistent, wastes the data. The same machinery then fits the innovation form instead — the
+prediction-error method (Ljung, *System Identification*, 2nd ed., 1999, ch. 7): the residual
+is the one-step prediction error of x̂(k+1) = Φ x̂ + Bd u + K (y − C x̂ − Dd u), with the
+predictor gain K (n × m) among the unknowns, started from OKID's observer gain (its observer
+is this predictor, K = −G). Its residuals are the innovations, white under process and
+sensor noise alike, so the Cramér–Rao reading holds again.
 
 The parameters are those of the continuous model (Ac, Bc, and C, D where free), so the
 standard errors are those of the stability and control derivatives of thesis appendix A. The
@@ -41,6 +49,7 @@ import numpy as np
 import scipy.linalg
 
 from agent.ident.convert import StateSpace, discretize_hold, hold_block
+from agent.ident.errors import IdentificationFailed
 from agent.ident.fit import (
     estimate_initial_state,
     free_response_basis,
@@ -65,12 +74,13 @@ NOISE_FLOOR = 1e-9
 class Refinement:
     """The refined continuous model, its initial states and the Cramér–Rao covariance."""
 
+    gain: np.ndarray | None  # K of the innovation form; None for output error
     continuous: StateSpace  # Ac, Bc, C, D
     discrete: StateSpace  # its first-order-hold discretisation at dt (what was fitted)
     dt: float
     hold: str  # "zoh" or "foh": how the fitted discretisation treats the inputs
     initial_states: tuple[np.ndarray, ...]
-    noise_std: np.ndarray  # σ_i per output, from the final residuals
+    noise_std: np.ndarray  # σ_i per output: of the final residuals (innovations for PEM)
     covariance: np.ndarray  # of [vec Ac, vec Bc, vec C, vec D] (row-major), fixed entries 0
     cost_initial: float  # weighted cost of the starting model (final σ)
     cost: float
@@ -160,31 +170,39 @@ class _Problem:
         free_c: bool,
         free_d: bool,
         hold: str,
+        gain: np.ndarray | None = None,
     ):
         self.n, self.m, self.r = _shape(model)
         self.dt, self.hold = dt, hold
         self.batch = batch
+        self.innovation = gain is not None
         n, m, r = self.n, self.m, self.r
         self.matrix_size = n * n + n * r + m * n + m * r
+        self.states_at = self.matrix_size + n * m  # first x0 entry; K sits before it
+        K = np.zeros((n, m)) if gain is None else np.asarray(gain, dtype=float)
         self.full0 = np.concatenate(
-            [model.A.ravel(), model.B.ravel(), model.C.ravel(), model.D.ravel(), *x0s]
+            [model.A.ravel(), model.B.ravel(), model.C.ravel(), model.D.ravel(), K.ravel(), *x0s]
         )
-        # Which entries of the full vector move: Ac, Bc always; C, D as asked; every x0.
+        # Which entries of the full vector move: Ac, Bc always; C, D as asked; K in the
+        # innovation form; every x0.
         free = np.zeros(self.full0.size, dtype=bool)
         free[: n * n + n * r] = True
         free[n * n + n * r : n * n + n * r + m * n] = free_c
         free[n * n + n * r + m * n : self.matrix_size] = free_d
-        free[self.matrix_size :] = True
+        free[self.matrix_size : self.states_at] = self.innovation
+        free[self.states_at :] = True
         selection = np.eye(self.full0.size)[:, free]
         if free_c:
             # Drop the n² directions that only change state coordinates.
-            orbit = selection.T @ self._orbit_tangent(model, x0s)
+            orbit = selection.T @ self._orbit_tangent(model, K, x0s)
             self.basis = selection @ scipy.linalg.null_space(orbit.T)
         else:
             self.basis = selection
         self.weights = np.ones(m)
 
-    def _orbit_tangent(self, model: StateSpace, x0s: Sequence[np.ndarray]) -> np.ndarray:
+    def _orbit_tangent(
+        self, model: StateSpace, K: np.ndarray, x0s: Sequence[np.ndarray]
+    ) -> np.ndarray:
         """Columns: d(full vector) for z = (I + E_ab) x, one per (a, b)."""
         n = self.n
         cols = []
@@ -199,6 +217,7 @@ class _Problem:
                             (E @ model.B).ravel(),
                             (-model.C @ E).ravel(),
                             np.zeros(model.D.size),
+                            (E @ K).ravel(),
                             *[E @ x0 for x0 in x0s],
                         ]
                     )
@@ -208,46 +227,72 @@ class _Problem:
     def unpack(self, beta: np.ndarray) -> tuple[StateSpace, list[np.ndarray]]:
         v = self.full0 + self.basis @ beta
         model = _unpack_matrices(v[: self.matrix_size], self.n, self.m, self.r)
-        x0s = np.split(v[self.matrix_size :], len(self.batch))
+        x0s = np.split(v[self.states_at :], len(self.batch))
         return model, x0s
+
+    def gain(self, beta: np.ndarray) -> np.ndarray:
+        """K of the innovation form (zeros for output error)."""
+        v = self.full0 + self.basis @ beta
+        return v[self.matrix_size : self.states_at].reshape(self.n, self.m)
 
     def evaluate(
         self, beta: np.ndarray, with_jacobian: bool
     ) -> tuple[np.ndarray, np.ndarray | None]:
-        """Weighted residuals (ŷ − y)/σ stacked over experiments, and their Jacobian in β."""
+        """Weighted residuals (ŷ − y)/σ stacked over experiments, and their Jacobian in β.
+
+        Output error: ŷ is the model simulated from the inputs. Innovation form: ŷ is the
+        one-step prediction of x̂(k+1) = Φ x̂ + Bd u + K (y − C x̂ − Dd u), i.e. the system
+        Ā = Φ − K C driven by v = [u; y] through B̄ = [Bd − K Dd, K].
+        """
         cont, x0s = self.unpack(beta)
+        K = self.gain(beta)
         n, m, r = self.n, self.m, self.r
         disc = discretize_hold(cont.A, cont.B, cont.C, cont.D, self.dt, self.hold)
+        Abar = disc.A - K @ disc.C
+        Bbar = np.hstack([disc.B - K @ disc.D, K])
+        predictor = StateSpace(Abar, Bbar, disc.C, np.hstack([disc.D, np.zeros((m, m))]))
+        width = n + r + (m if self.innovation else 0)  # signals driving the sensitivities
         # The Jacobian in β is (∂ŷ/∂discrete)(∂discrete/∂continuous)(∂continuous/∂β): the
         # last two are small, so they are multiplied first, and the sparse C and D blocks of
-        # ∂ŷ/∂discrete are applied by einsum instead of being built.
+        # ∂ŷ/∂discrete are applied as matrix products instead of being built.
         G = None
         if with_jacobian:
             G = _chain(cont, self.dt, self.hold) @ self.basis[: self.matrix_size]
             q = G.shape[1]
             k_ab = n * n + n * r
-            G_ab = np.concatenate(
-                [G[: n * n].reshape(n, n, q), G[n * n : k_ab].reshape(n, r, q)], axis=1
-            )
-            # ŷ_a(k) depends on C_aj through x_j(k) and on D_aj through u_j(k).
-            G_c = G[k_ab : k_ab + m * n].reshape(m, n, q).transpose(1, 0, 2).reshape(n, m * q)
-            G_d = G[k_ab + m * n :].reshape(m, r, q).transpose(1, 0, 2).reshape(r, m * q)
+            dPhi = G[: n * n].reshape(n, n, q)
+            dBd = G[n * n : k_ab].reshape(n, r, q)
+            dC = G[k_ab : k_ab + m * n].reshape(m, n, q)
+            dDd = G[k_ab + m * n :].reshape(m, r, q)
+            dK = self.basis[self.matrix_size : self.states_at].reshape(n, m, q)
+            # ∂Ā = ∂Φ − ∂K C − K ∂C; ∂B̄ = [∂Bd − ∂K Dd − K ∂Dd, ∂K].
+            dAbar = dPhi - np.einsum("imq,mj->ijq", dK, disc.C) - np.einsum("im,mjq->ijq", K, dC)
+            dBu = dBd - np.einsum("imq,mj->ijq", dK, disc.D) - np.einsum("im,mjq->ijq", K, dDd)
+            blocks = [dAbar, dBu] + ([dK] if self.innovation else [])
+            G_all = np.concatenate(blocks, axis=1).reshape(n * width, q)
+            # ŷ_a(k) depends on C_aj through x̂_j(k) and on Dd_aj through u_j(k).
+            G_c = dC.transpose(1, 0, 2).reshape(n, m * q)
+            G_d = dDd.transpose(1, 0, 2).reshape(r, m * q)
         residuals, jacobians = [], []
         with np.errstate(over="ignore", invalid="ignore"):
             for index, (exp, x0) in enumerate(zip(self.batch, x0s, strict=True)):
-                states = simulate_states(disc, exp.u, x0)
+                v = np.hstack([exp.u, exp.y])
+                states = simulate_states(predictor, v, x0)
                 predicted = states @ disc.C.T + exp.u @ disc.D.T
                 residuals.append(((predicted - exp.y) * self.weights).ravel())
                 if G is None:
                     continue
                 length = exp.u.shape[0]
-                z = np.hstack([states, exp.u])
-                sens = state_convolution(disc.A, disc.C, z)  # (length, m, n, n + r)
-                jac = sens.reshape(length * m, n * (n + r)) @ G_ab.reshape(n * (n + r), q)
+                z = np.hstack([states, v if self.innovation else exp.u])
+                sens = state_convolution(Abar, disc.C, z)  # (length, m, n, width)
+                jac = sens.reshape(length * m, n * width) @ G_all
                 jac += (states @ G_c).reshape(length * m, q)
                 jac += (exp.u @ G_d).reshape(length * m, q)
-                rows = slice(self.matrix_size + index * n, self.matrix_size + (index + 1) * n)
-                jac += free_response_basis(disc, length) @ self.basis[rows]
+                rows = slice(self.states_at + index * n, self.states_at + (index + 1) * n)
+                jac += (
+                    free_response_basis(StateSpace(Abar, Bbar, disc.C, disc.D), length)
+                    @ (self.basis[rows])
+                )
                 jac *= np.tile(self.weights, length)[:, None]
                 jacobians.append(jac)
         res = np.concatenate(residuals)
@@ -258,7 +303,8 @@ class _Problem:
     def rms_errors(self, beta: np.ndarray) -> np.ndarray:
         """RMS simulation error per output (unweighted)."""
         res = self.evaluate(beta, with_jacobian=False)[0].reshape(-1, self.m) / self.weights
-        return np.sqrt(np.mean(res**2, axis=0))
+        with np.errstate(over="ignore", invalid="ignore"):
+            return np.sqrt(np.mean(res**2, axis=0))
 
 
 def _levenberg_marquardt(
@@ -287,7 +333,8 @@ def _levenberg_marquardt(
                 continue
             trial = beta + step
             new_res, _ = problem.evaluate(trial, with_jacobian=False)
-            new_cost = float(new_res @ new_res)
+            with np.errstate(over="ignore", invalid="ignore"):
+                new_cost = float(new_res @ new_res)  # inf for a diverging trial
             if new_cost < cost:
                 improved = True
                 break
@@ -311,21 +358,35 @@ def refine(
     output_coordinates: bool,
     estimate_d: bool,
     hold: str = "zoh",
+    gain: np.ndarray | None = None,
 ) -> Refinement:
-    """Maximum-likelihood output-error refinement of a continuous model (see module text).
+    """Maximum-likelihood refinement of a continuous model (see module text).
 
     `model` is continuous (Ac, Bc, C, D). `output_coordinates`: C is the identity and stays
     fixed; otherwise C is refined too. D is refined only when `estimate_d`, else held.
+    `gain`: None for output error; a starting K (n × m, discrete) for the prediction-error
+    fit of the innovation form, which also models process noise (turbulence).
     """
     start = discretize_hold(model.A, model.B, model.C, model.D, dt, hold)
     x0s = [estimate_initial_state(start, e.u, e.y) for e in batch]
     problem = _Problem(
-        model, dt, batch, x0s, free_c=not output_coordinates, free_d=estimate_d, hold=hold
+        model,
+        dt,
+        batch,
+        x0s,
+        free_c=not output_coordinates,
+        free_d=estimate_d,
+        hold=hold,
+        gain=gain,
     )
     y_rms = np.sqrt(np.mean(np.vstack([e.y for e in batch]) ** 2, axis=0))
     floor = NOISE_FLOOR * np.where(y_rms > 0, y_rms, 1.0)
     beta = np.zeros(problem.basis.shape[1])
     sigma = np.maximum(problem.rms_errors(beta), floor)
+    if not np.all(np.isfinite(sigma)):
+        raise IdentificationFailed(
+            "the starting model's simulation (or predictor) diverges: nothing to refine"
+        )
     iterations, passes = 0, 0
     for passes in range(1, MAX_PASSES + 1):  # noqa: B007 - reported
         problem.weights = 1.0 / sigma
@@ -341,6 +402,7 @@ def refine(
     start_res, _ = problem.evaluate(np.zeros_like(beta), with_jacobian=False)
     refined, x0s = problem.unpack(beta)
     return Refinement(
+        gain=problem.gain(beta) if problem.innovation else None,
         continuous=refined,
         discrete=discretize_hold(refined.A, refined.B, refined.C, refined.D, dt, hold),
         hold=hold,

@@ -113,6 +113,7 @@ def _refinement(result: Identification) -> dict[str, Any] | None:
     std = ref.matrix_std()
     out_coords = result.coordinates == "outputs"
     return {
+        "criterion": "output error" if ref.gain is None else "prediction error (innovation form)",
         "hold": ref.hold,
         "iterations": ref.iterations,
         "noise_std": {n: float(v) for n, v in zip(result.output_names, ref.noise_std, strict=True)},
@@ -148,7 +149,8 @@ def format_text(result: Identification, records: int, samples: int) -> str:
         + (" (automatic)" if result.markov_choice is not None else "")
         + f"; order n = {result.order}; model in {result.coordinates} coordinates; "
         + (
-            f"refined by output error ({result.refinement.hold} hold; "
+            f"refined by {'output' if result.refinement.gain is None else 'prediction'} error "
+            f"({result.refinement.hold} hold; "
             f"OKID/ERA TIC {result.okid_fit.tic_avg:.3f})"
             if result.refinement is not None
             else "not refined"

@@ -197,3 +197,75 @@ def test_noise_modes_with_the_largest_msv_do_not_hide_the_physical_ones():
     found = [m.eigenvalue for m in result.modes]
     found += [m.eigenvalue.conjugate() for m in result.modes if m.pair]
     assert matched_relative_errors(np.array(found), true_eigenvalues(LAT)).max() < 0.1
+
+
+def _process_noise_record(seed: int, gust: float = 0.3) -> Experiment:
+    """The A.2 model with white process noise on the rates (a crude gust) and 1 % sensor
+    noise: the response carries disturbances the inputs do not explain."""
+    rng = np.random.default_rng(seed)
+    u = reference.thesis_multisine(LAT, DT)
+    from agent.ident.convert import discretize
+
+    Ad, Bd = discretize(LAT.A, LAT.B, DT)
+    x, y = np.zeros(4), []
+    w = np.zeros((u.shape[0], 4))
+    w[:, 1:3] = rng.normal(size=(u.shape[0], 2)) * gust * DT  # p, r disturbances
+    for k in range(u.shape[0]):
+        y.append(x.copy())
+        x = Ad @ x + Bd @ u[k] + w[k]
+    y = np.array(y)
+    return Experiment(u, reference.with_output_noise(y, 0.01, seed + 100))
+
+
+def test_innovation_form_jacobian_matches_finite_differences():
+    from agent.ident.refine import _Problem
+
+    exp = _process_noise_record(0)
+    short = Experiment(exp.u[:200], exp.y[:200])
+    model = StateSpace(LAT.A * 1.02, LAT.B, np.eye(4), np.zeros((4, 2)))
+    K = 0.1 * np.random.default_rng(1).normal(size=(4, 4))
+    for hold, free_c in [("zoh", False), ("foh", True)]:
+        problem = _Problem(
+            model, DT, [short], [np.zeros(4)], free_c=free_c, free_d=False, hold=hold, gain=K
+        )
+        beta = 1e-3 * np.random.default_rng(2).normal(size=problem.basis.shape[1])
+        _, jac = problem.evaluate(beta, with_jacobian=True)
+        step = 1e-6
+        numeric = np.column_stack(
+            [
+                (
+                    problem.evaluate(beta + step * e, False)[0]
+                    - problem.evaluate(beta - step * e, False)[0]
+                )
+                / (2 * step)
+                for e in np.eye(beta.size)
+            ]
+        )
+        assert np.allclose(jac, numeric, rtol=1e-5, atol=1e-6 * np.abs(numeric).max())
+
+
+def test_process_noise_switches_refinement_to_the_innovation_form():
+    """Bad input tried: gusts the inputs do not explain. Output error leaves coloured
+    residuals there; the automatic choice then fits the Kalman predictor (innovation form)
+    instead, which is closer to the truth than output error; on white sensor noise it stays
+    with output error."""
+    truth = true_eigenvalues(LAT)
+
+    def worst(result):
+        found = [m.eigenvalue for m in result.modes]
+        found += [m.eigenvalue.conjugate() for m in result.modes if m.pair]
+        if len(found) != 4:
+            return np.inf
+        return matched_relative_errors(np.array(found), truth).max()
+
+    auto, output = [], []
+    for seed in range(4):
+        exp = _process_noise_record(seed, gust=1.0)
+        result = identify(exp, DT)
+        assert result.refinement is not None
+        assert result.refinement.gain is not None  # the innovation form was chosen
+        auto.append(worst(result))
+        output.append(worst(identify(exp, DT, settings=Settings(noise_model="output"))))
+    assert np.median(auto) < 0.6 * np.median(output)
+    calm = identify(_record(0.05), DT)
+    assert calm.refinement.gain is None
