@@ -105,11 +105,15 @@ def modal_analysis(
     input_scale: np.ndarray | None = None,
     output_scale: np.ndarray | None = None,
     horizon: tuple[int, int] = (20, 20),
+    balance: bool = True,
 ) -> list[Mode]:
     """Modes of the discrete model (A, B, C) sorted by natural frequency, with indicators.
 
     `horizon` (α, β) is the Hankel span for balancing and MSV; with `factors` it is taken
-    from their shapes. Without `factors`, EMAC and CMI are None.
+    from their shapes. Without `factors`, EMAC and CMI are None. `balance=False` skips the
+    balanced eigenvector lengths: MSV, EMAC and MPC do not depend on them (they are
+    invariant to each eigenvector's scale), MCI and MOI do and are then in the model's
+    coordinates — for a quick screen of modes, not for a report.
     """
     m, r = C.shape[0], B.shape[1]
     su = np.ones(r) if input_scale is None else np.asarray(input_scale, dtype=float)
@@ -123,7 +127,8 @@ def modal_analysis(
             "the identified A is defective (repeated eigenvalues without a full set of "
             "eigenvectors), so it has no modal decomposition; try another order"
         )
-    Psi = Psi / _balanced_norms(A, Bs, Cs, Psi, horizon)
+    if balance:
+        Psi = Psi / _balanced_norms(A, Bs, Cs, Psi, horizon)
     Psi_inv = np.linalg.inv(Psi)
     Bm, Cm = Psi_inv @ Bs, Cs @ Psi
     keep = [i for i in range(z.size) if z[i].imag >= -REAL_TOLERANCE * abs(z[i])]

@@ -212,7 +212,7 @@ def _supported_modes(
         modes = modal_analysis(
             realised.A, realised.B, realised.C, dt,
             factors=HankelFactors(realised.observability, realised.controllability),
-            input_scale=input_rms, output_scale=output_rms,
+            input_scale=input_rms, output_scale=output_rms, balance=False,
         )  # fmt: skip
     except IdentificationFailed:
         return realised  # defective A: no modal decomposition to cut with
