@@ -48,6 +48,7 @@ import sippy_unipi
 from agent.excitation.signals import doublet
 from agent.ident import Experiment, Settings, identify, reference
 from agent.ident.convert import StateSpace, discretize
+from agent.ident.errors import DataError, IdentificationFailed
 from agent.ident.fit import estimate_initial_state, simulate, theil
 from agent.ident.refine import cramer_rao, eigenvalue_std
 
@@ -190,7 +191,7 @@ def textbook_okid(train: list[Experiment]) -> tuple[int, list[Outcome]]:
         for exp in train:
             try:
                 outcomes.append(run_ours(settings)(exp))
-            except Exception:
+            except (IdentificationFailed, DataError):  # a p that fails counts as a miss
                 outcomes.append(Outcome(np.array([]), None, float("nan")))
         score = statistics.median(mode_errors(o.eigenvalues).max() for o in outcomes)
         if best is None or score < best[0]:
