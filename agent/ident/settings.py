@@ -1,0 +1,26 @@
+"""How to identify: every choice of the pipeline, None meaning automatic."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Settings:
+    """How to identify; None means choose automatically."""
+
+    markov: int | None = None
+    markov_max: int = 30
+    order: int | None = None
+    order_max: int = 20
+    estimate_d: bool = False
+    regularization: float = 0.0
+    hankel_blocks: int | None = None
+    decimation: int | None = None  # None: automatic from the band; 1: none
+    band_hz: float | None = None  # None: from the inputs' spectra
+    held_inputs: bool = True  # inputs held between samples (commands, zero-order hold)
+    smoothing_s: float | None = None  # Savitzky–Golay window; None: no smoothing
+    refine: bool = True  # output-error refinement of the OKID/ERA model
+    method: str = "time"  # "time": OKID regression; "frequency": spectra → FRF (thesis §4.3.1)
+    period_s: float | None = None  # excitation period for "frequency"; None: detected
+    noise_model: str = "auto"  # refinement: "output" error, "innovation" (PEM), or "auto"
