@@ -12,8 +12,8 @@ Maine & Iliff (*Identification of Dynamic Systems*, NASA RP-1138, 1985; Klein & 
 starting from the OKID/ERA model, with the initial state of every experiment among the
 unknowns and the noise variances σ_i² re-estimated from the residuals between passes (the
 relaxation algorithm of RP-1138 §5.3). The Jacobian is exact, from the output sensitivities
-of the discrete model (`fit.state_convolution`), and the minimisation is scipy's trust-region
-least squares. At the optimum (Jᵀ J)⁻¹ of the weighted Jacobian is the Cramér–Rao bound of
+of the discrete model (`fit.state_convolution`), and the minimisation is Levenberg–Marquardt
+on the normal equations. At the optimum (Jᵀ J)⁻¹ of the weighted Jacobian is the Cramér–Rao bound of
 the parameters; it assumes white residuals, so with unmodelled dynamics the true scatter is
 larger (Klein & Morelli §6.5).
 
@@ -35,9 +35,8 @@ the discrete output sensitivities with the Fréchet derivative of the matrix exp
 Loan's block formula, *IEEE TAC* 23, 1978). When the model is in output coordinates (C = I)
 every entry of Ac, Bc (and D when estimated) is free and identifiable. Otherwise A, B, C are
 over-parametrised by the n² state coordinates; the search then moves only orthogonally to the
-similarity orbit (data-driven
-local coordinates, McKelvey, Helmersson & Ribarits, *Automatica* 40, 2004), which keeps the
-Jacobian full rank without fixing a canonical form.
+similarity orbit (data-driven local coordinates, McKelvey, Helmersson & Ribarits,
+*Automatica* 40, 2004), which keeps the Jacobian full rank without fixing a canonical form.
 """
 
 from __future__ import annotations
