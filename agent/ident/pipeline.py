@@ -35,7 +35,13 @@ from agent.ident.fit import Fit, fit, theil
 from agent.ident.modal import HankelFactors, Mode, modal_analysis
 from agent.ident.naming import name_modes
 from agent.ident.preprocess import Preprocessing, preprocess
-from agent.ident.refine import Refinement, eigenvalue_std, refine, simulate_refined
+from agent.ident.refine import (
+    MAX_PASSES,
+    Refinement,
+    eigenvalue_std,
+    refine,
+    simulate_refined,
+)
 from agent.ident.settings import Settings
 
 # A decent fit has TIC below this (thesis §5.3, ref. [67]).
@@ -223,37 +229,35 @@ def _refine(
     """
     hold = "zoh" if prep.factor == 1 and settings.held_inputs else "foh"
 
-    def run(gain: np.ndarray | None) -> Refinement:
+    def run(start: StateSpace, gain: np.ndarray | None, passes: int = MAX_PASSES) -> Refinement:
         return refine(
-            continuous,
+            start,
             dt,
             batch,
             output_coordinates=coordinates == "outputs",
             estimate_d=settings.estimate_d,
             hold=hold,
             gain=gain,
+            max_passes=passes,
         )
 
     refinement = None
-    if settings.noise_model in ("auto", "output"):
-        try:
-            refinement = run(None)
-        except IdentificationFailed:
-            return None, fit(StateSpace(*_zoh(continuous, dt), continuous.C, continuous.D), batch)
-        predictions = simulate_refined(refinement, batch)
-        measured = np.vstack([e.y for e in batch])
-        poor = float(np.mean(theil(np.vstack(predictions), measured))) > PROCESS_NOISE_TIC
-        if (
-            settings.noise_model == "auto"
-            and poor
-            and residual_colour(predictions, batch) > COLOURED
-        ):
-            refinement = None
-    if refinement is None:
-        try:
-            refinement = run(-observer_gain)
-        except IdentificationFailed:
-            return None, fit(StateSpace(*_zoh(continuous, dt), continuous.C, continuous.D), batch)
+    try:
+        if settings.noise_model == "output":
+            refinement = run(continuous, None)
+        elif settings.noise_model == "auto":
+            # One output-error pass tells whether the residuals are coloured; if not, the
+            # remaining passes continue from where it stopped.
+            first = run(continuous, None, passes=1)
+            predictions = simulate_refined(first, batch)
+            measured = np.vstack([e.y for e in batch])
+            poor = float(np.mean(theil(np.vstack(predictions), measured))) > PROCESS_NOISE_TIC
+            if not (poor and residual_colour(predictions, batch) > COLOURED):
+                refinement = run(first.continuous, None)
+        if refinement is None:
+            refinement = run(continuous, -observer_gain)
+    except IdentificationFailed:
+        return None, fit(StateSpace(*_zoh(continuous, dt), continuous.C, continuous.D), batch)
     result = fit(refinement.discrete, batch)
     if refinement.cost > refinement.cost_initial or not np.all(np.isfinite(result.tic)):
         return None, fit(StateSpace(*_zoh(continuous, dt), continuous.C, continuous.D), batch)
