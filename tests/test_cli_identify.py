@@ -143,6 +143,11 @@ def test_frequency_method_from_the_command_line(capsys, tmp_path):
     code, doc = run_json(capsys, str(path), *LAT, "--method", "frequency", "--period", "7.3")
     assert code == 0  # a wrong period is not an error: it leaks, and says so
     assert any("leakage" in w or "period" in w for w in doc["warnings"])
+    # Bad input tried: a negative period and one longer than the record.
+    for period in ("-3", "500"):
+        code, doc = run_json(capsys, str(path), *LAT, "--method", "frequency", "--period", period)
+        assert code == 2
+        assert "excitation period" in doc["error"]["message"]
 
 
 def test_text_output_has_the_mode_table(capsys, lateral_csv):

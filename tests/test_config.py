@@ -49,6 +49,10 @@ def test_axis_sets_use_configured_channel_names(tmp_path):
         ("[identification]\ndecimation = 0\n", "identification.decimation", "integer ≥ 1"),
         ("[identification]\nband_hz = -1\n", "identification.band_hz", "greater than 0"),
         ("[identification]\nrefine = 'maybe'\n", "identification.refine", "valid boolean"),
+        ("[identification]\nmethod = 'fourier'\n", "identification.method", "'time'"),
+        ("[identification]\nnoise_model = 'kalman'\n", "identification.noise_model", "'auto'"),
+        ("[identification]\nperiod_s = 0\n", "identification.period_s", "greater than 0"),
+        ("[identification]\nsmoothing_s = -0.1\n", "identification.smoothing_s", "greater than 0"),
         ("[identification\n", "(syntax)", "line 1"),
     ],
 )

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent.ident.errors import InsufficientDataError
+from agent.ident.errors import DataError, InsufficientDataError
 from agent.ident.okid import MIN_ROWS_PER_UNKNOWN, Experiment, ObserverMarkov
 
 # An input repeats with period L when ‖u(k + L) − u(k)‖ ≤ PERIOD_TOLERANCE · ‖u‖.
@@ -38,6 +38,8 @@ LEAKAGE_WARN = 0.01
 # A bin's input spectral matrix counts as excited for an input when that input's power there
 # exceeds this fraction of its largest bin power.
 EXCITED_FRACTION = 1e-3
+# A given excitation period shorter than this many samples cannot hold a multisine.
+MIN_PERIOD = 8
 # Welch segments (no periodic input): this many samples at least, and 50 % overlap.
 MIN_WELCH_SEGMENT = 64
 
@@ -271,6 +273,12 @@ class FrequencyData:
 def analyse(batch: Sequence[Experiment], period: int | None = None) -> FrequencyData:
     """Spectra and FRF of the batch; the period is detected from the first record if not given."""
     warnings = []
+    shortest = min(e.length for e in batch)
+    if period is not None and not MIN_PERIOD <= period <= shortest:
+        raise DataError(
+            f"an excitation period of {period} samples is unusable: it must be at least "
+            f"{MIN_PERIOD} samples and fit in every record ({shortest} samples)"
+        )
     if period is None:
         period = detect_period(batch[0].u)
     if period is None:
