@@ -11,7 +11,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 BENCH_STAMP := $(VENV)/.installed-bench
 
-.PHONY: demo test bench examples clean
+.PHONY: demo test bench bench-jsbsim examples clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -34,6 +34,10 @@ test: $(STAMP)
 
 bench: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/bench_identify.py
+
+# Issue 3 case (b): the J-3 Cub in JSBSim, 20 seeds (about 6 minutes here).
+bench-jsbsim: $(BENCH_STAMP)
+	$(BIN)/python benchmarks/bench_jsbsim.py
 
 examples: $(STAMP)
 	$(BIN)/python examples/generate.py

@@ -1,6 +1,6 @@
 """Case (b) of issue 3: JSBSim's J-3 Cub, the full eight-output model, against the peers.
 
-    .venv/bin/python benchmarks/bench_jsbsim.py              # 20 seeds (slow: ~1 h)
+    make bench-jsbsim                                       # 20 seeds (about 6 min here)
     .venv/bin/python benchmarks/bench_jsbsim.py --seeds 3    # a quick look
 
 Each seed flies the Cub in JSBSim (trimmed at 60 kt, 1000 ft) for 1 s of trim and 60 s of

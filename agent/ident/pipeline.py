@@ -143,40 +143,21 @@ def identify(
         candidate = run_candidate(batch, settings.markov, settings, dt, prep.band_hz, freq)
         choice = None
     model, factors, G, coordinates = _reported_model(candidate)
-    continuous = None
-    try:
-        Ac, Bc = to_continuous(model.A, model.B, dt)
-        continuous = StateSpace(Ac, Bc, model.C, model.D)
-    except ContinuousConversionError as exc:
-        warnings.append(str(exc))
+    okid_model = model
+    continuous = _continuous(model, dt, warnings)
     refinement, fitted = None, candidate.fit
     if settings.refine and continuous is None:
-        warnings.append("no output-error refinement: it needs a continuous-time model")
+        warnings.append("no refinement: no continuous-time model to start from")
     elif settings.refine:
-        refinement, fitted = _refine(continuous, dt, batch, prep, coordinates, settings, G)
-        if refinement is None:
-            warnings.append("output-error refinement did not improve the OKID/ERA fit")
+        refined = _refine(continuous, dt, batch, prep, coordinates, settings, G)
+        if refined is None:
+            warnings.append("refinement could not start or did not improve the OKID/ERA fit")
         else:
+            refinement, fitted = refined
             continuous = refinement.continuous
             A, B = _zoh(continuous, dt)
             model = StateSpace(A, B, continuous.C, continuous.D)
-    input_rms, output_rms = okid.channel_rms(batch)
-    if refinement is None:
-        modes = modal_analysis(
-            model.A, model.B, model.C, dt,
-            factors=factors, input_scale=input_rms, output_scale=output_rms,
-        )  # fmt: skip
-    else:
-        okid_model = _reported_model(candidate)[0]
-        okid_modes = modal_analysis(
-            okid_model.A, okid_model.B, okid_model.C, dt,
-            factors=factors, input_scale=input_rms, output_scale=output_rms,
-        )  # fmt: skip
-        modes = modal_analysis(
-            model.A, model.B, model.C, dt, input_scale=input_rms, output_scale=output_rms,
-            horizon=(candidate.era.rows, candidate.era.cols),
-        )  # fmt: skip
-        modes = _with_uncertainty(_with_consistency(modes, okid_modes), refinement)
+    modes = _modes(model, okid_model, factors, candidate, batch, dt, refinement)
     if output_roles is not None:
         modes = name_modes(modes, output_roles)
     if any(not mode.stable for mode in modes):
@@ -205,6 +186,40 @@ def identify(
     )
 
 
+def _continuous(model: StateSpace, dt: float, warnings: list[str]) -> StateSpace | None:
+    """The continuous-time model, or None (and the reason in `warnings`) when none exists."""
+    try:
+        Ac, Bc = to_continuous(model.A, model.B, dt)
+    except ContinuousConversionError as exc:
+        warnings.append(str(exc))
+        return None
+    return StateSpace(Ac, Bc, model.C, model.D)
+
+
+def _modes(
+    model: StateSpace,
+    okid_model: StateSpace,
+    factors: HankelFactors,
+    candidate: Candidate,
+    batch: Sequence[okid.Experiment],
+    dt: float,
+    refinement: Refinement | None,
+) -> list[Mode]:
+    """Modes with indicators; after refinement with EMAC inherited and Cramér–Rao 1-σ."""
+    input_rms, output_rms = okid.channel_rms(batch)
+    okid_modes = modal_analysis(
+        okid_model.A, okid_model.B, okid_model.C, dt,
+        factors=factors, input_scale=input_rms, output_scale=output_rms,
+    )  # fmt: skip
+    if refinement is None:
+        return okid_modes
+    modes = modal_analysis(
+        model.A, model.B, model.C, dt, input_scale=input_rms, output_scale=output_rms,
+        horizon=(candidate.era.rows, candidate.era.cols),
+    )  # fmt: skip
+    return _with_uncertainty(_with_consistency(modes, okid_modes), refinement)
+
+
 def _zoh(model: StateSpace, dt: float) -> tuple[np.ndarray, np.ndarray]:
     return discretize(model.A, model.B, dt)
 
@@ -217,8 +232,8 @@ def _refine(
     coordinates: str,
     settings: Settings,
     observer_gain: np.ndarray,
-) -> tuple[Refinement | None, Fit]:
-    """Maximum-likelihood refinement; None (and the OKID fit) if it does not lower the error.
+) -> tuple[Refinement, Fit] | None:
+    """Maximum-likelihood refinement and its fit; None if it cannot start or does not help.
 
     Held inputs at the record rate are exactly a zero-order hold; decimated (filtered, hence
     smooth) or sampled-continuous inputs are modelled with a first-order hold. Output error
@@ -257,10 +272,10 @@ def _refine(
         if refinement is None:
             refinement = run(continuous, -observer_gain)
     except IdentificationFailed:
-        return None, fit(StateSpace(*_zoh(continuous, dt), continuous.C, continuous.D), batch)
+        return None
     result = fit(refinement.discrete, batch)
     if refinement.cost > refinement.cost_initial or not np.all(np.isfinite(result.tic)):
-        return None, fit(StateSpace(*_zoh(continuous, dt), continuous.C, continuous.D), batch)
+        return None
     return refinement, result
 
 

@@ -269,3 +269,29 @@ def test_process_noise_switches_refinement_to_the_innovation_form():
     assert np.median(auto) < 0.6 * np.median(output)
     calm = identify(_record(0.05), DT)
     assert calm.refinement.gain is None
+
+
+def test_a_model_without_continuous_equivalent_is_reported_unrefined_with_the_reason():
+    """Bad input tried: p = 2, n = 4 forced on the raw 50 Hz record with 5 % noise, where
+    OKID returns a discrete eigenvalue on the negative real axis (a Nyquist noise mode).
+    Nothing crashes: the OKID/ERA model is reported, unrefined, and the warnings say why."""
+    settings = Settings(markov=2, order=4, decimation=1)
+    result = identify(_record(0.05), DT, settings=settings)
+    assert result.refinement is None
+    assert result.continuous is None
+    assert any("negative real axis" in w for w in result.warnings)
+    assert any("no refinement" in w for w in result.warnings)
+    assert all(m.uncertainty is None for m in result.modes)
+    assert result.fit is result.okid_fit
+
+
+def test_refinement_refuses_a_start_whose_simulation_diverges():
+    """Bad input tried: a starting model with a +30 1/s eigenvalue over a 30 s record (the
+    simulation overflows). Refinement raises IdentificationFailed with the reason (identify
+    catches it, warns, and reports the OKID/ERA model)."""
+    from agent.ident.errors import IdentificationFailed
+
+    exp = _record(0.0)
+    start = StateSpace(LAT.A + 30.0 * np.eye(4), LAT.B, np.eye(4), np.zeros((4, 2)))
+    with pytest.raises(IdentificationFailed, match="diverges"):
+        refine(start, DT, [exp], output_coordinates=True, estimate_d=False)
