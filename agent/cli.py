@@ -11,6 +11,8 @@ from pathlib import Path
 from agent.analysis import identify as identify_cmd
 from agent.analysis.records import RecordError
 from agent.config import Config, ConfigError, load_config
+from agent.excitation.plan import PRESETS, PlanRefused, check, preset, summary
+from agent.excitation.preview import PreviewError, csv_text, load_plan, parse_amplitudes, plot
 from agent.ident import DataError, IdentificationFailed
 from agent.ident.summary import format_text, to_dict
 
@@ -92,6 +94,27 @@ def build_parser() -> argparse.ArgumentParser:
     ident.add_argument("--config", type=Path, help="config file (default ./config.toml if any)")
     ident.add_argument("--json", action="store_true", help="print one JSON object")
 
+    excite = sub.add_parser(
+        "excite",
+        help="preview an excitation plan before flight",
+        description="Render a plan at the command rate: CSV (default), a JSON summary, a plot.",
+    )
+    source = excite.add_mutually_exclusive_group(required=True)
+    source.add_argument("--preset", choices=PRESETS, help="one of the thesis's plans")
+    source.add_argument("--plan", type=Path, metavar="PLAN.json", help="a plan file")
+    excite.add_argument("--rate", type=float, metavar="HZ", help="command rate (default: config)")
+    excite.add_argument(
+        "--amplitude",
+        action="append",
+        default=[],
+        metavar="CONTROL=VALUE",
+        help="preset amplitude (deg, throttle %%) from trim; repeat per control",
+    )
+    excite.add_argument("--csv", action="store_true", help="time and one column per control")
+    excite.add_argument("--json", action="store_true", help="duration, RPF, peak, band, warnings")
+    excite.add_argument("--plot", type=Path, metavar="FILE.png", help="draw the plan")
+    excite.add_argument("--config", type=Path, help="config file (default ./config.toml if any)")
+
     config = sub.add_parser("config", help="configuration tools")
     config_sub = config.add_subparsers(dest="config_command", required=True)
     check = config_sub.add_parser("check", help="validate a config file")
@@ -160,6 +183,37 @@ def _fail(args: argparse.Namespace, kind: str, message: str, code: int) -> int:
     return code
 
 
+def cmd_excite(args: argparse.Namespace) -> int:
+    try:
+        config = _load_optional_config(args.config)
+        rate = config.excitation.rate_hz if args.rate is None else args.rate
+        if not 1.0 <= rate <= 1000.0:
+            raise PreviewError(f"--rate must be within 1–1000 Hz, got {rate:g}")
+        if args.plan is not None:
+            plan = load_plan(args.plan)
+        else:
+            plan = preset(args.preset, parse_amplitudes(args.amplitude))
+        timeline = check(plan, rate, config.excitation.surfaces, config.excitation.envelope)
+    except (ConfigError, PreviewError, PlanRefused, ValueError) as exc:
+        _error("excite", str(exc))
+        return EXIT_BAD_INPUT
+    columns = {n: getattr(config.identification.channels, n) for n in timeline.values}
+    report = summary(timeline, config.excitation.surfaces)
+    for warning in report["warnings"]:
+        print(f"sysid excite: warning: {warning}", file=sys.stderr)
+    if args.plot is not None:
+        try:
+            plot(timeline, report, columns, args.plot)
+        except PreviewError as exc:
+            _error("excite", str(exc))
+            return EXIT_BAD_INPUT
+    if args.json:
+        print(json.dumps(report))
+    elif args.csv or args.plot is None:
+        sys.stdout.write(csv_text(timeline, columns))
+    return EXIT_OK
+
+
 def cmd_config_check(args: argparse.Namespace) -> int:
     try:
         load_config(args.file)
@@ -175,4 +229,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.command == "identify":
         return cmd_identify(args)
+    if args.command == "excite":
+        return cmd_excite(args)
     return cmd_config_check(args)

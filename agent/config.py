@@ -136,11 +136,127 @@ class Identification(_Section):
     standard errors; false reports the OKID/ERA model as is."""
 
 
+class Surface(_Section):
+    """One excited control (surface or throttle): its RC channel, calibration and limits.
+
+    Command = trim + direction × us_per_unit × value, where value is in the surface's unit
+    from trim; commands are clamped to [min_us, max_us].
+    """
+
+    channel: int = Field(ge=1, le=16)
+    """RC channel (1–16) the autopilot drives this control from (ArduPlane RCMAP)."""
+    unit: Literal["deg", "percent"] = "deg"
+    """Unit of plan amplitudes for this control: surface degrees, or percent for throttle."""
+    us_per_unit: float = Field(gt=0.0, le=200.0)
+    """PWM microseconds per degree (or per percent) of this control."""
+    direction: Literal[1, -1] = 1
+    """+1 when a larger PWM moves the control in the positive sense (trailing edge down for
+    ailerons and elevator by the thesis's eq. 3.1, more throttle), −1 otherwise."""
+    min_us: int = Field(1000, ge=800, le=2200)
+    """Lowest PWM ever commanded on this channel."""
+    max_us: int = Field(2000, ge=800, le=2200)
+    """Highest PWM ever commanded on this channel."""
+    max_amplitude: float = Field(gt=0.0)
+    """Envelope: the largest excitation deflection from trim a plan may ask, in the unit."""
+    rate_limit: float = Field(gt=0.0)
+    """Servo model: slew rate, unit per second; faster signals are distorted (warning)."""
+    travel: float = Field(gt=0.0)
+    """Servo model: deflection reachable each side of neutral, in the unit (warning)."""
+
+    @model_validator(mode="after")
+    def _ordered(self) -> Surface:
+        if self.min_us >= self.max_us:
+            raise ValueError(f"min_us ({self.min_us}) must be below max_us ({self.max_us})")
+        return self
+
+
+def _default_surfaces() -> dict[str, Surface]:
+    # ArduPlane's default RCMAP: roll 1, pitch 2, throttle 3, yaw 4.
+    deg = {"us_per_unit": 20.0, "max_amplitude": 10.0, "rate_limit": 200.0, "travel": 25.0}
+    return {
+        "aileron": Surface(channel=1, **deg),
+        "elevator": Surface(channel=2, **deg),
+        "throttle": Surface(
+            channel=3,
+            unit="percent",
+            us_per_unit=10.0,
+            max_amplitude=30.0,
+            rate_limit=400.0,
+            travel=50.0,
+        ),
+        "rudder": Surface(channel=4, **deg),
+    }
+
+
+class Envelope(_Section):
+    """Limits enforced onboard whatever the ground asks: a plan outside them is refused, and a
+    run that leaves them is aborted (trim, then release)."""
+
+    max_bank_deg: float = Field(45.0, gt=0.0, le=90.0)
+    """Largest |bank angle| during a run."""
+    max_pitch_deg: float = Field(25.0, gt=0.0, le=90.0)
+    """Largest |pitch attitude| during a run."""
+    min_airspeed: float = Field(12.0, ge=0.0)
+    """Lowest airspeed during a run, m/s (stall margin)."""
+    max_airspeed: float = Field(35.0, gt=0.0)
+    """Highest airspeed during a run, m/s."""
+    max_alpha_deg: float = Field(12.0, gt=0.0, le=45.0)
+    """Largest angle of attack during a run."""
+    max_altitude_loss_m: float = Field(40.0, gt=0.0)
+    """Excursion limit: the largest height lost since the run started."""
+    max_duration_s: float = Field(90.0, gt=0.0, le=600.0)
+    """Longest plan accepted (while overridden, the pilot's stick on excited axes is unseen)."""
+
+    @model_validator(mode="after")
+    def _speeds(self) -> Envelope:
+        if self.min_airspeed >= self.max_airspeed:
+            raise ValueError("min_airspeed must be below max_airspeed")
+        return self
+
+
+class Excitation(_Section):
+    """The excitation scheduler: command rate, staleness, trim capture, controls, envelope."""
+
+    rate_hz: float = Field(50.0, ge=50.0, le=100.0)
+    """Command rate of RC overrides during a run (thesis: 50–100 Hz)."""
+    stale_s: float = Field(0.5, gt=0.0, le=5.0)
+    """Flight state or RC switch data older than this aborts a run (and refuses a start)."""
+    trim_window_s: float = Field(0.5, gt=0.0, le=10.0)
+    """Trim = median servo output over this window just before the run starts."""
+    switch_channel: int = Field(7, ge=1, le=18)
+    """RC channel of the pilot's excitation switch (read only, never overridden)."""
+    switch_high_us: int = Field(1700, ge=800, le=2200)
+    """The switch reads high at or above this PWM."""
+    surfaces: dict[str, Surface] = Field(default_factory=_default_surfaces)
+    """Controls that plans may excite, keyed by role: aileron, elevator, rudder, throttle."""
+    envelope: Envelope = Envelope()
+    """Onboard limits on plans and on the aircraft during a run."""
+
+    @model_validator(mode="after")
+    def _channels(self) -> Excitation:
+        unknown = sorted(set(self.surfaces) - set(INPUT_ROLES))
+        if unknown:
+            raise ValueError(
+                f"unknown control {', '.join(unknown)}; controls are {', '.join(INPUT_ROLES)}"
+            )
+        used = [s.channel for s in self.surfaces.values()]
+        if len(set(used)) != len(used):
+            raise ValueError("each control needs its own RC channel")
+        if self.switch_channel in used:
+            raise ValueError(
+                f"switch_channel {self.switch_channel} is also a control's channel; the pilot's "
+                "switch is never overridden"
+            )
+        return self
+
+
 class Config(_Section):
     """The whole configuration file."""
 
     identification: Identification = Identification()
     """The identification core's settings."""
+    excitation: Excitation = Excitation()
+    """The excitation scheduler's settings and the onboard envelope."""
 
 
 class ConfigError(Exception):

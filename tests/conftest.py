@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import threading
 
 import numpy as np
@@ -20,6 +21,15 @@ def no_leaked_threads():
     yield
     leaked = [t for t in threading.enumerate() if t not in before and t.is_alive()]
     assert not leaked, f"test leaked threads: {leaked}"
+
+
+@pytest.fixture
+async def no_leaked_tasks():
+    """Fail an async test that leaves tasks running (STYLE.md item 4); use it per module."""
+    yield
+    current = asyncio.current_task()
+    leaked = [t for t in asyncio.all_tasks() if t is not current and not t.done()]
+    assert not leaked, f"test leaked tasks: {[t.get_name() for t in leaked]}"
 
 
 def detrimmed(record: reference.Record, seconds: float = 0.5) -> Experiment:

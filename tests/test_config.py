@@ -25,6 +25,13 @@ def test_sections_are_frozen_and_documented():
         assert field.description, f"identification.{name} has no docstring"
     for name, field in type(config.identification.channels).model_fields.items():
         assert field.description, f"channels.{name} has no docstring"
+    for section in (
+        config.excitation,
+        config.excitation.envelope,
+        config.excitation.surfaces["rudder"],
+    ):
+        for name, field in type(section).model_fields.items():
+            assert field.description, f"{type(section).__name__}.{name} has no docstring"
 
 
 def test_axis_sets_use_configured_channel_names(tmp_path):
@@ -34,6 +41,12 @@ def test_axis_sets_use_configured_channel_names(tmp_path):
     assert channels.axis_set("lateral") == (("aileron", "rudder"), ("sideslip", "p", "r", "phi"))
     assert channels.axis_set("full")[1][0] == "tas"
     assert channels.role_of("sideslip") == "beta"
+
+
+AIL = (
+    "[excitation.surfaces.aileron]\nchannel = 1\nus_per_unit = 20\nmax_amplitude = 10\n"
+    "rate_limit = 200\ntravel = 25\n"
+)
 
 
 @pytest.mark.parametrize(
@@ -54,6 +67,22 @@ def test_axis_sets_use_configured_channel_names(tmp_path):
         ("[identification]\nperiod_s = 0\n", "identification.period_s", "greater than 0"),
         ("[identification]\nsmoothing_s = -0.1\n", "identification.smoothing_s", "greater than 0"),
         ("[identification\n", "(syntax)", "line 1"),
+        ("[excitation]\nrate_hz = 20\n", "excitation.rate_hz", "greater than or equal to 50"),
+        ("[excitation]\nswitch_channel = 1\n", "excitation", "never overridden"),
+        (f"{AIL}{AIL.replace('aileron', 'flaps')}", "excitation", "unknown control flaps"),
+        (f"{AIL}{AIL.replace('aileron', 'rudder')}", "excitation", "its own RC channel"),
+        (
+            AIL.replace("channel = 1", "channel = 1\nmin_us = 2000"),
+            "excitation.surfaces.aileron",
+            "must be below max_us",
+        ),
+        (
+            AIL.replace("us_per_unit = 20", "us_per_unit = 0"),
+            "excitation.surfaces.aileron.us_per_unit",
+            "greater than 0",
+        ),
+        (AIL.replace("\nchannel = 1", ""), "excitation.surfaces.aileron.channel", "Field required"),
+        ("[excitation.envelope]\nmin_airspeed = 40\n", "excitation.envelope", "below max_airspeed"),
     ],
 )
 def test_bad_config_names_key_and_reason(tmp_path, capsys, text, key, reason):

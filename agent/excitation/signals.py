@@ -1,13 +1,19 @@
-"""Excitation signals as pure numpy arrays (thesis §4.4.5).
+"""Excitation signals as pure numpy arrays (thesis §4.4.5), in units of the surface (degrees
+or percent from trim), sampled every `dt` seconds from t = 0.
 
 Multisines follow eq. 4.30 with Schroeder's phases (eq. 4.34; Schroeder, "Synthesis of
 low-peak-factor signals and binary sequences with low autocorrelation", IEEE Trans. Inf.
-Theory 16, 1970), and the peak factors of eq. 4.31–4.33.
+Theory 16, 1970) or phases optimised for a low peak factor, and the peak factors of
+eq. 4.31–4.33. Harmonics are allocated across surfaces so that the surfaces are mutually
+orthogonal over a whole period (Morelli, "Multiple input design for real-time parameter
+estimation in the frequency domain", IFAC SYSID 2003).
 """
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
+from functools import lru_cache
 
 import numpy as np
 
@@ -19,6 +25,18 @@ THESIS_HARMONICS = {
     "elevator": (7, 14, 21, 28),
 }
 
+# Phase optimisation grid: samples per period of the highest harmonic. Fine enough that the
+# optimised peak holds at any command rate (the peak between grid points is < 0.1 % higher).
+_GRID_PER_CYCLE = 64
+# Clipping passes of the phase optimiser; the RPF of 4–8 harmonics settles within ~100.
+_PHASE_PASSES = 200
+# Each pass clips the signal to this fraction of its peak-to-peak range.
+_CLIP = 0.9
+
+
+def _samples(duration: float, dt: float) -> int:
+    return max(0, round(duration / dt))
+
 
 def schroeder_phases(count: int) -> np.ndarray:
     """φ_1 = 0, φ_k = φ_(k−1) − π k²/M for k = 2 … M (eq. 4.34, equal amplitudes)."""
@@ -26,6 +44,66 @@ def schroeder_phases(count: int) -> np.ndarray:
     for k in range(2, count + 1):
         phases[k - 1] = phases[k - 2] - np.pi * k**2 / count
     return phases
+
+
+def _one_period(harmonics: np.ndarray, phases: np.ndarray) -> np.ndarray:
+    n = _GRID_PER_CYCLE * int(harmonics.max())
+    tau = np.arange(n) / n
+    return np.cos(2 * np.pi * np.outer(tau, harmonics) + phases).sum(axis=1)
+
+
+@lru_cache(maxsize=64)
+def _optimised(harmonics: tuple[int, ...]) -> tuple[float, ...]:
+    k = np.asarray(harmonics)
+    n = _GRID_PER_CYCLE * int(k.max())
+    phases = schroeder_phases(k.size)
+    best, best_phases = np.inf, phases
+    for _ in range(_PHASE_PASSES):
+        u = _one_period(k, phases)
+        lo, hi = u.min(), u.max()
+        if hi - lo < best:
+            best, best_phases = hi - lo, phases
+        mid, half = (hi + lo) / 2, _CLIP * (hi - lo) / 2
+        spectrum = np.fft.rfft(np.clip(u, mid - half, mid + half), n)
+        phases = np.angle(spectrum[k])
+    return tuple(float(p) for p in best_phases)
+
+
+def low_peak_phases(harmonics: Sequence[int]) -> np.ndarray:
+    """Phases of equal-amplitude harmonics with a low relative peak factor.
+
+    Starts from Schroeder's phases and alternates clipping the waveform to 90 % of its
+    peak-to-peak range with restoring the flat amplitude spectrum, keeping the best phases
+    (the clipping algorithm of Van der Ouderaa, Schoukens and Renneboog, "Peak factor
+    minimization using a time-frequency domain swapping algorithm", IEEE Trans. Instrum.
+    Meas. 37, 1988). Deterministic, so a plan previewed on the ground plays the same onboard.
+    Four harmonics reach RPF ≈ 1.01 (Schroeder: 1.19).
+    """
+    k = tuple(int(h) for h in harmonics)
+    if not k or min(k) < 1 or len(set(k)) != len(k):
+        raise ValueError(f"harmonics must be distinct integers ≥ 1, got {list(harmonics)}")
+    return np.array(_optimised(k))
+
+
+def zero_start(harmonics: Sequence[int], phases: Sequence[float]) -> np.ndarray:
+    """The same multisine delayed so it starts at a zero crossing: phases φ_k + k·θ.
+
+    A time shift leaves the amplitude spectrum, the peak factor and the orthogonality to other
+    harmonics unchanged, and whole periods then start and end at trim instead of jumping to
+    Σ cos φ_k. Of the zero crossings, the one with the gentlest slope is taken.
+    """
+    k = np.asarray(harmonics, dtype=float)
+    phi = np.asarray(phases, dtype=float)
+    u = _one_period(k, phi)
+    n = u.size
+    up = np.flatnonzero(np.sign(u) != np.sign(np.roll(u, -1)))
+    slope = np.abs(np.roll(u, -1)[up] - u[up])
+    i = int(up[np.argmin(slope)])
+    theta = 2 * np.pi * (i + u[i] / (u[i] - u[(i + 1) % n])) / n
+    for _ in range(3):  # Newton on the exact waveform: u(θ) = Σ cos(kθ + φ)
+        value = np.cos(k * theta + phi).sum()
+        theta -= value / -(k * np.sin(k * theta + phi)).sum()
+    return phi + k * theta
 
 
 def multisine(
@@ -43,11 +121,35 @@ def multisine(
     """
     k = np.asarray(harmonics, dtype=float)
     phi = schroeder_phases(k.size) if phases is None else np.asarray(phases, dtype=float)
-    t = np.arange(round(duration / dt)) * dt
+    t = np.arange(_samples(duration, dt)) * dt
     wave = np.cos(2 * np.pi * np.outer(t, k) / period + phi).sum(axis=1)
     # Scale by the peak over one whole period, so a short record keeps the designed amplitude.
     one = np.cos(2 * np.pi * np.outer(np.arange(round(period / dt)) * dt, k) / period + phi)
     return amplitude * wave / np.max(np.abs(one.sum(axis=1)))
+
+
+def allocate_harmonics(
+    surfaces: Sequence[str], period: float, band_hz: tuple[float, float]
+) -> dict[str, tuple[int, ...]]:
+    """Interleave the harmonics of 1/period inside the band across the surfaces.
+
+    Harmonic k goes to surface (k − k_min) mod S, so every surface spans the whole band and no
+    two share a frequency: they are orthogonal over any whole number of periods.
+    """
+    lo, hi = band_hz
+    if not surfaces or len(set(surfaces)) != len(surfaces):
+        raise ValueError("allocate_harmonics needs distinct surface names")
+    if period <= 0 or not 0 <= lo < hi:
+        raise ValueError(f"need period > 0 and 0 ≤ low < high, got {period}, {band_hz}")
+    k_min, k_max = max(1, int(np.ceil(lo * period - 1e-9))), int(np.floor(hi * period + 1e-9))
+    harmonics = list(range(k_min, k_max + 1))
+    if len(harmonics) < len(surfaces):
+        raise ValueError(
+            f"{len(harmonics)} harmonics of a {period:g} s period lie in {lo:g}–{hi:g} Hz, "
+            f"fewer than the {len(surfaces)} surfaces: lengthen the period or widen the band"
+        )
+    count = len(surfaces)
+    return {s: tuple(harmonics[i::count]) for i, s in enumerate(surfaces)}
 
 
 def peak_factor(u: np.ndarray) -> float:
@@ -63,12 +165,100 @@ def relative_peak_factor(u: np.ndarray) -> float:
 
 def doublet(dt: float, pulse: float, amplitude: float, lead: float = 0.0, tail: float = 0.0):
     """+A for `pulse` s, −A for `pulse` s, with `lead` and `tail` seconds of zero around it."""
-    n_lead, n_pulse, n_tail = round(lead / dt), round(pulse / dt), round(tail / dt)
     return np.concatenate(
         [
-            np.zeros(n_lead),
-            np.full(n_pulse, amplitude),
-            np.full(n_pulse, -amplitude),
-            np.zeros(n_tail),
+            np.zeros(_samples(lead, dt)),
+            pulses(dt, pulse, amplitude, (1, -1)),
+            np.zeros(_samples(tail, dt)),
         ]
     )
+
+
+def pulses(dt: float, unit: float, amplitude: float, pattern: Sequence[int]) -> np.ndarray:
+    """Alternating pulses of the given lengths in units of `unit` s: (1, −1) is a doublet.
+
+    The sign of each entry is the pulse's sign and its magnitude the length in units; each
+    pulse is rounded on its own cumulative edge so the total is round(Σ|n|·unit/dt) samples.
+    """
+    edges = np.round(np.cumsum([0] + [abs(n) for n in pattern]) * unit / dt).astype(int)
+    out = np.zeros(edges[-1])
+    for (a, b), n in zip(itertools.pairwise(edges), pattern, strict=True):
+        out[a:b] = np.sign(n) * amplitude
+    return out
+
+
+def three_two_one_one(dt: float, unit: float, amplitude: float) -> np.ndarray:
+    """3-2-1-1: +A for 3Δt, −A for 2Δt, +A for Δt, −A for Δt (thesis §4.4.5.1); Δt = `unit`.
+
+    The 2Δt pulse is aimed at the mode of interest (period ≈ 4Δt … 5Δt); the others widen the
+    excited band.
+    """
+    return pulses(dt, unit, amplitude, (3, -2, 1, -1))
+
+
+def sweep_frequency(
+    t: np.ndarray, f_start: float, f_end: float, duration: float, law: str = "linear"
+) -> np.ndarray:
+    """Instantaneous frequency (Hz) of the sweep at times t within [0, duration]."""
+    tau = np.clip(np.asarray(t, dtype=float) / duration, 0.0, 1.0)
+    if law == "linear":
+        return f_start + (f_end - f_start) * tau
+    if law == "log":
+        return f_start * (f_end / f_start) ** tau
+    raise ValueError(f'sweep law must be "linear" or "log", got {law!r}')
+
+
+def sweep(
+    dt: float,
+    f_start: float,
+    f_end: float,
+    duration: float,
+    amplitude: float,
+    law: str = "linear",
+    fade: float = 0.0,
+    dwell_cycles: float = 0.0,
+) -> np.ndarray:
+    """A sine sweep A·sin(2π∫f dt) from f_start to f_end in `duration` s.
+
+    law "linear": f = f₀ + (f₁ − f₀)t/T; "log": f = f₀(f₁/f₀)^(t/T) (ArduPilot's SystemID
+    chirp law). `dwell_cycles` whole cycles at f₀ come first; the whole signal fades in and
+    out over `fade` s with a raised cosine, so it starts and ends at trim with zero slope.
+    """
+    if min(f_start, f_end) <= 0 or duration <= 0:
+        raise ValueError("sweep needs positive frequencies and duration")
+    dwell = dwell_cycles / f_start
+    t = np.arange(_samples(dwell + duration, dt)) * dt
+    s = np.clip(t - dwell, 0.0, None)
+    if law == "linear":
+        cycles = f_start * s + (f_end - f_start) * s**2 / (2 * duration)
+    elif law == "log":
+        ratio = f_end / f_start
+        if np.isclose(ratio, 1.0):
+            cycles = f_start * s
+        else:
+            cycles = f_start * duration / np.log(ratio) * (ratio ** (s / duration) - 1)
+    else:
+        raise ValueError(f'sweep law must be "linear" or "log", got {law!r}')
+    cycles = np.where(t < dwell, f_start * (t - dwell), cycles)
+    return amplitude * np.sin(2 * np.pi * cycles) * raised_cosine(t.size, dt, fade)
+
+
+def raised_cosine(count: int, dt: float, fade: float) -> np.ndarray:
+    """Window of `count` samples rising over `fade` s as ½(1 − cos πt/fade), falling likewise."""
+    w = np.ones(count)
+    n = min(_samples(fade, dt), count // 2)
+    if n > 0:
+        ramp = 0.5 * (1 - np.cos(np.pi * np.arange(n) / n))
+        w[:n] = ramp
+        w[count - n :] = ramp[::-1]
+    return w
+
+
+def steps(dt: float, hold: float, amplitude: float, levels: Sequence[float]) -> np.ndarray:
+    """A step-like sequence: each level (a multiple of `amplitude`) held for `hold` s.
+
+    The thesis's throttle input (figure 4.4, flown after the multisines in figure 6.12) is
+    levels (1, 1, −1): two counts of more throttle, one count of less.
+    """
+    n = _samples(hold, dt)
+    return np.repeat(np.asarray(levels, dtype=float) * amplitude, n)

@@ -1,0 +1,369 @@
+"""What to play: a Plan of segments of signals on controls, the thesis's presets, rendering at
+the command rate, and the checks a plan must pass before it may start.
+
+A Plan is a small frozen pydantic model: its compact JSON (`Plan.to_bytes`) is what the ground
+sends over the radio, and the onboard agent renders exactly what the ground previewed (every
+signal, phase optimisation included, is deterministic). Amplitudes are in each control's unit
+(surface degrees, throttle percent) from trim.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from agent.config import Envelope, Surface
+from agent.excitation import servo, signals
+
+AxisSet = Literal["lateral", "longitudinal", "full"]
+Nonzero = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class _Signal(_Model):
+    amplitude: Nonzero
+    """Peak deflection from trim in the control's unit; negative reverses the signal."""
+
+    @field_validator("amplitude")
+    @classmethod
+    def _nonzero(cls, value: float) -> float:
+        if value == 0:
+            raise ValueError("amplitude must not be 0")
+        return value
+
+
+class Doublet(_Signal):
+    """+A then −A, each for `pulse_s` seconds."""
+
+    kind: Literal["doublet"] = "doublet"
+    pulse_s: float = Field(gt=0.0, le=30.0)
+
+    def samples(self, dt: float) -> np.ndarray:
+        return signals.doublet(dt, self.pulse_s, self.amplitude)
+
+
+class ThreeTwoOneOne(_Signal):
+    """3-2-1-1 with unit pulse `pulse_s` (7 units in all)."""
+
+    kind: Literal["3211"] = "3211"
+    pulse_s: float = Field(gt=0.0, le=10.0)
+
+    def samples(self, dt: float) -> np.ndarray:
+        return signals.three_two_one_one(dt, self.pulse_s, self.amplitude)
+
+
+class Sweep(_Signal):
+    """Sine sweep from f0_hz to f1_hz over duration_s (linear or logarithmic law)."""
+
+    kind: Literal["sweep"] = "sweep"
+    f0_hz: float = Field(gt=0.0)
+    f1_hz: float = Field(gt=0.0)
+    duration_s: float = Field(gt=0.0, le=300.0)
+    law: Literal["linear", "log"] = "linear"
+    fade_s: float = Field(0.0, ge=0.0)
+    dwell_cycles: float = Field(0.0, ge=0.0, le=20.0)
+
+    def samples(self, dt: float) -> np.ndarray:
+        return signals.sweep(
+            dt, self.f0_hz, self.f1_hz, self.duration_s, self.amplitude, self.law,
+            self.fade_s, self.dwell_cycles,
+        )  # fmt: skip
+
+    @property
+    def top_hz(self) -> float:
+        return max(self.f0_hz, self.f1_hz)
+
+
+class Multisine(_Signal):
+    """Harmonics k of 1/period_s with equal amplitudes, `periods` periods long (eq. 4.30),
+    started at a zero crossing so whole periods begin and end at trim."""
+
+    kind: Literal["multisine"] = "multisine"
+    harmonics: tuple[int, ...] = Field(min_length=1, max_length=64)
+    period_s: float = Field(gt=0.0, le=120.0)
+    periods: float = Field(2.0, gt=0.0, le=20.0)
+    phases: Literal["optimised", "schroeder"] = "optimised"
+
+    @field_validator("harmonics")
+    @classmethod
+    def _distinct(cls, value: tuple[int, ...]) -> tuple[int, ...]:
+        if min(value) < 1 or len(set(value)) != len(value):
+            raise ValueError("harmonics must be distinct integers ≥ 1")
+        return value
+
+    def samples(self, dt: float) -> np.ndarray:
+        phases = signals.zero_start(
+            self.harmonics,
+            signals.low_peak_phases(self.harmonics)
+            if self.phases == "optimised"
+            else signals.schroeder_phases(len(self.harmonics)),
+        )
+        return signals.multisine(
+            self.harmonics, self.period_s, dt, self.periods * self.period_s, self.amplitude,
+            phases,
+        )  # fmt: skip
+
+    @property
+    def top_hz(self) -> float:
+        return max(self.harmonics) / self.period_s
+
+
+class Steps(_Signal):
+    """Step-like sequence: each level × amplitude held for hold_s (levels within ±1)."""
+
+    kind: Literal["steps"] = "steps"
+    levels: tuple[float, ...] = Field(min_length=1, max_length=32)
+    hold_s: float = Field(gt=0.0, le=60.0)
+
+    @field_validator("levels")
+    @classmethod
+    def _unit(cls, value: tuple[float, ...]) -> tuple[float, ...]:
+        if any(not -1.0 <= v <= 1.0 for v in value):
+            raise ValueError("levels are multiples of the amplitude within −1 … 1")
+        return value
+
+    def samples(self, dt: float) -> np.ndarray:
+        return signals.steps(dt, self.hold_s, self.amplitude, self.levels)
+
+
+Signal = Annotated[
+    Doublet | ThreeTwoOneOne | Sweep | Multisine | Steps, Field(discriminator="kind")
+]
+
+
+class Segment(_Model):
+    """Signals that start together on their controls, then free response for free_s."""
+
+    signals: dict[str, Signal] = Field(min_length=1)
+    free_s: float = Field(0.0, ge=0.0, le=120.0)
+
+
+class Plan(_Model):
+    """An excitation run: trim for lead_s, then the segments in order."""
+
+    id: str = Field(min_length=1, max_length=16, pattern=r"^[A-Za-z0-9_.\-]+$")
+    axes: AxisSet
+    """Identification type the run is flown for (which model the job identifies)."""
+    segments: tuple[Segment, ...] = Field(min_length=1, max_length=16)
+    lead_s: float = Field(1.0, ge=0.0, le=10.0)
+    """Trim held at the start so the record begins in trimmed flight (trim removal)."""
+
+    @model_validator(mode="after")
+    def _controls(self) -> Plan:
+        unknown = {n for s in self.segments for n in s.signals} - set(CONTROLS)
+        if unknown:
+            raise ValueError(f"unknown control {sorted(unknown)}; controls are {CONTROLS}")
+        return self
+
+    def to_bytes(self) -> bytes:
+        """Compact JSON for the radio (defaults left out)."""
+        data = self.model_dump(mode="json", exclude_defaults=True)
+        for packed, segment in zip(data["segments"], self.segments, strict=True):
+            for name, sig in segment.signals.items():
+                packed["signals"][name]["kind"] = sig.kind  # the discriminator stays
+        return json.dumps(data, separators=(",", ":")).encode()
+
+    @classmethod
+    def from_bytes(cls, data: bytes) -> Plan:
+        return cls.model_validate_json(data)
+
+    def controls(self) -> list[str]:
+        """Controls the plan moves, in CONTROLS order."""
+        used = {n for s in self.segments for n in s.signals}
+        return [c for c in CONTROLS if c in used]
+
+
+CONTROLS = ("aileron", "elevator", "rudder", "throttle")
+
+
+@dataclass(frozen=True)
+class Timeline:
+    """A plan rendered at the command rate: sample i is commanded at start + i·dt."""
+
+    plan: Plan
+    dt: float
+    values: dict[str, np.ndarray]
+    """Per control, the deflection from trim at every sample (its unit)."""
+    active: dict[str, np.ndarray] = field(repr=False)
+    """Per control, True where one of its signals plays (not lead, not free response)."""
+
+    @property
+    def count(self) -> int:
+        return len(next(iter(self.values.values())))
+
+    @property
+    def duration(self) -> float:
+        return self.count * self.dt
+
+    def times(self) -> np.ndarray:
+        return np.arange(self.count) * self.dt
+
+
+def render(plan: Plan, rate_hz: float) -> Timeline:
+    """Every control's deflection from trim at rate_hz, lead and free response included."""
+    dt = 1.0 / rate_hz
+    pieces: dict[str, list[np.ndarray]] = {c: [] for c in plan.controls()}
+    flags: dict[str, list[np.ndarray]] = {c: [] for c in plan.controls()}
+    lead = round(plan.lead_s / dt)
+    for c in pieces:
+        pieces[c].append(np.zeros(lead))
+        flags[c].append(np.zeros(lead, dtype=bool))
+    for segment in plan.segments:
+        played = {name: sig.samples(dt) for name, sig in segment.signals.items()}
+        length = max(len(v) for v in played.values()) + round(segment.free_s / dt)
+        for c in pieces:
+            v = played.get(c, np.zeros(0))
+            pieces[c].append(np.concatenate([v, np.zeros(length - len(v))]))
+            flags[c].append(np.arange(length) < len(v))
+    # A final sample at trim: the last command of every run is the trim itself.
+    values = {c: np.concatenate([*p, [0.0]]) for c, p in pieces.items()}
+    active = {c: np.concatenate([*f, [False]]) for c, f in flags.items()}
+    return Timeline(plan, dt, values, active)
+
+
+class PlanRefused(ValueError):
+    """A plan that must not start; the message says which limit and by how much."""
+
+
+def refusals(plan: Plan, rate_hz: float, surfaces: Mapping[str, Surface], envelope: Envelope):
+    """Every reason this plan may not fly with this configuration (empty: it may)."""
+    reasons = []
+    timeline = render(plan, rate_hz)
+    if timeline.duration > envelope.max_duration_s:
+        reasons.append(
+            f"plan lasts {timeline.duration:.1f} s, longer than the envelope's "
+            f"max_duration_s = {envelope.max_duration_s:g} s"
+        )
+    for name in plan.controls():
+        if name not in surfaces:
+            reasons.append(f"{name} is not a configured control ([excitation.surfaces])")
+            continue
+        surface, peak = surfaces[name], float(np.max(np.abs(timeline.values[name])))
+        if peak > surface.max_amplitude + 1e-9:
+            reasons.append(
+                f"{name}: {peak:.3g} {_unit(surface)} from trim exceeds its max_amplitude of "
+                f"{surface.max_amplitude:g} {_unit(surface)}"
+            )
+    nyquist = rate_hz / 2
+    for segment in plan.segments:
+        for name, sig in segment.signals.items():
+            top = getattr(sig, "top_hz", 0.0)
+            if top >= nyquist:
+                reasons.append(
+                    f"{name}: {sig.kind} reaches {top:g} Hz, not below the "
+                    f"{nyquist:g} Hz Nyquist frequency of the {rate_hz:g} Hz command rate"
+                )
+    return reasons
+
+
+def check(plan: Plan, rate_hz: float, surfaces: Mapping[str, Surface], envelope: Envelope):
+    """Raise PlanRefused listing every reason the plan may not fly; return its timeline."""
+    reasons = refusals(plan, rate_hz, surfaces, envelope)
+    if reasons:
+        raise PlanRefused(f"plan {plan.id!r} refused: " + "; ".join(reasons))
+    return render(plan, rate_hz)
+
+
+def _unit(surface: Surface) -> str:
+    return "%" if surface.unit == "percent" else "deg"
+
+
+def summary(timeline: Timeline, surfaces: Mapping[str, Surface]) -> dict:
+    """Duration, per-control RPF/peak/band, largest cross-correlation, servo warnings."""
+    per_control = {}
+    warnings: list[str] = []
+    for name, values in timeline.values.items():
+        played = values[timeline.active[name]]
+        per_control[name] = {
+            "rpf": signals.relative_peak_factor(played),
+            "peak": float(np.max(np.abs(played))),
+            "unit": _unit(surfaces[name]) if name in surfaces else None,
+            "band_hz": list(power_band(played, timeline.dt)),
+        }
+        if name in surfaces:
+            warnings += servo.distortion_warnings(name, values, timeline.dt, surfaces[name])
+    return {
+        "plan": timeline.plan.id,
+        "axes": timeline.plan.axes,
+        "rate_hz": 1.0 / timeline.dt,
+        "duration_s": timeline.duration,
+        "controls": per_control,
+        "max_cross_correlation": max_cross_correlation(timeline.values),
+        "warnings": warnings,
+    }
+
+
+def power_band(u: np.ndarray, dt: float, fraction: float = 0.98) -> tuple[float, float]:
+    """Frequencies (Hz) between which the central `fraction` of the signal's power lies."""
+    power = np.abs(np.fft.rfft(u - np.mean(u))) ** 2
+    freqs = np.fft.rfftfreq(len(u), dt)
+    cumulative = np.cumsum(power) / np.sum(power)
+    tail = (1 - fraction) / 2
+    lo = freqs[int(np.searchsorted(cumulative, tail))]
+    hi = freqs[min(int(np.searchsorted(cumulative, 1 - tail)), len(freqs) - 1)]
+    return float(lo), float(hi)
+
+
+def max_cross_correlation(values: Mapping[str, np.ndarray]) -> float:
+    """Largest |Σ uᵢuⱼ| / (‖uᵢ‖‖uⱼ‖) between two controls over the whole plan (0: orthogonal)."""
+    names = list(values)
+    worst = 0.0
+    for i, a in enumerate(names):
+        for b in names[i + 1 :]:
+            x, y = values[a], values[b]
+            norm = np.linalg.norm(x) * np.linalg.norm(y)
+            if norm > 0:
+                worst = max(worst, abs(float(x @ y)) / norm)
+    return worst
+
+
+# Preset defaults (documented in the README): amplitudes in degrees / percent from trim.
+PRESET_AMPLITUDE = {"aileron": 4.0, "elevator": 3.0, "rudder": 4.0, "throttle": 10.0}
+DOUBLET_PULSE_S = {"aileron": 1.0, "rudder": 1.0, "elevator": 0.5}
+MULTISINE_PERIOD_S = 20.0
+MULTISINE_PERIODS = 2.0
+THROTTLE_LEVELS = (1.0, 1.0, -1.0)  # thesis figure 4.4: two counts up, one count down
+THROTTLE_COUNT_S = 2.0
+PRESETS = ("lateral", "longitudinal", "full")
+
+
+def preset(name: str, amplitude: Mapping[str, float] | None = None, plan_id: str | None = None):
+    """The thesis's plans: lateral (aileron then rudder doublet), longitudinal (elevator
+    doublet then throttle steps), full (multisines on aileron, rudder, elevator, then the
+    throttle steps, as in figure 6.12)."""
+    amp = {**PRESET_AMPLITUDE, **(amplitude or {})}
+
+    def doublet(c: str) -> dict:
+        return {c: Doublet(pulse_s=DOUBLET_PULSE_S[c], amplitude=amp[c])}
+
+    steps = Steps(levels=THROTTLE_LEVELS, hold_s=THROTTLE_COUNT_S, amplitude=amp["throttle"])
+    throttle = {"throttle": steps}
+    if name == "lateral":
+        segments = [Segment(signals=doublet("aileron"), free_s=4.0),
+                    Segment(signals=doublet("rudder"), free_s=6.0)]  # fmt: skip
+    elif name == "longitudinal":
+        segments = [Segment(signals=doublet("elevator"), free_s=3.0),
+                    Segment(signals=throttle, free_s=10.0)]  # fmt: skip
+    elif name == "full":
+        sines = {c: _thesis_multisine(c, amp[c]) for c in ("aileron", "rudder", "elevator")}
+        segments = [Segment(signals=sines), Segment(signals=throttle, free_s=10.0)]
+    else:
+        raise ValueError(f"unknown preset {name!r}; presets are {', '.join(PRESETS)}")
+    return Plan(id=plan_id or name, axes=name, segments=tuple(segments))
+
+
+def _thesis_multisine(control: str, amplitude: float) -> Multisine:
+    return Multisine(
+        harmonics=signals.THESIS_HARMONICS[control],
+        period_s=MULTISINE_PERIOD_S,
+        periods=MULTISINE_PERIODS,
+        amplitude=amplitude,
+    )

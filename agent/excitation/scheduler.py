@@ -1,0 +1,331 @@
+"""The excitation player: arms a plan, starts it on the pilot's switch, plays it on the
+controls against absolute deadlines, and ends every run with trim and then release.
+
+Safety (DESIGN.md): the pilot's switch always wins; trim is captured before a run; every end —
+finished, pilot, operator, envelope, stale data, internal error, shutdown — commands trim and
+then releases the override; the envelope is enforced onboard whatever the ground asks. The
+scheduler talks to the autopilot only through `SurfaceSink`, so tests drive it with a fake sink
+and the agent drives it with the MAVSDK driver unchanged.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+from collections import Counter, deque
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Literal, Protocol
+
+import numpy as np
+
+from agent.clock import Clock
+from agent.config import Envelope, Excitation
+from agent.excitation import servo
+from agent.excitation.plan import Plan, PlanRefused, Timeline, check
+
+log = logging.getLogger(__name__)
+
+# Progress events per second of run: enough for a console, few enough for the radio.
+PROGRESS_HZ = 1.0
+# Servo-output history kept for trim capture (samples); 10 s at 50 Hz telemetry.
+SERVO_HISTORY = 500
+
+
+@dataclass(frozen=True)
+class FlightState:
+    """Latest aircraft state the envelope is checked against (from sensors or autopilot)."""
+
+    time: float
+    bank_deg: float
+    pitch_deg: float
+    airspeed: float
+    alpha_deg: float
+    altitude_m: float
+
+
+class SurfaceSink(Protocol):
+    """Where commands go: the autopilot's RC override (ArduPlane RC_CHANNELS_OVERRIDE)."""
+
+    async def command(self, pwm: Mapping[int, int]) -> None:
+        """Override these RC channels with these PWM values (µs)."""
+
+    async def release(self, channels: Sequence[int]) -> None:
+        """Give these channels back to the pilot."""
+
+
+EventKind = Literal["armed", "disarmed", "refused", "started", "progress", "finished", "aborted"]
+
+
+@dataclass(frozen=True)
+class Event:
+    """What the scheduler did, for the link, the console and the log."""
+
+    kind: EventKind
+    plan_id: str
+    time: float
+    detail: str = ""
+    fraction: float | None = None
+
+
+@dataclass(frozen=True)
+class Window:
+    """An excitation window for the recorder: the data between start and end belong to it."""
+
+    plan_id: str
+    axes: str
+    start: float
+    end: float
+    outcome: Literal["finished", "aborted"]
+    reason: str = ""
+
+
+def envelope_violation(s: FlightState, env: Envelope, altitude_ref: float | None) -> str:
+    """Which envelope limit the state is outside ("" when inside)."""
+    if not all(np.isfinite([s.bank_deg, s.pitch_deg, s.airspeed, s.alpha_deg, s.altitude_m])):
+        return "envelope: flight state is not finite"
+    lost = 0.0 if altitude_ref is None else altitude_ref - s.altitude_m
+    b, p, v, a, e = s.bank_deg, s.pitch_deg, s.airspeed, s.alpha_deg, env
+    checks = [
+        (abs(b) > e.max_bank_deg, f"bank {b:.1f}° beyond ±{e.max_bank_deg:g}°"),
+        (abs(p) > e.max_pitch_deg, f"pitch {p:.1f}° beyond ±{e.max_pitch_deg:g}°"),
+        (v < e.min_airspeed, f"airspeed {v:.1f} m/s below {e.min_airspeed:g} m/s"),
+        (v > e.max_airspeed, f"airspeed {v:.1f} m/s above {e.max_airspeed:g} m/s"),
+        (a > e.max_alpha_deg, f"angle of attack {a:.1f}° above {e.max_alpha_deg:g}°"),
+        (
+            lost > e.max_altitude_loss_m,
+            f"lost {lost:.1f} m of height, limit {e.max_altitude_loss_m:g} m",
+        ),
+    ]
+    return next((f"envelope: {text}" for failed, text in checks if failed), "")
+
+
+class _Abort(Exception):
+    """A run must end now; the message is the reason reported to the operator."""
+
+
+class Scheduler:
+    """Plays armed plans on the pilot's switch; see the module docstring for the rules."""
+
+    def __init__(self, config: Excitation, sink: SurfaceSink, clock: Clock):
+        self._config = config
+        self._sink = sink
+        self._clock = clock
+        self._listeners: list[Callable[[Event | Window], None]] = []
+        self._armed: tuple[Plan, Timeline] | None = None
+        self._running: Plan | None = None
+        self._seen_low = False
+        self._switch: tuple[float, bool] | None = None
+        self._state: FlightState | None = None
+        self._servos: deque[tuple[float, Mapping[int, int]]] = deque(maxlen=SERVO_HISTORY)
+        self._abort_request: str | None = None
+        self._start = asyncio.Event()
+        self.counters: Counter[str] = Counter()
+
+    # -- inputs -------------------------------------------------------------------------------
+
+    def subscribe(self, listener: Callable[[Event | Window], None]) -> None:
+        """Call listener with every Event and Window (it must not block)."""
+        self._listeners.append(listener)
+
+    @property
+    def status(self) -> Literal["idle", "armed", "running"]:
+        if self._running is not None:
+            return "running"
+        return "armed" if self._armed is not None else "idle"
+
+    def arm(self, plan: Plan) -> Timeline:
+        """Arm a plan; raise PlanRefused (and emit "refused") if it may not fly."""
+        now = self._clock.now()
+        try:
+            if self._running is not None:
+                raise PlanRefused(f"plan {plan.id!r} refused: plan {self._running.id!r} is running")
+            timeline = check(plan, self._config.rate_hz, self._config.surfaces,
+                             self._config.envelope)  # fmt: skip
+        except PlanRefused as exc:
+            self.counters["refused"] += 1
+            self._emit(Event("refused", plan.id, now, str(exc)))
+            raise
+        self._armed = (plan, timeline)
+        # A start needs the pilot to flip the switch low → high after arming, so arming from
+        # the ground never starts a run by itself.
+        self._seen_low = self._switch is not None and not self._switch[1]
+        self._emit(Event("armed", plan.id, now, f"{timeline.duration:.1f} s"))
+        return timeline
+
+    def disarm(self) -> None:
+        """Forget the armed plan (a running one is not affected: use abort)."""
+        if self._armed is not None:
+            plan = self._armed[0]
+            self._armed = None
+            self._emit(Event("disarmed", plan.id, self._clock.now()))
+
+    def abort(self, reason: str = "operator abort") -> None:
+        """End a running plan (trim, then release) at the next command; disarm an armed one."""
+        if self._running is not None:
+            self._abort_request = reason
+        else:
+            self.disarm()
+
+    def update_switch(self, pwm: int, time: float) -> None:
+        """The pilot's excitation switch (RC_CHANNELS of the switch channel)."""
+        high = pwm >= self._config.switch_high_us
+        self._switch = (time, high)
+        if not high:
+            self._seen_low = True
+        elif self._armed is not None and self._seen_low and self._running is None:
+            self._start.set()
+
+    def update_state(self, state: FlightState) -> None:
+        """The latest flight state (latest value wins)."""
+        self._state = state
+
+    def update_servos(self, time: float, pwm: Mapping[int, int]) -> None:
+        """Servo outputs (SERVO_OUTPUT_RAW) by channel, for trim capture."""
+        self._servos.append((time, dict(pwm)))
+
+    # -- the player ---------------------------------------------------------------------------
+
+    async def run(self) -> None:
+        """Serve forever: wait for an armed plan and a switch flip, then play it."""
+        while True:
+            await self._start.wait()
+            self._start.clear()
+            if self._armed is None:
+                continue
+            plan, timeline = self._armed
+            try:
+                trim = self._preflight(plan, timeline)
+            except _Abort as exc:
+                self.counters["refused"] += 1
+                log.warning("plan %s not started: %s", plan.id, exc)
+                self._emit(Event("refused", plan.id, self._clock.now(), str(exc)))
+                continue
+            self._armed = None
+            await self._play(plan, timeline, trim)
+
+    def _preflight(self, plan: Plan, timeline: Timeline) -> dict[str, float]:
+        """Checks before the first command; the captured trim (µs) per control."""
+        now = self._clock.now()
+        reason = self._violation(now, altitude_ref=None)
+        if reason:
+            raise _Abort(f"not started: {reason}")
+        trim = self._capture_trim(now, plan.controls())
+        for name in plan.controls():
+            surface = self._config.surfaces[name]
+            clamped = servo.pwm_clamped(timeline.values[name], trim[name], surface)
+            if clamped:
+                self.counters["clamped_samples"] += clamped
+                log.warning(
+                    "plan %s: %d %s samples clamped to %d–%d µs around trim %.0f µs",
+                    plan.id, clamped, name, surface.min_us, surface.max_us, trim[name],
+                )  # fmt: skip
+        return trim
+
+    def _capture_trim(self, now: float, controls: Sequence[str]) -> dict[str, float]:
+        recent = [pwm for t, pwm in self._servos if now - t <= self._config.trim_window_s]
+        trim = {}
+        for name in controls:
+            channel = self._config.surfaces[name].channel
+            values = [pwm[channel] for pwm in recent if channel in pwm]
+            if not values:
+                raise _Abort(
+                    f"not started: no servo output on channel {channel} ({name}) in the last "
+                    f"{self._config.trim_window_s:g} s to capture trim"
+                )
+            trim[name] = float(np.median(values))
+        return trim
+
+    async def _play(self, plan: Plan, timeline: Timeline, trim: dict[str, float]) -> None:
+        surfaces = self._config.surfaces
+        channels = [surfaces[n].channel for n in plan.controls()]
+        pwm = servo.surface_pwm(timeline.values, trim, surfaces)
+        trim_pwm = {surfaces[n].channel: round(trim[n]) for n in plan.controls()}
+        self._running, self._abort_request = plan, None
+        start = self._clock.now()
+        altitude_ref = self._state.altitude_m if self._state else None
+        self.counters["runs"] += 1
+        detail = ", ".join(f"{n} {trim[n]:.0f} µs" for n in plan.controls())
+        self._emit(Event("started", plan.id, start, f"trim {detail}"))
+        outcome, reason = "finished", ""
+        try:
+            await self._ticks(plan, timeline, pwm, start, altitude_ref)
+        except _Abort as exc:
+            outcome, reason = "aborted", str(exc)
+        except asyncio.CancelledError:
+            outcome, reason = "aborted", "agent shutting down"
+            await asyncio.shield(self._end(trim_pwm, channels))
+            self._finish(plan, start, outcome, reason)
+            raise
+        except Exception as exc:  # any fault while playing must still end in trim + release
+            log.exception("plan %s: internal error", plan.id)
+            outcome, reason = "aborted", f"internal error: {exc!r}"
+        await self._end(trim_pwm, channels)
+        self._finish(plan, start, outcome, reason)
+
+    async def _ticks(self, plan, timeline: Timeline, pwm, start: float, altitude_ref) -> None:
+        dt, count = timeline.dt, timeline.count
+        progress_every = max(1, round(1 / (PROGRESS_HZ * dt)))
+        i = 0
+        while True:
+            now = self._clock.now()
+            due = math.floor((now - start) / dt + 1e-6)
+            if due > i:  # woke late: skip to the sample that is due now, never catch up
+                self.counters["late_samples"] += due - i
+                i = due
+            if i >= count:
+                return
+            reason = self._abort_request or self._violation(now, altitude_ref)
+            if reason:
+                raise _Abort(reason)
+            await self._sink.command({ch: int(p[i]) for ch, p in pwm.items()})
+            self.counters["commands"] += 1
+            if i % progress_every == 0 and i:
+                self._emit(Event("progress", plan.id, now, fraction=i / count))
+            i += 1
+            await self._clock.sleep_until(start + i * dt)
+
+    def _violation(self, now: float, altitude_ref: float | None) -> str:
+        """Why a run may not continue now ("" when it may)."""
+        cfg = self._config
+        if self._switch is None or now - self._switch[0] > cfg.stale_s:
+            age = "never received" if self._switch is None else f"{now - self._switch[0]:.2f} s old"
+            return f"stale RC switch data ({age})"
+        if not self._switch[1]:
+            return "pilot switch low"
+        s = self._state
+        if s is None or now - s.time > cfg.stale_s:
+            age = "never received" if s is None else f"{now - s.time:.2f} s old"
+            return f"stale flight state ({age})"
+        return envelope_violation(s, self._config.envelope, altitude_ref)
+
+    async def _end(self, trim_pwm: Mapping[int, int], channels: Sequence[int]) -> None:
+        """Trim, then release; each step tried even if the other fails."""
+        try:
+            await self._sink.command(trim_pwm)
+        except Exception:  # the release below must still be tried
+            self.counters["sink_errors"] += 1
+            log.exception("commanding trim failed")
+        try:
+            await self._sink.release(channels)
+        except Exception:  # counted and logged; the autopilot's RC_OVERRIDE_TIME is the backstop
+            self.counters["sink_errors"] += 1
+            log.exception("releasing the override failed")
+
+    def _finish(self, plan: Plan, start: float, outcome: str, reason: str) -> None:
+        end = self._clock.now()
+        self._running = None
+        self.counters[outcome] += 1
+        if outcome == "aborted":
+            log.warning("plan %s aborted: %s", plan.id, reason)
+        self._emit(Event(outcome, plan.id, end, reason))
+        self._emit(Window(plan.id, plan.axes, start, end, outcome, reason))
+
+    def _emit(self, item: Event | Window) -> None:
+        for listener in self._listeners:
+            try:
+                listener(item)
+            except Exception:  # one faulty listener must not stop the run or the others
+                self.counters["listener_errors"] += 1
+                log.exception("excitation listener failed on %s", item)

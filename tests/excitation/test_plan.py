@@ -1,0 +1,153 @@
+"""Plans: presets, rendering, radio encoding, refusal before flight, servo-model warnings."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+
+from agent.config import Config, Envelope, Surface
+from agent.excitation import servo
+from agent.excitation.plan import (
+    PRESETS,
+    Doublet,
+    Multisine,
+    Plan,
+    PlanRefused,
+    Segment,
+    Sweep,
+    check,
+    preset,
+    render,
+    summary,
+)
+
+CONFIG = Config().excitation
+SURFACES, ENVELOPE = CONFIG.surfaces, CONFIG.envelope
+
+
+def test_full_preset_is_orthogonal_with_low_rpf_per_surface():
+    timeline = check(preset("full"), 50.0, SURFACES, ENVELOPE)
+    report = summary(timeline, SURFACES)
+    assert report["max_cross_correlation"] < 1e-9
+    for name in ("aileron", "rudder", "elevator"):
+        assert report["controls"][name]["rpf"] <= 1.10
+    # The multisines carry the thesis's harmonics of a 20 s period: aileron 0.15–0.6 Hz.
+    assert report["controls"]["aileron"]["band_hz"] == pytest.approx([0.15, 0.6])
+    assert report["controls"]["elevator"]["band_hz"] == pytest.approx([0.35, 1.4])
+    assert report["warnings"] == []
+    # Each multisine starts at a zero crossing and plays whole periods: no jump off trim.
+    for name in ("aileron", "rudder", "elevator"):
+        played = timeline.values[name][timeline.active[name]]
+        assert abs(played[0]) < 1e-9
+        assert abs(played[-1]) <= np.max(np.abs(np.diff(played)))  # back to trim in one step
+
+
+def test_presets_follow_the_thesis_sequences():
+    lateral = render(preset("lateral"), 50.0)
+    a, r = lateral.values["aileron"], lateral.values["rudder"]
+    # Aileron doublet first, rudder doublet after it; never both at once.
+    assert np.flatnonzero(a)[-1] < np.flatnonzero(r)[0]
+    longitudinal = render(preset("longitudinal"), 50.0)
+    e, t = longitudinal.values["elevator"], longitudinal.values["throttle"]
+    assert np.flatnonzero(e)[-1] < np.flatnonzero(t)[0]
+    # Throttle: two counts up, one count down (figure 4.4).
+    steps = t[longitudinal.active["throttle"]]
+    assert np.count_nonzero(steps > 0) == 2 * np.count_nonzero(steps < 0)
+    full = render(preset("full"), 50.0)
+    sines_end = np.flatnonzero(full.active["elevator"])[-1]
+    assert sines_end < np.flatnonzero(full.active["throttle"])[0]
+
+
+@pytest.mark.parametrize("name", PRESETS)
+def test_every_run_starts_and_ends_at_trim(name):
+    timeline = render(preset(name), 100.0)
+    lead = round(preset(name).lead_s * 100)
+    for values in timeline.values.values():
+        assert not values[:lead].any()
+        assert values[-1] == 0.0
+
+
+@pytest.mark.parametrize("name", PRESETS)
+def test_plans_survive_the_radio_encoding(name):
+    plan = preset(name, amplitude={"aileron": 2.5})
+    data = plan.to_bytes()
+    assert len(data) < 512  # two XBee payloads at most
+    assert Plan.from_bytes(data) == plan
+
+
+def test_malformed_plans_are_rejected_with_the_field_named():
+    # Bad input tried: truncated bytes, an unknown signal kind, a zero amplitude, repeated
+    # harmonics, an unknown control, a step level outside ±1.
+    data = preset("full").to_bytes()
+    with pytest.raises(ValidationError):
+        Plan.from_bytes(data[:-7])
+    with pytest.raises(ValidationError, match="kind"):
+        Plan.from_bytes(data.replace(b'"multisine"', b'"chirp"'))
+    with pytest.raises(ValidationError, match="amplitude must not be 0"):
+        Doublet(pulse_s=1.0, amplitude=0.0)
+    with pytest.raises(ValidationError, match="distinct"):
+        Multisine(harmonics=(3, 3), period_s=20.0, amplitude=1.0)
+    bad = {"id": "x", "axes": "lateral", "segments": [{"signals": {"flaps": {
+        "kind": "doublet", "pulse_s": 1, "amplitude": 1}}}]}  # fmt: skip
+    with pytest.raises(ValidationError, match="unknown control"):
+        Plan.model_validate(bad)
+    steps = {"kind": "steps", "levels": [2], "hold_s": 1, "amplitude": 5}
+    with pytest.raises(ValidationError, match="within −1"):
+        Plan.model_validate({"id": "x", "axes": "lateral", "segments": [{"signals": {
+            "throttle": steps}}]})  # fmt: skip
+
+
+def _one(signal, name="aileron", free_s=0.0) -> Plan:
+    return Plan(id="t", axes="lateral", segments=(Segment(signals={name: signal}, free_s=free_s),))
+
+
+def test_plans_outside_the_envelope_are_refused_before_start():
+    # Bad input tried: an amplitude past max_amplitude, a plan longer than max_duration_s, a
+    # sweep above the command rate's Nyquist frequency, a control with no calibration.
+    with pytest.raises(PlanRefused, match=r"aileron: 12 deg from trim exceeds its max_amplitude"):
+        check(_one(Doublet(pulse_s=1.0, amplitude=-12.0)), 50.0, SURFACES, ENVELOPE)
+    with pytest.raises(PlanRefused, match=r"lasts 101.0 s, longer than .* max_duration_s = 90"):
+        check(_one(Doublet(pulse_s=1.0, amplitude=2.0), free_s=98.0), 50.0, SURFACES, ENVELOPE)
+    fast = Sweep(f0_hz=1.0, f1_hz=30.0, duration_s=5.0, amplitude=2.0)
+    with pytest.raises(PlanRefused, match="30 Hz, not below the 25 Hz Nyquist"):
+        check(_one(fast), 50.0, SURFACES, ENVELOPE)
+    only_aileron = {"aileron": SURFACES["aileron"]}
+    with pytest.raises(PlanRefused, match="rudder is not a configured control"):
+        check(preset("lateral"), 50.0, only_aileron, ENVELOPE)
+    # All reasons at once, so the operator fixes the plan in one go.
+    with pytest.raises(PlanRefused) as caught:
+        check(_one(Doublet(pulse_s=1.0, amplitude=12.0), free_s=98.0), 50.0, SURFACES, ENVELOPE)
+    assert "max_amplitude" in str(caught.value)
+    assert "max_duration_s" in str(caught.value)
+    strict = Envelope(max_duration_s=30.0)
+    with pytest.raises(PlanRefused, match="max_duration_s = 30"):
+        check(preset("full"), 50.0, SURFACES, strict)
+
+
+SERVO = Surface(channel=1, us_per_unit=20.0, max_amplitude=10.0, rate_limit=150.0, travel=8.0)
+
+
+def test_servo_model_warns_when_a_sweep_outruns_the_servo():
+    # A 1–10 Hz linear sweep at ±4°: 2π f A passes 150 °/s at f ≈ 6 Hz (t ≈ 5.5 s of 10); a
+    # fifth of each cycle is too fast from f ≈ 6.3 Hz (t ≈ 5.9 s).
+    dt = 0.01
+    fast = Sweep(f0_hz=1.0, f1_hz=10.0, duration_s=10.0, amplitude=4.0).samples(dt)
+    warnings = servo.distortion_warnings("elevator", fast, dt, SERVO)
+    assert len(warnings) == 1
+    assert "servo rate limit 150 deg/s" in warnings[0]
+    first = float(warnings[0].rsplit("t = ", 1)[1].split(" s")[0])
+    assert 4.0 < first < 7.0
+    slow = Sweep(f0_hz=0.2, f1_hz=2.0, duration_s=10.0, amplitude=4.0).samples(dt)
+    assert servo.distortion_warnings("elevator", slow, dt, SERVO) == []
+    big = Doublet(pulse_s=1.0, amplitude=9.0).samples(dt)
+    assert "exceeds the servo travel of 8 deg" in servo.distortion_warnings("e", big, dt, SERVO)[0]
+
+
+def test_pwm_conversion_direction_and_clamping():
+    reverse = SERVO.model_copy(update={"direction": -1, "min_us": 1400})
+    values = np.array([0.0, 2.0, -2.0, -10.0])
+    assert servo.to_pwm(values, 1500, SERVO).tolist() == [1500, 1540, 1460, 1300]
+    assert servo.to_pwm(values, 1500, reverse).tolist() == [1500, 1460, 1540, 1700]
+    assert servo.to_pwm(np.array([6.0]), 1500, reverse).tolist() == [1400]  # clamped
+    assert servo.pwm_clamped(np.array([6.0, 1.0]), 1500, reverse) == 1

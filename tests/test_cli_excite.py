@@ -1,0 +1,101 @@
+"""`sysid excite`: CSV, JSON and plot previews, and bad input.
+
+Bad input tried: a plan file that is not JSON, a plan with an unknown control, a missing plan
+file, an amplitude beyond the envelope, a malformed --amplitude, a rate of 0, and a plot
+path in a directory that does not exist. Each gives a message and exit 2.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+
+import numpy as np
+import pytest
+
+from agent.cli import main
+from agent.excitation.plan import preset
+
+
+def test_csv_has_a_header_and_one_row_per_command(capsys):
+    assert main(["excite", "--preset", "full", "--rate", "50", "--csv"]) == 0
+    text = capsys.readouterr().out
+    header, *_ = text.splitlines()
+    assert header == "time,aileron,elevator,rudder,throttle"
+    data = np.loadtxt(io.StringIO(text), delimiter=",", skiprows=1)
+    assert np.allclose(np.diff(data[:, 0]), 0.02)
+    assert data.shape[0] == round(57.0 * 50) + 1  # 1 s lead, 40 s sines, 6 s steps, 10 s free
+    assert np.max(np.abs(data[:, 1])) == pytest.approx(4.0, abs=1e-5)  # aileron, degrees
+    assert set(np.unique(data[:, 4])) == {-10.0, 0.0, 10.0}  # throttle, percent
+
+
+def test_csv_columns_follow_the_configured_channel_names(tmp_path, capsys):
+    config = tmp_path / "config.toml"
+    config.write_text('[identification.channels]\naileron = "dA"\nrudder = "dR"\n')
+    assert main(["excite", "--preset", "lateral", "--config", str(config)]) == 0
+    assert capsys.readouterr().out.splitlines()[0] == "time,dA,dR"
+
+
+def test_json_summary(capsys):
+    assert main(["excite", "--preset", "full", "--json", "--amplitude", "rudder=2"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["duration_s"] == pytest.approx(57.02)
+    assert report["controls"]["rudder"]["peak"] == pytest.approx(2.0)
+    assert all(report["controls"][c]["rpf"] <= 1.10 for c in ("aileron", "rudder", "elevator"))
+    assert report["max_cross_correlation"] < 1e-9
+    assert report["warnings"] == []
+
+
+def test_servo_warnings_reach_the_json_and_stderr(tmp_path, capsys):
+    config = tmp_path / "config.toml"
+    # Listing controls replaces the default table: the elevator's servo is slow (20 °/s).
+    config.write_text(
+        "[excitation.surfaces.elevator]\nchannel = 2\nus_per_unit = 20\n"
+        "max_amplitude = 10\nrate_limit = 20\ntravel = 25\n"
+        '[excitation.surfaces.throttle]\nchannel = 3\nunit = "percent"\nus_per_unit = 10\n'
+        "max_amplitude = 30\nrate_limit = 400\ntravel = 50\n"
+    )
+    assert main(["excite", "--preset", "longitudinal", "--json", "--config", str(config)]) == 0
+    captured = capsys.readouterr()
+    assert "elevator: needs" in json.loads(captured.out)["warnings"][0]
+    assert "warning: elevator: needs" in captured.err
+
+
+def test_plot_and_plan_file(tmp_path):
+    plan = tmp_path / "plan.json"
+    plan.write_bytes(preset("longitudinal").to_bytes())
+    png = tmp_path / "plan.png"
+    assert main(["excite", "--plan", str(plan), "--plot", str(png)]) == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert png.stat().st_size > 10_000
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--plan", "{bad}"], "not a valid plan"),
+        (["--plan", "{unknown}"], "unknown control"),
+        (["--plan", "{missing}"], "cannot be read"),
+        (["--preset", "lateral", "--amplitude", "aileron=15"], "exceeds its max_amplitude"),
+        (["--preset", "lateral", "--amplitude", "aileron:3"], "CONTROL=VALUE"),
+        (["--preset", "lateral", "--rate", "0"], "--rate must be"),
+        (["--preset", "lateral", "--plot", "{nodir}"], "cannot be written"),
+    ],
+)
+def test_bad_input_is_a_clear_error(tmp_path, capsys, args, message):
+    (tmp_path / "bad.json").write_text("{not json")
+    (tmp_path / "unknown.json").write_text(
+        '{"id":"x","axes":"lateral","segments":[{"signals":{"flaps":'
+        '{"kind":"doublet","pulse_s":1,"amplitude":2}}}]}'
+    )
+    paths = {
+        "{bad}": tmp_path / "bad.json",
+        "{unknown}": tmp_path / "unknown.json",
+        "{missing}": tmp_path / "missing.json",
+        "{nodir}": tmp_path / "no" / "such" / "dir.png",
+    }
+    args = [str(paths.get(a, a)) for a in args]
+    assert main(["excite", *args]) == 2
+    err = capsys.readouterr().err
+    assert "sysid excite: error:" in err
+    assert message in err
