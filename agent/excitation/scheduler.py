@@ -249,20 +249,31 @@ class Scheduler:
         detail = ", ".join(f"{n} {trim[n]:.0f} µs" for n in plan.controls())
         self._emit(Event("started", plan.id, start, f"trim {detail}"))
         outcome, reason = "finished", ""
+        cancelled: asyncio.CancelledError | None = None
         try:
             await self._ticks(plan, timeline, pwm, start, altitude_ref)
         except _Abort as exc:
             outcome, reason = "aborted", str(exc)
-        except asyncio.CancelledError:
-            outcome, reason = "aborted", "agent shutting down"
-            await asyncio.shield(self._end(trim_pwm, channels))
-            self._finish(plan, start, outcome, reason)
-            raise
+        except asyncio.CancelledError as exc:
+            outcome, reason, cancelled = "aborted", "agent shutting down", exc
         except Exception as exc:  # any fault while playing must still end in trim + release
             log.exception("plan %s: internal error", plan.id)
             outcome, reason = "aborted", f"internal error: {exc!r}"
-        await self._end(trim_pwm, channels)
-        self._finish(plan, start, outcome, reason)
+        try:
+            await self._end_shielded(trim_pwm, channels)
+        finally:
+            self._finish(plan, start, outcome, reason)
+        if cancelled is not None:
+            raise cancelled
+
+    async def _end_shielded(self, trim_pwm: Mapping[int, int], channels: Sequence[int]) -> None:
+        """_end, carried through to release even if this task is cancelled meanwhile."""
+        ending = asyncio.create_task(self._end(trim_pwm, channels), name="excitation-end")
+        try:
+            await asyncio.shield(ending)
+        except asyncio.CancelledError:
+            await ending  # trim and release complete before the cancellation goes on
+            raise
 
     async def _ticks(self, plan, timeline: Timeline, pwm, start: float, altitude_ref) -> None:
         dt, count = timeline.dt, timeline.count

@@ -40,6 +40,7 @@ class FakeAutopilot:
         self.calls: list[tuple[float, str, object]] = []
         self.switch, self.state, self.telemetry, self.sensors = HIGH, CRUISE, True, True
         self.fail_command_at: float | None = None
+        self.slow_release, self.releasing = False, asyncio.Event()
 
     async def command(self, pwm):
         now = self.clock.now()
@@ -53,6 +54,10 @@ class FakeAutopilot:
 
     async def release(self, channels):
         self.calls.append((self.clock.now(), "release", list(channels)))
+        if self.slow_release:
+            self.releasing.set()
+            await asyncio.sleep(0.05)  # a slow link
+            self.calls.append((self.clock.now(), "released", list(channels)))
 
     def commands(self):
         return [(t, p) for t, kind, p in self.calls if kind == "command"]
@@ -303,3 +308,19 @@ async def test_a_faulty_listener_does_not_stop_the_run():
     await fly(s, sink, preset("lateral"))
     assert events[-1].outcome == "finished"
     assert s.counters["listener_errors"] > 0
+
+
+async def test_shutdown_during_the_release_still_completes_it():
+    clock = VirtualClock(0.0)
+    script, _ = _at(2.0, ABORTS["operator abort"])
+    s, sink, events = make(clock, script)
+    sink.slow_release = True
+    task = asyncio.create_task(s.run(), name="scheduler")
+    s.arm(preset("lateral"))
+    feed(s, clock.now(), HIGH)
+    await asyncio.wait_for(sink.releasing.wait(), 5.0)
+    task.cancel()  # the agent shuts down while the override is being released
+    with pytest.raises(asyncio.CancelledError):
+        await task
+    assert sink.calls[-1][1] == "released"
+    assert events[-1].outcome == "aborted"
