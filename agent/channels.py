@@ -37,3 +37,27 @@ AXIS_SETS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "longitudinal": (("throttle", "elevator"), LONGITUDINAL_OUTPUTS),
     "full": (INPUT_ROLES, OUTPUT_ROLES),
 }
+
+
+# Every channel the sensors publish (name → unit, hold). "linear": interpolated between the
+# samples around a frame time; "zoh": the latest sample held (flags, counters, status words).
+SENSOR_CHANNELS: dict[str, tuple[str, str]] = {
+    # VN-200
+    "phi": ("rad", "linear"), "theta": ("rad", "linear"), "psi": ("rad", "linear"),
+    "p": ("rad/s", "linear"), "q": ("rad/s", "linear"), "r": ("rad/s", "linear"),
+    "ax": ("m/s^2", "linear"), "ay": ("m/s^2", "linear"), "az": ("m/s^2", "linear"),
+    "lat": ("deg", "linear"), "lon": ("deg", "linear"), "alt_gps": ("m", "linear"),
+    "vn": ("m/s", "linear"), "ve": ("m/s", "linear"), "vd": ("m/s", "linear"),
+    "ins_status": ("bits", "zoh"), "utc": ("s", "linear"), "vn_time": ("s", "zoh"),
+    # µADC
+    "Vt": ("m/s", "linear"), "ias": ("m/s", "linear"), "alpha": ("rad", "linear"),
+    "beta": ("rad", "linear"), "alpha_clipped": ("flag", "zoh"), "beta_clipped": ("flag", "zoh"),
+    "alt_pressure": ("m", "linear"), "p_total": ("Pa", "linear"), "p_static": ("Pa", "linear"),
+    "adc_sample": ("count", "zoh"),
+    # surface box
+    "aileron": ("deg", "linear"), "elevator": ("deg", "linear"), "rudder": ("deg", "linear"),
+    "flap": ("deg", "linear"), "aileron_left": ("deg", "linear"),
+    "aileron_right": ("deg", "linear"), "elevator_left": ("deg", "linear"),
+    "elevator_right": ("deg", "linear"), "flap_left": ("deg", "linear"),
+    "flap_right": ("deg", "linear"), "rpm": ("rpm", "linear"), "box_seq": ("count", "zoh"),
+}  # fmt: skip

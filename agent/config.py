@@ -6,6 +6,7 @@ ignored setting. Loaded once at start-up and passed down; there are no global se
 
 from __future__ import annotations
 
+import itertools
 import tomllib
 from pathlib import Path
 from typing import Annotated, Literal
@@ -250,6 +251,155 @@ class Excitation(_Section):
         return self
 
 
+class SerialPort(_Section):
+    """A serial port and how the driver keeps it alive."""
+
+    port: str = Field(min_length=1)
+    """Device path (prefer a stable /dev/serial/by-id/... link) or a pyserial URL."""
+    baud: int = Field(115200, ge=1200, le=4_000_000)
+    """Baud rate (irrelevant on pseudo-terminals)."""
+    rate_hz: float = Field(100.0, gt=0.0, le=1000.0)
+    """The device's output rate: gaps and the expected sample period follow from it."""
+    silence_s: float = Field(1.0, gt=0.0, le=60.0)
+    """No byte for this long counts as a dead link: close and reopen the port."""
+    enabled: bool = True
+    """false: the agent does not open this sensor (its channels stay empty)."""
+
+
+class VectorNav(SerialPort):
+    """VN-200 INS (binary output, or ASCII $VNYMR/$VNINS)."""
+
+    port: str = "/dev/ttyS1"
+    baud: int = Field(921600, ge=1200, le=4_000_000)
+    protocol: Literal["binary", "ascii"] = "binary"
+    """Binary output packets (the thesis's choice) or ASCII sentences."""
+    fields: tuple[str, ...] = (
+        "common.time_startup",
+        "common.time_gps",
+        "common.quaternion",
+        "common.angular_rate",
+        "common.position",
+        "common.vel_ned",
+        "common.accel",
+        "common.ins_status",
+    )
+    """Binary fields ("group.field"); quaternion or ypr, angular_rate and time_startup are
+    needed for attitude, rates and time alignment."""
+    configure: bool = False
+    """Write binary output register 75 with these fields and rate at every connect."""
+    gps_leap_seconds: int = Field(18, ge=0, le=60)
+    """GPS − UTC in seconds (18 since 2017-01-01), for converting GPS time to UTC."""
+
+    @model_validator(mode="after")
+    def _known_fields(self) -> VectorNav:
+        from drivers.vectornav.codec import field_names
+
+        unknown = [f for f in self.fields if f not in field_names()]
+        if unknown:
+            raise ValueError(f"unknown VN-200 binary fields {unknown}; known: {field_names()}")
+        return self
+
+
+class AirDataPort(SerialPort):
+    """Aeroprobe µADC (ASCII lines)."""
+
+    port: str = "/dev/ttyS2"
+    probe_limit_deg: float = Field(20.0, gt=0.0, le=90.0)
+    """Vane/probe range: α or β within 0.05° of it is flagged as clipped."""
+
+
+class Calibration(_Section):
+    """Potentiometer counts → surface degrees: a table (linear between points) or a
+    polynomial deg = Σ c_k counts^k."""
+
+    table: tuple[tuple[float, float], ...] | None = None
+    """(counts, degrees) points, counts strictly increasing."""
+    poly: tuple[float, ...] | None = None
+    """Coefficients c_0, c_1, … of the polynomial in counts."""
+
+    @model_validator(mode="after")
+    def _one(self) -> Calibration:
+        if (self.table is None) == (self.poly is None):
+            raise ValueError("give exactly one of table or poly")
+        if self.table is not None:
+            counts = [c for c, _ in self.table]
+            if len(counts) < 2 or any(b <= a for a, b in itertools.pairwise(counts)):
+                raise ValueError("table needs ≥ 2 points with strictly increasing counts")
+        return self
+
+
+def _default_calibration() -> dict[str, Calibration]:
+    # 10-bit ADC, 512 counts at neutral, 0.25 °/count: a placeholder until the box is measured.
+    from drivers.surfaces.codec import CHANNELS
+
+    return {name: Calibration(poly=(-128.0, 0.25)) for name in CHANNELS}
+
+
+class SurfacePort(SerialPort):
+    """The surface box (seven potentiometers and RPM on an Arduino UNO)."""
+
+    port: str = "/dev/ttyACM0"
+    calibration: dict[str, Calibration] = Field(default_factory=_default_calibration)
+    """Per potentiometer (aileron_left, aileron_right, elevator_left, elevator_right, rudder,
+    flap_left, flap_right): counts → degrees, positive by the right-hand rule."""
+
+    @model_validator(mode="after")
+    def _all_channels(self) -> SurfacePort:
+        from drivers.surfaces.codec import CHANNELS
+
+        missing = sorted(set(CHANNELS) - set(self.calibration))
+        unknown = sorted(set(self.calibration) - set(CHANNELS))
+        if missing or unknown:
+            raise ValueError(f"calibration must cover {list(CHANNELS)}; missing {missing}, "
+                             f"unknown {unknown}")  # fmt: skip
+        return self
+
+
+class Sensors(_Section):
+    """The onboard sensors' ports and options; a sensor set to enabled = false is not opened."""
+
+    vn200: VectorNav = VectorNav()
+    """The INS."""
+    airdata: AirDataPort = AirDataPort()
+    """The air data computer."""
+    surfaces: SurfacePort = SurfacePort()
+    """The surface-position box."""
+    backoff_initial_s: float = Field(0.1, gt=0.0, le=10.0)
+    """First wait before reopening a port that failed or vanished."""
+    backoff_max_s: float = Field(2.0, gt=0.0, le=60.0)
+    """Longest wait between attempts (the wait doubles up to this)."""
+
+
+class Recorder(_Section):
+    """Fixed-rate frames over the sensor channels, the ring buffer, and the logs."""
+
+    rate_hz: float = Field(100.0, ge=1.0, le=1000.0)
+    """Frame rate (the thesis logs at 100 Hz)."""
+    capacity_s: float = Field(600.0, ge=10.0, le=7200.0)
+    """Ring buffer length: the most recent capacity_s seconds of frames stay in memory."""
+    delay_s: float = Field(0.05, ge=0.0, le=1.0)
+    """Frames are assembled this long after their time, so samples just after it (for
+    interpolation) and late arrivals are in."""
+    max_age_s: float = Field(0.1, gt=0.0, le=10.0)
+    """A channel whose newest sample is older than this at a frame time is recorded empty
+    (NaN) there; its age is recorded either way."""
+    channels: tuple[str, ...] | None = None
+    """Channels to record (unset: every sensor channel, see the README)."""
+    log_dir: str = "logs"
+    """Directory of the flight, excitation and execution logs."""
+    excitation_margin_s: float = Field(2.0, ge=0.0, le=60.0)
+    """Data kept before and after an excitation window in its input/output log."""
+
+    @model_validator(mode="after")
+    def _known(self) -> Recorder:
+        from agent.channels import SENSOR_CHANNELS
+
+        unknown = [c for c in self.channels or () if c not in SENSOR_CHANNELS]
+        if unknown:
+            raise ValueError(f"unknown channels {unknown}; known: {list(SENSOR_CHANNELS)}")
+        return self
+
+
 class Config(_Section):
     """The whole configuration file."""
 
@@ -257,6 +407,10 @@ class Config(_Section):
     """The identification core's settings."""
     excitation: Excitation = Excitation()
     """The excitation scheduler's settings and the onboard envelope."""
+    sensors: Sensors = Sensors()
+    """Sensor ports, rates, calibration."""
+    recorder: Recorder = Recorder()
+    """Frame assembly, ring buffer, logs."""
 
 
 class ConfigError(Exception):

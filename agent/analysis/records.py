@@ -8,6 +8,7 @@ and the column, so a bad file is fixed rather than debugged.
 from __future__ import annotations
 
 import csv
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,13 +46,17 @@ def read_record(path: str | Path, names: Sequence[str]) -> Record:
     path = Path(path)
     try:
         with path.open(newline="", encoding="utf-8") as handle:
-            reader = csv.reader(handle)
+            # Our flight and excitation logs start with "# " comment lines (units, config hash).
+            comments = 0
+            while (line := handle.readline()).startswith("#"):
+                comments += 1
+            reader = csv.reader(itertools.chain([line] if line else [], handle))
             header = next(reader, None)
             if header is None:
                 raise RecordError(f"{path}: the file is empty; expected a header row")
             header = [h.strip() for h in header]
             index = _column_index(path, header, ["time", *names])
-            values = _read_rows(path, reader, len(header), index, ["time", *names])
+            values = _read_rows(path, reader, len(header), index, ["time", *names], 2 + comments)
     except OSError as exc:
         raise RecordError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
     except UnicodeDecodeError as exc:
@@ -75,10 +80,10 @@ def _column_index(path: Path, header: list[str], wanted: list[str]) -> list[int]
 
 
 def _read_rows(
-    path: Path, reader: csv.reader, width: int, index: list[int], names: list[str]
+    path: Path, reader: csv.reader, width: int, index: list[int], names: list[str], first: int
 ) -> np.ndarray:
     rows: list[list[float]] = []
-    for line_no, row in enumerate(reader, start=2):
+    for line_no, row in enumerate(reader, start=first):
         if not row or all(not cell.strip() for cell in row):
             continue
         if len(row) != width:

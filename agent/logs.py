@@ -1,0 +1,262 @@
+"""Flight logs (thesis §2.2.1): the full-flight data log, one input/output log per excitation,
+and the execution log — written off the event loop, crash-safe.
+
+One writer thread owns every log file. The loop hands it whole lines (or recorder rows, which
+the thread formats) through one bounded queue; a full queue drops the line and counts it.
+Each line goes to the file in a single write() of complete bytes, so a process killed at any
+moment leaves only whole lines (the reader still ignores a final line with no line end, which
+only a power cut can leave). Files are fsynced at least once a second: a power cut loses at
+most the last second.
+
+Names: NNNN_kind[_single|_batch]_YYYYMMDD.ext — a running number per log directory, the kind
+(flight, exec, or the identification type of an excitation: lateral, longitudinal, full), the
+batch flag for excitation logs, and the UTC date.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as dt
+import hashlib
+import json
+import logging
+import os
+import queue
+import re
+import threading
+import time
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+# Lines waiting for the writer thread: 20 s of 100 Hz frames plus events and excitation logs.
+QUEUE_LINES = 4096
+# fsync every file with new data at least this often (the power-cut loss bound).
+FSYNC_S = 1.0
+# How long close() waits for the writer to drain before giving up (a stuck disk).
+CLOSE_TIMEOUT_S = 10.0
+NAME = re.compile(r"^(\d{4})_")
+
+
+def next_number(directory: Path) -> int:
+    """One more than the largest running number in the directory (1 when empty)."""
+    numbers = [int(m.group(1)) for p in directory.iterdir() if (m := NAME.match(p.name))]
+    return max(numbers, default=0) + 1
+
+
+def log_name(number: int, kind: str, ext: str, batch: bool | None = None, when=None) -> str:
+    """NNNN_kind[_single|_batch]_YYYYMMDD.ext."""
+    day = (when or dt.datetime.now(dt.UTC)).strftime("%Y%m%d")
+    flag = "" if batch is None else ("_batch" if batch else "_single")
+    return f"{number:04d}_{kind}{flag}_{day}.{ext}"
+
+
+def config_hash(text: str) -> str:
+    """SHA-256 of the configuration in force, so a log names the settings it was made with."""
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def csv_header(
+    kind: str, columns: Sequence[str], units: Sequence[str], config_sha256: str, extra: str = ""
+) -> bytes:
+    """Comment lines (what, when, config hash, units), then the column names."""
+    stamp = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
+    units_line = ",".join(f"{c}={u}" for c, u in zip(columns, units, strict=True))
+    lines = [
+        f"# suas-sysid {kind} log, created {stamp}",
+        f"# config sha256 {config_sha256}",
+        f"# units: {units_line}",
+    ]
+    if extra:
+        lines.append(f"# {extra}")
+    lines.append(",".join(columns))
+    return ("\n".join(lines) + "\n").encode()
+
+
+def format_row(row: np.ndarray) -> bytes:
+    """One CSV line: time with µs resolution, values to 9 significant digits, NaN empty."""
+    cells = [f"{row[0]:.6f}"] + ["" if v != v else f"{v:.9g}" for v in row[1:].tolist()]
+    return (",".join(cells) + "\n").encode()
+
+
+class LogWriter:
+    """The writer thread: open files, append lines, fsync; see the module docstring."""
+
+    def __init__(
+        self, directory: Path, *, queue_lines: int = QUEUE_LINES, fsync_s: float = FSYNC_S
+    ):
+        self.directory = Path(directory)
+        self.directory.mkdir(parents=True, exist_ok=True)
+        self._queue: queue.Queue = queue.Queue(maxsize=queue_lines)
+        self._fsync_s = fsync_s
+        self._fds: dict[int, int] = {}
+        self._paths: dict[int, Path] = {}
+        self._dirty: set[int] = set()
+        self._handles = 0
+        self._lock = threading.Lock()
+        self.dropped = 0
+        self.errors = 0
+        self._thread = threading.Thread(target=self._serve, name="log-writer", daemon=True)
+        self._thread.start()
+
+    def open(self, name: str, header: bytes = b"") -> int:
+        """Create a log file (never overwrites) and queue its header; returns its handle."""
+        with self._lock:
+            self._handles += 1
+            handle = self._handles
+        path = self.directory / name
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o644)
+        self._fds[handle], self._paths[handle] = fd, path
+        if header:
+            self._put((handle, header), block=True)
+        return handle
+
+    def path(self, handle: int) -> Path:
+        return self._paths[handle]
+
+    def write(self, handle: int, line: bytes | np.ndarray) -> bool:
+        """Queue a line (bytes ending in a newline), a recorder row, or a 2-D block of rows
+        (one queue slot); False if dropped."""
+        return self._put((handle, line), block=False)
+
+    def close_file(self, handle: int) -> None:
+        self._put((handle, None), block=True)
+
+    def _put(self, item, *, block: bool) -> bool:
+        try:
+            self._queue.put(item, block=block, timeout=CLOSE_TIMEOUT_S if block else None)
+        except queue.Full:
+            self.dropped += 1
+            return False
+        return True
+
+    def close(self) -> None:
+        """Write everything queued, fsync, close every file and stop the thread."""
+        if self._thread.is_alive():
+            self._put((0, None), block=True)
+            self._thread.join(CLOSE_TIMEOUT_S)
+
+    def _serve(self) -> None:
+        last_sync = time.monotonic()
+        while True:
+            try:
+                handle, data = self._queue.get(timeout=self._fsync_s / 2)
+            except queue.Empty:
+                handle, data = -1, None
+            if handle == 0:
+                self._sync()
+                for fd in self._fds.values():
+                    os.close(fd)
+                self._fds.clear()
+                return
+            if handle > 0:
+                self._apply(handle, data)
+            if time.monotonic() - last_sync >= self._fsync_s:
+                self._sync()
+                last_sync = time.monotonic()
+
+    def _apply(self, handle: int, data) -> None:
+        fd = self._fds.get(handle)
+        if fd is None:
+            return
+        if data is None:  # close this file
+            with contextlib.suppress(OSError):
+                os.fsync(fd)
+            os.close(self._fds.pop(handle))
+            self._dirty.discard(handle)
+            return
+        if isinstance(data, np.ndarray):
+            lines = [format_row(r) for r in np.atleast_2d(data)]
+        else:
+            lines = [data]
+        try:
+            for line in lines:
+                os.write(fd, line)  # one write per whole line: a kill leaves whole lines
+        except OSError:
+            self.errors += 1
+            return
+        self._dirty.add(handle)
+
+    def _sync(self) -> None:
+        for handle in list(self._dirty):
+            fd = self._fds.get(handle)
+            if fd is not None:
+                try:
+                    os.fsync(fd)
+                except OSError:
+                    self.errors += 1
+        self._dirty.clear()
+
+
+class JsonLinesHandler(logging.Handler):
+    """The execution log: one JSON object per logging event, through the writer thread."""
+
+    def __init__(self, writer: LogWriter, handle: int, clock=None):
+        super().__init__()
+        self._writer, self._handle, self._clock = writer, handle, clock
+
+    def emit(self, record: logging.LogRecord) -> None:
+        event = {
+            "utc": dt.datetime.fromtimestamp(record.created, dt.UTC).isoformat(),
+            "t": self._clock.now() if self._clock else None,
+            "level": record.levelname,
+            "logger": record.name,
+            "message": record.getMessage(),
+        }
+        if record.exc_info:
+            event["exception"] = self.format(record).splitlines()[-1]
+        self._writer.write(self._handle, (json.dumps(event) + "\n").encode())
+
+
+def read_log(path: Path) -> tuple[list[str], np.ndarray]:
+    """A flight or excitation log: (column names, rows); empty cells are NaN. Comment lines
+    are skipped; a last line without a line end (a power cut mid-write) is ignored."""
+    text = Path(path).read_bytes().decode()
+    lines = text.split("\n")
+    complete = lines[:-1]  # the piece after the last newline is unfinished or empty
+    rows = [ln for ln in complete if ln and not ln.startswith("#")]
+    header, body = rows[0].split(","), rows[1:]
+    data = np.array(
+        [[float(c) if c else np.nan for c in ln.split(",")] for ln in body], dtype=float
+    ).reshape(len(body), len(header))
+    return header, data
+
+
+def units_of(names: Iterable[str], table: dict[str, tuple[str, str]]) -> list[str]:
+    return [table.get(n, ("", ""))[0] or "-" for n in names]
+
+
+class Logbook:
+    """The logs of one agent run: the flight log (every recorder frame), the execution log,
+    and an input/output log per excitation window."""
+
+    def __init__(self, writer: LogWriter, columns: Sequence[str], units: Sequence[str],
+                 config_sha256: str):  # fmt: skip
+        self._writer, self._columns, self._units = writer, list(columns), list(units)
+        self._sha = config_sha256
+        number = next_number(writer.directory)
+        header = csv_header("flight", self._columns, self._units, config_sha256)
+        self.flight = writer.open(log_name(number, "flight", "csv"), header)
+        self.execution = writer.open(log_name(number, "exec", "jsonl"))
+
+    def row(self, row: np.ndarray) -> None:
+        """A recorder frame into the flight log (dropped and counted if the queue is full)."""
+        self._writer.write(self.flight, row)
+
+    def excitation(self, window, rows: np.ndarray, batch: bool = False) -> Path:
+        """Write one excitation's input/output log; returns its path."""
+        number = next_number(self._writer.directory)
+        extra = (
+            f"excitation plan {window.plan_id}, {window.outcome}"
+            f"{': ' + window.reason if window.reason else ''}, "
+            f"window {window.start:.6f} – {window.end:.6f} s"
+        )
+        header = csv_header(window.axes, self._columns, self._units, self._sha, extra)
+        handle = self._writer.open(log_name(number, window.axes, "csv", batch=batch), header)
+        self._writer._put((handle, rows), block=True)
+        self._writer.close_file(handle)
+        return self._writer.path(handle)
+
+    def handler(self, clock=None) -> JsonLinesHandler:
+        return JsonLinesHandler(self._writer, self.execution, clock)

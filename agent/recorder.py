@@ -1,0 +1,195 @@
+"""The recorder: fixed-rate frames over the configured channels, a ring buffer a time window
+can be copied from, excitation-window marks, and the flight and excitation logs.
+
+Drivers push samples (agent-clock time, values by channel) as they arrive. At every frame time
+T (default every 10 ms, assembled `delay_s` later so the samples around T are in), each channel
+is sampled by linear interpolation between the samples around T or by holding the latest one
+(flags, counters), and the age of its newest sample at T is recorded beside it; a channel whose
+newest sample is older than `max_age_s` is recorded empty (NaN) — a gap is visible, never
+papered over. Nothing here blocks: histories and the ring are fixed-size, and rows go to the
+log writer thread through its bounded queue (drops counted).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from bisect import bisect_right
+from collections import Counter, deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from agent.channels import SENSOR_CHANNELS
+from agent.clock import Clock
+from agent.config import Recorder as RecorderConfig
+from agent.excitation.scheduler import Window
+from drivers.sensor import Sample
+
+log = logging.getLogger(__name__)
+
+# Samples kept per channel: 2 s at 100 Hz covers the frame delay and any catch-up.
+HISTORY = 200
+# Excitation windows remembered.
+MARKS = 256
+
+
+@dataclass(frozen=True)
+class Frames:
+    """A copy of recorded frames: times, and values and ages by channel."""
+
+    time: np.ndarray
+    values: dict[str, np.ndarray]
+    ages: dict[str, np.ndarray]
+
+
+class _History:
+    """Recent (time, value) samples of one channel, oldest first."""
+
+    __slots__ = ("times", "values")
+
+    def __init__(self) -> None:
+        self.times: deque[float] = deque(maxlen=HISTORY)
+        self.values: deque[float] = deque(maxlen=HISTORY)
+
+    def sample(self, t: float, linear: bool, max_age: float) -> tuple[float, float]:
+        """(value, age) at t."""
+        times = self.times
+        j = bisect_right(times, t) - 1
+        if j < 0:
+            return math.nan, math.nan
+        t0, v0 = times[j], self.values[j]
+        age = t - t0
+        if age > max_age:
+            return math.nan, age
+        if linear and j + 1 < len(times) and times[j + 1] - t0 <= max_age:
+            t1, v1 = times[j + 1], self.values[j + 1]
+            return v0 + (v1 - v0) * (t - t0) / (t1 - t0), age
+        return v0, age
+
+
+class Ring:
+    """The newest `capacity` rows of a fixed width, as one preallocated array."""
+
+    def __init__(self, capacity: int, width: int):
+        self._data = np.full((capacity, width), np.nan)
+        self._next = 0
+        self.count = 0
+
+    def append(self, row: np.ndarray) -> None:
+        self._data[self._next] = row
+        self._next = (self._next + 1) % len(self._data)
+        self.count = min(self.count + 1, len(self._data))
+
+    def ordered(self) -> np.ndarray:
+        """A copy of the stored rows, oldest first."""
+        if self.count < len(self._data):
+            return self._data[: self.count].copy()
+        return np.roll(self._data, -self._next, axis=0)
+
+    def between(self, t0: float, t1: float) -> np.ndarray:
+        """A copy of the rows whose time (column 0) lies in [t0, t1]."""
+        rows = self.ordered()
+        keep = (rows[:, 0] >= t0) & (rows[:, 0] <= t1)
+        return rows[keep]
+
+
+class Recorder:
+    """See the module docstring. `sink(row)` receives every frame (the flight log)."""
+
+    def __init__(
+        self,
+        config: RecorderConfig,
+        clock: Clock,
+        *,
+        channels: Sequence[str] | None = None,
+        sink: Callable[[np.ndarray], None] | None = None,
+        on_excitation: Callable[[object, np.ndarray], None] | None = None,
+    ):
+        self._config, self._clock, self._sink = config, clock, sink
+        self._on_excitation = on_excitation
+        self._pending: deque = deque(maxlen=MARKS)
+        self.channels = list(channels or config.channels or SENSOR_CHANNELS)
+        self._linear = [
+            SENSOR_CHANNELS.get(c, ("", "linear"))[1] == "linear" for c in self.channels
+        ]
+        self._histories = {c: _History() for c in self.channels}
+        self._dt = 1.0 / config.rate_hz
+        self.ring = Ring(round(config.capacity_s * config.rate_hz), 1 + 2 * len(self.channels))
+        self.marks: deque = deque(maxlen=MARKS)
+        self.counters: Counter[str] = Counter()
+
+    @property
+    def columns(self) -> list[str]:
+        """Column names of a row: time, the channels, then each channel's age."""
+        return ["time", *self.channels, *(f"{c}_age" for c in self.channels)]
+
+    def push(self, sample: Sample) -> None:
+        """A sample from a driver (called on the event loop; O(channels in the sample))."""
+        for name, value in sample.values.items():
+            history = self._histories.get(name)
+            if history is None:
+                continue
+            if history.times and sample.time <= history.times[-1]:
+                self.counters["out_of_order"] += 1  # a duplicate or late sample: keep order
+                continue
+            history.times.append(sample.time)
+            history.values.append(value)
+
+    def mark(self, event: object) -> None:
+        """A scheduler event; a Window (plan id, axes, start, end, outcome) is kept, and its
+        input/output log goes to `on_excitation` once the margin after it is recorded."""
+        if not isinstance(event, Window):
+            return
+        window = event
+        self.marks.append(window)
+        self._pending.append(window)
+
+    def _flush_excitations(self, latest: float) -> None:
+        margin = self._config.excitation_margin_s
+        while self._pending and self._pending[0].end + margin <= latest:
+            window = self._pending.popleft()
+            if self._on_excitation is not None:
+                rows = self.ring.between(window.start - margin, window.end + margin)
+                self._on_excitation(window, rows)
+
+    def frame(self, t: float) -> np.ndarray:
+        """The row for frame time t."""
+        n = len(self.channels)
+        row = np.empty(1 + 2 * n)
+        row[0] = t
+        max_age = self._config.max_age_s
+        for k, (name, linear) in enumerate(zip(self.channels, self._linear, strict=True)):
+            row[1 + k], row[1 + n + k] = self._histories[name].sample(t, linear, max_age)
+        return row
+
+    async def run(self) -> None:
+        """Assemble a frame every 1/rate_hz s, `delay_s` after its time, until cancelled."""
+        delay = self._config.delay_s
+        start = self._clock.now()
+        i = 0
+        while True:
+            await self._clock.sleep_until(start + i * self._dt + delay)
+            due = math.floor((self._clock.now() - delay - start) / self._dt + 1e-9)
+            if due - i > 1:
+                self.counters["catch_up_frames"] += due - i
+            # Late frames are still assembled (the histories hold 2 s): none is lost.
+            while i <= due:
+                row = self.frame(start + i * self._dt)
+                self.ring.append(row)
+                self.counters["frames"] += 1
+                if self._sink is not None:
+                    self._sink(row)
+                i += 1
+            self._flush_excitations(start + (i - 1) * self._dt)
+
+    def window(self, t0: float, t1: float) -> Frames:
+        """A copy of the frames with time in [t0, t1]."""
+        rows = self.ring.between(t0, t1)
+        n = len(self.channels)
+        return Frames(
+            time=rows[:, 0],
+            values={c: rows[:, 1 + k] for k, c in enumerate(self.channels)},
+            ages={c: rows[:, 1 + n + k] for k, c in enumerate(self.channels)},
+        )

@@ -1,0 +1,138 @@
+"""Logs: names and running numbers, headers, the writer thread, drops, and kill -9 safety."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agent.excitation.scheduler import Window
+from agent.logs import Logbook, LogWriter, config_hash, log_name, next_number, read_log
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_names_combine_number_kind_batch_flag_and_date(tmp_path):
+    assert next_number(tmp_path) == 1
+    (tmp_path / "0007_flight_20261122.csv").touch()
+    (tmp_path / "notes.txt").touch()
+    assert next_number(tmp_path) == 8
+    import datetime as dt
+
+    day = dt.datetime(2026, 11, 22, tzinfo=dt.UTC)
+    assert (
+        log_name(8, "lateral", "csv", batch=False, when=day) == "0008_lateral_single_20261122.csv"
+    )
+    assert log_name(9, "full", "csv", batch=True, when=day) == "0009_full_batch_20261122.csv"
+    assert log_name(10, "flight", "csv", when=day) == "0010_flight_20261122.csv"
+
+
+def test_logbook_flight_excitation_and_execution_logs(tmp_path):
+    writer = LogWriter(tmp_path)
+    try:
+        book = Logbook(writer, ["time", "p", "p_age"], ["s", "rad/s", "s"], config_hash("x=1"))
+        for k in range(5):
+            book.row(np.array([k * 0.01, np.nan if k == 2 else 0.1 * k, 0.001]))
+        rows = np.array([[1.0, 0.5, 0.0], [1.01, 0.6, 0.0]])
+        path = book.excitation(Window("lat1", "lateral", 1.0, 1.01, "aborted", "pilot switch low"),
+                               rows)  # fmt: skip
+        import logging
+
+        logger = logging.getLogger("test.exec")
+        logger.addHandler(handler := book.handler())
+        logger.warning("airdata: %s", "port lost")
+        logger.removeHandler(handler)
+    finally:
+        writer.close()
+    flight = writer.path(book.flight)
+    text = flight.read_text()
+    assert text.startswith("# suas-sysid flight log, created ")
+    assert f"# config sha256 {config_hash('x=1')}" in text
+    assert "# units: time=s,p=rad/s,p_age=s" in text
+    header, data = read_log(flight)
+    assert header == ["time", "p", "p_age"]
+    assert data.shape == (5, 3)
+    assert np.isnan(data[2, 1])  # a gap stays a gap
+    assert path.name.endswith("_lateral_single_" + flight.name.split("_")[-1])
+    assert "pilot switch low" in path.read_text()
+    assert read_log(path)[1].tolist() == rows.tolist()
+    execution = writer.path(book.execution).read_text().splitlines()
+    assert '"message": "airdata: port lost"' in execution[0]
+
+
+def test_a_full_queue_drops_and_counts_but_never_tears_a_line(tmp_path):
+    writer = LogWriter(tmp_path, queue_lines=2)
+    handle = writer.open("0001_flight_x.csv", b"time,a\n")
+    accepted = sum(writer.write(handle, f"{k},{k}\n".encode()) for k in range(20_000))
+    writer.close()
+    lines = (tmp_path / "0001_flight_x.csv").read_text().splitlines()
+    assert writer.dropped == 20_000 - accepted
+    assert len(lines) == 1 + accepted
+    assert all(a == b for a, b in (ln.split(",") for ln in lines[1:]))
+
+
+WRITER = """
+import sys, numpy as np
+from pathlib import Path
+from agent.logs import Logbook, LogWriter
+writer = LogWriter(Path(sys.argv[1]))
+cols = ["time"] + [f"c{j}" for j in range(40)]
+book = Logbook(writer, cols, ["s"] * len(cols), "0" * 64)
+print("ready", flush=True)
+k = 0
+while True:
+    row = np.full(len(cols), 1.0 / 3.0) * k
+    row[0] = k * 0.01
+    book.row(row)
+    k += 1
+"""
+
+
+@pytest.mark.parametrize("delay", [0.7, 1.3])
+def test_kill_9_leaves_only_whole_lines(tmp_path, delay):
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen([sys.executable, "-c", WRITER, str(tmp_path)], stdout=subprocess.PIPE,
+                            env=env)  # fmt: skip
+    try:
+        assert proc.stdout.readline().strip() == b"ready"
+        time.sleep(delay)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(10)
+        proc.stdout.close()
+    (log,) = tmp_path.glob("*_flight_*.csv")
+    raw = log.read_bytes()
+    assert raw.endswith(b"\n")  # killed between lines, never inside one
+    lines = raw.decode().split("\n")[:-1]
+    body = [ln for ln in lines if not ln.startswith("#")][1:]
+    assert len(body) > 100
+    for line in body:  # every line parses: 41 fields, all numbers
+        cells = line.split(",")
+        assert len(cells) == 41
+        [float(c) for c in cells]
+
+
+def test_sysid_identify_reads_flight_logs_and_names_the_right_line(tmp_path):
+    from agent.analysis.records import RecordError, read_record
+
+    writer = LogWriter(tmp_path)
+    book = Logbook(writer, ["time", "p"], ["s", "rad/s"], "0" * 64)
+    for k in range(4):
+        book.row(np.array([k * 0.01, 0.1 * k]))
+    book.row(np.array([0.04, np.nan]))
+    writer.close()
+    path = writer.path(book.flight)
+    # 3 comment lines, the header (line 4), rows from line 5: the gap is on line 9.
+    with pytest.raises(RecordError, match=r"line 9: '' in column 'p' is not a number"):
+        read_record(path, ["p"])
+    clean = tmp_path / "clean.csv"
+    clean.write_text("\n".join(path.read_text().splitlines()[:-1]) + "\n")
+    record = read_record(clean, ["p"])
+    assert record.columns["p"].tolist() == pytest.approx([0.0, 0.1, 0.2, 0.3])
+    assert record.dt == pytest.approx(0.01)

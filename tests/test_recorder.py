@@ -1,0 +1,110 @@
+"""The recorder: frame sampling (interpolation, hold, age, gaps), cadence against the clock,
+the ring buffer, and excitation input/output logs."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+
+import numpy as np
+import pytest
+
+from agent.clock import VirtualClock
+from agent.config import Recorder as RecorderConfig
+from agent.excitation.scheduler import Event, Window
+from agent.recorder import Recorder, Ring
+from drivers.sensor import Sample
+
+pytestmark = pytest.mark.usefixtures("no_leaked_tasks")
+
+
+def make(**overrides):
+    config = RecorderConfig(**{"capacity_s": 10.0, **overrides})
+    return Recorder(config, VirtualClock(0.0), channels=["p", "ins_status", "Vt"])
+
+
+def test_linear_channels_interpolate_and_flags_hold():
+    rec = make()
+    rec.push(Sample("vn200", 1.00, {"p": 0.10, "ins_status": 2.0}))
+    rec.push(Sample("vn200", 1.01, {"p": 0.20, "ins_status": 3.0}))
+    row = rec.frame(1.004)
+    n = len(rec.channels)
+    assert row[1] == pytest.approx(0.14)  # p, linear between the samples around 1.004
+    assert row[2] == 2.0  # ins_status held, never interpolated
+    assert row[1 + n] == pytest.approx(0.004)  # age of p's newest sample at the frame
+    assert math.isnan(row[3])  # Vt: no sample yet
+    # After the newest sample, hold it (and its age grows) until max_age_s.
+    later = rec.frame(1.05)
+    assert later[1] == pytest.approx(0.20)
+    assert later[1 + n] == pytest.approx(0.04)
+    stale = rec.frame(1.2)
+    assert math.isnan(stale[1])  # 0.19 s old > max_age_s = 0.1: recorded empty
+    assert stale[1 + n] == pytest.approx(0.19)  # the gap's length is still there
+
+
+def test_out_of_order_and_foreign_samples_are_counted_not_recorded():
+    # Bad input tried: a sample older than the newest one, a channel not recorded.
+    rec = make()
+    rec.push(Sample("vn200", 2.0, {"p": 1.0, "unknown": 5.0}))
+    rec.push(Sample("vn200", 1.5, {"p": 9.0}))
+    assert rec.counters["out_of_order"] == 1
+    assert rec.frame(2.0)[1] == 1.0
+
+
+async def test_frames_at_the_rate_with_catch_up_after_a_stall():
+    stalls = {"n": 0}
+
+    def lateness(deadline):
+        if deadline > 5.0 and stalls["n"] == 0:
+            stalls["n"] = 1
+            return 0.25  # the loop was blocked for 25 frames
+        return 0.0
+
+    clock = VirtualClock(0.0, lateness=lateness)
+    rows = []
+    rec = Recorder(RecorderConfig(capacity_s=10.0), clock, channels=["p"], sink=rows.append)
+    task = asyncio.create_task(rec.run(), name="recorder")
+    for k in range(1000):
+        rec.push(Sample("vn200", k * 0.01, {"p": k * 0.01}))
+        await asyncio.sleep(0)
+        if clock.now() > 9.0:
+            break
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
+    times = np.array([r[0] for r in rows])
+    assert np.allclose(np.diff(times), 0.01)  # no frame missing across the stall
+    assert rec.counters["catch_up_frames"] >= 24
+    window = rec.window(2.0, 3.0)
+    assert len(window.time) == 101
+    assert np.allclose(window.values["p"], window.time, atol=1e-9)
+
+
+def test_ring_keeps_the_newest_rows():
+    ring = Ring(5, 2)
+    for k in range(8):
+        ring.append(np.array([k, 10 * k]))
+    assert ring.ordered()[:, 0].tolist() == [3, 4, 5, 6, 7]
+    assert ring.between(4, 6)[:, 1].tolist() == [40, 50, 60]
+
+
+async def test_excitation_window_goes_to_its_log_after_the_margin():
+    clock = VirtualClock(0.0)
+    logged = []
+    rec = Recorder(RecorderConfig(capacity_s=60.0, excitation_margin_s=1.0), clock, channels=["p"],
+                   on_excitation=lambda w, rows: logged.append((w, rows)))  # fmt: skip
+    rec.mark(Event("started", "lat", 2.0))  # not a window: ignored
+    rec.mark(Window("lat", "lateral", 2.0, 4.0, "finished"))
+    task = asyncio.create_task(rec.run(), name="recorder")
+    while clock.now() < 4.9:
+        await asyncio.sleep(0)
+    assert not logged  # the margin after the window is not recorded yet
+    while clock.now() < 5.2:
+        await asyncio.sleep(0)
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
+    window, rows = logged[0]
+    assert window.plan_id == "lat"
+    assert rows[0, 0] == pytest.approx(1.0)
+    assert rows[-1, 0] == pytest.approx(5.0)
