@@ -15,6 +15,8 @@ from agent.excitation.plan import PRESETS, PlanRefused, check, preset, summary
 from agent.excitation.preview import PreviewError, csv_text, load_plan, parse_amplitudes, plot
 from agent.ident import DataError, IdentificationFailed
 from agent.ident.summary import format_text, to_dict
+from drivers.decode import CODECS as DECODERS
+from drivers.decode import as_json, as_text, decode_file
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 DEFAULT_CONFIG = Path("config.toml")
@@ -115,6 +117,16 @@ def build_parser() -> argparse.ArgumentParser:
     excite.add_argument("--plot", type=Path, metavar="FILE.png", help="draw the plan")
     excite.add_argument("--config", type=Path, help="config file (default ./config.toml if any)")
 
+    decode = sub.add_parser(
+        "decode",
+        help="decode a raw sensor capture",
+        description="Decode a raw capture (bytes as read from the port) with the drivers' codecs.",
+    )
+    decode.add_argument("device", choices=sorted(DECODERS), metavar="DEVICE",
+                        help=f"one of {', '.join(sorted(DECODERS))}")  # fmt: skip
+    decode.add_argument("file", type=Path, metavar="FILE")
+    decode.add_argument("--json", action="store_true", help="one JSON object per message")
+
     config = sub.add_parser("config", help="configuration tools")
     config_sub = config.add_subparsers(dest="config_command", required=True)
     check = config_sub.add_parser("check", help="validate a config file")
@@ -214,6 +226,25 @@ def cmd_excite(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_decode(args: argparse.Namespace) -> int:
+    try:
+        args.file.open("rb").close()
+    except OSError as exc:
+        _error("decode", f"{args.file}: cannot be read ({exc.strerror or exc})")
+        return EXIT_BAD_INPUT
+    messages, stats = decode_file(args.device, args.file)
+    try:
+        for message in messages:
+            print(json.dumps(as_json(message)) if args.json else as_text(message))
+        if args.json:
+            print(json.dumps({"stats": stats.as_dict()}))
+        else:
+            print("stats: " + ", ".join(f"{k} {v}" for k, v in stats.as_dict().items()))
+    except BrokenPipeError:  # the reader (head, less) went away: nothing more to say
+        sys.stdout = None
+    return EXIT_OK
+
+
 def cmd_config_check(args: argparse.Namespace) -> int:
     try:
         load_config(args.file)
@@ -231,4 +262,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         return cmd_identify(args)
     if args.command == "excite":
         return cmd_excite(args)
+    if args.command == "decode":
+        return cmd_decode(args)
     return cmd_config_check(args)

@@ -83,6 +83,20 @@ AIL = (
         ),
         (AIL.replace("\nchannel = 1", ""), "excitation.surfaces.aileron.channel", "Field required"),
         ("[excitation.envelope]\nmin_airspeed = 40\n", "excitation.envelope", "below max_airspeed"),
+        ('[sensors.vn200]\nfields = ["common.nope"]\n', "sensors.vn200", "unknown VN-200"),
+        ("[sensors.airdata]\nbaud = 10\n", "sensors.airdata.baud", "greater than or equal"),
+        (
+            "[sensors.surfaces.calibration.rudder]\npoly = [0, 1]\n",
+            "sensors.surfaces",
+            "missing ['aileron_left'",
+        ),
+        (
+            "[sensors.surfaces.calibration.x]\ntable = [[0, 0], [0, 1]]\n",
+            "sensors.surfaces.calibration.x",
+            "strictly increasing",
+        ),
+        ('[recorder]\nchannels = ["p", "warp"]\n', "recorder", "unknown channels ['warp']"),
+        ("[recorder]\nrate_hz = 0\n", "recorder.rate_hz", "greater than or equal to 1"),
     ],
 )
 def test_bad_config_names_key_and_reason(tmp_path, capsys, text, key, reason):
