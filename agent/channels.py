@@ -60,4 +60,6 @@ SENSOR_CHANNELS: dict[str, tuple[str, str]] = {
     "aileron_right": ("deg", "linear"), "elevator_left": ("deg", "linear"),
     "elevator_right": ("deg", "linear"), "flap_left": ("deg", "linear"),
     "flap_right": ("deg", "linear"), "rpm": ("rpm", "linear"), "box_seq": ("count", "zoh"),
+    # autopilot (SERVO_OUTPUT_RAW): the throttle command in µs, as the thesis's models take it
+    "throttle": ("us", "zoh"),
 }  # fmt: skip

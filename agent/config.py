@@ -400,6 +400,34 @@ class Recorder(_Section):
         return self
 
 
+class Autopilot(_Section):
+    """The autopilot link (ArduPlane through MAVSDK)."""
+
+    url: str = "serial:///dev/ttyS3:921600"
+    """MAVSDK connection URL: serial:///dev/…:baud, udpin://0.0.0.0:14550 (listen) or
+    udpout://host:port (the simulated aircraft)."""
+    system_id: int = Field(255, ge=1, le=255)
+    """Our MAVLink system id: ArduPilot accepts RC overrides only from SYSID_MYGCS (255)."""
+    component_id: int = Field(190, ge=1, le=255)
+    """Our MAVLink component id (190: MAV_COMP_ID_MISSIONPLANNER, a GCS)."""
+    target_system: int = Field(1, ge=1, le=255)
+    """The autopilot's system id (SYSID_THISMAV)."""
+    connect_timeout_s: float = Field(10.0, gt=0.0, le=300.0)
+    """How long one attempt to find the autopilot waits before it is retried."""
+    link_timeout_s: float = Field(0.5, gt=0.0, le=10.0)
+    """No message from the autopilot for this long: link lost (a run aborts)."""
+    attitude_hz: float = Field(50.0, gt=0.0, le=200.0)
+    """ATTITUDE rate (bank, pitch, body rates)."""
+    vfr_hud_hz: float = Field(20.0, gt=0.0, le=200.0)
+    """VFR_HUD rate (airspeed, altitude, throttle)."""
+    aoa_hz: float = Field(20.0, gt=0.0, le=200.0)
+    """AOA_SSA rate (angle of attack for the envelope)."""
+    rc_channels_hz: float = Field(20.0, gt=0.0, le=200.0)
+    """RC_CHANNELS rate (the pilot's excitation switch)."""
+    servo_output_hz: float = Field(50.0, gt=0.0, le=200.0)
+    """SERVO_OUTPUT_RAW rate (trim capture, commanded surfaces in the log)."""
+
+
 class Config(_Section):
     """The whole configuration file."""
 
@@ -411,6 +439,8 @@ class Config(_Section):
     """Sensor ports, rates, calibration."""
     recorder: Recorder = Recorder()
     """Frame assembly, ring buffer, logs."""
+    autopilot: Autopilot = Autopilot()
+    """The MAVLink link to ArduPlane."""
 
 
 class ConfigError(Exception):

@@ -210,7 +210,8 @@ def surfaces(
     def encode(t: float, k: int) -> bytes:
         s = state(t)
         deflection = {
-            "aileron_left": -s.get("aileron", 0.0), "aileron_right": s.get("aileron", 0.0),
+            "aileron_left": s.get("aileron_left", -s.get("aileron", 0.0)),
+            "aileron_right": s.get("aileron_right", s.get("aileron", 0.0)),
             "elevator_left": s.get("elevator", 0.0), "elevator_right": s.get("elevator", 0.0),
             "rudder": s.get("rudder", 0.0), "flap_left": 0.0, "flap_right": 0.0,
         }  # fmt: skip

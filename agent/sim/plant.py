@@ -147,6 +147,39 @@ class Plant:
             low = 0.0 if name == "throttle" else -1.0
             self.fdm[COMMAND_PROPERTY[name]] = float(np.clip(self.trim[name] + delta, low, 1.0))
 
+    def set_normalised(self, commands: Mapping[str, float]) -> None:
+        """Set commands to absolute normalised values (servo outputs), clipped to range."""
+        for name, value in commands.items():
+            low = 0.0 if name == "throttle" else -1.0
+            self.fdm[COMMAND_PROPERTY[name]] = float(np.clip(value, low, 1.0))
+
+    def state(self) -> dict[str, float]:
+        """The truth the sensors measure: attitude, rates, air data, position, velocity,
+        body accelerations (m/s², specific force), surface positions (deg), engine RPM."""
+        f = self.fdm
+        values = {name: float(f[prop]) * scale for name, (prop, scale) in OUTPUT_PROPERTY.items()}
+        values.update(
+            psi=float(f["attitude/psi-rad"]),
+            alt=float(f["position/h-sl-meters"]),
+            lat=float(f["position/lat-geod-deg"]),
+            lon=float(f["position/long-gc-deg"]),
+            vn=float(f["velocities/v-north-fps"]) * FT,
+            ve=float(f["velocities/v-east-fps"]) * FT,
+            vd=float(f["velocities/v-down-fps"]) * FT,
+            ax=float(f["accelerations/a-pilot-x-ft_sec2"]) * FT,
+            ay=float(f["accelerations/a-pilot-y-ft_sec2"]) * FT,
+            az=float(f["accelerations/a-pilot-z-ft_sec2"]) * FT,
+            # Eq. 3.1 with JSBSim's signs: δA = ½(δA_R − δA_L) from its left/right positions.
+            aileron_left=float(f["fcs/left-aileron-pos-deg"]),
+            aileron_right=float(f["fcs/right-aileron-pos-deg"]),
+            elevator=float(f["fcs/elevator-pos-deg"]),
+            rudder=float(f["fcs/rudder-pos-deg"]),
+            throttle=float(f["fcs/throttle-pos-norm"]),
+            rpm=float(f["propulsion/engine/engine-rpm"]),
+        )
+        values["aileron"] = 0.5 * (values["aileron_right"] - values["aileron_left"])
+        return values
+
     def step(self) -> None:
         if not self.fdm.run():
             raise PlantError("JSBSim stopped")

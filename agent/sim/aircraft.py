@@ -1,0 +1,136 @@
+"""The hardware-free aircraft: JSBSim, the emulated ArduPlane on UDP, the scripted pilot and
+the three sensors on pseudo-terminals, stepped together in real time on the event loop.
+
+Physics runs at JSBSim's 200 Hz, two steps per 100 Hz tick of the autopilot (servo outputs in,
+telemetry out). The sensors sample the latest truth at their own rates, with white noise at
+the instruments' levels (thesis chapter 3) and the µADC's ±20° probe limit.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import random
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from agent.clock import Clock
+from agent.config import SurfacePort
+from agent.sim import devices
+from agent.sim.ardupilot import OUTPUTS, EmulatedArduPlane, Params, normalised_to_pwm
+from agent.sim.pilot import ScriptedPilot
+from agent.sim.plant import Plant
+
+log = logging.getLogger(__name__)
+
+TICK_HZ = 100.0
+DEG = math.pi / 180
+# 1-σ sensor noise (VN-200 and µADC data sheets via the thesis's chapter 3; pots ±0.5 %).
+NOISE = {
+    "phi": 0.05 * DEG, "theta": 0.05 * DEG, "psi": 0.1 * DEG, "p": 0.02 * DEG,
+    "q": 0.02 * DEG, "r": 0.02 * DEG, "ax": 0.01, "ay": 0.01, "az": 0.01, "Vt": 0.1,
+    "alpha": 0.2 * DEG, "beta": 0.2 * DEG, "aileron_left": 0.1, "aileron_right": 0.1,
+    "elevator": 0.1, "rudder": 0.1,
+}  # fmt: skip
+
+
+@dataclass
+class AircraftOptions:
+    aircraft: str = "J3Cub"
+    speed_kts: float = 60.0
+    altitude_ft: float = 1000.0
+    turbulence: float = 0.0
+    seed: int = 0
+    noise: bool = True
+    mavlink_host: str = "127.0.0.1"
+    mavlink_port: int = 0
+    """UDP port the emulated autopilot listens on (0: any free port)."""
+    gcs: tuple[str, int] | None = None
+    """Where to send telemetry before any GCS has spoken (like ArduPilot's --out)."""
+    params: Params = field(default_factory=Params)
+    sensor_rate_hz: float = 100.0
+
+
+def noisy(state: Callable[[], dict[str, float]], seed: int, enabled: bool):
+    rng = random.Random(seed)
+
+    def sample(_t: float) -> dict[str, float]:
+        s = dict(state())
+        if enabled:
+            for name, sigma in NOISE.items():
+                if name in s:
+                    s[name] += rng.gauss(0.0, sigma)
+        return s
+
+    return sample
+
+
+class SimAircraft:
+    """Owns the plant, the autopilot emulation, the pilot and the sensor ports."""
+
+    def __init__(self, options: AircraftOptions, clock: Clock, directory: Path):
+        self.options, self._clock = options, clock
+        self.directory = Path(directory)
+        self.plant = Plant(options.aircraft, airspeed_kts=options.speed_kts,
+                           altitude_ft=options.altitude_ft, turbulence=options.turbulence,
+                           seed=options.seed)  # fmt: skip
+        sticks = {ch: normalised_to_pwm(ch, self.plant.trim[name]) for ch, name in OUTPUTS.items()}
+        self.pilot = ScriptedPilot(sticks, options.params.switch_channel)
+        self.autopilot = EmulatedArduPlane(
+            options.params, self.pilot, dt=1.0 / TICK_HZ, trim=self.plant.trim, gcs=options.gcs
+        )
+        self.truth = self.plant.state()
+        self.ports = {
+            n: devices.PtyPort(self.directory / n) for n in ("vn200", "airdata", "surfaces")
+        }
+        self.emitters: dict[str, devices.Emitter] = {}
+        self.mavlink_address: tuple[str, int] | None = None
+        self.ticks = 0
+
+    def _state(self) -> dict[str, float]:
+        return self.truth
+
+    async def run(self) -> None:
+        """Fly until cancelled."""
+        loop = asyncio.get_running_loop()
+        transport, _ = await loop.create_datagram_endpoint(
+            lambda: self.autopilot,
+            local_addr=(self.options.mavlink_host, self.options.mavlink_port),
+        )
+        self.mavlink_address = transport.get_extra_info("sockname")[:2]
+        boot = self._clock.now()
+        seed, noise, rate = self.options.seed, self.options.noise, self.options.sensor_rate_hz
+        calibration = SurfacePort(port="sim").calibration
+        encoders = {
+            "vn200": devices.vn200_binary(noisy(self._state, seed + 1, noise), boot),
+            "airdata": devices.airdata(noisy(self._state, seed + 2, noise)),
+            "surfaces": devices.surfaces(noisy(self._state, seed + 3, noise), calibration, boot),
+        }
+        try:
+            async with asyncio.TaskGroup() as group:
+                for name, port in self.ports.items():
+                    port.plug()
+                    self.emitters[name] = devices.Emitter(port, encoders[name], rate, self._clock)
+                    group.create_task(self.emitters[name].run(), name=f"sim-{name}")
+                group.create_task(self._physics(), name="sim-physics")
+        finally:
+            transport.close()
+            for port in self.ports.values():
+                if port.plugged:
+                    port.unplug()
+
+    async def _physics(self) -> None:
+        dt = 1.0 / TICK_HZ
+        steps = round(dt / self.plant.dt)
+        start = self._clock.now()
+        while True:
+            now = self._clock.now()
+            commands = self.autopilot.tick(now, self.truth)
+            self.plant.set_normalised(commands)
+            for _ in range(steps):
+                self.plant.step()
+            self.truth = self.plant.state()
+            self.ticks += 1
+            await self._clock.sleep_until(start + self.ticks * dt)

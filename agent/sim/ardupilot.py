@@ -1,0 +1,263 @@
+"""An emulated ArduPlane in MANUAL, speaking real MAVLink (pymavlink) over UDP.
+
+What it does, as ArduPlane does it (PROTOCOLS.md):
+- HEARTBEAT at 1 Hz as a fixed-wing ArduPilot (custom mode 0 = MANUAL, armed).
+- Telemetry at per-message intervals, changed by MAV_CMD_SET_MESSAGE_INTERVAL (511) with a
+  COMMAND_ACK: ATTITUDE, VFR_HUD, AOA_SSA, RC_CHANNELS, SERVO_OUTPUT_RAW, GLOBAL_POSITION_INT.
+  Other commands are acknowledged as unsupported (MAVSDK asks a few things on connect).
+- RC_CHANNELS_OVERRIDE accepted only from SYSID_MYGCS (255) addressed to this system; channels
+  1–8: 0 releases, 65535 leaves alone; 9–18: 65534 releases, 0 and 65535 leave alone. An
+  override lapses RC_OVERRIDE_TIME after its last refresh and the pilot's stick is back. The
+  excitation switch channel is never overridden, and with RCx_OPTION = 46 (RC override enable)
+  a low switch disables all overrides — the pilot's hardware kill.
+- MANUAL: servo outputs follow the RC inputs; overridden channels report the override in
+  RC_CHANNELS. The outputs drive the JSBSim surfaces through a servo model (transport delay,
+  rate limit, travel limit).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections import Counter, deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+log = logging.getLogger(__name__)
+
+CHANNELS = 18
+IGNORE, RELEASE_LOW, RELEASE_HIGH = 65535, 0, 65534
+MANUAL = 0
+BASE_MODE = (
+    mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    | mavlink.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+    | mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+)
+# Default stream intervals (s) before the GCS asks for others; ArduPilot's SRx_ defaults are
+# a few Hz.
+DEFAULT_INTERVAL = {
+    mavlink.MAVLINK_MSG_ID_ATTITUDE: 0.25,
+    mavlink.MAVLINK_MSG_ID_VFR_HUD: 0.25,
+    mavlink.MAVLINK_MSG_ID_AOA_SSA: 0.25,
+    mavlink.MAVLINK_MSG_ID_RC_CHANNELS: 0.25,
+    mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 0.25,
+    mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 0.25,
+}
+# Output channel → JSBSim control (ArduPlane's default RCMAP / SERVOn_FUNCTION).
+OUTPUTS = {1: "aileron", 2: "elevator", 3: "throttle", 4: "rudder"}
+
+
+@dataclass
+class Params:
+    """The ArduPlane parameters the emulation honours."""
+
+    sysid: int = 1
+    sysid_mygcs: int = 255
+    rc_override_time_s: float = 3.0
+    switch_channel: int = 7
+    switch_option_46: bool = True
+    switch_high_us: int = 1700
+    servo_delay_s: float = 0.02
+    servo_rate: float = 4.0
+    """Normalised travel per second (±1 is full travel): 0.5 s end to end."""
+    servo_travel: float = 1.0
+    reversed: dict[int, bool] = field(default_factory=dict)
+
+
+def pwm_to_normalised(channel: int, pwm: float) -> float:
+    """Throttle: 1000–2000 µs → 0–1; surfaces: 1500 ± 500 µs → ±1."""
+    if OUTPUTS.get(channel) == "throttle":
+        return (pwm - 1000.0) / 1000.0
+    return (pwm - 1500.0) / 500.0
+
+
+def normalised_to_pwm(channel: int, value: float) -> int:
+    if OUTPUTS.get(channel) == "throttle":
+        return round(1000 + 1000 * value)
+    return round(1500 + 500 * value)
+
+
+class ServoModel:
+    """A servo: pure delay, then a rate limit, then the travel stops (normalised units)."""
+
+    def __init__(self, delay_s: float, rate: float, travel: float, dt: float, start: float):
+        self._queue: deque[float] = deque([start] * max(1, round(delay_s / dt)))
+        self._step, self._travel, self.position = rate * dt, travel, start
+
+    def step(self, command: float) -> float:
+        self._queue.append(command)
+        target = float(np.clip(self._queue.popleft(), -self._travel, self._travel))
+        self.position += float(np.clip(target - self.position, -self._step, self._step))
+        return self.position
+
+
+class EmulatedArduPlane(asyncio.DatagramProtocol):
+    """See the module docstring. `tick(now, state)` runs it; the datagram side is asyncio's."""
+
+    def __init__(
+        self,
+        params: Params,
+        pilot: Callable[[float], list[int]],
+        *,
+        dt: float,
+        trim: dict[str, float],
+        gcs: tuple[str, int] | None = None,
+    ):
+        self.params, self._pilot, self._dt = params, pilot, dt
+        self.mav = mavlink.MAVLink(None, srcSystem=params.sysid, srcComponent=1)
+        self.mav.robust_parsing = True
+        self._transport: asyncio.DatagramTransport | None = None
+        self.peers: set[tuple[str, int]] = {gcs} if gcs else set()
+        self._overrides: dict[int, tuple[int, float]] = {}
+        self.intervals = dict(DEFAULT_INTERVAL)
+        self._due: dict[int, float] = {}
+        self._heartbeat_at = -1.0
+        self._now = 0.0
+        self._boot = None
+        self.counters: Counter[str] = Counter()
+        start = {ch: trim.get(name, 0.0) for ch, name in OUTPUTS.items()}
+        self.servos = {ch: ServoModel(params.servo_delay_s, params.servo_rate,
+                                      params.servo_travel, dt, start[ch])
+                       for ch in OUTPUTS}  # fmt: skip
+        self.outputs: dict[int, int] = {ch: normalised_to_pwm(ch, start[ch]) for ch in OUTPUTS}
+
+    # -- MAVLink in -----------------------------------------------------------------------
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self._transport = transport  # type: ignore[assignment]
+
+    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+        self.peers.add(addr)
+        try:
+            messages = self.mav.parse_buffer(data) or []
+        except mavlink.MAVError:
+            self.counters["bad_packets"] += 1
+            return
+        for message in messages:
+            kind = message.get_type()
+            if kind == "RC_CHANNELS_OVERRIDE":
+                self._override(message)
+            elif kind == "COMMAND_LONG":
+                self._command(message, addr)
+
+    def _override(self, m) -> None:
+        p = self.params
+        if m.get_srcSystem() != p.sysid_mygcs or m.target_system != p.sysid:
+            self.counters["overrides_wrong_sysid"] += 1
+            return
+        if p.switch_option_46 and self._pilot(self._now)[p.switch_channel - 1] < p.switch_high_us:
+            self.counters["overrides_switch_low"] += 1
+            return
+        self.counters["overrides"] += 1
+        for ch in range(1, CHANNELS + 1):
+            value = getattr(m, f"chan{ch}_raw")
+            if ch == p.switch_channel:
+                continue  # the pilot's switch is never overridden
+            released = value == RELEASE_LOW if ch <= 8 else value == RELEASE_HIGH
+            ignored = value == IGNORE if ch <= 8 else value in (IGNORE, RELEASE_LOW)
+            if released:
+                self._overrides.pop(ch, None)
+            elif not ignored:
+                self._overrides[ch] = (value, self._now)
+
+    def _command(self, m, addr) -> None:
+        if m.target_system != self.params.sysid:
+            return
+        result = mavlink.MAV_RESULT_UNSUPPORTED
+        if m.command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
+            msg_id, interval_us = int(m.param1), m.param2
+            if interval_us < 0:
+                self.intervals.pop(msg_id, None)
+            elif interval_us == 0:
+                if msg_id in DEFAULT_INTERVAL:
+                    self.intervals[msg_id] = DEFAULT_INTERVAL[msg_id]
+            else:
+                self.intervals[msg_id] = interval_us * 1e-6
+            result = mavlink.MAV_RESULT_ACCEPTED
+        ack = self.mav.command_ack_encode(m.command, result, 0, 0, m.get_srcSystem(),
+                                          m.get_srcComponent())  # fmt: skip
+        self._send(ack, [addr])
+
+    # -- the vehicle ----------------------------------------------------------------------
+
+    def rc_inputs(self, now: float) -> list[int]:
+        """What the flight code sees on each RC channel: override if live, else the pilot."""
+        rc = list(self._pilot(now))
+        timeout = self.params.rc_override_time_s
+        for ch, (value, when) in list(self._overrides.items()):
+            if now - when > timeout:
+                del self._overrides[ch]  # lapsed: the pilot has the channel again
+                self.counters["override_timeouts"] += 1
+            else:
+                rc[ch - 1] = value
+        return rc
+
+    def tick(self, now: float, state: dict[str, float]) -> dict[str, float]:
+        """Advance one step: servo outputs (MANUAL: RC in), servo model, telemetry out.
+        Returns the normalised commands for the plant."""
+        self._now = now
+        if self._boot is None:
+            self._boot = now
+        rc = self.rc_inputs(now)
+        commands = {}
+        for ch, name in OUTPUTS.items():
+            self.outputs[ch] = rc[ch - 1]
+            command = pwm_to_normalised(ch, rc[ch - 1])
+            if self.params.reversed.get(ch):
+                command = -command
+            commands[name] = self.servos[ch].step(command)
+        self._telemetry(now, state, rc)
+        return commands
+
+    def _telemetry(self, now: float, s: dict[str, float], rc: list[int]) -> None:
+        if now - self._heartbeat_at >= 1.0:
+            self._heartbeat_at = now
+            self._send(self.mav.heartbeat_encode(
+                mavlink.MAV_TYPE_FIXED_WING, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, BASE_MODE,
+                MANUAL, mavlink.MAV_STATE_ACTIVE, 3,
+            ))  # fmt: skip
+        boot_ms = int((now - self._boot) * 1000) & 0xFFFFFFFF
+        for msg_id, interval in self.intervals.items():
+            due = self._due.get(msg_id, now)
+            if now + self._dt / 2 < due:  # sent at the tick nearest its due time
+                continue
+            self._due[msg_id] = max(due + interval, now - interval)  # no burst after a stall
+            message = self._message(msg_id, boot_ms, s, rc)
+            if message is not None:
+                self._send(message)
+
+    def _message(self, msg_id: int, boot_ms: int, s: dict[str, float], rc: list[int]):
+        m = self.mav
+        if msg_id == mavlink.MAVLINK_MSG_ID_ATTITUDE:
+            return m.attitude_encode(
+                boot_ms, s["phi"], s["theta"], s["psi"], s["p"], s["q"], s["r"]
+            )
+        if msg_id == mavlink.MAVLINK_MSG_ID_VFR_HUD:
+            heading, throttle = int(np.degrees(s["psi"]) % 360), round(100 * s["throttle"])
+            ground = float(np.hypot(s["vn"], s["ve"]))
+            return m.vfr_hud_encode(s["Vt"], ground, heading, throttle, s["alt"], -s["vd"])
+        if msg_id == mavlink.MAVLINK_MSG_ID_AOA_SSA:
+            return m.aoa_ssa_encode(boot_ms * 1000, np.degrees(s["alpha"]), np.degrees(s["beta"]))
+        if msg_id == mavlink.MAVLINK_MSG_ID_RC_CHANNELS:
+            return m.rc_channels_encode(boot_ms, CHANNELS, *rc, 255)
+        if msg_id == mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW:
+            servos = [self.outputs.get(ch, 0) for ch in range(1, 17)]
+            return m.servo_output_raw_encode((boot_ms * 1000) & 0xFFFFFFFF, 0, *servos)
+        if msg_id == mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
+            return m.global_position_int_encode(
+                boot_ms, int(s["lat"] * 1e7), int(s["lon"] * 1e7), int(s["alt"] * 1000),
+                int(s["alt"] * 1000), int(s["vn"] * 100), int(s["ve"] * 100),
+                int(s["vd"] * 100), int(np.degrees(s["psi"]) % 360 * 100),
+            )  # fmt: skip
+        return None
+
+    def _send(self, message, peers=None) -> None:
+        if self._transport is None or self._transport.is_closing():
+            return
+        data = message.pack(self.mav)
+        for peer in peers or self.peers:
+            self._transport.sendto(data, peer)
+        self.counters["sent"] += 1

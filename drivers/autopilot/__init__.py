@@ -1,0 +1,1 @@
+"""ArduPlane through MAVSDK."""

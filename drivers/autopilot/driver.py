@@ -1,0 +1,269 @@
+"""The autopilot driver: ArduPlane through MAVSDK 4.1 (`mavsdk.asyncio` and its
+`mavlink_direct` plugin), and the scheduler's surface sink (RC_CHANNELS_OVERRIDE).
+
+MAVSDK delivers messages on its own threads. They cross into the event loop in exactly one
+place (`_Seam`, STYLE.md item 8): the callback stores the newest message of each kind and
+schedules at most one pending drain, so a slow loop sees the latest values, never a backlog
+(MAVSDK's own asyncio subscriptions queue without bound). Commands that wait for an ack run
+on one worker thread this driver owns. Overrides are sent from the loop (a non-blocking UDP or
+serial write of ~30 µs).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import math
+import threading
+from collections import Counter, deque
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
+
+from agent.clock import Clock
+from agent.config import Autopilot as AutopilotConfig
+from agent.excitation.scheduler import FlightState
+from drivers.sensor import Sample
+from drivers.timing import DeviceClock
+
+log = logging.getLogger(__name__)
+
+MESSAGES = {  # name → MAVLink id, for SET_MESSAGE_INTERVAL
+    "ATTITUDE": 30, "VFR_HUD": 74, "AOA_SSA": 11020, "RC_CHANNELS": 65,
+    "SERVO_OUTPUT_RAW": 36, "HEARTBEAT": 0,
+}  # fmt: skip
+SET_MESSAGE_INTERVAL = 511
+IGNORE, RELEASE_LOW, RELEASE_HIGH = 65535, 0, 65534
+# Releases are repeated so one lost datagram does not leave a surface overridden until
+# RC_OVERRIDE_TIME.
+RELEASE_REPEATS = 3
+# The watchdog looks this often (s): link loss is reported within link_timeout_s + this.
+WATCH_S = 0.05
+# MAVSDK's own log lines kept for the loop to pass on (it may log from any thread).
+MAVSDK_LOG = 200
+
+
+class AutopilotError(RuntimeError):
+    """No usable link to the autopilot (the scheduler aborts a run on it)."""
+
+
+class _Seam:
+    """MAVSDK's threads → the loop: newest message per name, at most one pending drain."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, deliver: Callable[[dict], None]):
+        self._loop, self._deliver = loop, deliver
+        self._lock = threading.Lock()
+        self._latest: dict[str, str] = {}
+        self._pending = False
+        self.received: Counter[str] = Counter()
+
+    def callback(self, message, _user_data=None) -> None:  # on a MAVSDK thread
+        with self._lock:
+            self._latest[message.message_name] = message.fields_json
+            self.received[message.message_name] += 1
+            if self._pending:
+                return
+            self._pending = True
+        with contextlib.suppress(RuntimeError):  # a closed loop: we are shutting down
+            self._loop.call_soon_threadsafe(self._drain)
+
+    def _drain(self) -> None:
+        with self._lock:
+            latest, self._latest, self._pending = self._latest, {}, False
+        for text in latest.values():
+            self._deliver(json.loads(text))
+
+
+class AutopilotLink:
+    """Connects, keeps telemetry flowing, watches the link, and sends overrides."""
+
+    def __init__(
+        self,
+        config: AutopilotConfig,
+        clock: Clock,
+        *,
+        switch_channel: int,
+        on_switch: Callable[[int, float], None] | None = None,
+        on_state: Callable[[FlightState], None] | None = None,
+        on_servos: Callable[[float, dict[int, int]], None] | None = None,
+        on_sample: Callable[[Sample], None] | None = None,
+        on_link: Callable[[bool, str], None] | None = None,
+    ):
+        self._cfg, self._clock, self._switch = config, clock, switch_channel
+        self._on_switch, self._on_state, self._on_servos = on_switch, on_state, on_servos
+        self._on_sample, self._on_link = on_sample, on_link
+        self._direct = None
+        self._seam: _Seam | None = None
+        self._boot_clock = DeviceClock()
+        self._last_message: float | None = None
+        self.connected = False
+        self.status = "connecting"
+        self.counters: Counter[str] = Counter()
+        self.telemetry: dict[str, dict] = {}
+        self._state_parts: dict[str, float] = {}
+        self.mavsdk_log: deque[str] = deque(maxlen=MAVSDK_LOG)
+
+    @property
+    def received(self) -> Counter[str]:
+        """Messages received from MAVSDK by name (before latest-value coalescing)."""
+        return self._seam.received if self._seam else Counter()
+
+    # -- lifecycle ------------------------------------------------------------------------
+
+    async def run(self) -> None:
+        """Connect and serve until cancelled."""
+        from mavsdk import LogLevel, log_subscribe
+        from mavsdk.asyncio import Configuration, Mavsdk
+        from mavsdk.plugins.mavlink_direct import MavlinkDirect
+
+        def mavsdk_log(level: LogLevel, message: str, _file, _line) -> bool:
+            self.mavsdk_log.append(f"{level.name}: {message}")  # deque.append: thread-safe
+            return True  # keep MAVSDK off stdout
+
+        log_subscribe(mavsdk_log)
+        loop = asyncio.get_running_loop()
+        executor = ThreadPoolExecutor(1, thread_name_prefix="mavsdk-command")
+        cfg = self._cfg
+        mavsdk = Mavsdk(Configuration.create_manual(cfg.system_id, cfg.component_id, True))
+        handles = []
+        try:
+            await mavsdk.add_any_connection(cfg.url)
+            system = None
+            while system is None:
+                system = await mavsdk.first_autopilot(timeout_s=cfg.connect_timeout_s)
+                if system is None:
+                    self._report(
+                        False, f"no autopilot on {cfg.url} after {cfg.connect_timeout_s:g} s"
+                    )
+            self._direct = MavlinkDirect(system._system)
+            self._seam = _Seam(loop, self._deliver)
+            handles = [self._direct.subscribe_message(n, self._seam.callback) for n in MESSAGES]
+            self._last_message = self._clock.now()
+            self._report(True, "connected")
+            await self._set_rates(loop, executor)
+            await self._watch(loop, executor)
+        finally:
+            for handle in handles:
+                self._direct.unsubscribe_message(handle)
+            if self._direct is not None:
+                self._direct.destroy()
+                self._direct = None
+            self.connected = False
+            mavsdk.destroy()
+            executor.shutdown(wait=False, cancel_futures=True)
+
+    async def _set_rates(self, loop, executor) -> None:
+        from mavsdk.plugins.mavlink_direct import MavlinkMessage
+
+        cfg = self._cfg
+        rates = {
+            "ATTITUDE": cfg.attitude_hz, "VFR_HUD": cfg.vfr_hud_hz, "AOA_SSA": cfg.aoa_hz,
+            "RC_CHANNELS": cfg.rc_channels_hz, "SERVO_OUTPUT_RAW": cfg.servo_output_hz,
+        }  # fmt: skip
+        for name, hz in rates.items():
+            fields = {"target_system": cfg.target_system, "target_component": 1,
+                      "command": SET_MESSAGE_INTERVAL, "confirmation": 0,
+                      "param1": MESSAGES[name], "param2": round(1e6 / hz), "param3": 0,
+                      "param4": 0, "param5": 0, "param6": 0, "param7": 0}  # fmt: skip
+            command = MavlinkMessage(
+                message_name="COMMAND_LONG", system_id=cfg.system_id, component_id=cfg.component_id,
+                target_system_id=cfg.target_system, target_component_id=1,
+                fields_json=json.dumps(fields),
+            )  # fmt: skip
+            try:
+                ack = await loop.run_in_executor(executor, self._direct.send_command, command)
+                result = json.loads(ack.fields_json or "{}").get("result")
+            except Exception as exc:  # MavlinkDirectError and ctypes errors alike: log, go on
+                result = repr(exc)
+            if result != 0:
+                self.counters["rate_refused"] += 1
+                log.warning("autopilot: %s at %g Hz not accepted (%s)", name, hz, result)
+
+    async def _watch(self, loop, executor) -> None:
+        while True:
+            await asyncio.sleep(WATCH_S)
+            while self.mavsdk_log:
+                log.debug("mavsdk %s", self.mavsdk_log.popleft())
+            silent = self._clock.now() - (self._last_message or 0.0)
+            if self.connected and silent > self._cfg.link_timeout_s:
+                self.counters["link_losses"] += 1
+                self._report(False, f"no message from the autopilot for {silent:.2f} s")
+            elif not self.connected and silent <= self._cfg.link_timeout_s:
+                self._report(True, "link back")
+                await self._set_rates(loop, executor)  # a rebooted autopilot forgot them
+
+    def _report(self, up: bool, reason: str) -> None:
+        self.connected = up
+        self.status = "connected" if up else "lost"
+        (log.info if up else log.warning)("autopilot: %s", reason)
+        if self._on_link is not None:
+            self._on_link(up, reason)
+
+    # -- telemetry ------------------------------------------------------------------------
+
+    def _deliver(self, fields: dict) -> None:
+        name = fields.get("message_name", "")
+        now = self._clock.now()
+        self._last_message = now
+        self.telemetry[name] = fields
+        boot_ms = fields.get("time_boot_ms")
+        if boot_ms is None and "time_usec" in fields:
+            boot_ms = fields["time_usec"] / 1000
+        t = now if boot_ms is None else self._boot_clock.local(boot_ms / 1000.0, now)
+        if name == "RC_CHANNELS":
+            pwm = fields.get(f"chan{self._switch}_raw")
+            if pwm is not None and self._on_switch is not None:
+                self._on_switch(int(pwm), t)
+        elif name == "SERVO_OUTPUT_RAW":
+            servos = {ch: int(fields[f"servo{ch}_raw"]) for ch in range(1, 17)
+                      if f"servo{ch}_raw" in fields}  # fmt: skip
+            if self._on_servos is not None:
+                self._on_servos(t, servos)
+            if self._on_sample is not None and 3 in servos:
+                self._on_sample(Sample("autopilot", t, {"throttle": float(servos[3])}))
+        elif name in ("ATTITUDE", "VFR_HUD", "AOA_SSA"):
+            self._flight_state(name, fields, t)
+
+    def _flight_state(self, name: str, f: dict, t: float) -> None:
+        parts = self._state_parts
+        if name == "ATTITUDE":
+            parts.update(bank=math.degrees(f["roll"]), pitch=math.degrees(f["pitch"]))
+        elif name == "VFR_HUD":
+            parts.update(airspeed=f["airspeed"], altitude=f["alt"])
+        else:
+            parts.update(alpha=f["AOA"])
+        if name == "ATTITUDE" and len(parts) == 5 and self._on_state is not None:
+            self._on_state(FlightState(t, parts["bank"], parts["pitch"], parts["airspeed"],
+                                       parts["alpha"], parts["altitude"]))  # fmt: skip
+
+    # -- the surface sink -----------------------------------------------------------------
+
+    async def command(self, pwm: Mapping[int, int]) -> None:
+        """RC_CHANNELS_OVERRIDE with these channels; every other channel left alone."""
+        if self._switch in pwm:
+            raise AutopilotError(f"channel {self._switch} is the pilot's switch: never overridden")
+        self._send_override({ch: int(v) for ch, v in pwm.items()})
+        self.counters["overrides"] += 1
+
+    async def release(self, channels: Sequence[int]) -> None:
+        """Give these channels back to the pilot (0 on 1–8, 65534 on 9–18)."""
+        values = {ch: RELEASE_LOW if ch <= 8 else RELEASE_HIGH for ch in channels}
+        for _ in range(RELEASE_REPEATS):
+            self._send_override(values)
+        self.counters["releases"] += 1
+
+    def _send_override(self, values: Mapping[int, int]) -> None:
+        from mavsdk.plugins.mavlink_direct import MavlinkMessage
+
+        if self._direct is None or not self.connected:
+            raise AutopilotError(f"no autopilot link ({self.status})")
+        cfg = self._cfg
+        fields = {"target_system": cfg.target_system, "target_component": 1}
+        for ch in range(1, 19):
+            fields[f"chan{ch}_raw"] = values.get(ch, IGNORE if ch <= 8 else RELEASE_LOW)
+        self._direct.send_message(MavlinkMessage(
+            message_name="RC_CHANNELS_OVERRIDE", system_id=cfg.system_id,
+            component_id=cfg.component_id, target_system_id=cfg.target_system,
+            target_component_id=1, fields_json=json.dumps(fields),
+        ))  # fmt: skip

@@ -1,0 +1,138 @@
+"""The real MAVSDK driver against the emulated ArduPlane over UDP loopback, with JSBSim
+behind it.
+
+Bad input tried: overrides from a wrong system id, an override of the pilot's switch
+channel, overrides while the switch is low (RCx_OPTION 46), overrides that stop without a
+release, and the autopilot vanishing mid-run.
+"""
+
+from __future__ import annotations
+
+import asyncio
+
+import numpy as np
+import pytest
+
+from agent.sim.ardupilot import Params
+from drivers.autopilot.driver import AutopilotError
+from tests.sim.flight import SWITCH, flight
+
+pytestmark = pytest.mark.usefixtures("no_leaked_tasks")
+
+
+async def _override(link, pwm: dict[int, int], seconds: float, rate: float = 50.0) -> float:
+    """Send overrides at `rate` for `seconds`; the loop time of the last one."""
+    last = 0.0
+    for _ in range(round(seconds * rate)):
+        await link.command(pwm)
+        last = asyncio.get_running_loop().time()
+        await asyncio.sleep(1 / rate)
+    return last
+
+
+async def test_telemetry_arrives_at_the_configured_rates(tmp_path):
+    async with flight(tmp_path, attitude_hz=50, vfr_hud_hz=10, rc_channels_hz=20) as f:
+        assert f.link.connected
+        await asyncio.sleep(0.5)  # rates set
+        before = dict(f.link.received)
+        await asyncio.sleep(2.0)
+        got = {k: (f.link.received[k] - before.get(k, 0)) / 2.0 for k in f.link.received}
+    assert got["ATTITUDE"] == pytest.approx(50, rel=0.15)
+    assert got["VFR_HUD"] == pytest.approx(10, rel=0.15)
+    assert got["RC_CHANNELS"] == pytest.approx(20, rel=0.15)
+    assert got["HEARTBEAT"] == pytest.approx(1, abs=0.6)
+    assert f.states[-1].airspeed == pytest.approx(31.3, abs=1.0)  # 60 kt, trimmed
+
+
+async def test_overrides_move_the_jsbsim_surfaces_through_the_servo_model(tmp_path):
+    async with flight(tmp_path) as f:
+        await asyncio.sleep(0.3)
+        plant, autopilot = f.aircraft.plant, f.aircraft.autopilot
+        start = plant.state()["rudder"]
+        trace = []
+
+        async def watch():
+            while True:
+                trace.append((f.aircraft._clock.now(), plant.state()["rudder"]))
+                await asyncio.sleep(0.005)
+
+        f.aircraft.pilot.set_switch(True)  # RCx_OPTION 46: overrides enabled
+        watcher = asyncio.create_task(watch(), name="watch")
+        t0 = f.aircraft._clock.now()
+        await _override(f.link, {4: 1900}, 0.8)  # rudder: full deflection one way
+        watcher.cancel()
+        await asyncio.gather(watcher, return_exceptions=True)
+        assert autopilot.outputs[4] == 1900
+        await f.link.release([4])
+        await asyncio.sleep(0.1)
+        released = autopilot.outputs[4]
+    times, rudder = np.array(trace).T
+    final = rudder[-1]
+    assert abs(final - start) > 10  # degrees: the surface went over
+    # Servo model: 20 ms of dead time, then at most 4 normalised units/s (full ±1 in 0.5 s).
+    moved = times[np.abs(rudder - start) > 0.5][0] - t0
+    assert moved >= 0.02
+    reach = times[np.abs(rudder - final) < 0.05 * abs(final - start)][0] - t0
+    assert reach >= 0.02 + 0.8 / 4.0 * 0.9
+    assert released == f.aircraft.pilot(0)[3]  # back to the pilot's stick
+
+
+async def test_overrides_from_a_wrong_system_id_are_ignored(tmp_path):
+    async with flight(tmp_path, system_id=200) as f:
+        f.aircraft.pilot.set_switch(True)
+        await _override(f.link, {1: 1900}, 0.3)
+        counters = dict(f.aircraft.autopilot.counters)
+        output = f.aircraft.autopilot.outputs[1]
+    assert counters["overrides_wrong_sysid"] >= 10
+    assert counters.get("overrides", 0) == 0
+    assert output == f.aircraft.pilot(0)[0]
+
+
+async def test_stopped_overrides_return_to_the_pilot_after_rc_override_time(tmp_path):
+    params = Params(switch_channel=SWITCH, rc_override_time_s=0.3)
+    async with flight(tmp_path, params=params) as f:
+        f.aircraft.pilot.set_switch(True)
+        stopped = await _override(f.link, {2: 1800}, 0.4)
+        clock = f.aircraft._clock
+        assert f.aircraft.autopilot.outputs[2] == 1800
+        while f.aircraft.autopilot.outputs[2] == 1800 and clock.now() - stopped < 2.0:
+            await asyncio.sleep(0.005)
+        lapsed = clock.now() - stopped
+    assert 0.3 <= lapsed < 0.3 + 0.03  # the emulator ticks at 100 Hz
+    assert f.aircraft.autopilot.counters["override_timeouts"] >= 1
+
+
+async def test_the_switch_is_read_and_never_overridden(tmp_path):
+    async with flight(tmp_path) as f:
+        await asyncio.sleep(0.3)
+        assert f.switch[-1][0] < 1700  # the pilot's switch is low
+        # Switch low with RCx_OPTION 46: every override is refused by the autopilot.
+        await _override(f.link, {1: 1900}, 0.2)
+        assert f.aircraft.autopilot.counters["overrides_switch_low"] >= 5
+        assert f.aircraft.autopilot.outputs[1] != 1900
+        f.aircraft.pilot.set_switch(True)
+        await asyncio.sleep(0.2)
+        assert f.switch[-1][0] >= 1700  # the driver sees the flip
+        with pytest.raises(AutopilotError, match="pilot's switch"):
+            await f.link.command({SWITCH: 1000, 1: 1600})
+        # Even sent raw, the autopilot never overrides the switch channel.
+        for _ in range(10):
+            f.link._send_override({SWITCH: 1000})
+            await asyncio.sleep(0.02)
+        await asyncio.sleep(0.1)
+        assert f.switch[-1][0] >= 1700
+
+
+async def test_killing_the_autopilot_reports_link_loss_within_the_deadline(tmp_path):
+    async with flight(tmp_path, link_timeout_s=0.4) as f:
+        await asyncio.sleep(0.5)
+        clock = f.aircraft._clock
+        f.tasks[0].cancel()  # the emulator dies mid-run
+        killed = clock.now()
+        while f.link.connected and clock.now() - killed < 3.0:
+            await asyncio.sleep(0.01)
+        lost = [t for up, _, t in f.links if not up]
+        assert lost, "no link loss reported"
+        assert lost[0] - killed <= 0.4 + 0.05 + 0.1  # timeout + watchdog period + one message
+        with pytest.raises(AutopilotError, match="no autopilot link"):
+            await f.link.command({1: 1500})
