@@ -127,6 +127,27 @@ def build_parser() -> argparse.ArgumentParser:
     decode.add_argument("file", type=Path, metavar="FILE")
     decode.add_argument("--json", action="store_true", help="one JSON object per message")
 
+    aircraft = sub.add_parser(
+        "sim-aircraft",
+        help="run the simulated aircraft alone (JSBSim, emulated ArduPlane, sensor ptys)",
+        description="Fly the simulated aircraft and print where its MAVLink port and sensor "
+        "pseudo-terminals are, so `sysid agent` can be pointed at it as at a real aircraft.",
+    )
+    aircraft.add_argument("--aircraft", default="J3Cub", help="JSBSim aircraft (default J3Cub)")
+    aircraft.add_argument("--speed-kts", type=float, default=60.0)
+    aircraft.add_argument("--altitude-ft", type=float, default=1000.0)
+    aircraft.add_argument("--turbulence", type=float, default=0.0,
+                          help="Dryden severity: 0 none, 1 light, 2 moderate")  # fmt: skip
+    aircraft.add_argument("--seed", type=int, default=0)
+    aircraft.add_argument("--mavlink-port", type=int, default=14555,
+                          help="UDP port the emulated autopilot listens on (0: any)")  # fmt: skip
+    aircraft.add_argument("--pty-dir", type=Path, default=Path("sim"),
+                          help="directory for the sensor port links (default ./sim)")  # fmt: skip
+    aircraft.add_argument("--switch-at", type=float, nargs="*", default=[], metavar="T",
+                          help="flip the switch at these seconds: high, low, …")  # fmt: skip
+    aircraft.add_argument("--no-noise", action="store_true", help="perfect sensors")
+    aircraft.add_argument("--duration", type=float, help="stop after this many seconds")
+
     config = sub.add_parser("config", help="configuration tools")
     config_sub = config.add_subparsers(dest="config_command", required=True)
     check = config_sub.add_parser("check", help="validate a config file")
@@ -245,6 +266,31 @@ def cmd_decode(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_sim_aircraft(args: argparse.Namespace) -> int:
+    import asyncio
+
+    from agent.sim.aircraft import AircraftOptions, serve
+    from agent.sim.plant import PlantError
+
+    options = AircraftOptions(
+        aircraft=args.aircraft, speed_kts=args.speed_kts, altitude_ft=args.altitude_ft,
+        turbulence=args.turbulence, seed=args.seed, noise=not args.no_noise,
+        mavlink_port=args.mavlink_port,
+    )  # fmt: skip
+    try:
+        asyncio.run(serve(options, args.pty_dir, args.duration, tuple(args.switch_at),
+                          announce=lambda text: print(text, flush=True)))  # fmt: skip
+    except PlantError as exc:
+        _error("sim-aircraft", str(exc))
+        return EXIT_BAD_INPUT
+    except OSError as exc:
+        _error("sim-aircraft", f"cannot start: {exc}")
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        pass
+    return EXIT_OK
+
+
 def cmd_config_check(args: argparse.Namespace) -> int:
     try:
         load_config(args.file)
@@ -264,4 +310,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         return cmd_excite(args)
     if args.command == "decode":
         return cmd_decode(args)
+    if args.command == "sim-aircraft":
+        return cmd_sim_aircraft(args)
     return cmd_config_check(args)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import os
 import random
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -134,3 +135,46 @@ class SimAircraft:
             self.truth = self.plant.state()
             self.ticks += 1
             await self._clock.sleep_until(start + self.ticks * dt)
+
+
+async def serve(options: AircraftOptions, directory: Path, duration: float | None,
+                switch_at: tuple[float, ...] = (), announce=print) -> None:  # fmt: skip
+    """`sysid sim-aircraft`: fly, say where to connect, flip the switch as asked (the
+    schedule, or SIGUSR1 to toggle), stop after `duration` s or when cancelled."""
+    import signal
+
+    from agent.clock import LoopClock
+
+    clock = LoopClock()
+    directory.mkdir(parents=True, exist_ok=True)
+    aircraft = SimAircraft(options, clock, directory)
+    task = asyncio.create_task(aircraft.run(), name="sim-aircraft")
+    try:
+        while aircraft.mavlink_address is None and not task.done():
+            await asyncio.sleep(0.01)
+        if task.done():
+            await task  # raises what stopped it
+        host, port = aircraft.mavlink_address
+        start = clock.now()
+        for k, at in enumerate(switch_at):
+            aircraft.pilot.schedule(start + at, high=k % 2 == 0)
+        loop = asyncio.get_running_loop()
+        loop.add_signal_handler(signal.SIGUSR1, lambda: aircraft.pilot.set_switch(
+            not aircraft.pilot.switch_high))  # fmt: skip
+        trim = ", ".join(f"{k} {v:+.3f}" for k, v in aircraft.plant.trim.items())
+        announce(
+            f"simulated {options.aircraft} trimmed at {options.speed_kts:g} kt, "
+            f"{options.altitude_ft:g} ft (normalised trim: {trim})\n"
+            f'MAVLink (emulated ArduPlane, system 1): [autopilot] url = "udpout://{host}:{port}"\n'
+            f'VN-200 (binary, 100 Hz): [sensors.vn200] port = "{aircraft.ports["vn200"].path}"\n'
+            f'µADC (100 Hz): [sensors.airdata] port = "{aircraft.ports["airdata"].path}"\n'
+            f'surface box (100 Hz): [sensors.surfaces] port = "{aircraft.ports["surfaces"].path}"\n'
+            f"excitation switch: RC channel {options.params.switch_channel}, low; "
+            f"kill -USR1 {os.getpid()} toggles it"
+        )
+        await asyncio.wait_for(asyncio.shield(task), duration) if duration else await task
+    except TimeoutError:
+        pass
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)

@@ -1,0 +1,36 @@
+"""`sysid sim-aircraft`: announces where to connect, runs, and cleans up its ports.
+
+Bad input tried: an aircraft JSBSim does not have.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _run(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"}
+    return subprocess.run([sys.executable, "-m", "agent", "sim-aircraft", *args], env=env,
+                          capture_output=True, text=True, timeout=timeout)  # fmt: skip
+
+
+def test_announces_the_mavlink_url_and_sensor_ports_then_stops(tmp_path):
+    result = _run("--duration", "1.5", "--pty-dir", str(tmp_path), "--mavlink-port", "0")
+    assert result.returncode == 0, result.stderr
+    out = result.stdout
+    assert re.search(r'\[autopilot\] url = "udpout://127\.0\.0\.1:\d+"', out)
+    for name in ("vn200", "airdata", "surfaces"):
+        assert f'port = "{tmp_path / name}"' in out
+    assert not any(tmp_path.iterdir())  # the ports are unplugged on exit
+
+
+def test_unknown_aircraft_is_a_clear_error(tmp_path):
+    result = _run("--aircraft", "NoSuchPlane", "--duration", "1", "--pty-dir", str(tmp_path))
+    assert result.returncode == 2
+    assert "JSBSim has no aircraft 'NoSuchPlane'" in result.stderr
