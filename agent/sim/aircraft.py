@@ -2,8 +2,9 @@
 the three sensors on pseudo-terminals, stepped together in real time on the event loop.
 
 Physics runs at JSBSim's 200 Hz, two steps per 100 Hz tick of the autopilot (servo outputs in,
-telemetry out). The sensors sample the latest truth at their own rates, with white noise at
-the instruments' levels (thesis chapter 3) and the µADC's ±20° probe limit.
+telemetry out). The sensors sample the state of each tick (at most 100 Hz), with white noise
+at the instruments' levels (thesis chapter 3) and the µADC's ±20° probe limit; their frames
+carry the simulated time of the state they hold.
 """
 
 from __future__ import annotations
@@ -110,12 +111,10 @@ class SimAircraft:
             "surfaces": devices.surfaces(noisy(self._state, seed + 3, noise), calibration, boot),
         }
         try:
-            async with asyncio.TaskGroup() as group:
-                for name, port in self.ports.items():
-                    port.plug()
-                    self.emitters[name] = devices.Emitter(port, encoders[name], rate, self._clock)
-                    group.create_task(self.emitters[name].run(), name=f"sim-{name}")
-                group.create_task(self._physics(), name="sim-physics")
+            for name, port in self.ports.items():
+                port.plug()
+                self.emitters[name] = devices.Emitter(port, encoders[name], rate, self._clock)
+            await self._physics()
         finally:
             transport.close()
             for port in self.ports.values():
@@ -123,16 +122,23 @@ class SimAircraft:
                     port.unplug()
 
     async def _physics(self) -> None:
+        """Tick i is simulated time start + i/TICK_HZ: the autopilot acts, JSBSim steps, and
+        the sensors sample that very state. A late loop runs the ticks it owes back to back,
+        so the data stay true to their time stamps and only their delivery is late."""
         dt = 1.0 / TICK_HZ
         steps = round(dt / self.plant.dt)
+        every = {name: max(1, round(TICK_HZ / e.rate_hz)) for name, e in self.emitters.items()}
         start = self._clock.now()
         while True:
-            now = self._clock.now()
-            commands = self.autopilot.tick(now, self.truth)
+            t = start + self.ticks * dt
+            commands = self.autopilot.tick(t, self.truth)
             self.plant.set_normalised(commands)
             for _ in range(steps):
                 self.plant.step()
             self.truth = self.plant.state()
+            for name, emitter in self.emitters.items():
+                if self.ticks % every[name] == 0:
+                    emitter.emit(t + dt, self.ticks // every[name])
             self.ticks += 1
             await self._clock.sleep_until(start + self.ticks * dt)
 

@@ -112,24 +112,34 @@ class Emitter:
         self.truth: deque[tuple[int, float]] = deque(maxlen=TRUTH)
         """(frame number, sample time) of every frame written whole and uncorrupted."""
 
+    @property
+    def rate_hz(self) -> float:
+        return self._rate
+
     async def run(self) -> None:
+        """Emit on the clock's deadlines (a device with its own oscillator)."""
         start = self._clock.now()
         k = 0
         while True:
             t = start + k / self._rate
             await self._clock.sleep_until(t)
-            frame = self._encode(t, k)
-            if self._rng.random() < self._dropout:
-                self.dropped += 1
-            elif self.port.plugged:
-                if self._rng.random() < self._corrupt:
-                    frame = self._spoil(frame)
-                    self.corrupted += 1
-                else:
-                    self.truth.append((k, t))
-                self.port.write(frame)
-                self.sent += 1
+            self.emit(t, k)
             k += 1
+
+    def emit(self, t: float, k: int) -> None:
+        """Encode and write frame k sampled at time t (a simulator calls this in step with
+        its physics, so every frame carries the state of its own time stamp)."""
+        frame = self._encode(t, k)
+        if self._rng.random() < self._dropout:
+            self.dropped += 1
+        elif self.port.plugged:
+            if self._rng.random() < self._corrupt:
+                frame = self._spoil(frame)
+                self.corrupted += 1
+            else:
+                self.truth.append((k, t))
+            self.port.write(frame)
+            self.sent += 1
 
     def _spoil(self, frame: bytes) -> bytes:
         spoilt = bytearray(frame)

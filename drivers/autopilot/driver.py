@@ -44,6 +44,14 @@ WATCH_S = 0.05
 MAVSDK_LOG = 200
 
 
+# ArduPlane's custom_mode numbers (HEARTBEAT), for the console and the log.
+PLANE_MODES = {
+    0: "MANUAL", 1: "CIRCLE", 2: "STABILIZE", 3: "TRAINING", 4: "ACRO", 5: "FBWA", 6: "FBWB",
+    7: "CRUISE", 8: "AUTOTUNE", 10: "AUTO", 11: "RTL", 12: "LOITER", 13: "TAKEOFF",
+    15: "GUIDED", 17: "QSTABILIZE", 19: "QLOITER", 20: "QLAND", 21: "QRTL",
+}  # fmt: skip
+
+
 class AutopilotError(RuntimeError):
     """No usable link to the autopilot (the scheduler aborts a run on it)."""
 
@@ -103,6 +111,15 @@ class AutopilotLink:
         self.telemetry: dict[str, dict] = {}
         self._state_parts: dict[str, float] = {}
         self.mavsdk_log: deque[str] = deque(maxlen=MAVSDK_LOG)
+
+    @property
+    def flight_mode(self) -> str | None:
+        """ArduPlane's mode from the last HEARTBEAT (None before one arrived)."""
+        heartbeat = self.telemetry.get("HEARTBEAT")
+        if heartbeat is None:
+            return None
+        mode = int(heartbeat.get("custom_mode", -1))
+        return PLANE_MODES.get(mode, f"mode {mode}")
 
     @property
     def received(self) -> Counter[str]:

@@ -42,6 +42,7 @@ async def test_telemetry_arrives_at_the_configured_rates(tmp_path):
     assert got["RC_CHANNELS"] == pytest.approx(20, rel=0.15)
     assert got["HEARTBEAT"] == pytest.approx(1, abs=0.6)
     assert f.states[-1].airspeed == pytest.approx(31.3, abs=1.0)  # 60 kt, trimmed
+    assert f.link.flight_mode == "MANUAL"
 
 
 async def test_overrides_move_the_jsbsim_surfaces_through_the_servo_model(tmp_path):
@@ -98,7 +99,8 @@ async def test_stopped_overrides_return_to_the_pilot_after_rc_override_time(tmp_
         while f.aircraft.autopilot.outputs[2] == 1800 and clock.now() - stopped < 2.0:
             await asyncio.sleep(0.005)
         lapsed = clock.now() - stopped
-    assert 0.3 <= lapsed < 0.3 + 0.03  # the emulator ticks at 100 Hz
+    # The emulator stamps an override at its 100 Hz tick: ±10 ms around the 0.3 s.
+    assert 0.3 - 0.011 <= lapsed < 0.3 + 0.03
     assert f.aircraft.autopilot.counters["override_timeouts"] >= 1
 
 
@@ -136,3 +138,31 @@ async def test_killing_the_autopilot_reports_link_loss_within_the_deadline(tmp_p
         assert lost[0] - killed <= 0.4 + 0.05 + 0.1  # timeout + watchdog period + one message
         with pytest.raises(AutopilotError, match="no autopilot link"):
             await f.link.command({1: 1500})
+
+
+async def test_a_run_aborts_when_the_autopilot_link_is_lost(tmp_path):
+    from agent.config import Config
+    from agent.excitation.plan import preset
+    from agent.excitation.scheduler import Scheduler, Window
+
+    async with flight(tmp_path, link_timeout_s=0.4) as f:
+        clock = f.aircraft._clock
+        scheduler = Scheduler(Config().excitation, f.link, clock)
+        f.link._on_switch, f.link._on_state = scheduler.update_switch, scheduler.update_state
+        f.link._on_servos = scheduler.update_servos
+        f.link._on_link = lambda up, why: None if up else scheduler.abort(f"autopilot link: {why}")
+        windows: list[Window] = []
+        scheduler.subscribe(lambda e: windows.append(e) if isinstance(e, Window) else None)
+        f.tasks.append(asyncio.create_task(scheduler.run(), name="scheduler"))
+        await asyncio.sleep(0.5)
+        scheduler.arm(preset("lateral"))
+        f.aircraft.pilot.set_switch(True)
+        await asyncio.sleep(1.5)
+        assert scheduler.status == "running"
+        f.tasks[0].cancel()  # the autopilot goes away mid-run
+        killed = clock.now()
+        while not windows and clock.now() - killed < 3.0:
+            await asyncio.sleep(0.01)
+    assert windows[0].outcome == "aborted"
+    assert windows[0].end - killed < 0.4 + 0.05 + 0.1
+    assert "autopilot link" in windows[0].reason or "no autopilot link" in windows[0].reason
