@@ -163,13 +163,17 @@ class Plan(_Model):
             raise ValueError(f"unknown control {sorted(unknown)}; controls are {CONTROLS}")
         return self
 
-    def to_bytes(self) -> bytes:
-        """Compact JSON for the radio (defaults left out)."""
+    def to_compact(self) -> dict:
+        """The plan as plain values with defaults left out (the discriminators stay)."""
         data = self.model_dump(mode="json", exclude_defaults=True)
         for packed, segment in zip(data["segments"], self.segments, strict=True):
             for name, sig in segment.signals.items():
-                packed["signals"][name]["kind"] = sig.kind  # the discriminator stays
-        return json.dumps(data, separators=(",", ":")).encode()
+                packed["signals"][name]["kind"] = sig.kind
+        return data
+
+    def to_bytes(self) -> bytes:
+        """Compact JSON (a file, or a preview of what the radio carries)."""
+        return json.dumps(self.to_compact(), separators=(",", ":")).encode()
 
     @classmethod
     def from_bytes(cls, data: bytes) -> Plan:

@@ -48,6 +48,11 @@ class PtyPort:
     def plugged(self) -> bool:
         return self._master is not None
 
+    @property
+    def master_fd(self) -> int | None:
+        """The device side of the pty (for a fake device that also reads)."""
+        return self._master
+
     def plug(self) -> None:
         master, slave = os.openpty()
         tty.setraw(slave)  # no echo, no CR/LF translation: bytes pass unchanged

@@ -1,0 +1,1 @@
+"""The air–ground link: message schema, authenticated framing, reliable sessions."""

@@ -1,0 +1,206 @@
+"""Bytes on the air: MessagePack encoding, fragmentation into radio-sized frames, HMAC-SHA-256
+authentication, and replay protection.
+
+Frame (each at most the radio's payload, NP):
+
+    offset  size  field
+    0       1     version (1)
+    1       1     sender role: 0 ground, 1 aircraft (a frame is only accepted from the other role)
+    2       8     counter, uint64 big-endian, +1 per frame sent, never reused under a key
+    10      2     message number, uint16 (groups the fragments of one message)
+    12      1     fragment index
+    13      1     fragment count
+    14      …     chunk of the MessagePack-encoded message
+    end−12  12    tag: HMAC-SHA-256(key, every byte before it), first 12 bytes
+
+Receiving, in order, each failure dropped and counted before anything is decoded: source
+address not in the allow-list (`wrong_source`), too short or another version (`malformed`),
+tag mismatch (`bad_tag`: forged or tampered), same role as ours (`wrong_direction`), counter
+seen before (`replayed`) or older than the 64-frame window (`stale`). Fragments are reassembled
+per (source, message number) with a timeout and a bound on partial messages and bytes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import os
+import struct
+import time
+from collections import Counter, OrderedDict
+from dataclasses import dataclass
+from pathlib import Path
+
+import msgpack
+
+VERSION = 1
+GROUND, AIRCRAFT = 0, 1
+HEADER = struct.Struct(">BBQHBB")
+TAG = 12
+OVERHEAD = HEADER.size + TAG
+WINDOW = 64
+# Reassembly bounds: partial messages per source, and how long one may stay incomplete.
+MAX_PARTIAL = 8
+PARTIAL_TIMEOUT_S = 10.0
+# Counters reserved per write of the counter file: a reboot skips at most this many.
+COUNTER_BLOCK = 1 << 16
+
+
+class CounterStore:
+    """The sender's frame counter, never reused across restarts.
+
+    With a file, counters are reserved in blocks: the file holds the end of the reserved block,
+    written (and fsynced) before any counter of the block is used. Without one, the counter
+    starts at the wall clock in microseconds (monotonic across restarts while the clock is)."""
+
+    def __init__(self, path: Path | None = None):
+        self._path = path
+        if path is None:
+            self._next, self._reserved = time.time_ns() // 1000, 1 << 63
+        else:
+            start = int(path.read_text()) if path.exists() else 0
+            self._next, self._reserved = start, start
+            self._reserve()
+
+    def _reserve(self) -> None:
+        self._reserved = self._next + COUNTER_BLOCK
+        tmp = self._path.with_suffix(".tmp")
+        with open(tmp, "w") as handle:
+            handle.write(str(self._reserved))
+            handle.flush()
+            os.fsync(handle.fileno())
+        tmp.replace(self._path)
+
+    def next(self) -> int:
+        if self._next >= self._reserved:
+            self._reserve()
+        value = self._next
+        self._next += 1
+        return value
+
+
+class ReplayWindow:
+    """Highest counter seen and a 64-frame bitmap below it (IPsec-style)."""
+
+    def __init__(self) -> None:
+        self.highest = -1
+        self._bits = 0
+
+    def check(self, counter: int) -> str | None:
+        """None if fresh (and record it), else "replayed" or "stale"."""
+        if counter > self.highest:
+            shift = counter - self.highest
+            self._bits = ((self._bits << shift) | 1) & ((1 << WINDOW) - 1)
+            self.highest = counter
+            return None
+        age = self.highest - counter
+        if age >= WINDOW:
+            return "stale"
+        if self._bits >> age & 1:
+            return "replayed"
+        self._bits |= 1 << age
+        return None
+
+
+@dataclass
+class _Partial:
+    count: int
+    chunks: dict[int, bytes]
+    first_seen: float
+
+
+class LinkCodec:
+    """One end of the link: frames our messages, checks and reassembles the other end's."""
+
+    def __init__(self, key: bytes, role: int, allow: set[bytes], *, counter: CounterStore,
+                 max_payload: int = 256):  # fmt: skip
+        if len(key) < 16:
+            raise ValueError("the link key must be at least 16 bytes (32 random bytes advised)")
+        self._key, self.role, self.allow = key, role, set(allow)
+        self._counter = counter
+        self.max_payload = max_payload
+        self._message_number = 0
+        self._windows: dict[bytes, ReplayWindow] = {}
+        self._partials: dict[bytes, OrderedDict[int, _Partial]] = {}
+        self.counters: Counter[str] = Counter()
+
+    # -- sending ----------------------------------------------------------------------------
+
+    def encode(self, message: dict) -> list[bytes]:
+        """The frames carrying one message (a dict of plain values)."""
+        body = msgpack.packb(message, use_bin_type=True, use_single_float=False)
+        chunk = self.max_payload - OVERHEAD
+        count = max(1, -(-len(body) // chunk))
+        if count > 255:
+            raise ValueError(f"message of {len(body)} bytes needs {count} frames; at most 255")
+        self._message_number = (self._message_number + 1) & 0xFFFF
+        frames = []
+        for index in range(count):
+            header = HEADER.pack(VERSION, self.role, self._counter.next(), self._message_number,
+                                 index, count)  # fmt: skip
+            data = header + body[index * chunk : (index + 1) * chunk]
+            frames.append(data + self._tag(data))
+        return frames
+
+    def _tag(self, data: bytes) -> bytes:
+        return hmac.new(self._key, data, hashlib.sha256).digest()[:TAG]
+
+    # -- receiving --------------------------------------------------------------------------
+
+    def decode(self, source: bytes, frame: bytes, now: float) -> dict | None:
+        """The message a frame completes, or None (a fragment, or a frame dropped and counted)."""
+        if source not in self.allow:
+            return self._drop("wrong_source")
+        if len(frame) < OVERHEAD or frame[0] != VERSION:
+            return self._drop("malformed")
+        data, tag = frame[:-TAG], frame[-TAG:]
+        if not hmac.compare_digest(tag, self._tag(data)):
+            return self._drop("bad_tag")
+        _, role, counter, number, index, count = HEADER.unpack_from(data)
+        if role == self.role:
+            return self._drop("wrong_direction")
+        verdict = self._windows.setdefault(source, ReplayWindow()).check(counter)
+        if verdict is not None:
+            return self._drop(verdict)
+        if count == 0 or index >= count:
+            return self._drop("malformed")
+        self.counters["frames"] += 1
+        body = self._reassemble(source, number, index, count, data[HEADER.size :], now)
+        if body is None:
+            return None
+        try:
+            message = msgpack.unpackb(body, raw=False, strict_map_key=True)
+        except (ValueError, msgpack.ExtraData, msgpack.FormatError, msgpack.StackError):
+            return self._drop("undecodable")
+        self.counters["messages"] += 1
+        return message
+
+    def _drop(self, reason: str) -> None:
+        self.counters[reason] += 1
+        return None
+
+    def _reassemble(self, source: bytes, number: int, index: int, count: int, chunk: bytes,
+                    now: float) -> bytes | None:  # fmt: skip
+        if count == 1:
+            return chunk
+        partials = self._partials.setdefault(source, OrderedDict())
+        for key in [k for k, p in partials.items() if now - p.first_seen > PARTIAL_TIMEOUT_S]:
+            del partials[key]
+            self.counters["partial_timeouts"] += 1
+        partial = partials.get(number)
+        if partial is None or partial.count != count:
+            while len(partials) >= MAX_PARTIAL:
+                partials.popitem(last=False)
+                self.counters["partial_evicted"] += 1
+            partial = partials[number] = _Partial(count, {}, now)
+        partial.chunks[index] = chunk
+        if len(partial.chunks) < count:
+            return None
+        del partials[number]
+        return b"".join(partial.chunks[i] for i in range(count))
+
+    @property
+    def partial_bytes(self) -> int:
+        """Bytes held in incomplete messages (bounded by MAX_PARTIAL × 255 × NP per source)."""
+        return sum(len(c) for ps in self._partials.values() for p in ps.values()
+                   for c in p.chunks.values())  # fmt: skip

@@ -1,0 +1,208 @@
+"""What the aircraft and the ground say to each other (pydantic), version 1.
+
+Uplink (ground → air): arm a plan, start, abort, identification settings, a model decision,
+revert to the previous nominal model, ping. Downlink (air → ground): status (≈ 1 Hz, best
+effort), excitation events, identification results, acknowledgements of commands (with the
+reason for a refusal), warnings. Every message carries the protocol version; a receiver
+refuses other versions with a clear error.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
+
+from agent.excitation.plan import Plan
+
+VERSION = 1
+
+
+class LinkMessageError(ValueError):
+    """A payload that is not a message of this protocol version."""
+
+
+class _Message(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    v: int = VERSION
+
+
+# -- uplink -------------------------------------------------------------------------------
+
+
+class Arm(_Message):
+    """Arm this plan (the onboard envelope still decides; the pilot's switch starts it)."""
+
+    kind: Literal["arm"] = "arm"
+    plan: Plan
+
+
+class Start(_Message):
+    """Start the armed plan where the operator may start it (the switch still gates it)."""
+
+    kind: Literal["start"] = "start"
+
+
+class Abort(_Message):
+    kind: Literal["abort"] = "abort"
+    reason: str = Field("operator abort", max_length=80)
+
+
+class IdentSettings(_Message):
+    """Identification settings (thesis B.2 4.1.1: the operator sets the update period)."""
+
+    kind: Literal["settings"] = "settings"
+    axes: Literal["lateral", "longitudinal", "full"] = "lateral"
+    markov: int | Literal["auto"] = "auto"
+    order: int | Literal["auto"] = "auto"
+    batch: bool = False
+    update_period_s: float | None = Field(None, gt=0.0)
+
+
+class Decision(_Message):
+    """The operator's decision on a candidate model: accept as nominal, or reject."""
+
+    kind: Literal["decision"] = "decision"
+    model_id: str = Field(max_length=32)
+    accept: bool
+
+
+class Revert(_Message):
+    """Go back to the previous nominal model."""
+
+    kind: Literal["revert"] = "revert"
+
+
+class Ping(_Message):
+    kind: Literal["ping"] = "ping"
+
+
+# -- downlink -------------------------------------------------------------------------------
+
+
+class Status(_Message):
+    """Vehicle status, about once a second, latest wins."""
+
+    kind: Literal["status"] = "status"
+    time: float
+    link_quality: float | None = None
+    flight_mode: str | None = None
+    airspeed: float | None = None
+    altitude: float | None = None
+    alpha: float | None = None
+    beta: float | None = None
+    roll: float | None = None
+    pitch: float | None = None
+    yaw: float | None = None
+    excitation: str = "idle"
+    recorder: dict[str, float] = Field(default_factory=dict)
+    sensors: dict[str, dict[str, float | str | None]] = Field(default_factory=dict)
+
+
+class ExcitationEvent(_Message):
+    kind: Literal["event"] = "event"
+    event: str
+    plan_id: str
+    time: float
+    detail: str = ""
+
+
+class ModeReport(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    name: str | None
+    real: float
+    imag: float
+    frequency_hz: float | None
+    damping: float | None
+    time_constant_s: float | None
+    msv: float
+    mci: float
+    moi: float
+    emac: float
+    mpc: float
+    cmi: float
+
+
+class Result(_Message):
+    """One identification: modes with their quality indexes, fit, stability, the update
+    suggestion and the model matrices (discrete A, B, C, D at dt)."""
+
+    kind: Literal["result"] = "result"
+    model_id: str = Field(max_length=32)
+    axes: str
+    dt: float
+    inputs: list[str]
+    outputs: list[str]
+    modes: list[ModeReport]
+    tic: list[float]
+    tic_avg: float
+    stable: bool
+    suggest_update: bool
+    reasons: list[str] = Field(default_factory=list)
+    A: list[list[float]]
+    B: list[list[float]]
+    C: list[list[float]]
+    D: list[list[float]]
+
+
+class Ack(_Message):
+    """The answer to a command: done, or refused with the reason."""
+
+    kind: Literal["ack"] = "ack"
+    ref: int
+    ok: bool
+    reason: str = ""
+
+
+class Notice(_Message):
+    """A warning for the operator."""
+
+    kind: Literal["warning"] = "warning"
+    text: str = Field(max_length=200)
+
+
+Uplink = Arm | Start | Abort | IdentSettings | Decision | Revert | Ping
+Downlink = Status | ExcitationEvent | Result | Ack | Notice | Ping
+Message = Annotated[
+    Arm
+    | Start
+    | Abort
+    | IdentSettings
+    | Decision
+    | Revert
+    | Ping
+    | Status
+    | ExcitationEvent
+    | Result
+    | Ack
+    | Notice,
+    Field(discriminator="kind"),
+]
+_ADAPTER = TypeAdapter(Message)
+
+
+def to_dict(message: _Message) -> dict:
+    """Plain values with defaults left out (kind, version and a plan's signal kinds stay)."""
+    data = message.model_dump(mode="json", exclude_defaults=True)
+    data |= {"kind": message.kind, "v": message.v}
+    if isinstance(message, Arm):
+        data["plan"] = message.plan.to_compact()
+    return data
+
+
+def from_dict(data: object) -> _Message:
+    """A message from its decoded form; LinkMessageError for another version or a bad one."""
+    if not isinstance(data, dict):
+        raise LinkMessageError(f"a message is a map, got {type(data).__name__}")
+    version = data.get("v", VERSION)
+    if version != VERSION:
+        raise LinkMessageError(
+            f"link protocol version {version} is not supported (this end speaks {VERSION}): "
+            "update the other end"
+        )
+    try:
+        return _ADAPTER.validate_python(data)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(p) for p in first["loc"])
+        raise LinkMessageError(f"not a valid message: {where}: {first['msg']}") from exc

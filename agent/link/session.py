@@ -1,0 +1,199 @@
+"""Reliable and best-effort delivery over the authenticated link.
+
+Reliable (commands, results, acknowledgements): each message gets a sequence number within a
+session epoch (a random number drawn at start, so a restarted end is recognised rather than
+taken for a replay of old numbers); the receiver delivers in order exactly once, buffers up
+to 64 ahead, and answers every reliable frame with a cumulative link ack; the sender keeps up
+to 4 messages in flight, retransmits each after 0.5 s, doubling to at most 4 s, and keeps the
+rest queued (up to 64; the oldest is dropped and counted beyond that) — so results queued
+during an outage go out when the link returns. Best effort (status, heartbeat): sent once;
+status is latest-wins. Liveness: the link is up while an authenticated frame arrived within
+`deadline_s`; a heartbeat goes out when nothing else did for `heartbeat_s`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import random
+from collections import Counter, deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+from agent.clock import Clock
+from agent.link import messages
+from agent.link.codec import LinkCodec
+
+log = logging.getLogger(__name__)
+
+IN_FLIGHT = 4
+OUTBOX = 64
+AHEAD = 64
+RETRY_FIRST_S, RETRY_MAX_S = 0.5, 4.0
+TICK_S = 0.05
+
+
+class Transport(Protocol):
+    max_payload: int
+
+    async def send(self, destination: bytes, payload: bytes): ...
+
+
+@dataclass
+class _InFlight:
+    seq: int
+    data: dict
+    due: float
+    backoff: float
+
+
+class LinkSession:
+    """One end's session with its peer (see the module docstring)."""
+
+    def __init__(self, codec: LinkCodec, transport: Transport, peer: bytes, clock: Clock,
+                 on_message: Callable[[messages._Message], None], *, heartbeat_s: float = 1.0,
+                 deadline_s: float = 3.0):  # fmt: skip
+        self._codec, self._transport, self._peer, self._clock = codec, transport, peer, clock
+        self._on_message = on_message
+        self._heartbeat_s, self._deadline_s = heartbeat_s, deadline_s
+        self._epoch = random.SystemRandom().getrandbits(32)
+        self._next_seq = 1
+        self._outbox: deque[tuple[int, dict]] = deque()
+        self._flight: dict[int, _InFlight] = {}
+        self._peer_epoch: int | None = None
+        self._expected = 1
+        self._ahead: dict[int, dict] = {}
+        self._acks_due = False
+        self._status: dict | None = None
+        self._last_heard: float | None = None
+        self._last_sent = -1e9
+        self._wake = asyncio.Event()
+        self.counters: Counter[str] = Counter()
+
+    # -- application side -----------------------------------------------------------------
+
+    def send_reliable(self, message: messages._Message) -> int:
+        """Queue a message for exactly-once, in-order delivery; returns its sequence number."""
+        seq = self._next_seq
+        self._next_seq += 1
+        if len(self._outbox) >= OUTBOX:
+            self._outbox.popleft()
+            self.counters["outbox_dropped"] += 1
+        self._outbox.append((seq, messages.to_dict(message) | {"e": self._epoch, "s": seq}))
+        self._wake.set()
+        return seq
+
+    def send_status(self, message: messages._Message) -> None:
+        """Best effort, latest wins."""
+        self._status = messages.to_dict(message)
+        self._wake.set()
+
+    @property
+    def link_up(self) -> bool:
+        heard = self._last_heard
+        return heard is not None and self._clock.now() - heard <= self._deadline_s
+
+    @property
+    def pending(self) -> int:
+        """Reliable messages not yet acknowledged."""
+        return len(self._outbox) + len(self._flight)
+
+    # -- receiving --------------------------------------------------------------------------
+
+    def receive(self, source: bytes, frame: bytes, now: float) -> None:
+        """A frame from the radio (call on the loop)."""
+        data = self._codec.decode(source, frame, now)
+        if data is None:
+            return
+        self._last_heard = now
+        if data.get("kind") == "lack":
+            self._acked(data)
+        elif "s" in data:
+            self._reliable(data)
+        else:
+            self._deliver(data)
+
+    def _acked(self, data: dict) -> None:
+        if data.get("e") != self._epoch:
+            return
+        upto = int(data.get("upto", 0))
+        for seq in [s for s in self._flight if s <= upto]:
+            del self._flight[seq]
+            self.counters["acked"] += 1
+        self._wake.set()
+
+    def _reliable(self, data: dict) -> None:
+        epoch, seq = data.get("e"), int(data["s"])
+        if epoch != self._peer_epoch:  # the other end (re)started: a new numbering
+            self._peer_epoch, self._expected, self._ahead = epoch, 1, {}
+        self._acks_due = True
+        self._wake.set()
+        if seq < self._expected or seq in self._ahead:
+            self.counters["duplicates"] += 1
+            return
+        if seq >= self._expected + AHEAD:
+            self.counters["too_far_ahead"] += 1
+            return
+        self._ahead[seq] = data
+        while self._expected in self._ahead:
+            self._deliver(self._ahead.pop(self._expected))
+            self._expected += 1
+
+    def _deliver(self, data: dict) -> None:
+        data = {k: v for k, v in data.items() if k not in ("e", "s")}
+        try:
+            message = messages.from_dict(data)
+        except messages.LinkMessageError as exc:
+            self.counters["rejected_messages"] += 1
+            log.warning("link: %s", exc)
+            return
+        self.counters["delivered"] += 1
+        if not isinstance(message, messages.Ping):
+            self._on_message(message)
+
+    # -- sending ----------------------------------------------------------------------------
+
+    async def run(self) -> None:
+        """Send acks, reliable messages, status and heartbeats until cancelled."""
+        while True:
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._wake.wait(), TICK_S)
+            self._wake.clear()
+            await self._send_due()
+
+    async def _send_due(self) -> None:
+        now = self._clock.now()
+        if self._acks_due:
+            self._acks_due = False
+            await self._send({"kind": "lack", "e": self._peer_epoch, "upto": self._expected - 1})
+        while self._outbox and len(self._flight) < IN_FLIGHT:
+            seq, data = self._outbox.popleft()
+            self._flight[seq] = _InFlight(seq, data, now, RETRY_FIRST_S)
+        for item in sorted(self._flight.values(), key=lambda f: f.seq):
+            if item.due <= now and item.seq in self._flight:
+                if item.backoff > RETRY_FIRST_S:
+                    self.counters["retransmissions"] += 1
+                await self._send(item.data)
+                item.due = self._clock.now() + item.backoff
+                item.backoff = min(item.backoff * 2, RETRY_MAX_S)
+        if self._status is not None:
+            status, self._status = self._status, None
+            await self._send(status)
+        if self._clock.now() - self._last_sent >= self._heartbeat_s:
+            await self._send(messages.to_dict(messages.Ping()))
+
+    async def _send(self, data: dict) -> None:
+        self._last_sent = self._clock.now()
+        for frame in self._codec.encode(data):
+            try:
+                result = await self._transport.send(self._peer, frame)
+            except Exception as exc:  # a radio error: counted; reliable messages retry
+                self.counters["transport_errors"] += 1
+                log.debug("link: send failed: %s", exc)
+                return
+            if not result.ok:
+                self.counters["frames_failed"] += 1
+                return
+            self.counters["frames_sent"] += 1

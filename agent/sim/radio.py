@@ -1,0 +1,165 @@
+"""Two (or more) emulated XBee-PRO 900HP modules on pseudo-terminals, joined by an RF channel.
+
+Each module answers, on its pty, what digi-xbee asks when it opens a DigiMesh device (AT AP,
+HV, VR, SH, SL, NI, CE; SS answered "invalid command"; NP, the maximum payload) and then
+carries 0x10 Transmit Requests to the addressed module as 0x90 Receive Packets, answering the
+sender with a 0x8B Transmit Status. The channel model: a shared half-duplex channel at a data
+rate, a latency, independent loss of each attempt with up to `retries` MAC retries (status
+0x21 when all fail), a payload limit (0x74), and outages (0x25 route not found).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import random
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from agent.clock import Clock
+from agent.sim.devices import PtyPort
+from drivers.codec import StreamDecoder
+from drivers.xbee import codec as api
+
+HV_900HP = b"\x23\x01"
+VR_DIGIMESH = b"\x80\x75"
+# Per-frame radio overhead on air (preamble, MAC header, CRC), bytes.
+AIR_OVERHEAD = 30
+
+
+@dataclass
+class RfChannel:
+    """The air between the modules."""
+
+    data_rate_bps: float = 200_000.0
+    """900HP RF data rate: 200 kb/s (10 kb/s in its long-range setting)."""
+    latency_s: float = 0.005
+    loss: float = 0.0
+    """Probability that one over-the-air attempt is lost."""
+    retries: int = 3
+    """MAC retries before the sender gets a network ACK failure."""
+    payload_limit: int = 256
+    """Largest RF payload (NP)."""
+    outage: bool = False
+    """True: nothing gets through (route not found)."""
+    seed: int = 0
+    busy_until: float = 0.0
+    rng: random.Random = field(default_factory=random.Random)
+    air_bytes: int = 0
+    """Bytes put on the air, retries and overhead included."""
+
+    def __post_init__(self) -> None:
+        self.rng.seed(self.seed)
+
+
+class EmulatedXBee:
+    """One module: its pty, its address, the channel it shares with its peers."""
+
+    def __init__(self, name: str, address: bytes, directory: Path, channel: RfChannel,
+                 clock: Clock, *, escaped: bool = False):  # fmt: skip
+        self.name, self.address, self.channel, self._clock = name, address, channel, clock
+        self.port = PtyPort(Path(directory) / name)
+        self.escaped = escaped
+        self._codec = api.ApiCodec(escaped)
+        self._decoder = StreamDecoder(self._codec)
+        self.network: dict[bytes, EmulatedXBee] = {}
+        self.counters: Counter[str] = Counter()
+        self._tasks: set[asyncio.Task] = set()
+
+    @property
+    def path(self) -> Path:
+        return self.port.path
+
+    def join(self, *others: EmulatedXBee) -> None:
+        for module in (self, *others):
+            self.network[module.address] = module
+
+    async def run(self) -> None:
+        loop = asyncio.get_running_loop()
+        self.port.plug()
+        fd = self.port.master_fd
+        loop.add_reader(fd, self._readable)
+        try:
+            await asyncio.Event().wait()  # serve until cancelled
+        finally:
+            loop.remove_reader(fd)
+            for task in self._tasks:
+                task.cancel()
+            self.port.unplug()
+
+    def _readable(self) -> None:
+        try:
+            data = os.read(self.port.master_fd, 4096)
+        except (BlockingIOError, OSError):
+            return
+        for frame in self._decoder.feed(data):
+            self._handle(frame)
+
+    def _send(self, frame: api.ApiFrame) -> None:
+        self.port.write(self._codec.encode(frame))
+
+    def _handle(self, frame: api.ApiFrame) -> None:
+        if frame.kind in (api.AT_COMMAND, api.AT_COMMAND_QUEUED):
+            self._at(frame.data[1], frame.data[2:4], frame.data[4:])
+        elif frame.kind == api.TRANSMIT_REQUEST:
+            frame_id, destination, payload = api.parse_transmit_request(frame)
+            self.counters["tx_requests"] += 1
+            task = asyncio.get_running_loop().create_task(
+                self._transmit(frame_id, destination, payload), name=f"{self.name}-tx"
+            )
+            self._tasks.add(task)
+            task.add_done_callback(self._tasks.discard)
+        else:
+            self.counters["unsupported_frames"] += 1
+
+    def _at(self, frame_id: int, command: bytes, value: bytes) -> None:
+        answers = {
+            b"AP": bytes([2 if self.escaped else 1]), b"HV": HV_900HP, b"VR": VR_DIGIMESH,
+            b"SH": self.address[:4], b"SL": self.address[4:], b"NI": self.name.encode(),
+            b"CE": b"\x00", b"NP": self.channel.payload_limit.to_bytes(2, "big"),
+            b"MY": b"\xff\xfe", b"BR": b"\x01",
+        }  # fmt: skip
+        if value and command in answers:  # a write: accepted, value unchanged here
+            self._send(api.at_response(frame_id, command, 0))
+        elif command in answers:
+            self._send(api.at_response(frame_id, command, 0, answers[command]))
+        else:
+            self._send(api.at_response(frame_id, command, 2))  # invalid command
+
+    async def _transmit(self, frame_id: int, destination: bytes, payload: bytes) -> None:
+        ch = self.channel
+        if len(payload) > ch.payload_limit:
+            self.counters["too_large"] += 1
+            self._status(frame_id, 0x74, 0)
+            return
+        peer = self.network.get(destination)
+        attempts, delivered = 0, False
+        while attempts <= ch.retries and not delivered:
+            attempts += 1
+            now = self._clock.now()
+            start = max(now, ch.busy_until)
+            airtime = (len(payload) + AIR_OVERHEAD) * 8 / ch.data_rate_bps
+            ch.busy_until = start + airtime
+            ch.air_bytes += len(payload) + AIR_OVERHEAD
+            await self._clock.sleep_until(start + airtime + ch.latency_s)
+            if peer is None or ch.outage:
+                break
+            delivered = ch.rng.random() >= ch.loss
+        if peer is None or ch.outage:
+            self.counters["no_route"] += 1
+            self._status(frame_id, 0x25, attempts - 1)
+            return
+        if not delivered:
+            self.counters["lost"] += 1
+            self._status(frame_id, 0x21, attempts - 1)
+            return
+        self.counters["delivered"] += 1
+        peer._send(api.receive_packet(self.address, payload))
+        self._status(frame_id, 0x00, attempts - 1)
+
+    def _status(self, frame_id: int, status: int, retries: int) -> None:
+        if frame_id:  # frame id 0: the sender asked for no status
+            with contextlib.suppress(OSError):
+                self._send(api.transmit_status(frame_id, status, retries))

@@ -1,0 +1,1 @@
+"""Digi XBee-PRO 900HP in DigiMesh API mode."""

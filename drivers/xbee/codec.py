@@ -1,0 +1,134 @@
+"""XBee API frames (PROTOCOLS.md), sans-I/O, for the emulated radios and for tests; the radio
+transport itself talks through digi-xbee.
+
+Frame: 0x7E, length (2 bytes big-endian, frame data only), frame data, checksum =
+0xFF − (sum of frame data & 0xFF). AP=2 (escaped): every byte after the 0x7E that is 0x7E,
+0x7D, 0x11 or 0x13 is sent as 0x7D, byte ^ 0x20 (length and checksum included; the checksum is
+over unescaped data). AP=1: 0x7E may appear inside a frame, so frames are cut by length.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+
+from drivers.codec import CodecStats, skip
+
+START = 0x7E
+ESCAPE = 0x7D
+ESCAPED = {0x7E, 0x7D, 0x11, 0x13}
+# Longest frame data accepted: a 900HP's 256-byte payload plus a 0x90 header, with margin.
+MAX_DATA = 512
+
+TRANSMIT_REQUEST, TRANSMIT_STATUS, RECEIVE_PACKET = 0x10, 0x8B, 0x90
+AT_COMMAND, AT_COMMAND_QUEUED, AT_RESPONSE = 0x08, 0x09, 0x88
+DELIVERY = {0x00: "ok", 0x21: "network ACK failure", 0x25: "route not found",
+            0x74: "payload too large"}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class ApiFrame:
+    """Frame data: the API identifier byte, then the rest."""
+
+    data: bytes
+
+    @property
+    def kind(self) -> int:
+        return self.data[0]
+
+
+def checksum(data: bytes) -> int:
+    return 0xFF - (sum(data) & 0xFF)
+
+
+def escape(raw: bytes) -> bytes:
+    out = bytearray()
+    for b in raw:
+        if b in ESCAPED:
+            out += bytes([ESCAPE, b ^ 0x20])
+        else:
+            out.append(b)
+    return bytes(out)
+
+
+class ApiCodec:
+    """API frames in AP=1 (escaped=False) or AP=2 (escaped=True)."""
+
+    def __init__(self, escaped: bool):
+        self.escaped = escaped
+        self.stats = CodecStats()
+
+    def encode(self, frame: ApiFrame) -> bytes:
+        body = struct.pack(">H", len(frame.data)) + frame.data + bytes([checksum(frame.data)])
+        return bytes([START]) + (escape(body) if self.escaped else body)
+
+    def decode(self, buffer: bytes | bytearray) -> tuple[int, ApiFrame | None]:
+        start = buffer.find(START)
+        if start != 0:
+            return skip(self.stats, len(buffer) if start < 0 else start), None
+        raw, used = self._unescape(buffer)
+        if raw is None:
+            return self._resync(buffer), None
+        if len(raw) < 2:
+            return 0, None
+        (length,) = struct.unpack_from(">H", raw)
+        if length == 0 or length > MAX_DATA:
+            return self._resync(buffer, rejected=True), None
+        if len(raw) < 2 + length + 1:
+            return 0, None
+        data = bytes(raw[2 : 2 + length])
+        if checksum(data) != raw[2 + length]:
+            return self._resync(buffer, crc=True), None
+        self.stats.frames += 1
+        return used[2 + length], ApiFrame(data)
+
+    def _unescape(self, buffer: bytes | bytearray):
+        """(unescaped bytes after the start byte, buffer offset after each of them); None
+        when an escaped stream holds a start byte where it cannot (a new frame began)."""
+        raw, ends = bytearray(), []
+        i = 1
+        limit = min(len(buffer), 1 + 2 * (MAX_DATA + 3))
+        while i < limit and len(raw) < MAX_DATA + 3:
+            b = buffer[i]
+            if self.escaped:
+                if b == START:
+                    return None, None
+                if b == ESCAPE:
+                    if i + 1 >= len(buffer):
+                        break
+                    b = buffer[i + 1] ^ 0x20
+                    i += 1
+            raw.append(b)
+            i += 1
+            ends.append(i)
+        return raw, ends
+
+    def _resync(self, buffer: bytes | bytearray, *, crc: bool = False, rejected: bool = False):
+        following = buffer.find(START, 1)
+        return skip(self.stats, len(buffer) if following < 0 else following, crc=crc,
+                    rejected=rejected)  # fmt: skip
+
+
+def transmit_request(
+    frame_id: int, destination: bytes, payload: bytes, options: int = 0
+) -> ApiFrame:
+    return ApiFrame(bytes([TRANSMIT_REQUEST, frame_id]) + destination + b"\xff\xfe\x00"
+                    + bytes([options]) + payload)  # fmt: skip
+
+
+def parse_transmit_request(frame: ApiFrame) -> tuple[int, bytes, bytes]:
+    """(frame id, 64-bit destination, payload)."""
+    d = frame.data
+    return d[1], d[2:10], d[14:]
+
+
+def transmit_status(frame_id: int, status: int, retries: int = 0) -> ApiFrame:
+    return ApiFrame(bytes([TRANSMIT_STATUS, frame_id, 0xFF, 0xFE, retries, status, 0]))
+
+
+def receive_packet(source: bytes, payload: bytes) -> ApiFrame:
+    return ApiFrame(bytes([RECEIVE_PACKET]) + source + b"\xff\xfe\x01" + payload)
+
+
+def at_response(frame_id: int, command: bytes, status: int, value: bytes = b"") -> ApiFrame:
+    return ApiFrame(bytes([AT_RESPONSE, frame_id]) + command + bytes([status]) + value)

@@ -1,0 +1,178 @@
+"""The radio transport, the same on the aircraft and on the ground: digi-xbee's
+`DigiMeshDevice`, bridged into asyncio through one seam.
+
+Why digi-xbee and not our own frame codec on the port: it is the vendor's maintained library
+(API modes, AT parameters, the module zoo), and the design card names it. Its pitfalls
+(PROTOCOLS.md) are handled here: `open()` and AT reads block, so they run on a worker thread;
+the blocking `send_data` can stall 4 s, so frames go out with `send_packet(sync=False)` and
+our own frame ids, and each 0x8B Transmit Status resolves the matching send; callbacks arrive
+on digi-xbee's thread pool in any order, so they cross into the loop in exactly one place
+(`loop.call_soon_threadsafe`), with a bound on how many may wait (drops counted), and the link
+layer above carries its own sequence numbers.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import threading
+from collections import Counter
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+from agent.clock import Clock
+
+log = logging.getLogger(__name__)
+
+# Longest wait for a Transmit Status: the module retries for well under a second; beyond this
+# the frame is counted as unconfirmed (the session layer retransmits anyway).
+STATUS_TIMEOUT_S = 5.0
+# Received frames allowed to wait for the loop; more are dropped and counted.
+INBOX = 256
+# Opening a module takes milliseconds; a missing or wedged one must not hang us.
+OPEN_TIMEOUT_S = 10.0
+DELIVERY = {0x00: "ok", 0x01: "MAC ACK failure", 0x21: "network ACK failure",
+            0x25: "route not found", 0x74: "payload too large"}  # fmt: skip
+
+
+class RadioError(RuntimeError):
+    """The radio cannot be opened or used."""
+
+
+@dataclass(frozen=True)
+class SendResult:
+    status: int
+    retries: int
+
+    @property
+    def ok(self) -> bool:
+        return self.status == 0
+
+    @property
+    def reason(self) -> str:
+        return DELIVERY.get(self.status, f"status 0x{self.status:02X}")
+
+
+class XBeeRadio:
+    """One XBee module on a serial port."""
+
+    def __init__(self, port: str, baud: int, clock: Clock,
+                 on_frame: Callable[[bytes, bytes, float], None]):  # fmt: skip
+        self.port, self.baud, self._clock, self._on_frame = port, baud, clock, on_frame
+        self._device = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._executor = ThreadPoolExecutor(1, thread_name_prefix="xbee-open")
+        self._pending: dict[int, asyncio.Future] = {}
+        self._next_id = 0
+        self._inbox = 0
+        self._lock = threading.Lock()
+        self.max_payload = 0
+        self.address = b""
+        self.counters: Counter[str] = Counter()
+
+    async def open(self) -> None:
+        """Open the module (digi-xbee reads its parameters), read NP and our address."""
+        self._loop = asyncio.get_running_loop()
+        try:
+            await asyncio.wait_for(
+                self._loop.run_in_executor(self._executor, self._open_blocking), OPEN_TIMEOUT_S
+            )
+        except TimeoutError as exc:
+            raise RadioError(
+                f"{self.port}: the XBee did not answer in {OPEN_TIMEOUT_S:g} s"
+            ) from exc
+
+    def _open_blocking(self) -> None:
+        from digi.xbee.devices import DigiMeshDevice
+        from digi.xbee.exception import XBeeException
+
+        device = DigiMeshDevice(self.port, self.baud)
+        try:
+            device.open()
+            self.max_payload = int.from_bytes(device.get_parameter("NP"), "big")
+            self.address = bytes(device.get_64bit_addr().address)
+        except (XBeeException, OSError) as exc:
+            with contextlib.suppress(Exception):  # closing a half-open device may fail too
+                device.close()
+            raise RadioError(f"{self.port}: cannot open the XBee: {exc}") from exc
+        device.add_packet_received_callback(self._packet)
+        self._device = device
+
+    async def close(self) -> None:
+        device, self._device = self._device, None
+        if device is not None and self._loop is not None:
+            await self._loop.run_in_executor(self._executor, device.close)
+        for future in self._pending.values():
+            future.cancel()
+        self._executor.shutdown(wait=True)
+
+    # -- the seam: digi-xbee's threads → the loop -----------------------------------------
+
+    def _packet(self, packet) -> None:  # on a digi-xbee callback thread
+        with self._lock:
+            if self._inbox >= INBOX:
+                self.counters["inbox_dropped"] += 1
+                return
+            self._inbox += 1
+        with contextlib.suppress(RuntimeError):  # a closed loop: shutting down
+            self._loop.call_soon_threadsafe(self._dispatch, packet)
+
+    def _dispatch(self, packet) -> None:
+        from digi.xbee.packets.aft import ApiFrameType
+
+        with self._lock:
+            self._inbox -= 1
+        kind = packet.get_frame_type()
+        if kind == ApiFrameType.TRANSMIT_STATUS:
+            future = self._pending.pop(packet.frame_id, None)
+            if future is not None and not future.done():
+                future.set_result(SendResult(packet.transmit_status.code,
+                                             packet.transmit_retry_count))  # fmt: skip
+        elif kind == ApiFrameType.RECEIVE_PACKET:
+            self.counters["received"] += 1
+            source = bytes(packet.x64bit_source_addr.address)
+            self._on_frame(source, bytes(packet.rf_data), self._clock.now())
+
+    # -- sending ----------------------------------------------------------------------------
+
+    async def send(self, destination: bytes, payload: bytes) -> SendResult:
+        """Transmit one frame and wait for its Transmit Status (or STATUS_TIMEOUT_S)."""
+        from digi.xbee.models.address import XBee16BitAddress, XBee64BitAddress
+        from digi.xbee.packets.common import TransmitPacket
+
+        device = self._device
+        if device is None:
+            raise RadioError("the XBee is not open")
+        if len(payload) > self.max_payload:
+            self.counters["too_large"] += 1
+            return SendResult(0x74, 0)
+        frame_id = self._frame_id()
+        future = self._loop.create_future()
+        self._pending[frame_id] = future
+        packet = TransmitPacket(frame_id, XBee64BitAddress(destination),
+                                XBee16BitAddress.UNKNOWN_ADDRESS, 0, 0, payload,
+                                op_mode=device.operating_mode)  # fmt: skip
+        try:
+            device.send_packet(packet, sync=False)
+            self.counters["sent"] += 1
+            result = await asyncio.wait_for(future, STATUS_TIMEOUT_S)
+        except TimeoutError:
+            self.counters["status_timeouts"] += 1
+            return SendResult(0xFF, 0)
+        except Exception as exc:  # digi-xbee raises XBeeException and serial errors alike
+            self.counters["send_errors"] += 1
+            raise RadioError(f"cannot send: {exc}") from exc
+        finally:
+            self._pending.pop(frame_id, None)
+        self.counters["ok" if result.ok else f"failed_{result.status:02x}"] += 1
+        return result
+
+    def _frame_id(self) -> int:
+        """1 … 255, skipping ids still waiting for a status (0 would ask for none)."""
+        for _ in range(255):
+            self._next_id = self._next_id % 255 + 1
+            if self._next_id not in self._pending:
+                return self._next_id
+        raise RadioError("255 frames are waiting for a transmit status")

@@ -1,0 +1,86 @@
+"""Two ends of the link over emulated XBee modules, with the real digi-xbee on each side."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from agent.clock import LoopClock
+from agent.link.codec import AIRCRAFT, GROUND, CounterStore, LinkCodec
+from agent.link.session import LinkSession
+from agent.sim.radio import EmulatedXBee, RfChannel
+from drivers.xbee.driver import XBeeRadio
+
+KEY = bytes(range(32))
+AIR_ADDR = bytes.fromhex("0013A20040000001")
+GROUND_ADDR = bytes.fromhex("0013A20040000002")
+
+
+@dataclass
+class End:
+    radio: XBeeRadio
+    codec: LinkCodec
+    session: LinkSession
+    inbox: list = field(default_factory=list)
+
+
+@dataclass
+class Pair:
+    channel: RfChannel
+    air: End
+    ground: End
+    modules: tuple[EmulatedXBee, EmulatedXBee]
+    tasks: list[asyncio.Task]
+
+
+@contextlib.asynccontextmanager
+async def link_pair(tmp_path: Path, *, escaped: bool = False, channel: RfChannel | None = None,
+                    deadline_s: float = 3.0):  # fmt: skip
+    clock = LoopClock()
+    channel = channel or RfChannel()
+    air_module = EmulatedXBee("air", AIR_ADDR, tmp_path, channel, clock, escaped=escaped)
+    ground_module = EmulatedXBee("ground", GROUND_ADDR, tmp_path, channel, clock, escaped=escaped)
+    air_module.join(ground_module)
+    ground_module.join(air_module)
+    tasks = [
+        asyncio.create_task(m.run(), name=f"xbee-{m.name}") for m in (air_module, ground_module)
+    ]
+    await asyncio.sleep(0.05)
+    ends = {}
+    for name, role, module, peer in (("air", AIRCRAFT, air_module, GROUND_ADDR),
+                                      ("ground", GROUND, ground_module, AIR_ADDR)):  # fmt: skip
+        inbox: list = []
+        codec = LinkCodec(KEY, role, {peer}, counter=CounterStore(tmp_path / f"{name}.counter"))
+        holder: list[LinkSession] = []
+        radio = XBeeRadio(str(module.path), 115200, clock,
+                          lambda s, p, t, h=holder: h[0].receive(s, p, t))  # fmt: skip
+        await radio.open()
+        codec.max_payload = radio.max_payload
+        session = LinkSession(codec, radio, peer, clock, inbox.append, deadline_s=deadline_s)
+        holder.append(session)
+        tasks.append(asyncio.create_task(session.run(), name=f"session-{name}"))
+        ends[name] = End(radio, codec, session, inbox)
+    pair = Pair(channel, ends["air"], ends["ground"], (air_module, ground_module), tasks)
+    try:
+        yield pair
+    finally:
+        for task in tasks[2:]:
+            task.cancel()
+        await asyncio.gather(*tasks[2:], return_exceptions=True)
+        for end in ends.values():
+            await end.radio.close()
+        for task in tasks[:2]:
+            task.cancel()
+        await asyncio.gather(*tasks[:2], return_exceptions=True)
+
+
+async def wait_for(predicate, timeout: float) -> bool:
+    loop = asyncio.get_running_loop()
+    end = loop.time() + timeout
+    while loop.time() < end:
+        if predicate():
+            return True
+        await asyncio.sleep(0.02)
+    return predicate()

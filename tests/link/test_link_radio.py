@@ -1,0 +1,95 @@
+"""Messages between two ends of the link: real digi-xbee on each side, emulated XBee modules
+and an RF channel between them.
+
+Bad input tried: 20 % of over-the-air attempts lost, a 30 s outage, a payload larger than the
+radio takes.
+"""
+
+from __future__ import annotations
+
+import asyncio
+
+import numpy as np
+import pytest
+
+from agent.excitation.plan import preset
+from agent.link import messages
+from agent.sim.radio import RfChannel
+from tests.link.pair import link_pair, wait_for
+
+pytestmark = pytest.mark.usefixtures("no_leaked_tasks")
+
+
+def full_result(model_id: str = "m1") -> messages.Result:
+    """A full-model result: eight states, four inputs, eight outputs."""
+    rng = np.random.default_rng(0)
+    mode = messages.ModeReport(name="Dutch roll", real=-0.6, imag=2.2, frequency_hz=0.36,
+                               damping=0.26, time_constant_s=None, msv=0.3, mci=0.8, moi=0.7,
+                               emac=0.95, mpc=0.3, cmi=0.7)  # fmt: skip
+    m = lambda r, c: rng.normal(size=(r, c)).tolist()  # noqa: E731
+    return messages.Result(
+        model_id=model_id, axes="full", dt=0.04,
+        inputs=["throttle", "elevator", "aileron", "rudder"],
+        outputs=["Vt", "alpha", "q", "theta", "beta", "p", "r", "phi"],
+        modes=[mode] * 5, tic=[0.1] * 8, tic_avg=0.1, stable=True, suggest_update=True,
+        reasons=["TIC 0.10 better than nominal 0.14"], A=m(8, 8), B=m(8, 4), C=m(8, 8),
+        D=m(8, 4),
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("escaped", [False, True], ids=["AP=1", "AP=2"])
+async def test_messages_round_trip_in_both_api_modes(tmp_path, escaped):
+    async with link_pair(tmp_path, escaped=escaped) as pair:
+        assert pair.air.radio.max_payload == 256  # NP read at start-up
+        pair.ground.session.send_reliable(messages.Arm(plan=preset("full")))
+        pair.ground.session.send_reliable(messages.Abort(reason="test"))
+        result = full_result()
+        pair.air.session.send_reliable(result)
+        pair.air.session.send_status(messages.Status(time=1.0, airspeed=22.0, excitation="idle"))
+        assert await wait_for(lambda: len(pair.air.inbox) == 2 and len(pair.ground.inbox) == 2, 5)
+    assert pair.air.inbox[0] == messages.Arm(plan=preset("full"))
+    assert pair.air.inbox[1].reason == "test"
+    got = {type(m): m for m in pair.ground.inbox}
+    assert got[messages.Result] == result  # 8 × 8 float matrices survive exactly
+    assert got[messages.Status].airspeed == 22.0
+    assert pair.ground.codec.counters["messages"] >= 2
+
+
+async def test_twenty_percent_loss_delivers_everything_once_in_order(tmp_path):
+    channel = RfChannel(loss=0.2, retries=0, seed=4)  # every attempt: 20 % lost, no MAC retry
+    async with link_pair(tmp_path, channel=channel) as pair:
+        for k in range(30):
+            pair.ground.session.send_reliable(messages.Abort(reason=f"up {k}"))
+            pair.air.session.send_reliable(messages.Notice(text=f"down {k}"))
+        done = await wait_for(
+            lambda: len(pair.air.inbox) == 30 and len(pair.ground.inbox) == 30, 60
+        )
+        await asyncio.sleep(0.5)  # nothing more may arrive (no duplicates)
+        lost = pair.modules[0].counters["lost"] + pair.modules[1].counters["lost"]
+    assert done
+    assert [m.reason for m in pair.air.inbox] == [f"up {k}" for k in range(30)]
+    assert [m.text for m in pair.ground.inbox] == [f"down {k}" for k in range(30)]
+    assert lost > 5  # the channel did lose frames
+    assert pair.air.session.counters["retransmissions"] > 0
+
+
+async def test_results_queued_during_a_30_s_outage_are_delivered_after_it(tmp_path):
+    async with link_pair(tmp_path, deadline_s=3.0) as pair:
+        await asyncio.sleep(0.3)
+        assert pair.ground.session.link_up
+        pair.channel.outage = True
+        for k in range(3):
+            pair.air.session.send_reliable(full_result(f"during-{k}"))
+        await asyncio.sleep(30.0)
+        assert not pair.ground.session.link_up  # the ground saw the link go
+        assert not pair.ground.inbox
+        pair.channel.outage = False
+        assert await wait_for(lambda: len(pair.ground.inbox) == 3, 15)
+        assert pair.ground.session.link_up
+    assert [m.model_id for m in pair.ground.inbox] == [f"during-{k}" for k in range(3)]
+
+
+async def test_a_payload_larger_than_the_radio_takes_is_refused_not_sent(tmp_path):
+    async with link_pair(tmp_path) as pair:
+        result = await pair.air.radio.send(pair.modules[1].address, bytes(300))
+    assert result.reason == "payload too large"
