@@ -11,7 +11,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 BENCH_STAMP := $(VENV)/.installed-bench
 
-.PHONY: demo test bench bench-jsbsim examples clean
+.PHONY: demo test bench bench-jsbsim bench-link examples clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -38,6 +38,10 @@ bench: $(BENCH_STAMP)
 # Issue 3 case (b): the J-3 Cub in JSBSim, 20 seeds (about 6 minutes here).
 bench-jsbsim: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/bench_jsbsim.py
+
+# Issue 7: bytes on air and delivery time of a full-model result over the emulated radios.
+bench-link: $(STAMP)
+	$(BIN)/python benchmarks/bench_link.py
 
 examples: $(STAMP)
 	$(BIN)/python examples/generate.py

@@ -428,6 +428,58 @@ class Autopilot(_Section):
     """SERVO_OUTPUT_RAW rate (trim capture, commanded surfaces in the log)."""
 
 
+def _address(value: object) -> object:
+    if isinstance(value, str) and len(value) == 16:
+        try:
+            bytes.fromhex(value)
+            return value.upper()
+        except ValueError:
+            pass
+    raise ValueError(f"a 64-bit XBee address is 16 hex digits (SH then SL), got {value!r}")
+
+
+Address = Annotated[str, BeforeValidator(_address)]
+
+
+class Link(_Section):
+    """The XBee link between the aircraft and the ground station."""
+
+    port: str = "/dev/ttyUSB0"
+    """Serial port of this end's XBee (API mode 1 or 2: digi-xbee finds out which)."""
+    baud: int = Field(115200, ge=1200, le=921600)
+    """The XBee's serial baud rate (BD)."""
+    peer: Address | None = None
+    """The other end's 64-bit address: frames go to it, and only frames from it are
+    accepted (the allow-list); unset: the link is not started."""
+    key_file: str = "link.key"
+    """File holding the shared HMAC key as hex (32 random bytes; keep it mode 0600)."""
+    counter_file: str = "link.counter"
+    """Where this end reserves its frame counters (never reused under the key)."""
+    heartbeat_s: float = Field(1.0, gt=0.0, le=60.0)
+    """A heartbeat goes out when nothing else was sent for this long."""
+    deadline_s: float = Field(3.0, gt=0.0, le=120.0)
+    """The link is down when no authenticated frame arrived for this long."""
+
+
+def load_key(path: str | Path) -> bytes:
+    """The link key from its file (hex); ConfigError-style messages on every problem."""
+    path = Path(path)
+    try:
+        text = path.read_text().strip()
+    except OSError as exc:
+        make = "python -c 'import secrets; print(secrets.token_hex(32))' > " + str(path)
+        raise ValueError(
+            f"{path}: cannot read the link key ({exc.strerror or exc}); make one with: {make}"
+        ) from exc
+    try:
+        key = bytes.fromhex(text)
+    except ValueError:
+        raise ValueError(f"{path}: the link key must be hex digits") from None
+    if len(key) < 16:
+        raise ValueError(f"{path}: the link key has {len(key)} bytes; use 32")
+    return key
+
+
 class Config(_Section):
     """The whole configuration file."""
 
@@ -441,6 +493,8 @@ class Config(_Section):
     """Frame assembly, ring buffer, logs."""
     autopilot: Autopilot = Autopilot()
     """The MAVLink link to ArduPlane."""
+    link: Link = Link()
+    """The XBee air–ground link."""
 
 
 class ConfigError(Exception):

@@ -110,12 +110,10 @@ class SerialLink:
         loop = asyncio.get_running_loop()
         before = self.stats.bytes_received
         try:
-            transport, protocol = await asyncio.wait_for(
-                serial_asyncio.create_serial_connection(
+            async with asyncio.timeout(OPEN_TIMEOUT_S):  # not wait_for: see link.session
+                transport, protocol = await serial_asyncio.create_serial_connection(
                     loop, lambda: _Protocol(self), self.port, baudrate=self.baud
-                ),
-                OPEN_TIMEOUT_S,
-            )
+                )
         except (OSError, serial.SerialException, TimeoutError) as exc:
             self.stats.open_failures += 1
             self._note(f"cannot open {self.port}: {exc}", first=self.stats.open_failures == 1)

@@ -97,6 +97,8 @@ AIL = (
         ),
         ('[recorder]\nchannels = ["p", "warp"]\n', "recorder", "unknown channels ['warp']"),
         ("[recorder]\nrate_hz = 0\n", "recorder.rate_hz", "greater than or equal to 1"),
+        ('[link]\npeer = "0013A2004"\n', "link.peer", "16 hex digits"),
+        ('[link]\npeer = "0013A20040A1B2CZ"\n', "link.peer", "16 hex digits"),
     ],
 )
 def test_bad_config_names_key_and_reason(tmp_path, capsys, text, key, reason):
@@ -117,3 +119,19 @@ def test_config_check_ok_and_missing_file(tmp_path, capsys):
     assert "ok" in capsys.readouterr().out
     assert main(["config", "check", str(tmp_path / "nope.toml")]) == 2
     assert "no such file" in capsys.readouterr().err
+
+
+def test_link_key_file_problems_are_explained(tmp_path):
+    from agent.config import load_key
+
+    # Bad input tried: a missing key file, a key that is not hex, a key that is too short.
+    with pytest.raises(ValueError, match="make one with: python -c"):
+        load_key(tmp_path / "none.key")
+    (tmp_path / "bad.key").write_text("zz" * 32)
+    with pytest.raises(ValueError, match="must be hex digits"):
+        load_key(tmp_path / "bad.key")
+    (tmp_path / "short.key").write_text("ab" * 8 + "\n")
+    with pytest.raises(ValueError, match="has 8 bytes; use 32"):
+        load_key(tmp_path / "short.key")
+    (tmp_path / "good.key").write_text("ab" * 32 + "\n")
+    assert load_key(tmp_path / "good.key") == bytes([0xAB]) * 32

@@ -10,6 +10,7 @@ carry the simulated time of the state they hold.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import math
 import os
@@ -178,9 +179,9 @@ async def serve(options: AircraftOptions, directory: Path, duration: float | Non
             f"excitation switch: RC channel {options.params.switch_channel}, low; "
             f"kill -USR1 {os.getpid()} toggles it"
         )
-        await asyncio.wait_for(asyncio.shield(task), duration) if duration else await task
-    except TimeoutError:
-        pass
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(duration):
+                await asyncio.shield(task)
     finally:
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)

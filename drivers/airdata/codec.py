@@ -56,9 +56,12 @@ class AirDataCodec:
     def decode(self, buffer: bytes | bytearray) -> tuple[int, AirData | None]:
         end = buffer.find(b"\n", 0, MAX_LINE)
         if end < 0:
-            if len(buffer) >= MAX_LINE:  # no line end where one must be: garbage
-                return skip(self.stats, len(buffer)), None
-            return 0, None
+            if len(buffer) < MAX_LINE:
+                return 0, None
+            # No line end where one must be: garbage up to the next possible line start.
+            starts = _candidate_starts(bytes(buffer[1:]))
+            drop = 1 + starts[0] if starts else len(buffer) - 6
+            return skip(self.stats, drop), None
         line = bytes(buffer[:end]).rstrip(b"\r")
         message = self._parse(line)
         if message is None:

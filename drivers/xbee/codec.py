@@ -17,8 +17,11 @@ from drivers.codec import CodecStats, skip
 START = 0x7E
 ESCAPE = 0x7D
 ESCAPED = {0x7E, 0x7D, 0x11, 0x13}
-# Longest frame data accepted: a 900HP's 256-byte payload plus a 0x90 header, with margin.
-MAX_DATA = 512
+# Longest frame data accepted: a 900HP's 256-byte payload plus a 0x10 header (14), with
+# margin. In AP=1 a stray 0x7E followed by a bogus length delays decoding until that many
+# bytes have arrived (then the checksum fails and decoding resumes at the next 0x7E): the cap
+# bounds that delay; no frame is lost to it.
+MAX_DATA = 300
 
 TRANSMIT_REQUEST, TRANSMIT_STATUS, RECEIVE_PACKET = 0x10, 0x8B, 0x90
 AT_COMMAND, AT_COMMAND_QUEUED, AT_RESPONSE = 0x08, 0x09, 0x88
@@ -66,16 +69,15 @@ class ApiCodec:
         start = buffer.find(START)
         if start != 0:
             return skip(self.stats, len(buffer) if start < 0 else start), None
-        raw, used = self._unescape(buffer)
-        if raw is None:
-            return self._resync(buffer), None
+        raw, used, interrupted = self._unescape(buffer)
         if len(raw) < 2:
-            return 0, None
+            return (self._resync(buffer), None) if interrupted else (0, None)
         (length,) = struct.unpack_from(">H", raw)
         if length == 0 or length > MAX_DATA:
             return self._resync(buffer, rejected=True), None
         if len(raw) < 2 + length + 1:
-            return 0, None
+            # A start byte inside an escaped frame means the frame was cut short.
+            return (self._resync(buffer), None) if interrupted else (0, None)
         data = bytes(raw[2 : 2 + length])
         if checksum(data) != raw[2 + length]:
             return self._resync(buffer, crc=True), None
@@ -83,8 +85,8 @@ class ApiCodec:
         return used[2 + length], ApiFrame(data)
 
     def _unescape(self, buffer: bytes | bytearray):
-        """(unescaped bytes after the start byte, buffer offset after each of them); None
-        when an escaped stream holds a start byte where it cannot (a new frame began)."""
+        """(unescaped bytes after the start byte, the buffer offset after each, whether an
+        escaped stream hit a start byte — which cannot occur inside a frame)."""
         raw, ends = bytearray(), []
         i = 1
         limit = min(len(buffer), 1 + 2 * (MAX_DATA + 3))
@@ -92,7 +94,7 @@ class ApiCodec:
             b = buffer[i]
             if self.escaped:
                 if b == START:
-                    return None, None
+                    return raw, ends, True
                 if b == ESCAPE:
                     if i + 1 >= len(buffer):
                         break
@@ -101,7 +103,7 @@ class ApiCodec:
             raw.append(b)
             i += 1
             ends.append(i)
-        return raw, ends
+        return raw, ends, False
 
     def _resync(self, buffer: bytes | bytearray, *, crc: bool = False, rejected: bool = False):
         following = buffer.find(START, 1)

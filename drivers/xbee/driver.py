@@ -76,9 +76,8 @@ class XBeeRadio:
         """Open the module (digi-xbee reads its parameters), read NP and our address."""
         self._loop = asyncio.get_running_loop()
         try:
-            await asyncio.wait_for(
-                self._loop.run_in_executor(self._executor, self._open_blocking), OPEN_TIMEOUT_S
-            )
+            async with asyncio.timeout(OPEN_TIMEOUT_S):
+                await self._loop.run_in_executor(self._executor, self._open_blocking)
         except TimeoutError as exc:
             raise RadioError(
                 f"{self.port}: the XBee did not answer in {OPEN_TIMEOUT_S:g} s"
@@ -157,7 +156,8 @@ class XBeeRadio:
         try:
             device.send_packet(packet, sync=False)
             self.counters["sent"] += 1
-            result = await asyncio.wait_for(future, STATUS_TIMEOUT_S)
+            async with asyncio.timeout(STATUS_TIMEOUT_S):  # not wait_for: see session.run
+                result = await future
         except TimeoutError:
             self.counters["status_timeouts"] += 1
             return SendResult(0xFF, 0)
