@@ -455,6 +455,9 @@ class Link(_Section):
     """File holding the shared HMAC key as hex (32 random bytes; keep it mode 0600)."""
     counter_file: str = "link.counter"
     """Where this end reserves its frame counters (never reused under the key)."""
+    seen_file: str = "link.seen"
+    """Where this end keeps the highest counter accepted from the peer (replays refused
+    across restarts)."""
     heartbeat_s: float = Field(1.0, gt=0.0, le=60.0)
     """A heartbeat goes out when nothing else was sent for this long."""
     deadline_s: float = Field(3.0, gt=0.0, le=120.0)

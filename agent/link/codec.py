@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+import json
 import os
 import struct
 import time
@@ -82,9 +83,9 @@ class CounterStore:
 class ReplayWindow:
     """Highest counter seen and a 64-frame bitmap below it (IPsec-style)."""
 
-    def __init__(self) -> None:
-        self.highest = -1
-        self._bits = 0
+    def __init__(self, floor: int = -1) -> None:
+        self.highest = floor
+        self._bits = (1 << WINDOW) - 1 if floor >= 0 else 0  # nothing at or below the floor
 
     def check(self, counter: int) -> str | None:
         """None if fresh (and record it), else "replayed" or "stale"."""
@@ -113,14 +114,19 @@ class LinkCodec:
     """One end of the link: frames our messages, checks and reassembles the other end's."""
 
     def __init__(self, key: bytes, role: int, allow: set[bytes], *, counter: CounterStore,
-                 max_payload: int = 256):  # fmt: skip
+                 max_payload: int = 256, seen: Path | None = None):  # fmt: skip
         if len(key) < 16:
             raise ValueError("the link key must be at least 16 bytes (32 random bytes advised)")
         self._key, self.role, self.allow = key, role, set(allow)
         self._counter = counter
         self.max_payload = max_payload
         self._message_number = 0
-        self._windows: dict[bytes, ReplayWindow] = {}
+        self._seen_path = seen
+        floors = {}
+        if seen is not None and seen.exists():
+            floors = {bytes.fromhex(k): int(v) for k, v in json.loads(seen.read_text()).items()}
+        self._windows: dict[bytes, ReplayWindow] = {a: ReplayWindow(f) for a, f in floors.items()}
+        self._saved: dict[bytes, int] = dict(floors)
         self._partials: dict[bytes, OrderedDict[int, _Partial]] = {}
         self.counters: Counter[str] = Counter()
 
@@ -174,6 +180,19 @@ class LinkCodec:
             return self._drop("undecodable")
         self.counters["messages"] += 1
         return message
+
+    def save_seen(self) -> bool:
+        """Write the highest counter accepted from each source (the session calls this about
+        once a second), so a restarted receiver refuses frames it accepted before. After an
+        unclean restart, frames of the last interval could be accepted once more."""
+        current = {a: w.highest for a, w in self._windows.items()}
+        if self._seen_path is None or current == self._saved:
+            return False
+        tmp = self._seen_path.with_suffix(".tmp")
+        tmp.write_text(json.dumps({a.hex(): h for a, h in current.items()}))
+        tmp.replace(self._seen_path)
+        self._saved = current
+        return True
 
     def _drop(self, reason: str) -> None:
         self.counters[reason] += 1

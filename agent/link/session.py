@@ -33,6 +33,8 @@ OUTBOX = 64
 AHEAD = 64
 RETRY_FIRST_S, RETRY_MAX_S = 0.5, 4.0
 TICK_S = 0.05
+# How often the highest counters accepted are written (the replay bound after a crash).
+SAVE_SEEN_S = 1.0
 
 
 class Transport(Protocol):
@@ -70,6 +72,7 @@ class LinkSession:
         self._last_heard: float | None = None
         self._last_sent = -1e9
         self._wake = asyncio.Event()
+        self._saved_at = -1e9
         self.counters: Counter[str] = Counter()
 
     # -- application side -----------------------------------------------------------------
@@ -165,6 +168,10 @@ class LinkSession:
                     await self._wake.wait()
             self._wake.clear()
             await self._send_due()
+            now = self._clock.now()
+            if now - self._saved_at >= SAVE_SEEN_S:
+                self._saved_at = now
+                self._codec.save_seen()
 
     async def _send_due(self) -> None:
         now = self._clock.now()

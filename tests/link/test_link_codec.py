@@ -119,3 +119,17 @@ def test_counters_are_never_reused_across_restarts(tmp_path):
 def test_short_keys_are_refused(tmp_path):
     with pytest.raises(ValueError, match="at least 16 bytes"):
         LinkCodec(b"short", GROUND, set(), counter=CounterStore(tmp_path / "c"))
+
+
+def test_a_restarted_receiver_still_refuses_old_frames(tmp_path):
+    seen = tmp_path / "seen"
+    air = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(tmp_path / "a"))
+    ground = LinkCodec(KEY, GROUND, {AIR}, counter=CounterStore(tmp_path / "g"), seen=seen)
+    frames = [air.encode({"kind": "ping", "v": 1, "n": k})[0] for k in range(3)]
+    for frame in frames:
+        assert ground.decode(AIR, frame, 0) is not None
+    assert ground.save_seen()
+    restarted = LinkCodec(KEY, GROUND, {AIR}, counter=CounterStore(tmp_path / "g"), seen=seen)
+    assert all(restarted.decode(AIR, f, 0) is None for f in frames)  # replayed after restart
+    assert restarted.counters["replayed"] + restarted.counters["stale"] == 3
+    assert restarted.decode(AIR, air.encode({"kind": "ping", "v": 1})[0], 0) is not None
