@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -122,8 +123,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="decode a raw sensor capture",
         description="Decode a raw capture (bytes as read from the port) with the drivers' codecs.",
     )
-    decode.add_argument("device", choices=sorted(DECODERS), metavar="DEVICE",
-                        help=f"one of {', '.join(sorted(DECODERS))}")  # fmt: skip
+    decode.add_argument(
+        "device",
+        choices=sorted(DECODERS),
+        metavar="DEVICE",
+        help=f"one of {', '.join(sorted(DECODERS))}",
+    )
     decode.add_argument("file", type=Path, metavar="FILE")
     decode.add_argument("--json", action="store_true", help="one JSON object per message")
 
@@ -136,17 +141,66 @@ def build_parser() -> argparse.ArgumentParser:
     aircraft.add_argument("--aircraft", default="J3Cub", help="JSBSim aircraft (default J3Cub)")
     aircraft.add_argument("--speed-kts", type=float, default=60.0)
     aircraft.add_argument("--altitude-ft", type=float, default=1000.0)
-    aircraft.add_argument("--turbulence", type=float, default=0.0,
-                          help="Dryden severity: 0 none, 1 light, 2 moderate")  # fmt: skip
+    aircraft.add_argument(
+        "--turbulence", type=float, default=0.0, help="Dryden severity: 0 none, 1 light, 2 moderate"
+    )
     aircraft.add_argument("--seed", type=int, default=0)
-    aircraft.add_argument("--mavlink-port", type=int, default=14555,
-                          help="UDP port the emulated autopilot listens on (0: any)")  # fmt: skip
-    aircraft.add_argument("--pty-dir", type=Path, default=Path("sim"),
-                          help="directory for the sensor port links (default ./sim)")  # fmt: skip
-    aircraft.add_argument("--switch-at", type=float, nargs="*", default=[], metavar="T",
-                          help="flip the switch at these seconds: high, low, …")  # fmt: skip
+    aircraft.add_argument(
+        "--mavlink-port",
+        type=int,
+        default=14555,
+        help="UDP port the emulated autopilot listens on (0: any)",
+    )
+    aircraft.add_argument(
+        "--pty-dir",
+        type=Path,
+        default=Path("sim"),
+        help="directory for the sensor port links (default ./sim)",
+    )
+    aircraft.add_argument(
+        "--switch-at",
+        type=float,
+        nargs="*",
+        default=[],
+        metavar="T",
+        help="flip the switch at these seconds: high, low, …",
+    )
     aircraft.add_argument("--no-noise", action="store_true", help="perfect sensors")
     aircraft.add_argument("--duration", type=float, help="stop after this many seconds")
+
+    agent = sub.add_parser(
+        "agent",
+        help="run the onboard flight agent",
+        description="The onboard agent: sensors, autopilot, recorder, "
+        "excitation, identification, radio link; stop with Ctrl-C.",
+    )
+    agent.add_argument("--config", type=Path, default=DEFAULT_CONFIG)
+    agent.add_argument(
+        "--base",
+        type=Path,
+        default=Path("."),
+        help="directory for logs, models and link state (default .)",
+    )
+
+    sim = sub.add_parser(
+        "sim",
+        help="a whole flight with no hardware, end to end",
+        description="Simulated aircraft, emulated ArduPlane, sensors and "
+        "radios, the real agent, and a scripted ground operator.",
+    )
+    sim.add_argument("--aircraft", default="J3Cub")
+    sim.add_argument("--speed-kts", type=float, default=60.0)
+    sim.add_argument("--turbulence", type=float, default=0.0, help="Dryden severity (1 = light)")
+    sim.add_argument("--seed", type=int, default=0)
+    sim.add_argument("--preset", choices=PRESETS, default="full")
+    sim.add_argument(
+        "--runs",
+        type=_positive_int,
+        default=1,
+        help="excitations in a row (from the second on: TIC against the nominal)",
+    )
+    sim.add_argument("--keep", type=Path, metavar="DIR", help="keep logs and models in DIR")
+    sim.add_argument("--json", action="store_true", help="one JSON object")
 
     config = sub.add_parser("config", help="configuration tools")
     config_sub = config.add_subparsers(dest="config_command", required=True)
@@ -273,13 +327,24 @@ def cmd_sim_aircraft(args: argparse.Namespace) -> int:
     from agent.sim.plant import PlantError
 
     options = AircraftOptions(
-        aircraft=args.aircraft, speed_kts=args.speed_kts, altitude_ft=args.altitude_ft,
-        turbulence=args.turbulence, seed=args.seed, noise=not args.no_noise,
+        aircraft=args.aircraft,
+        speed_kts=args.speed_kts,
+        altitude_ft=args.altitude_ft,
+        turbulence=args.turbulence,
+        seed=args.seed,
+        noise=not args.no_noise,
         mavlink_port=args.mavlink_port,
-    )  # fmt: skip
+    )
     try:
-        asyncio.run(serve(options, args.pty_dir, args.duration, tuple(args.switch_at),
-                          announce=lambda text: print(text, flush=True)))  # fmt: skip
+        asyncio.run(
+            serve(
+                options,
+                args.pty_dir,
+                args.duration,
+                tuple(args.switch_at),
+                announce=lambda text: print(text, flush=True),
+            )
+        )
     except PlantError as exc:
         _error("sim-aircraft", str(exc))
         return EXIT_BAD_INPUT
@@ -289,6 +354,55 @@ def cmd_sim_aircraft(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         pass
     return EXIT_OK
+
+
+def cmd_agent(args: argparse.Namespace) -> int:
+    import asyncio
+
+    from agent.runtime import serve
+
+    try:
+        config = load_config(args.config)
+        text = args.config.read_text()
+    except ConfigError as exc:
+        _error("agent", str(exc))
+        return EXIT_BAD_INPUT
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    try:
+        asyncio.run(serve(config, text, args.base))
+    except (OSError, ValueError) as exc:  # a port that cannot be opened, a bad key file
+        _error("agent", str(exc))
+        return EXIT_FAILED
+    return EXIT_OK
+
+
+def cmd_sim(args: argparse.Namespace) -> int:
+    import asyncio
+
+    from agent.sim.flight import SimError, SimOptions, fly, format_report
+    from agent.sim.plant import PlantError
+
+    progress = None if args.json else (lambda text: print(text, flush=True))
+    options = SimOptions(
+        aircraft=args.aircraft,
+        speed_kts=args.speed_kts,
+        turbulence=args.turbulence,
+        seed=args.seed,
+        preset=args.preset,
+        runs=args.runs,
+        directory=args.keep,
+        progress=progress,
+    )
+    try:
+        report = asyncio.run(fly(options))
+    except PlantError as exc:
+        _error("sim", str(exc))
+        return EXIT_BAD_INPUT
+    except SimError as exc:
+        _error("sim", str(exc))
+        return EXIT_FAILED
+    print(json.dumps(report) if args.json else format_report(report))
+    return EXIT_OK if not report["failure"] else EXIT_FAILED
 
 
 def cmd_config_check(args: argparse.Namespace) -> int:
@@ -312,4 +426,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return cmd_decode(args)
     if args.command == "sim-aircraft":
         return cmd_sim_aircraft(args)
+    if args.command == "agent":
+        return cmd_agent(args)
+    if args.command == "sim":
+        return cmd_sim(args)
     return cmd_config_check(args)

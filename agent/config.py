@@ -377,7 +377,7 @@ class Recorder(_Section):
     """Frame rate (the thesis logs at 100 Hz)."""
     capacity_s: float = Field(600.0, ge=10.0, le=7200.0)
     """Ring buffer length: the most recent capacity_s seconds of frames stay in memory."""
-    delay_s: float = Field(0.05, ge=0.0, le=1.0)
+    delay_s: float = Field(0.25, ge=0.0, le=1.0)
     """Frames are assembled this long after their time, so samples just after it (for
     interpolation) and late arrivals are in."""
     max_age_s: float = Field(0.1, gt=0.0, le=10.0)

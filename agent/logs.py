@@ -199,7 +199,9 @@ class JsonLinesHandler(logging.Handler):
     def emit(self, record: logging.LogRecord) -> None:
         event = {
             "utc": dt.datetime.fromtimestamp(record.created, dt.UTC).isoformat(),
-            "t": self._clock.now() if self._clock else None,
+            # time.monotonic: the loop clock's base, and safe on any thread (libraries log
+            # from their own).
+            "t": time.monotonic(),
             "level": record.levelname,
             "logger": record.name,
             "message": record.getMessage(),

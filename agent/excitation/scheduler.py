@@ -168,6 +168,19 @@ class Scheduler:
         else:
             self.disarm()
 
+    def request_start(self) -> str:
+        """The operator's start (thesis B.2 3.1): runs the armed plan if the pilot's switch is
+        already high; "" when started, else why not (the switch still gates every run)."""
+        if self._armed is None:
+            return "no plan is armed"
+        if self._running is not None:
+            return "a plan is running"
+        if self._switch is None or not self._switch[1]:
+            return "the pilot's switch is low"
+        self._seen_low = True
+        self._start.set()
+        return ""
+
     def update_switch(self, pwm: int, time: float) -> None:
         """The pilot's excitation switch (RC_CHANNELS of the switch channel)."""
         high = pwm >= self._config.switch_high_us

@@ -115,12 +115,12 @@ class ModeReport(BaseModel):
     frequency_hz: float | None
     damping: float | None
     time_constant_s: float | None
-    msv: float
-    mci: float
-    moi: float
-    emac: float
-    mpc: float
-    cmi: float
+    msv: float | None
+    mci: float | None
+    moi: float | None
+    emac: float | None
+    mpc: float | None
+    cmi: float | None
 
 
 class Result(_Message):
@@ -139,10 +139,22 @@ class Result(_Message):
     stable: bool
     suggest_update: bool
     reasons: list[str] = Field(default_factory=list)
+    tic_jn: float | None = None
+    tic_nn: float | None = None
+    tic_nj: float | None = None
     A: list[list[float]]
     B: list[list[float]]
     C: list[list[float]]
     D: list[list[float]]
+
+
+class Failure(_Message):
+    """An identification that failed, and why (the agent keeps flying)."""
+
+    kind: Literal["failure"] = "failure"
+    model_id: str = Field(max_length=32)
+    axes: str
+    reason: str = Field(max_length=300)
 
 
 class Ack(_Message):
@@ -162,7 +174,7 @@ class Notice(_Message):
 
 
 Uplink = Arm | Start | Abort | IdentSettings | Decision | Revert | Ping
-Downlink = Status | ExcitationEvent | Result | Ack | Notice | Ping
+Downlink = Status | ExcitationEvent | Result | Failure | Ack | Notice | Ping
 Message = Annotated[
     Arm
     | Start
@@ -174,6 +186,7 @@ Message = Annotated[
     | Status
     | ExcitationEvent
     | Result
+    | Failure
     | Ack
     | Notice,
     Field(discriminator="kind"),

@@ -55,7 +55,8 @@ class LinkSession:
     """One end's session with its peer (see the module docstring)."""
 
     def __init__(self, codec: LinkCodec, transport: Transport, peer: bytes, clock: Clock,
-                 on_message: Callable[[messages._Message], None], *, heartbeat_s: float = 1.0,
+                 on_message: Callable[[messages._Message, int | None], None], *,
+                 heartbeat_s: float = 1.0,
                  deadline_s: float = 3.0):  # fmt: skip
         self._codec, self._transport, self._peer, self._clock = codec, transport, peer, clock
         self._on_message = on_message
@@ -141,10 +142,10 @@ class LinkSession:
             return
         self._ahead[seq] = data
         while self._expected in self._ahead:
-            self._deliver(self._ahead.pop(self._expected))
+            self._deliver(self._ahead.pop(self._expected), self._expected)
             self._expected += 1
 
-    def _deliver(self, data: dict) -> None:
+    def _deliver(self, data: dict, seq: int | None = None) -> None:
         data = {k: v for k, v in data.items() if k not in ("e", "s")}
         try:
             message = messages.from_dict(data)
@@ -154,7 +155,7 @@ class LinkSession:
             return
         self.counters["delivered"] += 1
         if not isinstance(message, messages.Ping):
-            self._on_message(message)
+            self._on_message(message, seq)
 
     # -- sending ----------------------------------------------------------------------------
 

@@ -58,7 +58,8 @@ async def link_pair(tmp_path: Path, *, escaped: bool = False, channel: RfChannel
                           lambda s, p, t, h=holder: h[0].receive(s, p, t))  # fmt: skip
         await radio.open()
         codec.max_payload = radio.max_payload
-        session = LinkSession(codec, radio, peer, clock, inbox.append, deadline_s=deadline_s)
+        session = LinkSession(codec, radio, peer, clock, lambda m, _seq, box=inbox: box.append(m),
+                              deadline_s=deadline_s)  # fmt: skip
         holder.append(session)
         tasks.append(asyncio.create_task(session.run(), name=f"session-{name}"))
         ends[name] = End(radio, codec, session, inbox)

@@ -1,0 +1,109 @@
+"""One identification as a job for a worker process: a window of recorded data in, a plain
+result (or a failure with its reason) out. Pure functions of picklable arguments, so the agent's
+event loop only hands them to a pre-started process and never waits on them.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from agent.ident import Experiment, Settings, identify
+from agent.ident.convert import StateSpace
+from agent.ident.errors import DataError, IdentificationFailed
+from agent.ident.fit import fit
+from agent.ident.preprocess import preprocess
+from agent.ident.summary import to_dict
+
+# Gaps (NaN) up to this long are bridged linearly; longer ones fail the job with the reason.
+MAX_GAP_S = 0.1
+
+
+@dataclass(frozen=True)
+class Job:
+    model_id: str
+    axes: str
+    record_dt: float
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    roles: tuple[str, ...]
+    experiments: tuple[tuple[np.ndarray, np.ndarray], ...]
+    settings: Settings = field(default_factory=Settings)
+
+
+def window_experiment(values: dict[str, np.ndarray], inputs, outputs, dt: float,
+                      trim_s: float) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """(u, y) from recorded columns: short gaps bridged, trim (first trim_s) removed."""
+    names = [*inputs, *outputs]
+    every = np.column_stack([values[n] for n in names])
+    # Rows at the window's edges where a channel has no data yet (or no longer) are cut.
+    complete = np.flatnonzero(np.isfinite(every).all(axis=1))
+    if complete.size < 2:
+        raise DataError("the window holds no complete row of the channels to identify")
+    keep = slice(complete[0], complete[-1] + 1)
+    u = np.column_stack([_bridge(values[n][keep], dt, n) for n in inputs])
+    y = np.column_stack([_bridge(values[n][keep], dt, n) for n in outputs])
+    count = max(1, round(trim_s / dt))
+    return u - u[:count].mean(axis=0), y - y[:count].mean(axis=0)
+
+
+def _bridge(x: np.ndarray, dt: float, name: str) -> np.ndarray:
+    bad = ~np.isfinite(x)
+    if not bad.any():
+        return x
+    edges = np.diff(np.concatenate([[0], bad.astype(int), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    longest = int(np.max(ends - starts))
+    if longest * dt > MAX_GAP_S:
+        raise DataError(f"channel {name!r} has a {longest * dt:.2f} s gap in the window "
+                        f"(at most {MAX_GAP_S:g} s is bridged)")  # fmt: skip
+    t = np.arange(x.size)
+    return np.interp(t, t[~bad], x[~bad])
+
+
+def run(job: Job) -> dict:
+    """Identify; never raises for bad data: {"ok": False, "reason": …} instead."""
+    try:
+        experiments = [Experiment(u, y) for u, y in job.experiments]
+        result = identify(experiments, job.record_dt, input_names=job.inputs,
+                          output_names=job.outputs, output_roles=job.roles,
+                          settings=job.settings)  # fmt: skip
+    except (DataError, IdentificationFailed, np.linalg.LinAlgError, ValueError) as exc:
+        return {"ok": False, "model_id": job.model_id, "reason": str(exc)}
+    prep = result.preprocessing
+    return {
+        "ok": True,
+        "model_id": job.model_id,
+        "axes": job.axes,
+        "result": to_dict(result),
+        "preprocessing": {
+            "factor": prep.factor,
+            "band_hz": prep.band_hz,
+            "held_inputs": prep.held_inputs,
+            "smoothing_s": prep.smoothing_s,
+        },
+    }
+
+
+def cross_tic(result: dict, preprocessing: dict, record_dt: float,
+              experiments: tuple[tuple[np.ndarray, np.ndarray], ...]) -> float:  # fmt: skip
+    """TIC_avg of an identified model (its discrete A, B, C, D) on other data, preprocessed
+    as the model's own data was (thesis 5.3: TIC_jN, TIC_Nj)."""
+    batch, _ = preprocess(
+        [Experiment(u, y) for u, y in experiments], record_dt,
+        decimation=preprocessing["factor"], band_hz=preprocessing["band_hz"],
+        held_inputs=preprocessing["held_inputs"], smoothing_s=preprocessing["smoothing_s"],
+    )  # fmt: skip
+    model = StateSpace(*(np.asarray(result[k], dtype=float) for k in ("A", "B", "C", "D")))
+    return fit(model, batch).tic_avg
+
+
+def warm() -> None:
+    """Import and exercise the numerics once, so the first real job pays no start-up cost."""
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=(400, 1))
+    y = np.cumsum(u, axis=0) * 0.01 + rng.normal(size=(400, 1)) * 1e-3
+    with contextlib.suppress(DataError, IdentificationFailed, np.linalg.LinAlgError):
+        identify(Experiment(u, y), 0.02, settings=Settings(refine=False))

@@ -1,0 +1,179 @@
+"""The nominal model store and the thesis's update suggestion (section 5.3, figure 5.2).
+
+A candidate is an identified model with the data set it was identified from. The operator
+accepts one as nominal (the previous nominal is kept, for revert), or rejects it. The store
+is files (JSON + NumPy) in a directory, so the nominal model survives restarts.
+
+Update suggestion, in the thesis's order; any NO suggests not updating:
+1. the candidate is stable (a mode doubling in 10 s or more is tolerated, see
+DIVERGENCE_LIMIT); 2. its quality indexes hold (every named mode's EMAC ≥ 50 %);
+3. TIC_jj (its own data) averages below 0.3; 4.–7. with a nominal model: TIC_jN (candidate on
+the nominal's data) no worse than TIC_NN (nominal on its own), and TIC_jj + TIC_jN below
+TIC_NN + TIC_Nj (nominal on the candidate's data).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+TIC_LIMIT = 0.3
+# Step 1 accepts a slowly divergent mode: many airframes have a spiral that doubles in tens of
+# seconds (JSBSim's J-3 Cub: +0.004 1/s). Faster divergence (time to double < 10 s) fails.
+DIVERGENCE_LIMIT = np.log(2) / 10.0
+EMAC_MIN = 50.0
+# Self-check (requirement 6.3.1): a new nominal predicting the next excitation this much worse
+# (TIC_avg ratio) than the model it replaced is rolled back.
+SELF_CHECK_RATIO = 1.5
+
+
+@dataclass
+class Candidate:
+    model_id: str
+    axes: str
+    record_dt: float
+    result: dict
+    preprocessing: dict
+    experiments: tuple[tuple[np.ndarray, np.ndarray], ...]
+    tic_nn: float | None = None  # as nominal: its TIC on its own data
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def tic_jj(self) -> float:
+        return float(self.result["tic_avg"])
+
+
+@dataclass(frozen=True)
+class Suggestion:
+    update: bool
+    steps: list[str]
+    tic_jj: float
+    tic_jn: float | None = None
+    tic_nn: float | None = None
+    tic_nj: float | None = None
+
+
+def suggest(
+    candidate: Candidate, nominal: Candidate | None, tic_jn: float | None, tic_nj: float | None
+) -> Suggestion:
+    """The figure 5.2 procedure; each step's outcome is a line for the operator."""
+    steps, ok = [], True
+    fastest = max(m["eigenvalue"][0] for m in candidate.result["modes"])
+    stable = bool(fastest < DIVERGENCE_LIMIT)
+    state = (
+        "stable"
+        if candidate.result["stable"]
+        else f"slowly divergent (doubles in {np.log(2) / fastest:.0f} s)"
+        if stable
+        else f"UNSTABLE (doubles in {np.log(2) / fastest:.1f} s)"
+    )
+    steps.append(f"1 stability: {state}")
+    ok &= stable
+    named = [m for m in candidate.result["modes"] if m["name"]]
+    weak = [m["name"] for m in named if (m["emac"] or 0.0) < EMAC_MIN]
+    quality = bool(named) and not weak
+    steps.append(
+        "2 quality: "
+        + ("named modes EMAC ≥ 50 %" if quality else f"weak {weak}" if weak else "no named mode")
+    )
+    ok &= quality
+    tic_jj = candidate.tic_jj
+    steps.append(f"3 TIC_jj {tic_jj:.3f} {'<' if tic_jj < TIC_LIMIT else '≥'} {TIC_LIMIT}")
+    ok &= tic_jj < TIC_LIMIT
+    if nominal is None:
+        steps.append("4–7 no nominal model yet")
+        return Suggestion(bool(ok), steps, tic_jj)
+    tic_nn = nominal.tic_nn if nominal.tic_nn is not None else nominal.tic_jj
+    better = bool(tic_jn is not None and tic_jn <= tic_nn)
+    steps.append(
+        f"4–5 TIC_jN {tic_jn:.3f} vs TIC_NN {tic_nn:.3f}: {'no worse' if better else 'WORSE'}"
+    )
+    combined = bool(tic_jn is not None and tic_nj is not None and tic_jj + tic_jn < tic_nn + tic_nj)
+    mine, theirs = tic_jj + (tic_jn or 0), tic_nn + (tic_nj or 0)
+    verdict = "better" if combined else "NOT better"
+    steps.append(f"6–7 TIC_jj + TIC_jN {mine:.3f} vs TIC_NN + TIC_Nj {theirs:.3f}: {verdict}")
+    return Suggestion(bool(ok and better and combined), steps, tic_jj, tic_jn, tic_nn, tic_nj)
+
+
+class ModelStore:
+    """Nominal and previous nominal per identification type, on disk."""
+
+    def __init__(self, directory: Path):
+        self.directory = Path(directory)
+        self.directory.mkdir(parents=True, exist_ok=True)
+        self.candidates: dict[str, Candidate] = {}
+
+    def nominal(self, axes: str) -> Candidate | None:
+        return self._load(axes, "nominal")
+
+    def previous(self, axes: str) -> Candidate | None:
+        return self._load(axes, "previous")
+
+    def accept(self, model_id: str) -> Candidate:
+        """Make a candidate nominal (the old nominal becomes previous)."""
+        candidate = self.candidates.pop(model_id)
+        current = self.nominal(candidate.axes)
+        if current is not None:
+            self._save(current, "previous")
+        candidate.tic_nn = candidate.tic_jj
+        self._save(candidate, "nominal")
+        return candidate
+
+    def reject(self, model_id: str) -> None:
+        self.candidates.pop(model_id)
+
+    def revert(self, axes: str) -> Candidate:
+        """Previous nominal back to nominal (the reverted one becomes previous)."""
+        previous, current = self.previous(axes), self.nominal(axes)
+        if previous is None:
+            raise LookupError(f"no previous {axes} nominal model to revert to")
+        self._save(previous, "nominal")
+        if current is not None:
+            self._save(current, "previous")
+        return previous
+
+    def _paths(self, axes: str, slot: str) -> tuple[Path, Path]:
+        base = self.directory / f"{axes}_{slot}"
+        return base.with_suffix(".json"), base.with_suffix(".npz")
+
+    def _save(self, c: Candidate, slot: str) -> None:
+        meta, data = self._paths(c.axes, slot)
+        arrays = {f"u{k}": u for k, (u, _) in enumerate(c.experiments)}
+        arrays |= {f"y{k}": y for k, (_, y) in enumerate(c.experiments)}
+        np.savez(data.with_suffix(".tmp.npz"), **arrays)
+        data.with_suffix(".tmp.npz").replace(data)
+        tmp = meta.with_suffix(".tmp")
+        tmp.write_text(
+            json.dumps(
+                {
+                    "model_id": c.model_id,
+                    "axes": c.axes,
+                    "record_dt": c.record_dt,
+                    "result": c.result,
+                    "preprocessing": c.preprocessing,
+                    "tic_nn": c.tic_nn,
+                    "count": len(c.experiments),
+                }
+            )
+        )
+        tmp.replace(meta)
+
+    def _load(self, axes: str, slot: str) -> Candidate | None:
+        meta, data = self._paths(axes, slot)
+        if not meta.exists():
+            return None
+        m = json.loads(meta.read_text())
+        with np.load(data) as arrays:
+            experiments = tuple((arrays[f"u{k}"], arrays[f"y{k}"]) for k in range(m["count"]))
+        return Candidate(
+            m["model_id"],
+            m["axes"],
+            m["record_dt"],
+            m["result"],
+            m["preprocessing"],
+            experiments,
+            m["tic_nn"],
+        )

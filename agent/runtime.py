@@ -1,0 +1,453 @@
+"""`sysid agent`: the flight agent — one event loop and one TaskGroup owning the sensor
+drivers, the autopilot link, the recorder, the excitation scheduler, the radio link session,
+the identification job runner and the health monitor (thesis chapter 5.1, algorithm 1).
+
+Every component runs under `_supervised`: a component that fails is logged, counted and
+restarted after a backoff; it never takes the others down. Identification runs in a worker
+process started (and warmed up) with the agent, so the loop never waits on numerics. On
+SIGINT/SIGTERM a running excitation is aborted (trim, then release), logs are flushed and
+closed, the worker is stopped.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import multiprocessing
+import signal
+from collections import Counter
+from collections.abc import Awaitable, Callable
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from agent.channels import AXIS_SETS, SENSOR_CHANNELS
+from agent.clock import Clock, LoopClock
+from agent.config import Config, load_key
+from agent.excitation.plan import PlanRefused
+from agent.excitation.scheduler import Event, Scheduler, Window
+from agent.ident import Settings
+from agent.ident import job as jobs
+from agent.link import messages
+from agent.logs import Logbook, LogWriter, config_hash, log_name, next_number, units_of
+from agent.models import SELF_CHECK_RATIO, Candidate, ModelStore, suggest
+from agent.recorder import Recorder
+from drivers.autopilot.driver import AutopilotLink
+
+log = logging.getLogger(__name__)
+
+# Restart backoff of a failed component: first wait, doubling to at most this.
+RESTART_S, RESTART_MAX_S = 0.5, 10.0
+# Identification jobs waiting (more are dropped and counted: the operator can re-fly).
+JOB_QUEUE = 4
+STATUS_S = 1.0
+
+
+class Agent:
+    """The onboard agent; `run()` serves until cancelled."""
+
+    def __init__(
+        self,
+        config: Config,
+        *,
+        base: Path = Path("."),
+        clock: Clock | None = None,
+        config_text: str = "",
+    ):
+        self.config, self.base = config, Path(base)
+        self.clock = clock or LoopClock()
+        self.counters: Counter[str] = Counter()
+        self.writer = LogWriter(self.base / config.recorder.log_dir)
+        self.recorder = Recorder(config.recorder, self.clock, on_excitation=self._on_window_logged)
+        self.logbook = Logbook(
+            self.writer,
+            self.recorder.columns,
+            units_of(self.recorder.columns, SENSOR_CHANNELS),
+            config_hash(config_text),
+        )
+        self.recorder._sink = self.logbook.row
+        # The result log: one JSON object per identification (thesis 2.2.1).
+        self._results = self.writer.open(
+            log_name(next_number(self.writer.directory), "results", "jsonl")
+        )
+        excitation = config.excitation
+        self.autopilot = AutopilotLink(
+            config.autopilot,
+            self.clock,
+            switch_channel=excitation.switch_channel,
+            on_switch=lambda pwm, t: self.scheduler.update_switch(pwm, t),
+            on_state=lambda s: self.scheduler.update_state(s),
+            on_servos=lambda t, p: self.scheduler.update_servos(t, p),
+            on_sample=self.recorder.push,
+            on_link=self._on_autopilot_link,
+        )
+        self.scheduler = Scheduler(excitation, self.autopilot, self.clock)
+        self.scheduler.subscribe(self._on_scheduler)
+        self.models = ModelStore(self.base / "models")
+        self.ident = messages.IdentSettings(axes=config.identification.axes)
+        self._jobs: asyncio.Queue = asyncio.Queue(JOB_QUEUE)
+        self._batch: dict[str, list] = {}
+        self._self_check: dict[str, str] = {}
+        self._model_number = 0
+        self.session = None
+        self.radio = None
+        self.results: list[dict] = []
+        self.drivers = self._drivers()
+
+    def _drivers(self):
+        from drivers.airdata.driver import make_driver as airdata
+        from drivers.surfaces.driver import make_driver as surfaces
+        from drivers.vectornav.driver import make_driver as vn200
+
+        sensors = self.config.sensors
+        makers = {"vn200": vn200, "airdata": airdata, "surfaces": surfaces}
+        return [
+            make(sensors, self.clock, self.recorder.push)
+            for name, make in makers.items()
+            if getattr(sensors, name).enabled
+        ]
+
+    # -- running ----------------------------------------------------------------------------
+
+    async def run(self) -> None:
+        handler = self.logbook.handler(self.clock)
+        logging.getLogger().addHandler(handler)
+        context = multiprocessing.get_context("spawn")  # no fork of a threaded process
+        pool = ProcessPoolExecutor(1, mp_context=context, initializer=jobs.warm)
+        try:
+            await self._open_link()
+            async with asyncio.TaskGroup() as group:
+                for driver in self.drivers:
+                    group.create_task(self._supervised(driver.name, driver.run), name=driver.name)
+                named = {
+                    "autopilot": self.autopilot.run,
+                    "recorder": self.recorder.run,
+                    "scheduler": self.scheduler.run,
+                    "status": self._status_loop,
+                    "identification": lambda: self._job_loop(pool),
+                }
+                if self.session is not None:
+                    named["link"] = self.session.run
+                for name, factory in named.items():
+                    group.create_task(self._supervised(name, factory), name=name)
+                log.info(
+                    "agent started: %s", ", ".join([d.name for d in self.drivers] + list(named))
+                )
+        finally:
+            logging.getLogger().removeHandler(handler)
+            pool.shutdown(wait=True, cancel_futures=True)
+            if self.radio is not None:
+                await self.radio.close()
+            self.writer.close()
+
+    async def _supervised(self, name: str, factory: Callable[[], Awaitable[None]]) -> None:
+        delay = RESTART_S
+        while True:
+            try:
+                await factory()
+                return
+            except asyncio.CancelledError:
+                raise
+            except Exception:  # one component's fault must not stop the others: log, restart
+                self.counters[f"{name}_restarts"] += 1
+                log.exception("%s failed; restarting in %.1f s", name, delay)
+                await asyncio.sleep(delay)
+                delay = min(delay * 2, RESTART_MAX_S)
+
+    async def _open_link(self) -> None:
+        cfg = self.config.link
+        if cfg.peer is None:
+            log.info("link: no [link] peer configured, radio not started")
+            return
+        from agent.link.codec import AIRCRAFT, CounterStore, LinkCodec
+        from agent.link.session import LinkSession
+        from drivers.xbee.driver import XBeeRadio
+
+        peer = bytes.fromhex(cfg.peer)
+        key = load_key(self.base / cfg.key_file)
+        codec = LinkCodec(
+            key,
+            AIRCRAFT,
+            {peer},
+            counter=CounterStore(self.base / cfg.counter_file),
+            seen=self.base / cfg.seen_file,
+        )
+        self.radio = XBeeRadio(
+            cfg.port, cfg.baud, self.clock, lambda s, p, t: self.session.receive(s, p, t)
+        )
+        await self.radio.open()
+        codec.max_payload = self.radio.max_payload
+        self.session = LinkSession(
+            codec,
+            self.radio,
+            peer,
+            self.clock,
+            self._on_ground,
+            heartbeat_s=cfg.heartbeat_s,
+            deadline_s=cfg.deadline_s,
+        )
+
+    # -- events -----------------------------------------------------------------------------
+
+    def _downlink(self, message: messages._Message, reliable: bool = True) -> None:
+        if self.session is not None:
+            (self.session.send_reliable if reliable else self.session.send_status)(message)
+
+    def _on_scheduler(self, item: Event | Window) -> None:
+        self.recorder.mark(item)
+        if isinstance(item, Event) and item.kind != "progress":
+            self._downlink(
+                messages.ExcitationEvent(
+                    event=item.kind, plan_id=item.plan_id, time=item.time, detail=item.detail
+                )
+            )
+
+    def _on_autopilot_link(self, up: bool, reason: str) -> None:
+        if not up:
+            self.scheduler.abort(f"autopilot link lost: {reason}")
+
+    def _on_window_logged(self, window: Window, rows: np.ndarray) -> None:
+        """The recorder has the window and its margin: log it and queue its identification."""
+        self.logbook.excitation(window, rows, batch=self.ident.batch)
+        if window.outcome != "finished":
+            self._downlink(
+                messages.Notice(text=f"{window.plan_id} aborted ({window.reason}): not identified")
+            )
+            return
+        try:
+            self._jobs.put_nowait((window, rows))
+        except asyncio.QueueFull:
+            self.counters["jobs_dropped"] += 1
+            self._downlink(messages.Notice(text="identification queue full: window dropped"))
+
+    def _on_ground(self, message: messages._Message, seq: int | None) -> None:
+        ok, reason = True, ""
+        try:
+            if isinstance(message, messages.Arm):
+                self.scheduler.arm(message.plan)
+            elif isinstance(message, messages.Start):
+                reason = self.scheduler.request_start()
+                ok = not reason
+            elif isinstance(message, messages.Abort):
+                self.scheduler.abort(message.reason)
+            elif isinstance(message, messages.IdentSettings):
+                self.ident = message
+            elif isinstance(message, messages.Decision):
+                if message.accept:
+                    accepted = self.models.accept(message.model_id)
+                    if self.models.previous(accepted.axes) is not None:
+                        self._self_check[accepted.axes] = accepted.model_id
+                else:
+                    self.models.reject(message.model_id)
+            elif isinstance(message, messages.Revert):
+                self.models.revert(self.ident.axes)
+        except (PlanRefused, KeyError, LookupError) as exc:
+            ok, reason = False, str(exc).strip("'")
+        if seq is not None:
+            self._downlink(messages.Ack(ref=seq, ok=ok, reason=reason))
+
+    # -- identification ---------------------------------------------------------------------
+
+    async def _job_loop(self, pool: ProcessPoolExecutor) -> None:
+        loop = asyncio.get_running_loop()
+        await loop.run_in_executor(pool, jobs.warm)  # the worker is up before the first window
+        while True:
+            window, rows = await self._jobs.get()
+            try:
+                await self._identify(loop, pool, window, rows)
+            except Exception as exc:  # a fault in one identification: a failure result, go on
+                log.exception("identification of %s failed", window.plan_id)
+                self._failed(f"{window.plan_id}", self.ident.axes, f"internal error: {exc!r}")
+
+    async def _identify(self, loop, pool, window: Window, rows: np.ndarray) -> None:
+        axes = self.ident.axes
+        inputs, outputs = self.config.identification.channels.axis_set(axes)
+        roles = AXIS_SETS[axes][1]
+        self._model_number += 1
+        model_id = f"{axes[:3]}-{self._model_number}"
+        columns = {c: rows[:, 1 + k] for k, c in enumerate(self.recorder.channels)}
+        dt = 1.0 / self.config.recorder.rate_hz
+        try:
+            experiment = jobs.window_experiment(
+                columns, inputs, outputs, dt, self.config.identification.trim_seconds
+            )
+        except (ValueError, KeyError) as exc:
+            return self._failed(model_id, axes, f"window unusable: {exc}")
+        batch = self._batch.setdefault(axes, []) if self.ident.batch else []
+        batch.append(experiment)
+        settings = _settings(self.config, self.ident)
+        job = jobs.Job(model_id, axes, dt, inputs, outputs, roles, tuple(batch), settings)
+        outcome = await loop.run_in_executor(pool, jobs.run, job)
+        if not outcome["ok"]:
+            return self._failed(model_id, axes, outcome["reason"])
+        candidate = Candidate(
+            model_id, axes, dt, outcome["result"], outcome["preprocessing"], job.experiments
+        )
+        nominal = self.models.nominal(axes)
+        tic_jn = tic_nj = None
+        if nominal is not None:
+            tic_jn = await loop.run_in_executor(
+                pool,
+                jobs.cross_tic,
+                candidate.result,
+                candidate.preprocessing,
+                dt,
+                nominal.experiments,
+            )
+            tic_nj = await loop.run_in_executor(
+                pool,
+                jobs.cross_tic,
+                nominal.result,
+                nominal.preprocessing,
+                dt,
+                candidate.experiments,
+            )
+            await self._check_new_nominal(axes, nominal, tic_nj, loop, pool, candidate)
+        suggestion = suggest(candidate, nominal, tic_jn, tic_nj)
+        self.models.candidates[model_id] = candidate
+        record = {
+            "model_id": model_id,
+            "axes": axes,
+            "window": [window.start, window.end],
+            "suggestion": suggestion.__dict__,
+            "result": outcome["result"],
+        }
+        self.results.append(record)
+        self.writer.write(self._results, (json.dumps(record) + "\n").encode())
+        self._downlink(_result_message(candidate, suggestion))
+
+    async def _check_new_nominal(self, axes, nominal, tic_nj, loop, pool, candidate) -> None:
+        """Requirement 6.3.1: a just-accepted nominal predicting this new excitation much worse
+        than the model it replaced is rolled back, and the ground is told."""
+        if self._self_check.pop(axes, None) != nominal.model_id:
+            return
+        previous = self.models.previous(axes)
+        tic_previous = await loop.run_in_executor(
+            pool,
+            jobs.cross_tic,
+            previous.result,
+            previous.preprocessing,
+            candidate.record_dt,
+            candidate.experiments,
+        )
+        if tic_nj > SELF_CHECK_RATIO * tic_previous:
+            self.models.revert(axes)
+            text = (
+                f"self-check: nominal {nominal.model_id} predicts the new data with TIC "
+                f"{tic_nj:.2f} against {tic_previous:.2f} for {previous.model_id}: reverted"
+            )
+            self._downlink(messages.Notice(text=text))
+
+    def _failed(self, model_id: str, axes: str, reason: str) -> None:
+        self.counters["identification_failures"] += 1
+        log.warning("identification %s failed: %s", model_id, reason)
+        self.results.append({"model_id": model_id, "axes": axes, "failure": reason})
+        self.writer.write(self._results, (json.dumps(self.results[-1]) + "\n").encode())
+        self._downlink(messages.Failure(model_id=model_id, axes=axes, reason=reason[:300]))
+
+    # -- status -----------------------------------------------------------------------------
+
+    async def _status_loop(self) -> None:
+        while True:
+            await asyncio.sleep(STATUS_S)
+            t = self.autopilot.telemetry
+            att, hud, aoa = t.get("ATTITUDE", {}), t.get("VFR_HUD", {}), t.get("AOA_SSA", {})
+            sensors = {}
+            for driver in self.drivers:
+                h = driver.health()
+                sensors[driver.name] = {
+                    "state": h.state,
+                    "rate_hz": h.rate_hz,
+                    "gaps": h.gaps,
+                    "crc_errors": h.crc_errors,
+                    "age_s": h.last_sample_age,
+                }
+            self._downlink(
+                messages.Status(
+                    time=self.clock.now(),
+                    flight_mode=self.autopilot.flight_mode,
+                    airspeed=hud.get("airspeed"),
+                    altitude=hud.get("alt"),
+                    alpha=aoa.get("AOA"),
+                    beta=aoa.get("SSA"),
+                    roll=att.get("roll"),
+                    pitch=att.get("pitch"),
+                    yaw=att.get("yaw"),
+                    excitation=self.scheduler.status,
+                    recorder={k: float(v) for k, v in self.recorder.counters.items()},
+                    sensors=sensors,
+                ),
+                reliable=False,
+            )
+
+
+def _settings(config: Config, ident: messages.IdentSettings) -> Settings:
+    from agent.analysis.identify import settings_from
+
+    markov = None if ident.markov == "auto" else ident.markov
+    order = None if ident.order == "auto" else ident.order
+    settings = settings_from(config.identification, markov, order)
+    # The surface pots sample continuously moving surfaces: not held inputs.
+    return Settings(**{**settings.__dict__, "held_inputs": False})
+
+
+def _result_message(c: Candidate, s) -> messages.Result:
+    r = c.result
+    modes = []
+    for m in r["modes"]:
+        re, im = m["eigenvalue"]
+        modes.append(
+            messages.ModeReport(
+                name=m["name"],
+                real=re,
+                imag=im,
+                frequency_hz=m["frequency_rad_s"] / (2 * np.pi),
+                damping=m["damping"],
+                time_constant_s=m["time_constant_s"],
+                msv=m["msv"],
+                mci=m["mci"],
+                moi=m["moi"],
+                emac=m["emac"],
+                mpc=m["mpc"],
+                cmi=m["cmi"],
+            )
+        )
+    return messages.Result(
+        model_id=c.model_id,
+        axes=c.axes,
+        dt=r["dt"],
+        inputs=r["inputs"],
+        outputs=r["outputs"],
+        modes=modes,
+        tic=[float(r["tic"][o]) for o in r["outputs"]],
+        tic_avg=r["tic_avg"],
+        stable=r["stable"],
+        suggest_update=s.update,
+        reasons=s.steps,
+        tic_jn=s.tic_jn,
+        tic_nn=s.tic_nn,
+        tic_nj=s.tic_nj,
+        A=r["A"],
+        B=r["B"],
+        C=r["C"],
+        D=r["D"],
+    )
+
+
+async def serve(config: Config, config_text: str, base: Path) -> None:
+    """`sysid agent`: run until SIGINT/SIGTERM, then abort any run and shut down cleanly."""
+    agent = Agent(config, base=base, config_text=config_text)
+    task = asyncio.create_task(agent.run(), name="agent")
+    loop = asyncio.get_running_loop()
+
+    def stop() -> None:
+        agent.scheduler.abort("agent shutting down")
+        task.cancel()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop)
+    with contextlib.suppress(asyncio.CancelledError):
+        await task

@@ -1,0 +1,336 @@
+"""`sysid sim`: a whole flight with no hardware — the simulated aircraft (JSBSim, emulated
+ArduPlane, sensor ptys), emulated radios, the real agent, and a scripted ground operator who
+arms a preset, has the pilot flip the switch, receives the result over the radio link and
+decides on it."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import secrets
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from agent.clock import LoopClock
+from agent.config import (
+    AirDataPort,
+    Autopilot,
+    Config,
+    Identification,
+    Link,
+    Recorder,
+    Sensors,
+    SurfacePort,
+    VectorNav,
+)
+from agent.excitation.plan import preset
+from agent.link import messages
+from agent.link.codec import GROUND, CounterStore, LinkCodec
+from agent.link.session import LinkSession
+from agent.runtime import Agent
+from agent.sim.aircraft import AircraftOptions, SimAircraft
+from agent.sim.ardupilot import Params
+from agent.sim.radio import EmulatedXBee, RfChannel
+from drivers.xbee.driver import XBeeRadio
+
+AIR = bytes.fromhex("0013A20041000001")
+GROUND_ADDR = bytes.fromhex("0013A20041000002")
+# Deadlines of the scripted operator (s): connection, an acknowledgement, a result after the
+# plan ends (recorder margin + identification + radio).
+CONNECT_S, ACK_S, RESULT_S = 30.0, 10.0, 90.0
+
+
+class SimError(RuntimeError):
+    """The simulated flight did not get where it should (the message says where)."""
+
+
+@dataclass
+class SimOptions:
+    aircraft: str = "J3Cub"
+    speed_kts: float = 60.0
+    turbulence: float = 0.0
+    seed: int = 0
+    preset: str = "full"
+    runs: int = 1
+    directory: Path | None = None
+    progress: object = None  # callable(str) for progress lines
+
+
+@dataclass
+class Ground:
+    """The scripted operator's end of the link."""
+
+    session: LinkSession
+    radio: XBeeRadio
+    inbox: list = field(default_factory=list)
+    acks: dict = field(default_factory=dict)
+
+    def on_message(self, message, seq) -> None:
+        if isinstance(message, messages.Ack):
+            self.acks[message.ref] = message
+        else:
+            self.inbox.append(message)
+
+    async def command(self, message) -> messages.Ack:
+        seq = self.session.send_reliable(message)
+        if not await _until(lambda: seq in self.acks, ACK_S):
+            raise SimError(f"no acknowledgement of {message.kind} in {ACK_S:g} s")
+        return self.acks[seq]
+
+
+async def _until(predicate, timeout: float) -> bool:
+    loop = asyncio.get_running_loop()
+    end = loop.time() + timeout
+    while not predicate():
+        if loop.time() > end:
+            return False
+        await asyncio.sleep(0.05)
+    return True
+
+
+def _config(tmp: Path, ports: Path, mavlink: tuple[str, int], axes: str) -> Config:
+    return Config(
+        identification=Identification(axes=axes),
+        sensors=Sensors(
+            vn200=VectorNav(port=str(ports / "vn200")),
+            airdata=AirDataPort(port=str(ports / "airdata")),
+            surfaces=SurfacePort(port=str(ports / "surfaces")),
+        ),
+        autopilot=Autopilot(url=f"udpout://{mavlink[0]}:{mavlink[1]}"),
+        link=Link(
+            port=str(ports / "xbee-air"),
+            peer=GROUND_ADDR.hex(),
+            key_file=str(tmp / "link.key"),
+            counter_file=str(tmp / "air.counter"),
+            seen_file=str(tmp / "air.seen"),
+        ),
+        recorder=Recorder(log_dir=str(tmp / "logs")),
+    )
+
+
+async def fly(options: SimOptions) -> dict:
+    """Fly the scripted session; returns what `sysid sim` prints."""
+    say = options.progress or (lambda text: None)
+    with contextlib.ExitStack() as stack:
+        tmp = options.directory or Path(stack.enter_context(tempfile.TemporaryDirectory()))
+        return await _fly(options, Path(tmp), say)
+
+
+async def _fly(options: SimOptions, tmp: Path, say) -> dict:
+    clock = LoopClock()
+    ports = tmp / "ports"
+    ports.mkdir(parents=True, exist_ok=True)
+    key = secrets.token_bytes(32)
+    (tmp / "link.key").write_text(key.hex())
+    aircraft = SimAircraft(
+        AircraftOptions(
+            aircraft=options.aircraft,
+            speed_kts=options.speed_kts,
+            turbulence=options.turbulence,
+            seed=options.seed,
+            params=Params(switch_channel=7),
+        ),
+        clock,
+        ports,
+    )
+    channel = RfChannel()
+    air = EmulatedXBee("xbee-air", AIR, ports, channel, clock)
+    ground_module = EmulatedXBee("xbee-ground", GROUND_ADDR, ports, channel, clock)
+    air.join(ground_module)
+    ground_module.join(air)
+    tasks = [
+        asyncio.create_task(aircraft.run(), name="sim-aircraft"),
+        asyncio.create_task(air.run(), name="xbee-air"),
+        asyncio.create_task(ground_module.run(), name="xbee-ground"),
+    ]
+    ground = None
+    try:
+        if not await _until(
+            lambda: (
+                aircraft.mavlink_address is not None
+                and air.port.plugged
+                and ground_module.port.plugged
+            ),
+            CONNECT_S,
+        ):
+            raise SimError("the simulated aircraft did not start")
+        axes = preset(options.preset).axes
+        agent = Agent(_config(tmp, ports, aircraft.mavlink_address, axes), base=tmp, clock=clock)
+        tasks.append(asyncio.create_task(agent.run(), name="agent"))
+        ground = await _ground(ground_module, key, clock, tasks)
+        say(f"simulated {options.aircraft} at {options.speed_kts:g} kt; agent up; link up")
+        if not await _until(
+            lambda: agent.autopilot.connected and ground.session.link_up, CONNECT_S
+        ):
+            raise SimError("the agent did not connect to the autopilot and the ground in time")
+        await asyncio.sleep(1.0)  # trimmed flight before the first excitation
+        outcomes = []
+        for run in range(options.runs):
+            outcomes.append(await _one_run(options, aircraft, ground, run, say))
+        return _report(options, aircraft, agent, outcomes)
+    finally:
+        # The agent and the ground stop first (their radios close while the emulated modules
+        # still exist), then the radios and the aircraft.
+        inner = [t for t in tasks if t.get_name() in ("agent", "ground-session")]
+        for task in inner:
+            task.cancel()
+        await asyncio.gather(*inner, return_exceptions=True)
+        if ground is not None:
+            await ground.radio.close()
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+
+
+async def _ground(module: EmulatedXBee, key: bytes, clock, tasks) -> Ground:
+    holder: list[Ground] = []
+    radio = XBeeRadio(
+        str(module.path), 115200, clock, lambda s, p, t: holder[0].session.receive(s, p, t)
+    )
+    await radio.open()
+    codec = LinkCodec(key, GROUND, {AIR}, counter=CounterStore(), max_payload=radio.max_payload)
+    ground = Ground(None, radio)  # type: ignore[arg-type]
+    ground.session = LinkSession(codec, radio, AIR, clock, ground.on_message)
+    holder.append(ground)
+    tasks.append(asyncio.create_task(ground.session.run(), name="ground-session"))
+    return ground
+
+
+async def _one_run(options: SimOptions, aircraft: SimAircraft, ground: Ground, run: int, say):
+    plan = preset(options.preset, plan_id=f"{options.preset}-{run + 1}")
+    ack = await ground.command(messages.IdentSettings(axes=plan.axes))
+    ack = await ground.command(messages.Arm(plan=plan))
+    if not ack.ok:
+        raise SimError(f"the agent refused the plan: {ack.reason}")
+    say(f"run {run + 1}: {plan.id} armed; the pilot flips the switch")
+    seen = len(ground.inbox)
+    aircraft.pilot.set_switch(True)
+
+    def answered() -> bool:
+        return any(isinstance(m, messages.Result | messages.Failure) for m in ground.inbox[seen:])
+
+    if not await _until(answered, 60.0 + RESULT_S):
+        raise SimError(f"no identification result for {plan.id}")
+    aircraft.pilot.set_switch(False)
+    answer = next(
+        m for m in ground.inbox[seen:] if isinstance(m, messages.Result | messages.Failure)
+    )
+    events = [m.event for m in ground.inbox[seen:] if isinstance(m, messages.ExcitationEvent)]
+    if isinstance(answer, messages.Failure):
+        say(f"run {run + 1}: identification failed: {answer.reason}")
+        return {"plan": plan.id, "events": events, "failure": answer.reason}
+    decision = "accept" if answer.suggest_update else "reject"
+    ack = await ground.command(
+        messages.Decision(model_id=answer.model_id, accept=answer.suggest_update)
+    )
+    say(
+        f"run {run + 1}: result {answer.model_id} received; operator: {decision} "
+        f"({'ok' if ack.ok else ack.reason})"
+    )
+    return {"plan": plan.id, "events": events, "result": answer, "decision": decision}
+
+
+def _truth(aircraft: SimAircraft, axes: str) -> dict[str, complex]:
+    lam = aircraft.plant.linearisation.eigenvalues(exclude=("Psi", "Latitude", "Longitude", "Alt"))
+    pairs = sorted((s for s in lam if s.imag > 1e-6), key=abs)
+    reals = sorted((s.real for s in lam if abs(s.imag) <= 1e-6), key=abs)
+    truth = {"Dutch roll": pairs[-1], "spiral": complex(reals[0]) if reals else None}
+    fast = sorted(r for r in reals if r < -1.0)
+    truth["roll"] = complex(fast[0]) if fast else None
+    if axes != "lateral":
+        truth["phugoid"] = pairs[0]
+        truth["short period"] = [complex(r) for r in fast[1:]]
+    return truth
+
+
+def _report(options: SimOptions, aircraft: SimAircraft, agent: Agent, outcomes: list) -> dict:
+    last = outcomes[-1]
+    result = last.get("result")
+    truth = _truth(aircraft, preset(options.preset).axes)
+    rows = []
+    if result is not None:
+        for mode in result.modes:
+            lam = complex(mode.real, mode.imag)
+            candidates = truth.get(mode.name or "")
+            candidates = candidates if isinstance(candidates, list) else [candidates]
+            candidates = [c for c in candidates if c is not None]
+            ref = min(candidates, key=lambda c: abs(c - lam), default=None)
+            rows.append(
+                {
+                    "name": mode.name,
+                    "eigenvalue": [lam.real, lam.imag],
+                    "frequency_rad_s": abs(lam),
+                    "damping": mode.damping,
+                    "emac": mode.emac,
+                    "msv": mode.msv,
+                    "truth": None if ref is None else [ref.real, ref.imag],
+                    "error": None if ref is None else abs(lam - ref) / abs(ref),
+                }
+            )
+    truth_modes = {
+        k: (
+            [[c.real, c.imag] for c in v]
+            if isinstance(v, list)
+            else None
+            if v is None
+            else [v.real, v.imag]
+        )
+        for k, v in truth.items()
+    }
+    return {
+        "aircraft": options.aircraft,
+        "preset": options.preset,
+        "runs": len(outcomes),
+        "events": last["events"],
+        "modes": rows,
+        "truth_modes": truth_modes,
+        "tic_avg": None if result is None else result.tic_avg,
+        "suggestion": None
+        if result is None
+        else {
+            "update": result.suggest_update,
+            "steps": result.reasons,
+            "tic_jn": result.tic_jn,
+            "tic_nn": result.tic_nn,
+            "tic_nj": result.tic_nj,
+        },
+        "decision": last.get("decision"),
+        "failure": last.get("failure"),
+        "history": [
+            {
+                "plan": o["plan"],
+                "decision": o.get("decision"),
+                "model_id": o["result"].model_id if "result" in o else None,
+            }
+            for o in outcomes
+        ],
+        "recorder": dict(agent.recorder.counters),
+        "sensor_gaps": {d.name: d.health().gaps for d in agent.drivers},
+        "worker_identifications": len(agent.results),
+    }
+
+
+def format_report(report: dict) -> str:
+    lines = [f"{report['aircraft']} · preset {report['preset']} · {report['runs']} run(s)"]
+    if report["failure"]:
+        return "\n".join([*lines, f"identification failed: {report['failure']}"])
+    lines.append(f"{'mode':<14}{'identified':>22}{'JSBSim':>22}{'error':>8}{'EMAC %':>8}")
+    for row in report["modes"]:
+        lam = complex(*row["eigenvalue"])
+        ref = "" if row["truth"] is None else f"{complex(*row['truth']):.3f}"
+        err = "" if row["error"] is None else f"{100 * row['error']:.1f}%"
+        emac = "" if row["emac"] is None else f"{row['emac']:.0f}"
+        lines.append(f"{row['name'] or '-':<14}{lam:>22.3f}{ref:>22}{err:>8}{emac:>8}")
+    s = report["suggestion"]
+    lines.append(f"TIC_avg {report['tic_avg']:.3f}; update suggested: {s['update']}")
+    lines += [f"  {step}" for step in s["steps"]]
+    lines.append(f"operator: {report['decision']}")
+    return "\n".join(lines)
+
+
+def modes_within(report: dict, tolerance: float) -> bool:
+    errors = [r["error"] for r in report["modes"] if r["error"] is not None]
+    return bool(errors) and all(e <= tolerance for e in errors) and not np.isnan(errors).any()
