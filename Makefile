@@ -1,4 +1,5 @@
 # Two commands do everything on a fresh machine (Python ≥ 3.11 with venv, and make):
+#   make sim    set up .venv, fly the hardware-free simulation end to end (`sysid sim`)
 #   make demo   set up .venv, identify the bundled example flight record, print the modes
 #   make test   set up .venv, lint, run the test suite
 PYTHON ?= python3
@@ -11,7 +12,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 BENCH_STAMP := $(VENV)/.installed-bench
 
-.PHONY: demo test bench bench-jsbsim bench-link examples clean
+.PHONY: sim demo test bench bench-jsbsim bench-link examples clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -23,6 +24,9 @@ $(STAMP): pyproject.toml
 $(BENCH_STAMP): $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[test,bench]'
 	touch $(BENCH_STAMP)
+
+sim: $(STAMP)
+	$(BIN)/sysid sim
 
 demo: $(STAMP)
 	$(BIN)/sysid identify examples/a2_lateral.csv --axes lateral

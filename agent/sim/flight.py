@@ -67,6 +67,7 @@ class Ground:
     radio: XBeeRadio
     inbox: list = field(default_factory=list)
     acks: dict = field(default_factory=dict)
+    accepted: bool = False
 
     def on_message(self, message, seq) -> None:
         if isinstance(message, messages.Ack):
@@ -222,15 +223,25 @@ async def _one_run(options: SimOptions, aircraft: SimAircraft, ground: Ground, r
     if isinstance(answer, messages.Failure):
         say(f"run {run + 1}: identification failed: {answer.reason}")
         return {"plan": plan.id, "events": events, "failure": answer.reason}
-    decision = "accept" if answer.suggest_update else "reject"
-    ack = await ground.command(
-        messages.Decision(model_id=answer.model_id, accept=answer.suggest_update)
-    )
+    accept = _operator_accepts(answer, first=not ground.accepted)
+    decision = "accept" if accept else "reject"
+    ack = await ground.command(messages.Decision(model_id=answer.model_id, accept=accept))
+    ground.accepted |= accept and ack.ok
     say(
         f"run {run + 1}: result {answer.model_id} received; operator: {decision} "
         f"({'ok' if ack.ok else ack.reason})"
     )
     return {"plan": plan.id, "events": events, "result": answer, "decision": decision}
+
+
+def _operator_accepts(result: messages.Result, first: bool) -> bool:
+    """The scripted operator: follows the suggestion; with no nominal model yet, accepts a
+    stable candidate that fits its own data (TIC_jj < 0.3) as the first nominal, even if the
+    quality step flagged a mode — a human establishing a baseline would."""
+    if result.suggest_update:
+        return True
+    basics = [r for r in result.reasons if r.startswith(("1 ", "3 "))]
+    return first and all("UNSTABLE" not in r and "≥" not in r for r in basics)
 
 
 def _truth(aircraft: SimAircraft, axes: str) -> dict[str, complex]:

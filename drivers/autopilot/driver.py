@@ -21,6 +21,10 @@ from collections import Counter, deque
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 
+from mavsdk import LogLevel, log_subscribe
+from mavsdk.asyncio import Configuration, Mavsdk
+from mavsdk.plugins.mavlink_direct import MavlinkDirect, MavlinkMessage
+
 from agent.clock import Clock
 from agent.config import Autopilot as AutopilotConfig
 from agent.excitation.scheduler import FlightState
@@ -130,9 +134,6 @@ class AutopilotLink:
 
     async def run(self) -> None:
         """Connect and serve until cancelled."""
-        from mavsdk import LogLevel, log_subscribe
-        from mavsdk.asyncio import Configuration, Mavsdk
-        from mavsdk.plugins.mavlink_direct import MavlinkDirect
 
         def mavsdk_log(level: LogLevel, message: str, _file, _line) -> bool:
             self.mavsdk_log.append(f"{level.name}: {message}")  # deque.append: thread-safe
@@ -171,7 +172,6 @@ class AutopilotLink:
             executor.shutdown(wait=False, cancel_futures=True)
 
     async def _set_rates(self, loop, executor) -> None:
-        from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
         cfg = self._cfg
         rates = {
@@ -271,7 +271,6 @@ class AutopilotLink:
         self.counters["releases"] += 1
 
     def _send_override(self, values: Mapping[int, int]) -> None:
-        from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
         if self._direct is None or not self.connected:
             raise AutopilotError(f"no autopilot link ({self.status})")

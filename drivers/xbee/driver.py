@@ -4,8 +4,9 @@
 Why digi-xbee and not our own frame codec on the port: it is the vendor's maintained library
 (API modes, AT parameters, the module zoo), and the design card names it. Its pitfalls
 (PROTOCOLS.md) are handled here: `open()` and AT reads block, so they run on a worker thread;
-the blocking `send_data` can stall 4 s, so frames go out with `send_packet(sync=False)` and
-our own frame ids, and each 0x8B Transmit Status resolves the matching send; callbacks arrive
+the blocking `send_data` can stall 4 s, so frames go out with `send_packet(sync=False)` (on a
+writer thread: the UART write itself blocks) and our own frame ids, and each 0x8B Transmit
+Status resolves the matching send; callbacks arrive
 on digi-xbee's thread pool in any order, so they cross into the loop in exactly one place
 (`loop.call_soon_threadsafe`), with a bound on how many may wait (drops counted), and the link
 layer above carries its own sequence numbers.
@@ -21,6 +22,12 @@ from collections import Counter
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+
+from digi.xbee.devices import DigiMeshDevice
+from digi.xbee.exception import XBeeException
+from digi.xbee.models.address import XBee16BitAddress, XBee64BitAddress
+from digi.xbee.packets.aft import ApiFrameType
+from digi.xbee.packets.common import TransmitPacket
 
 from agent.clock import Clock
 
@@ -64,6 +71,7 @@ class XBeeRadio:
         self._device = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="xbee-open")
+        self._writer = ThreadPoolExecutor(1, thread_name_prefix="xbee-tx")
         self._pending: dict[int, asyncio.Future] = {}
         self._next_id = 0
         self._inbox = 0
@@ -84,8 +92,6 @@ class XBeeRadio:
             ) from exc
 
     def _open_blocking(self) -> None:
-        from digi.xbee.devices import DigiMeshDevice
-        from digi.xbee.exception import XBeeException
 
         device = DigiMeshDevice(self.port, self.baud)
         try:
@@ -105,6 +111,7 @@ class XBeeRadio:
             await self._loop.run_in_executor(self._executor, device.close)
         for future in self._pending.values():
             future.cancel()
+        self._writer.shutdown(wait=True)
         self._executor.shutdown(wait=True)
 
     # -- the seam: digi-xbee's threads → the loop -----------------------------------------
@@ -119,7 +126,6 @@ class XBeeRadio:
             self._loop.call_soon_threadsafe(self._dispatch, packet)
 
     def _dispatch(self, packet) -> None:
-        from digi.xbee.packets.aft import ApiFrameType
 
         with self._lock:
             self._inbox -= 1
@@ -138,8 +144,6 @@ class XBeeRadio:
 
     async def send(self, destination: bytes, payload: bytes) -> SendResult:
         """Transmit one frame and wait for its Transmit Status (or STATUS_TIMEOUT_S)."""
-        from digi.xbee.models.address import XBee16BitAddress, XBee64BitAddress
-        from digi.xbee.packets.common import TransmitPacket
 
         device = self._device
         if device is None:
@@ -154,7 +158,9 @@ class XBeeRadio:
                                 XBee16BitAddress.UNKNOWN_ADDRESS, 0, 0, payload,
                                 op_mode=device.operating_mode)  # fmt: skip
         try:
-            device.send_packet(packet, sync=False)
+            # The write blocks until the UART has taken the frame (23 ms for 260 bytes at
+            # 115200 baud): never on the loop.
+            await self._loop.run_in_executor(self._writer, device.send_packet, packet, False)
             self.counters["sent"] += 1
             async with asyncio.timeout(STATUS_TIMEOUT_S):  # not wait_for: see session.run
                 result = await future

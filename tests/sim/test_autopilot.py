@@ -164,5 +164,7 @@ async def test_a_run_aborts_when_the_autopilot_link_is_lost(tmp_path):
         while not windows and clock.now() - killed < 3.0:
             await asyncio.sleep(0.01)
     assert windows[0].outcome == "aborted"
-    assert windows[0].end - killed < 0.4 + 0.05 + 0.1
+    # Link timeout + watchdog period, plus the trim and release attempts and the scheduling
+    # slack of a loaded test process.
+    assert windows[0].end - killed < 0.4 + 0.05 + 0.5
     assert "autopilot link" in windows[0].reason or "no autopilot link" in windows[0].reason
