@@ -143,6 +143,7 @@ class Agent:
                     "recorder": self.recorder.run,
                     "scheduler": self.scheduler.run,
                     "status": self._status_loop,
+                    "periodic": self._periodic_loop,
                     "identification": lambda: self._job_loop(pool),
                 }
                 if self.session is not None:
@@ -261,6 +262,29 @@ class Agent:
             ok, reason = False, str(exc).strip("'")
         if seq is not None:
             self._downlink(messages.Ack(ref=seq, ok=ok, reason=reason))
+
+    async def _periodic_loop(self) -> None:
+        """Thesis B.2 4.1: identify every update period set from the ground, on the data
+        recorded over that period (nothing when no period is set)."""
+        while True:
+            period = self.ident.update_period_s
+            await asyncio.sleep(period or STATUS_S)
+            if period:
+                self.periodic_window(self.clock.now(), period)
+
+    def periodic_window(self, now: float, period: float) -> bool:
+        """Queue the last `period` seconds of frames for identification; False if dropped."""
+        end = now - self.config.recorder.delay_s
+        rows = self.recorder.ring.between(end - period, end)
+        if len(rows) < 2:
+            return False
+        window = Window(f"periodic@{end:.0f}", self.ident.axes, end - period, end, "finished")
+        try:
+            self._jobs.put_nowait((window, rows))
+        except asyncio.QueueFull:
+            self.counters["jobs_dropped"] += 1
+            return False
+        return True
 
     # -- identification ---------------------------------------------------------------------
 

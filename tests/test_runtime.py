@@ -1,0 +1,65 @@
+"""The agent's own logic, without the hardware: ground commands answered with acks, and the
+identification every update period set from the ground.
+
+Bad input tried: a plan beyond the envelope, a decision on a model that does not exist, a
+revert with no previous nominal, an operator start with the switch low.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agent.clock import VirtualClock
+from agent.config import Config, Recorder
+from agent.excitation.plan import Doublet, Plan, Segment, preset
+from agent.link import messages
+from agent.runtime import Agent
+
+
+@pytest.fixture
+def agent(tmp_path):
+    config = Config(recorder=Recorder(log_dir=str(tmp_path / "logs"), capacity_s=60.0))
+    a = Agent(config, base=tmp_path, clock=VirtualClock(100.0))
+    sent = []
+    a._downlink = lambda message, reliable=True: sent.append(message)
+    a.sent = sent
+    yield a
+    a.writer.close()
+
+
+def test_ground_commands_are_acknowledged_with_the_reason(agent):
+    agent._on_ground(messages.Arm(plan=preset("lateral")), 1)
+    big = Plan(id="big", axes="lateral", segments=(Segment(signals={"aileron": Doublet(
+        pulse_s=1.0, amplitude=20.0)}),))  # fmt: skip
+    agent._on_ground(messages.Arm(plan=big), 2)
+    agent._on_ground(messages.Start(), 3)
+    agent._on_ground(messages.Decision(model_id="nope", accept=True), 4)
+    agent._on_ground(messages.Revert(), 5)
+    agent._on_ground(messages.IdentSettings(axes="full", update_period_s=20.0), 6)
+    acks = {m.ref: m for m in agent.sent if isinstance(m, messages.Ack)}
+    assert acks[1].ok
+    assert not acks[2].ok
+    assert "max_amplitude" in acks[2].reason
+    assert not acks[3].ok
+    assert "switch" in acks[3].reason
+    assert not acks[4].ok
+    assert "nope" in acks[4].reason
+    assert not acks[5].ok
+    assert "no previous" in acks[5].reason
+    assert acks[6].ok
+    assert agent.ident.axes == "full"
+
+
+def test_every_update_period_queues_the_latest_data(agent):
+    n = len(agent.recorder.channels)
+    for k in range(3000):  # 30 s of frames at 100 Hz
+        row = np.zeros(1 + 2 * n)
+        row[0] = 100.0 + k * 0.01
+        agent.recorder.ring.append(row)
+    assert agent.periodic_window(130.0, 20.0)
+    window, rows = agent._jobs.get_nowait()
+    assert window.end - window.start == pytest.approx(20.0)
+    assert rows[0, 0] >= window.start
+    assert rows[-1, 0] <= window.end
+    assert len(rows) == pytest.approx(2000, abs=2)
