@@ -107,7 +107,9 @@ class Recorder:
         sink: Callable[[np.ndarray], None] | None = None,
         on_excitation: Callable[[object, np.ndarray], None] | None = None,
     ):
-        self._config, self._clock, self._sink = config, clock, sink
+        self._config, self._clock = config, clock
+        self.sink = sink
+        """Receives every frame (the flight log); may be set after construction."""
         self._on_excitation = on_excitation
         self._pending: deque = deque(maxlen=MARKS)
         self.channels = list(channels or config.channels or SENSOR_CHANNELS)
@@ -179,8 +181,8 @@ class Recorder:
                 row = self.frame(start + i * self._dt)
                 self.ring.append(row)
                 self.counters["frames"] += 1
-                if self._sink is not None:
-                    self._sink(row)
+                if self.sink is not None:
+                    self.sink(row)
                 i += 1
             self._flush_excitations(start + (i - 1) * self._dt)
 

@@ -80,7 +80,7 @@ class Agent:
             units_of(self.recorder.columns, SENSOR_CHANNELS),
             config_hash(config_text),
         )
-        self.recorder._sink = self.logbook.row
+        self.recorder.sink = self.logbook.row
         # The result log: one JSON object per identification (thesis 2.2.1).
         self._results = self.writer.open(
             log_name(next_number(self.writer.directory), "results", "jsonl")

@@ -28,7 +28,7 @@ async def _record(tmp_path, seconds: float, during=None):
     recorder = Recorder(RecorderConfig(), rig.clock)
     book = Logbook(writer, recorder.columns, units_of(recorder.columns, SENSOR_CHANNELS),
                    config_hash("test"))  # fmt: skip
-    recorder._sink = book.row
+    recorder.sink = book.row
     try:
         await rig.start(sink=recorder.push)
         task = asyncio.create_task(recorder.run(), name="recorder")

@@ -2,7 +2,9 @@
 identification every update period set from the ground.
 
 Bad input tried: a plan beyond the envelope, a decision on a model that does not exist, a
-revert with no previous nominal, an operator start with the switch low.
+revert with no previous nominal, an operator start with the switch low, and an excitation
+window whose surface data are missing for a second (identification fails with the reason, the
+agent goes on).
 """
 
 from __future__ import annotations
@@ -63,3 +65,19 @@ def test_every_update_period_queues_the_latest_data(agent):
     assert rows[0, 0] >= window.start
     assert rows[-1, 0] <= window.end
     assert len(rows) == pytest.approx(2000, abs=2)
+
+
+async def test_an_unusable_window_gives_a_failure_result_and_the_agent_goes_on(agent):
+    from agent.excitation.scheduler import Window
+
+    n = len(agent.recorder.channels)
+    rows = np.zeros((1500, 1 + 2 * n))
+    rows[:, 0] = 100.0 + np.arange(1500) * 0.01
+    aileron = 1 + agent.recorder.channels.index("aileron")
+    rows[600:700, aileron] = np.nan  # the surface box was silent for 1 s mid-window
+    await agent._identify(None, None, Window("lat", "lateral", 100.0, 115.0, "finished"), rows)
+    failures = [m for m in agent.sent if isinstance(m, messages.Failure)]
+    assert len(failures) == 1
+    assert "1.00 s gap" in failures[0].reason
+    assert agent.counters["identification_failures"] == 1
+    assert agent.results[-1]["failure"] == failures[0].reason
