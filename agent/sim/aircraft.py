@@ -82,7 +82,12 @@ class SimAircraft:
         sticks = {ch: normalised_to_pwm(ch, self.plant.trim[name]) for ch, name in OUTPUTS.items()}
         self.pilot = ScriptedPilot(sticks, options.params.switch_channel)
         self.autopilot = EmulatedArduPlane(
-            options.params, self.pilot, dt=1.0 / TICK_HZ, trim=self.plant.trim, gcs=options.gcs
+            options.params,
+            self.pilot,
+            dt=1.0 / TICK_HZ,
+            trim=self.plant.trim,
+            gcs=options.gcs,
+            clock=clock.now,
         )
         self.truth = self.plant.state()
         self.ports = {

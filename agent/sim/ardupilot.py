@@ -46,6 +46,8 @@ DEFAULT_INTERVAL = {
     mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 0.25,
     mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 0.25,
 }
+# Entries kept in the wire log (about a minute of overrides at 50 Hz).
+WIRE_LOG = 4096
 # Output channel → JSBSim control (ArduPlane's default RCMAP / SERVOn_FUNCTION).
 OUTPUTS = {1: "aileron", 2: "elevator", 3: "throttle", 4: "rudder"}
 
@@ -105,8 +107,10 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
         dt: float,
         trim: dict[str, float],
         gcs: tuple[str, int] | None = None,
+        clock: Callable[[], float] | None = None,
     ):
         self.params, self._pilot, self._dt = params, pilot, dt
+        self._clock = clock or (lambda: self._now)
         self.mav = mavlink.MAVLink(None, srcSystem=params.sysid, srcComponent=1)
         self.mav.robust_parsing = True
         self._transport: asyncio.DatagramTransport | None = None
@@ -118,6 +122,11 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
         self._now = 0.0
         self._boot = None
         self.counters: Counter[str] = Counter()
+        self.link_up = True
+        """False: the MAVLink link is cut both ways (a cable or telemetry radio lost)."""
+        self.wire: deque[tuple[float, str, object]] = deque(maxlen=WIRE_LOG)
+        """What crossed the wire, stamped by the clock: ("override", {channel: value},
+        accepted) received, ("switch", pwm) sent in RC_CHANNELS — for the safety tests."""
         start = {ch: trim.get(name, 0.0) for ch, name in OUTPUTS.items()}
         self.servos = {ch: ServoModel(params.servo_delay_s, params.servo_rate,
                                       params.servo_travel, dt, start[ch])
@@ -130,6 +139,9 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
         self._transport = transport  # type: ignore[assignment]
 
     def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+        if not self.link_up:
+            self.counters["cut_in"] += 1
+            return
         self.peers.add(addr)
         try:
             messages = self.mav.parse_buffer(data) or []
@@ -148,10 +160,15 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
         if m.get_srcSystem() != p.sysid_mygcs or m.target_system != p.sysid:
             self.counters["overrides_wrong_sysid"] += 1
             return
+        values = {ch: getattr(m, f"chan{ch}_raw") for ch in range(1, CHANNELS + 1)}
+        values = {ch: v for ch, v in values.items()
+                  if v != IGNORE and not (ch > 8 and v == RELEASE_LOW)}  # fmt: skip
         if p.switch_option_46 and self._pilot(self._now)[p.switch_channel - 1] < p.switch_high_us:
             self.counters["overrides_switch_low"] += 1
+            self.wire.append((self._clock(), "override", values, False))
             return
         self.counters["overrides"] += 1
+        self.wire.append((self._clock(), "override", values, True))
         for ch in range(1, CHANNELS + 1):
             value = getattr(m, f"chan{ch}_raw")
             if ch == p.switch_channel:
@@ -242,6 +259,7 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
         if msg_id == mavlink.MAVLINK_MSG_ID_AOA_SSA:
             return m.aoa_ssa_encode(boot_ms * 1000, np.degrees(s["alpha"]), np.degrees(s["beta"]))
         if msg_id == mavlink.MAVLINK_MSG_ID_RC_CHANNELS:
+            self.wire.append((self._clock(), "switch", rc[self.params.switch_channel - 1]))
             return m.rc_channels_encode(boot_ms, CHANNELS, *rc, 255)
         if msg_id == mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW:
             servos = [self.outputs.get(ch, 0) for ch in range(1, 17)]
@@ -256,6 +274,9 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
 
     def _send(self, message, peers=None) -> None:
         if self._transport is None or self._transport.is_closing():
+            return
+        if not self.link_up:
+            self.counters["cut_out"] += 1
             return
         data = message.pack(self.mav)
         for peer in peers or self.peers:

@@ -112,15 +112,45 @@ def _config(tmp: Path, ports: Path, mavlink: tuple[str, int], axes: str) -> Conf
     )
 
 
+@dataclass
+class SimFlight:
+    """A simulated flight in progress: every part, for the scripted operator and for the
+    fault tests that cut, unplug or silence one of them."""
+
+    options: SimOptions
+    directory: Path
+    clock: LoopClock
+    aircraft: SimAircraft
+    channel: RfChannel
+    air_module: EmulatedXBee
+    ground_module: EmulatedXBee
+    agent: Agent
+    ground: Ground
+
+
 async def fly(options: SimOptions) -> dict:
     """Fly the scripted session; returns what `sysid sim` prints."""
     say = options.progress or (lambda text: None)
+    async with simulated(options) as sim:
+        outcomes = []
+        for run in range(options.runs):
+            outcomes.append(await _one_run(options, sim.aircraft, sim.ground, run, say))
+        return _report(options, sim.aircraft, sim.agent, outcomes)
+
+
+@contextlib.asynccontextmanager
+async def simulated(options: SimOptions, params: Params | None = None):
+    """The aircraft, radios, agent and ground, connected and in trimmed flight; torn down in
+    order on exit. `params`: the emulated ArduPlane's (default: switch on channel 7)."""
+    say = options.progress or (lambda text: None)
     with contextlib.ExitStack() as stack:
         tmp = options.directory or Path(stack.enter_context(tempfile.TemporaryDirectory()))
-        return await _fly(options, Path(tmp), say)
+        async with _parts(options, Path(tmp), params or Params(switch_channel=7), say) as sim:
+            yield sim
 
 
-async def _fly(options: SimOptions, tmp: Path, say) -> dict:
+@contextlib.asynccontextmanager
+async def _parts(options: SimOptions, tmp: Path, params: Params, say):
     clock = LoopClock()
     ports = tmp / "ports"
     ports.mkdir(parents=True, exist_ok=True)
@@ -132,7 +162,7 @@ async def _fly(options: SimOptions, tmp: Path, say) -> dict:
             speed_kts=options.speed_kts,
             turbulence=options.turbulence,
             seed=options.seed,
-            params=Params(switch_channel=7),
+            params=params,
         ),
         clock,
         ports,
@@ -168,10 +198,7 @@ async def _fly(options: SimOptions, tmp: Path, say) -> dict:
         ):
             raise SimError("the agent did not connect to the autopilot and the ground in time")
         await asyncio.sleep(1.0)  # trimmed flight before the first excitation
-        outcomes = []
-        for run in range(options.runs):
-            outcomes.append(await _one_run(options, aircraft, ground, run, say))
-        return _report(options, aircraft, agent, outcomes)
+        yield SimFlight(options, tmp, clock, aircraft, channel, air, ground_module, agent, ground)
     finally:
         # The agent and the ground stop first (their radios close while the emulated modules
         # still exist), then the radios and the aircraft.

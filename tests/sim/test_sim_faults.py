@@ -1,0 +1,211 @@
+"""Faults during a `sysid sim` flight: the whole chain (JSBSim aircraft, emulated ArduPlane on
+MAVLink, sensor ptys, emulated radios, the real agent with its worker process, the scripted
+ground) with one part made to fail mid-flight.
+
+- the pilot drops the excitation switch mid-run → trim on the MAVLink wire within one command
+  period of the switch report, then the override is released;
+- the autopilot link is cut (both directions) mid-run → the run aborts, the ground is told, the
+  agent reconnects when the link returns and accepts a new plan;
+- a sensor's port disappears and comes back in trimmed flight, and the radio is out while the
+  next run is identified → the driver reconnects, the gap is logged, the result reaches the
+  ground after the outage;
+- an identification fails (a Markov parameter count the record cannot support) → a failure
+  result with the reason, and the agent goes on to identify the next run.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import re
+
+import numpy as np
+import pytest
+
+from agent.excitation.plan import preset
+from agent.link import messages
+from agent.logs import read_log
+from agent.sim.ardupilot import RELEASE_LOW, Params
+from agent.sim.flight import SimFlight, SimOptions, simulated
+from drivers.autopilot.driver import RELEASE_REPEATS
+
+pytestmark = [pytest.mark.usefixtures("no_leaked_tasks"), pytest.mark.timeout(180)]
+
+# A message sent on the loopback reaches the other side in well under this (s): MAVSDK's
+# receive thread, the hand-over to the loop, the UDP hop.
+DELIVERY_S = 0.010
+
+
+async def until(predicate, timeout: float, what: str):
+    loop = asyncio.get_running_loop()
+    end = loop.time() + timeout
+    while not (found := predicate()):
+        assert loop.time() < end, f"timed out waiting for {what}"
+        await asyncio.sleep(0.02)
+    return found
+
+
+def received(sim: SimFlight, kind, since: int = 0, **fields) -> list:
+    return [
+        m
+        for m in sim.ground.inbox[since:]
+        if isinstance(m, kind) and all(getattr(m, k) == v for k, v in fields.items())
+    ]
+
+
+async def start_run(sim: SimFlight, plan_id: str, axes: str = "lateral") -> int:
+    """Arm a preset, flip the switch, wait for the start; the inbox index before it."""
+    seen = len(sim.ground.inbox)
+    ack = await sim.ground.command(messages.Arm(plan=preset(axes, plan_id=plan_id)))
+    assert ack.ok, ack.reason
+    sim.aircraft.pilot.set_switch(True)
+    await until(
+        lambda: received(sim, messages.ExcitationEvent, seen, event="started"), 10, "the start"
+    )
+    return seen
+
+
+async def answer(sim: SimFlight, since: int, timeout: float = 90.0):
+    def found():
+        return received(sim, messages.Result, since) or received(sim, messages.Failure, since)
+
+    return (await until(found, timeout, "an identification answer"))[0]
+
+
+async def test_switch_dropped_mid_run_trims_within_one_period_then_releases(tmp_path):
+    # ArduPilot's own kill (RCx_OPTION 46 ignoring overrides when the switch is low) is off,
+    # so what the aircraft does after the drop is the agent's doing alone.
+    params = Params(switch_channel=7, switch_option_46=False)
+    async with simulated(SimOptions(preset="lateral", directory=tmp_path), params) as sim:
+        ap, period = sim.aircraft.autopilot, 1.0 / sim.agent.config.excitation.rate_hz
+        seen = await start_run(sim, "drop")
+        started = received(sim, messages.ExcitationEvent, seen, event="started")[0]
+        await asyncio.sleep(1.2)  # inside the aileron doublet
+        dropped = sim.clock.now()
+        sim.aircraft.pilot.set_switch(False)
+        aborted = await until(
+            lambda: received(sim, messages.ExcitationEvent, seen, event="aborted"), 5, "abort"
+        )
+        await asyncio.sleep(0.5)  # anything the agent still sends after the release
+        wire = list(ap.wire)
+        overrides_held = dict(ap._overrides)
+        rc, pilot = ap.rc_inputs(sim.clock.now()), sim.aircraft.pilot(sim.clock.now())
+
+    assert "switch" in aborted[0].detail
+    trim = {
+        {"aileron": 1, "rudder": 4}[name]: int(us)
+        for name, us in re.findall(r"(\w+) (\d+) µs", started.detail)
+    }
+    assert set(trim) == {1, 4}
+    # The first report of the low switch to go out on the wire after the drop.
+    reported = next(t for t, kind, *rest in wire if kind == "switch" and t >= dropped
+                    and rest[0] < 1500)  # fmt: skip
+    after = [(t, values) for t, kind, values, accepted in
+             (e for e in wire if e[1] == "override") if t >= reported]  # fmt: skip
+    trims = [k for k, (_, values) in enumerate(after) if values == trim]
+    assert trims, f"no trim override after the switch report: {after[:5]}"
+    first_trim = trims[0]
+    # At most one excitation command was already on its way when the report arrived.
+    assert first_trim <= 1, after[: first_trim + 1]
+    latency = after[first_trim][0] - reported
+    assert latency <= period + DELIVERY_S, f"trim {1000 * latency:.1f} ms after the report"
+    # Then the release of exactly the excited channels (sent RELEASE_REPEATS times, as a
+    # datagram can be lost), and nothing more.
+    rest = [values for _, values in after[first_trim + 1 :]]
+    assert rest == [{1: RELEASE_LOW, 4: RELEASE_LOW}] * RELEASE_REPEATS
+    assert overrides_held == {}
+    assert rc == pilot  # the pilot's sticks drive every channel again
+
+
+async def test_autopilot_link_lost_mid_run_aborts_and_recovers(tmp_path):
+    async with simulated(SimOptions(preset="lateral", directory=tmp_path)) as sim:
+        ap, agent = sim.aircraft.autopilot, sim.agent
+        seen = await start_run(sim, "cut")
+        await asyncio.sleep(1.0)
+        cut = sim.clock.now()
+        ap.link_up = False  # both directions, as a broken cable
+        aborted = await until(
+            lambda: received(sim, messages.ExcitationEvent, seen, event="aborted"), 5, "abort"
+        )
+        # Whichever notices first names it: the scheduler's staleness check on the switch
+        # reports, or the link watchdog (both at link_timeout_s = 0.5 s).
+        detail = aborted[0].detail
+        assert "autopilot link lost" in detail or "stale RC switch data" in detail, detail
+        await until(lambda: not agent.autopilot.connected, 2, "the watchdog's report")
+        # Told within the link timeout, the watchdog's look and one command period.
+        cfg = agent.config
+        assert aborted[0].time - cut <= cfg.autopilot.link_timeout_s + 0.25
+        await until(lambda: received(sim, messages.Notice, seen), 5, "the not-identified notice")
+        assert "not identified" in received(sim, messages.Notice, seen)[0].text
+        assert agent.scheduler.status == "idle"
+        # The overrides the ArduPlane still held lapse after RC_OVERRIDE_TIME: the pilot's.
+        await until(lambda: ap.counters["override_timeouts"] > 0, 5, "override timeout")
+        sim.aircraft.pilot.set_switch(False)
+        frames_cut = agent.recorder.counters["frames"]
+        ap.link_up = True
+        await until(lambda: agent.autopilot.connected, 15, "the autopilot link back")
+        # Recording never depended on the autopilot link.
+        assert agent.recorder.counters["frames"] > frames_cut
+        ack = await sim.ground.command(messages.Arm(plan=preset("lateral", plan_id="again")))
+        assert ack.ok, ack.reason
+    assert ap.counters["cut_in"] > 0  # the agent kept trying while the link was down
+
+
+async def test_sensor_replugged_and_result_delivered_after_radio_outage(tmp_path):
+    async with simulated(SimOptions(preset="lateral", directory=tmp_path)) as sim:
+        agent, port = sim.agent, sim.aircraft.ports["airdata"]
+        airdata = next(d for d in agent.drivers if d.name == "airdata")
+        opens = airdata.link.stats.opens
+        port.unplug()  # the µADC's USB cable out for 1.5 s in trimmed flight
+        await asyncio.sleep(1.5)
+        port.plug()
+        await until(lambda: airdata.link.stats.opens > opens, 10, "the µADC reopened")
+        await until(lambda: airdata.health().rate_hz > 90, 5, "the µADC streaming")
+        gaps = airdata.health().gaps
+        assert gaps >= 1
+        assert airdata.link.stats.disconnects >= 1
+
+        seen = await start_run(sim, "outage")
+        await until(
+            lambda: received(sim, messages.ExcitationEvent, seen, event="finished"), 30, "end"
+        )
+        sim.channel.outage = True  # the radio is out while the worker identifies
+        await until(lambda: agent.results, 60, "the identification")
+        await asyncio.sleep(2.0)
+        assert not received(sim, messages.Result, seen)  # nothing got through
+        sim.channel.outage = False
+        restored = sim.clock.now()
+        result = await answer(sim, seen)
+        assert isinstance(result, messages.Result), result
+        assert result.model_id == agent.results[-1]["model_id"]
+        delivered = sim.clock.now()
+        retransmissions = agent.session.counters["retransmissions"]
+    assert delivered >= restored
+    assert retransmissions > 0
+    # The airdata gap is in the flight log as missing values, not as invented ones.
+    columns, rows = read_log(next((tmp_path / "logs").glob("*_flight_*")))
+    beta = rows[:, columns.index("beta")]
+    assert np.isnan(beta).sum() >= 50  # 1.5 s without the µADC at 100 Hz (less the hold)
+    assert np.isfinite(beta[-100:]).all()
+
+
+async def test_identification_failure_is_reported_and_the_next_run_identified(tmp_path):
+    async with simulated(SimOptions(preset="lateral", directory=tmp_path)) as sim:
+        ack = await sim.ground.command(messages.IdentSettings(axes="lateral", markov=5000))
+        assert ack.ok
+        seen = await start_run(sim, "bad-settings")
+        failure = await answer(sim, seen)
+        assert isinstance(failure, messages.Failure), failure
+        assert "too few for 5000 Markov parameters" in failure.reason  # from the worker
+        assert sim.agent.counters["identification_failures"] == 1
+        sim.aircraft.pilot.set_switch(False)
+        await asyncio.sleep(0.5)
+        assert all(d.health().state == "open" for d in sim.agent.drivers)  # still flying
+
+        await sim.ground.command(messages.IdentSettings(axes="lateral"))
+        seen = await start_run(sim, "good-settings")
+        result = await answer(sim, seen)
+        assert isinstance(result, messages.Result), result
+        assert sim.agent.counters["identification_failures"] == 1
+    results = (next((tmp_path / "logs").glob("*_results_*"))).read_text().splitlines()
+    assert '"failure"' in results[0]
+    assert '"failure"' not in results[1]
