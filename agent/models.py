@@ -15,10 +15,14 @@ TIC_NN + TIC_Nj (nominal on the candidate's data).
 from __future__ import annotations
 
 import json
+import logging
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+log = logging.getLogger(__name__)
 
 TIC_LIMIT = 0.3
 # Step 1 accepts a slowly divergent mode: many airframes have a spiral that doubles in tens of
@@ -106,6 +110,11 @@ def suggest(
     return Suggestion(bool(ok and better and combined), steps, tic_jj, tic_jn, tic_nn, tic_nj)
 
 
+# Undecided candidates kept for a decision; older ones are dropped (a decision on one is refused
+# as unknown: the result log still has it).
+CANDIDATES_KEPT = 16
+
+
 class ModelStore:
     """Nominal and previous nominal per identification type, on disk."""
 
@@ -113,6 +122,14 @@ class ModelStore:
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
         self.candidates: dict[str, Candidate] = {}
+        self.damaged = 0
+        """Candidates awaiting the operator's decision, the latest CANDIDATES_KEPT (each
+        holds its data set; a long flight must not grow without bound)."""
+
+    def add(self, candidate: Candidate) -> None:
+        self.candidates[candidate.model_id] = candidate
+        while len(self.candidates) > CANDIDATES_KEPT:
+            del self.candidates[next(iter(self.candidates))]
 
     def nominal(self, axes: str) -> Candidate | None:
         return self._load(axes, "nominal")
@@ -173,15 +190,25 @@ class ModelStore:
         meta, data = self._paths(axes, slot)
         if not meta.exists():
             return None
-        m = json.loads(meta.read_text())
-        with np.load(data) as arrays:
-            experiments = tuple((arrays[f"u{k}"], arrays[f"y{k}"]) for k in range(m["count"]))
-        return Candidate(
-            m["model_id"],
-            m["axes"],
-            m["record_dt"],
-            m["result"],
-            m["preprocessing"],
-            experiments,
-            m["tic_nn"],
-        )
+        try:
+            m = json.loads(meta.read_text())
+            with np.load(data) as arrays:
+                experiments = tuple((arrays[f"u{k}"], arrays[f"y{k}"]) for k in range(m["count"]))
+            return Candidate(
+                m["model_id"],
+                m["axes"],
+                m["record_dt"],
+                m["result"],
+                m["preprocessing"],
+                experiments,
+                m["tic_nn"],
+            )
+        except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile) as exc:
+            # A damaged store must not stop identification: set the files aside (kept for
+            # the post-flight look), count it, and carry on as if there were no such model.
+            self.damaged += 1
+            for path in (meta, data):
+                if path.exists():
+                    path.replace(path.with_name(path.name + ".damaged"))
+            log.error("%s %s model unreadable (%s): set aside as *.damaged", axes, slot, exc)
+            return None

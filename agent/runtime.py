@@ -17,7 +17,11 @@ import gc
 import json
 import logging
 import multiprocessing
+import os
+import resource
 import signal
+import threading
+import time
 from collections import Counter, deque
 from collections.abc import Awaitable, Callable
 from concurrent.futures import ProcessPoolExecutor
@@ -54,8 +58,12 @@ JOB_QUEUE = 4
 STATUS_S = 1.0
 LAG_PERIOD_S = 0.01
 LAG_WARN_S = 0.1
-# Lag samples kept (10 min at 100 Hz) for the benchmark's percentiles.
+# Lag samples kept (10 min at 100 Hz).
 LAG_SAMPLES = 60_000
+# The health record in the execution log: this often (s).
+HEALTH_S = 60.0
+HEALTH_KEPT = 60
+RESULTS_KEPT = 100
 
 
 class Agent:
@@ -106,8 +114,13 @@ class Agent:
         self._model_number = 0
         self.session = None
         self.radio = None
-        self.results: list[dict] = []
+        # The latest results (all of them are in the result log).
+        self.results: deque[dict] = deque(maxlen=RESULTS_KEPT)
         self.lags: deque[float] = deque(maxlen=LAG_SAMPLES)
+        self._period_lags: list[tuple[float, bool]] = []  # since the last health record
+        self.identifying = False  # a window is in the worker (lag while identifying)
+        self._status_lag = 0.0  # the worst lag since the last status
+        self.health: list[dict] = []  # the health records written so far (latest last)
         self.drivers = self._drivers()
 
     def _drivers(self):
@@ -139,6 +152,7 @@ class Agent:
                     group.create_task(self._supervised(driver.name, driver.run), name=driver.name)
                 named = {
                     "lag": self._lag_monitor,
+                    "health": self._health_loop,
                     "autopilot": self.autopilot.run,
                     "recorder": self.recorder.run,
                     "scheduler": self.scheduler.run,
@@ -293,11 +307,14 @@ class Agent:
         await loop.run_in_executor(pool, jobs.warm)  # the worker is up before the first window
         while True:
             window, rows = await self._jobs.get()
+            self.identifying = True
             try:
                 await self._identify(loop, pool, window, rows)
             except Exception as exc:  # a fault in one identification: a failure result, go on
                 log.exception("identification of %s failed", window.plan_id)
                 self._failed(f"{window.plan_id}", self.ident.axes, f"internal error: {exc!r}")
+            finally:
+                self.identifying = False
 
     async def _identify(self, loop, pool, window: Window, rows: np.ndarray) -> None:
         axes = self.ident.axes
@@ -350,7 +367,7 @@ class Agent:
             )
             await self._check_new_nominal(axes, nominal, tic_nj, loop, pool, candidate)
         suggestion = suggest(candidate, nominal, tic_jn, tic_nj)
-        self.models.candidates[model_id] = candidate
+        self.models.add(candidate)
         record = {
             "model_id": model_id,
             "axes": axes,
@@ -359,6 +376,7 @@ class Agent:
             "result": outcome["result"],
         }
         self.results.append(record)
+        self.counters["identifications"] += 1
         self.writer.write(self._results, (json.dumps(record) + "\n").encode())
         self._downlink(_result_message(candidate, suggestion))
 
@@ -400,9 +418,49 @@ class Agent:
             await asyncio.sleep(LAG_PERIOD_S)
             lag = loop.time() - start - LAG_PERIOD_S
             self.lags.append(lag)
+            self._period_lags.append((lag, self.identifying))
+            self._status_lag = max(self._status_lag, lag)
             if lag > LAG_WARN_S:
                 self.counters["loop_stalls"] += 1
                 log.warning("event loop stalled for %.0f ms", lag * 1000)
+
+    async def _health_loop(self) -> None:
+        """Every HEALTH_S: one `health {json}` line in the execution log — loop lag
+        percentiles (all, and while identifying), CPU, memory, threads, tasks, open files,
+        counters — so a flight's (or a soak's) resource use can be read afterwards."""
+        wall, cpu = time.monotonic(), time.process_time()
+        while True:
+            await asyncio.sleep(HEALTH_S)
+            now_wall, now_cpu = time.monotonic(), time.process_time()
+            record = self.health_record(now_wall - wall, now_cpu - cpu)
+            wall, cpu = now_wall, now_cpu
+            self.health.append(record)
+            del self.health[:-HEALTH_KEPT]
+            log.info("health %s", json.dumps(record))
+
+    def health_record(self, wall_s: float, cpu_s: float) -> dict:
+        lags, self._period_lags = self._period_lags, []
+        every = np.array([lag for lag, _ in lags]) * 1000
+        busy = np.array([lag for lag, identifying in lags if identifying]) * 1000
+
+        def percentiles(ms: np.ndarray) -> dict:
+            if not len(ms):
+                return {"n": 0}
+            p50, p99 = np.percentile(ms, [50, 99])
+            return {"n": len(ms), "p50_ms": p50, "p99_ms": p99, "max_ms": float(ms.max())}
+
+        return {
+            "t": self.clock.now(),
+            "lag": percentiles(every),
+            "lag_identifying": percentiles(busy),
+            "cpu_percent": 100 * cpu_s / wall_s if wall_s > 0 else None,
+            "rss_mb": _rss_bytes() / 2**20,
+            "threads": threading.active_count(),
+            "tasks": len(asyncio.all_tasks()),
+            "open_files": _open_files(),
+            "counters": dict(self.counters),
+            "recorder": dict(self.recorder.counters),
+        }
 
     # -- status -----------------------------------------------------------------------------
 
@@ -410,6 +468,7 @@ class Agent:
         while True:
             await asyncio.sleep(STATUS_S)
             t = self.autopilot.telemetry
+            lag, self._status_lag = self._status_lag, 0.0
             att, hud, aoa = t.get("ATTITUDE", {}), t.get("VFR_HUD", {}), t.get("AOA_SSA", {})
             sensors = {}
             for driver in self.drivers:
@@ -433,11 +492,29 @@ class Agent:
                     pitch=att.get("pitch"),
                     yaw=att.get("yaw"),
                     excitation=self.scheduler.status,
+                    identifying=self.identifying,
+                    loop_lag_ms=round(lag * 1000, 2),
                     recorder={k: float(v) for k, v in self.recorder.counters.items()},
                     sensors=sensors,
                 ),
                 reliable=False,
             )
+
+
+def _rss_bytes() -> int:
+    """Resident memory now (Linux /proc); elsewhere the peak, from getrusage."""
+    try:
+        pages = int(Path("/proc/self/statm").read_text().split()[1])
+        return pages * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+
+def _open_files() -> int | None:
+    try:
+        return len(os.listdir("/proc/self/fd"))
+    except OSError:
+        return None
 
 
 def _settings(config: Config, ident: messages.IdentSettings) -> Settings:

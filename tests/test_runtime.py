@@ -81,3 +81,21 @@ async def test_an_unusable_window_gives_a_failure_result_and_the_agent_goes_on(a
     assert "1.00 s gap" in failures[0].reason
     assert agent.counters["identification_failures"] == 1
     assert agent.results[-1]["failure"] == failures[0].reason
+
+
+async def test_health_record_separates_the_lag_while_identifying(agent):
+    # What the lag monitor collected over a period: 10 ms of lag once, while identifying.
+    agent._period_lags = [(0.0001, False)] * 99 + [(0.010, True), (0.0002, True)]
+    record = agent.health_record(wall_s=60.0, cpu_s=6.0)
+    assert record["lag"]["n"] == 101
+    assert record["lag"]["max_ms"] == pytest.approx(10.0)
+    assert record["lag"]["p50_ms"] == pytest.approx(0.1)
+    assert record["lag_identifying"]["n"] == 2
+    assert record["lag_identifying"]["p50_ms"] == pytest.approx(5.1)
+    assert record["cpu_percent"] == pytest.approx(10.0)
+    assert record["rss_mb"] > 10
+    assert record["threads"] >= 1
+    # The period starts afresh; an empty period is reported as such, not as zeros.
+    empty = agent.health_record(wall_s=60.0, cpu_s=0.0)
+    assert empty["lag"] == {"n": 0}
+    assert empty["lag_identifying"] == {"n": 0}

@@ -95,6 +95,9 @@ class Status(_Message):
     pitch: float | None = None
     yaw: float | None = None
     excitation: str = "idle"
+    identifying: bool = False
+    loop_lag_ms: float | None = None
+    """The agent's worst event-loop lag since the last status."""
     recorder: dict[str, float] = Field(default_factory=dict)
     sensors: dict[str, dict[str, float | str | None]] = Field(default_factory=dict)
 

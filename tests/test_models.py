@@ -1,0 +1,121 @@
+"""The model store and the thesis's update suggestion (section 5.3, figure 5.2).
+
+Bad input tried: a decision on a model that does not exist, a revert with no previous nominal,
+a nominal model file truncated mid-write and one whose data file is missing (set aside, the
+agent carries on as with no nominal), more undecided candidates than are kept.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agent.models import CANDIDATES_KEPT, Candidate, ModelStore, suggest
+
+
+def candidate(model_id: str, *, tic: float = 0.1, modes=None, record_s: float = 20.0):
+    modes = modes or [
+        {"name": "Dutch roll", "eigenvalue": [-0.8, 3.0], "emac": 95.0},
+        {"name": "roll", "eigenvalue": [-9.0, 0.0], "emac": 90.0},
+        {"name": "spiral", "eigenvalue": [0.004, 0.0], "emac": 20.0},
+    ]
+    stable = all(m["eigenvalue"][0] < 0 for m in modes)
+    rng = np.random.default_rng(len(model_id))
+    data = ((rng.normal(size=(100, 2)), rng.normal(size=(100, 4))),)
+    result = {"tic_avg": tic, "stable": stable, "modes": modes}
+    return Candidate(model_id, "lateral", 0.02, result, {"decimate": 1}, data,
+                     extra={"record_s": record_s})  # fmt: skip
+
+
+def test_first_candidate_steps_and_the_slow_spiral_is_not_judged():
+    s = suggest(candidate("a"), None, None, None)
+    assert s.update
+    assert s.steps[0].startswith("1 stability: slowly divergent")  # spiral +0.004 1/s
+    assert "['spiral'] slower than the record, not judged" in s.steps[1]
+    assert s.steps[2] == "3 TIC_jj 0.100 < 0.3"
+    assert s.steps[3] == "4–7 no nominal model yet"
+
+
+@pytest.mark.parametrize(
+    ("change", "step", "text"),
+    [
+        ({"modes": [{"name": "roll", "eigenvalue": [0.2, 0.0], "emac": 90.0}]}, 0, "UNSTABLE"),
+        ({"modes": [{"name": "roll", "eigenvalue": [-9.0, 0.0], "emac": 30.0}]}, 1, "weak"),
+        ({"tic": 0.45}, 2, "≥ 0.3"),
+    ],
+)
+def test_each_failing_step_says_no(change, step, text):
+    s = suggest(candidate("a", **change), None, None, None)
+    assert not s.update
+    assert text in s.steps[step]
+
+
+def test_against_a_nominal_the_tic_comparison_decides():
+    nominal, new = candidate("n", tic=0.2), candidate("c", tic=0.1)
+    nominal.tic_nn = 0.2
+    better = suggest(new, nominal, tic_jn=0.15, tic_nj=0.3)
+    assert better.update
+    assert "no worse" in better.steps[3]
+    assert "better" in better.steps[4]
+    worse = suggest(new, nominal, tic_jn=0.25, tic_nj=0.3)  # worse on the nominal's data
+    assert not worse.update
+    assert "WORSE" in worse.steps[3]
+    combined = suggest(new, nominal, tic_jn=0.2, tic_nj=0.05)  # 0.1 + 0.2 vs 0.2 + 0.05
+    assert not combined.update
+    assert "NOT better" in combined.steps[4]
+
+
+def test_accept_persist_revert_and_reject(tmp_path):
+    store = ModelStore(tmp_path)
+    for c in (candidate("a"), candidate("b"), candidate("c")):
+        store.add(c)
+    store.accept("a")
+    store.accept("b")
+    store.reject("c")
+    assert store.candidates == {}
+    # A restart: the nominal and the previous come back from disk with their data.
+    again = ModelStore(tmp_path)
+    assert again.nominal("lateral").model_id == "b"
+    assert again.previous("lateral").model_id == "a"
+    np.testing.assert_array_equal(
+        again.nominal("lateral").experiments[0][1], candidate("b").experiments[0][1]
+    )
+    assert again.nominal("lateral").tic_nn == pytest.approx(0.1)
+    assert again.revert("lateral").model_id == "a"
+    assert again.nominal("lateral").model_id == "a"
+    assert again.previous("lateral").model_id == "b"
+    assert again.nominal("longitudinal") is None
+    with pytest.raises(KeyError):
+        again.accept("nope")
+    with pytest.raises(LookupError, match="no previous longitudinal"):
+        again.revert("longitudinal")
+
+
+def test_only_the_latest_candidates_are_kept(tmp_path):
+    store = ModelStore(tmp_path)
+    for k in range(CANDIDATES_KEPT + 5):
+        store.add(candidate(f"m{k}"))
+    assert len(store.candidates) == CANDIDATES_KEPT
+    assert "m0" not in store.candidates
+    assert f"m{CANDIDATES_KEPT + 4}" in store.candidates
+    with pytest.raises(KeyError):
+        store.accept("m0")
+
+
+@pytest.mark.parametrize("damage", ["truncated json", "missing data"])
+def test_a_damaged_nominal_is_set_aside(tmp_path, damage):
+    store = ModelStore(tmp_path)
+    store.add(candidate("a"))
+    store.accept("a")
+    if damage == "truncated json":
+        meta = tmp_path / "lateral_nominal.json"
+        meta.write_text(meta.read_text()[:40])
+    else:
+        (tmp_path / "lateral_nominal.npz").unlink()
+    assert store.nominal("lateral") is None
+    assert store.damaged == 1
+    assert (tmp_path / "lateral_nominal.json.damaged").exists()
+    assert not (tmp_path / "lateral_nominal.json").exists()
+    store.add(candidate("b"))
+    assert store.accept("b").model_id == "b"  # the store works on
+    assert store.nominal("lateral").model_id == "b"
