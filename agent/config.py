@@ -510,8 +510,9 @@ class ConfigError(Exception):
         super().__init__(f"{path}: invalid configuration\n{lines}")
 
 
-def load_config(path: str | Path) -> Config:
-    """Read and validate a TOML configuration file; raise ConfigError saying what is wrong."""
+def load_config(path: str | Path, model: type[BaseModel] = Config):
+    """Read and validate a TOML configuration file (the agent's `Config`, or another section
+    model such as the ground console's); raise ConfigError saying what is wrong."""
     path = Path(path)
     try:
         raw = tomllib.loads(path.read_text(encoding="utf-8"))
@@ -522,7 +523,7 @@ def load_config(path: str | Path) -> Config:
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(path, [("(syntax)", str(exc))]) from exc
     try:
-        return Config.model_validate(raw)
+        return model.model_validate(raw)
     except ValidationError as exc:
         problems = [
             (".".join(str(part) for part in err["loc"]) or "(top level)", err["msg"])

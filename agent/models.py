@@ -123,6 +123,7 @@ class ModelStore:
         self.directory.mkdir(parents=True, exist_ok=True)
         self.candidates: dict[str, Candidate] = {}
         self.damaged = 0
+        self._ids: dict[str, str | None] = {}
         """Candidates awaiting the operator's decision, the latest CANDIDATES_KEPT (each
         holds its data set; a long flight must not grow without bound)."""
 
@@ -133,6 +134,16 @@ class ModelStore:
 
     def nominal(self, axes: str) -> Candidate | None:
         return self._load(axes, "nominal")
+
+    def nominal_id(self, axes: str) -> str | None:
+        """The nominal model's id, without loading its data (cached; for the status)."""
+        if axes not in self._ids:
+            meta, _ = self._paths(axes, "nominal")
+            try:
+                self._ids[axes] = json.loads(meta.read_text())["model_id"]
+            except (OSError, ValueError, KeyError, TypeError):
+                self._ids[axes] = None
+        return self._ids[axes]
 
     def previous(self, axes: str) -> Candidate | None:
         return self._load(axes, "previous")
@@ -165,6 +176,8 @@ class ModelStore:
         return base.with_suffix(".json"), base.with_suffix(".npz")
 
     def _save(self, c: Candidate, slot: str) -> None:
+        if slot == "nominal":
+            self._ids[c.axes] = c.model_id
         meta, data = self._paths(c.axes, slot)
         arrays = {f"u{k}": u for k, (u, _) in enumerate(c.experiments)}
         arrays |= {f"y{k}": y for k, (_, y) in enumerate(c.experiments)}
@@ -207,6 +220,7 @@ class ModelStore:
             # A damaged store must not stop identification: set the files aside (kept for
             # the post-flight look), count it, and carry on as if there were no such model.
             self.damaged += 1
+            self._ids.pop(axes, None)
             for path in (meta, data):
                 if path.exists():
                     path.replace(path.with_name(path.name + ".damaged"))

@@ -24,7 +24,7 @@ import threading
 import time
 from collections import Counter, deque
 from collections.abc import Awaitable, Callable
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -55,9 +55,12 @@ log = logging.getLogger(__name__)
 RESTART_S, RESTART_MAX_S = 0.5, 10.0
 # Identification jobs waiting (more are dropped and counted: the operator can re-fly).
 JOB_QUEUE = 4
+# Ground commands waiting to be handled (more are refused as busy).
+COMMAND_QUEUE = 16
 STATUS_S = 1.0
 LAG_PERIOD_S = 0.01
 LAG_WARN_S = 0.1
+GC_WARN_S = 0.02
 # Lag samples kept (10 min at 100 Hz).
 LAG_SAMPLES = 60_000
 # The health record in the execution log: this often (s).
@@ -109,6 +112,10 @@ class Agent:
         self.models = ModelStore(self.base / "models")
         self.ident = messages.IdentSettings(axes=config.identification.axes)
         self._jobs: asyncio.Queue = asyncio.Queue(JOB_QUEUE)
+        self._commands: asyncio.Queue = asyncio.Queue(COMMAND_QUEUE)
+        # The model store's files are read and written on this one thread, in order: a save
+        # (rename) can wait on the disk for a long time, and the loop must not.
+        self._store = ThreadPoolExecutor(1, thread_name_prefix="model-store")
         self._batch: dict[str, list] = {}
         self._self_check: dict[str, str] = {}
         self._model_number = 0
@@ -120,6 +127,7 @@ class Agent:
         self._period_lags: list[tuple[float, bool]] = []  # since the last health record
         self.identifying = False  # a window is in the worker (lag while identifying)
         self._status_lag = 0.0  # the worst lag since the last status
+        self._gc_start: float | None = None
         self.health: list[dict] = []  # the health records written so far (latest last)
         self.drivers = self._drivers()
 
@@ -136,10 +144,15 @@ class Agent:
     # -- running ----------------------------------------------------------------------------
 
     async def run(self) -> None:
+        slow_ms = os.environ.get("SYSID_SLOW_CALLBACK_MS")
+        if slow_ms:  # diagnosis of loop stalls: asyncio names every callback slower than this
+            loop = asyncio.get_running_loop()
+            loop.set_debug(True)
+            loop.slow_callback_duration = float(slow_ms) / 1000
         handler = self.logbook.handler(self.clock)
         logging.getLogger().addHandler(handler)
         context = multiprocessing.get_context("spawn")  # no fork of a threaded process
-        pool = ProcessPoolExecutor(1, mp_context=context, initializer=jobs.warm)
+        pool = ProcessPoolExecutor(1, mp_context=context, initializer=jobs.start_worker)
         try:
             await self._open_link()
             # Everything built so far lives as long as the agent: moved out of the collector's
@@ -159,6 +172,7 @@ class Agent:
                     "status": self._status_loop,
                     "periodic": self._periodic_loop,
                     "identification": lambda: self._job_loop(pool),
+                    "commands": self._command_loop,
                 }
                 if self.session is not None:
                     named["link"] = self.session.run
@@ -170,6 +184,7 @@ class Agent:
         finally:
             logging.getLogger().removeHandler(handler)
             pool.shutdown(wait=True, cancel_futures=True)
+            self._store.shutdown(wait=True)
             if self.radio is not None:
                 await self.radio.close()
             self.writer.close()
@@ -252,10 +267,33 @@ class Agent:
             self._downlink(messages.Notice(text="identification queue full: window dropped"))
 
     def _on_ground(self, message: messages._Message, seq: int | None) -> None:
+        """A command from the ground. An abort acts at once; the others are handled in order
+        by the command task, which keeps rendering and model-store files off the loop."""
+        if isinstance(message, messages.Abort):
+            self.scheduler.abort(message.reason)
+            if seq is not None:
+                self._downlink(messages.Ack(ref=seq, ok=True))
+            return
+        try:
+            self._commands.put_nowait((message, seq))
+        except asyncio.QueueFull:
+            self.counters["commands_dropped"] += 1
+            if seq is not None:
+                reason = "busy: too many commands waiting; send it again"
+                self._downlink(messages.Ack(ref=seq, ok=False, reason=reason))
+
+    async def _command_loop(self) -> None:
+        while True:
+            message, seq = await self._commands.get()
+            await self.handle(message, seq)
+
+    async def handle(self, message: messages._Message, seq: int | None) -> None:
+        """Carry out one ground command and acknowledge it (or say why not)."""
         ok, reason = True, ""
+        loop = asyncio.get_running_loop()
         try:
             if isinstance(message, messages.Arm):
-                self.scheduler.arm(message.plan)
+                await self.scheduler.arm_checked(message.plan)
             elif isinstance(message, messages.Start):
                 reason = self.scheduler.request_start()
                 ok = not reason
@@ -264,18 +302,22 @@ class Agent:
             elif isinstance(message, messages.IdentSettings):
                 self.ident = message
             elif isinstance(message, messages.Decision):
-                if message.accept:
-                    accepted = self.models.accept(message.model_id)
-                    if self.models.previous(accepted.axes) is not None:
-                        self._self_check[accepted.axes] = accepted.model_id
-                else:
-                    self.models.reject(message.model_id)
+                await loop.run_in_executor(self._store, self._decide, message)
             elif isinstance(message, messages.Revert):
-                self.models.revert(self.ident.axes)
+                await loop.run_in_executor(self._store, self.models.revert, self.ident.axes)
         except (PlanRefused, KeyError, LookupError) as exc:
             ok, reason = False, str(exc).strip("'")
         if seq is not None:
             self._downlink(messages.Ack(ref=seq, ok=ok, reason=reason))
+
+    def _decide(self, decision: messages.Decision) -> None:
+        """On the model-store thread."""
+        if not decision.accept:
+            self.models.reject(decision.model_id)
+            return
+        accepted = self.models.accept(decision.model_id)
+        if self.models.previous(accepted.axes) is not None:
+            self._self_check[accepted.axes] = accepted.model_id
 
     async def _periodic_loop(self) -> None:
         """Thesis B.2 4.1: identify every update period set from the ground, on the data
@@ -346,7 +388,7 @@ class Agent:
             job.experiments,
             extra={"record_s": len(experiment[0]) * dt},
         )
-        nominal = self.models.nominal(axes)
+        nominal = await loop.run_in_executor(self._store, self.models.nominal, axes)
         tic_jn = tic_nj = None
         if nominal is not None:
             tic_jn = await loop.run_in_executor(
@@ -367,7 +409,7 @@ class Agent:
             )
             await self._check_new_nominal(axes, nominal, tic_nj, loop, pool, candidate)
         suggestion = suggest(candidate, nominal, tic_jn, tic_nj)
-        self.models.add(candidate)
+        await loop.run_in_executor(self._store, self.models.add, candidate)
         record = {
             "model_id": model_id,
             "axes": axes,
@@ -385,7 +427,7 @@ class Agent:
         than the model it replaced is rolled back, and the ground is told."""
         if self._self_check.pop(axes, None) != nominal.model_id:
             return
-        previous = self.models.previous(axes)
+        previous = await loop.run_in_executor(self._store, self.models.previous, axes)
         tic_previous = await loop.run_in_executor(
             pool,
             jobs.cross_tic,
@@ -395,7 +437,7 @@ class Agent:
             candidate.experiments,
         )
         if tic_nj > SELF_CHECK_RATIO * tic_previous:
-            self.models.revert(axes)
+            await loop.run_in_executor(self._store, self.models.revert, axes)
             text = (
                 f"self-check: nominal {nominal.model_id} predicts the new data with TIC "
                 f"{tic_nj:.2f} against {tic_previous:.2f} for {previous.model_id}: reverted"
@@ -409,10 +451,31 @@ class Agent:
         self.writer.write(self._results, (json.dumps(self.results[-1]) + "\n").encode())
         self._downlink(messages.Failure(model_id=model_id, axes=axes, reason=reason[:300]))
 
+    def _on_gc(self, phase: str, info: dict) -> None:
+        """Times the collector's full (generation 2) passes: a stall's likeliest cause."""
+        if info.get("generation") != 2:
+            return
+        if phase == "start":
+            self._gc_start = time.perf_counter()
+        elif self._gc_start is not None:
+            took = time.perf_counter() - self._gc_start
+            self._gc_start = None
+            self.counters["gc_full"] += 1
+            if took > GC_WARN_S:
+                self.counters["gc_slow"] += 1
+                log.warning("full garbage collection took %.0f ms", took * 1000)
+
     async def _lag_monitor(self) -> None:
         """Event-loop lag: how late a 10 ms sleep wakes (kept for the benchmark; > 100 ms is
         logged, as it starves the 50–100 Hz command and recording deadlines)."""
         loop = asyncio.get_running_loop()
+        gc.callbacks.append(self._on_gc)
+        try:
+            await self._lag_loop(loop)
+        finally:
+            gc.callbacks.remove(self._on_gc)
+
+    async def _lag_loop(self, loop) -> None:
         while True:
             start = loop.time()
             await asyncio.sleep(LAG_PERIOD_S)
@@ -494,6 +557,11 @@ class Agent:
                     excitation=self.scheduler.status,
                     identifying=self.identifying,
                     loop_lag_ms=round(lag * 1000, 2),
+                    nominal={
+                        axes: model_id
+                        for axes in AXIS_SETS
+                        if (model_id := self.models.nominal_id(axes)) is not None
+                    },
                     recorder={k: float(v) for k, v in self.recorder.counters.items()},
                     sensors=sensors,
                 ),

@@ -119,3 +119,15 @@ def test_a_damaged_nominal_is_set_aside(tmp_path, damage):
     store.add(candidate("b"))
     assert store.accept("b").model_id == "b"  # the store works on
     assert store.nominal("lateral").model_id == "b"
+
+
+def test_the_nominal_id_follows_accept_and_revert(tmp_path):
+    store = ModelStore(tmp_path)
+    assert store.nominal_id("lateral") is None
+    for name in ("a", "b"):
+        store.add(candidate(name))
+        store.accept(name)
+    assert store.nominal_id("lateral") == "b"
+    store.revert("lateral")
+    assert store.nominal_id("lateral") == "a"
+    assert ModelStore(tmp_path).nominal_id("lateral") == "a"  # read back after a restart

@@ -28,17 +28,26 @@ def agent(tmp_path):
     a.sent = sent
     yield a
     a.writer.close()
+    a._store.shutdown()
 
 
-def test_ground_commands_are_acknowledged_with_the_reason(agent):
-    agent._on_ground(messages.Arm(plan=preset("lateral")), 1)
+async def test_ground_commands_are_acknowledged_with_the_reason(agent):
     big = Plan(id="big", axes="lateral", segments=(Segment(signals={"aileron": Doublet(
         pulse_s=1.0, amplitude=20.0)}),))  # fmt: skip
-    agent._on_ground(messages.Arm(plan=big), 2)
-    agent._on_ground(messages.Start(), 3)
-    agent._on_ground(messages.Decision(model_id="nope", accept=True), 4)
-    agent._on_ground(messages.Revert(), 5)
-    agent._on_ground(messages.IdentSettings(axes="full", update_period_s=20.0), 6)
+    commands = [
+        messages.Arm(plan=preset("lateral")),
+        messages.Arm(plan=big),
+        messages.Start(),
+        messages.Decision(model_id="nope", accept=True),
+        messages.Revert(),
+        messages.IdentSettings(axes="full", update_period_s=20.0),
+    ]
+    for seq, command in enumerate(commands, start=1):
+        agent._on_ground(command, seq)  # queued for the command task, in order
+    agent._on_ground(messages.Abort(), 7)  # an abort does not wait its turn
+    assert [m.ref for m in agent.sent if isinstance(m, messages.Ack)] == [7]
+    while not agent._commands.empty():
+        await agent.handle(*agent._commands.get_nowait())
     acks = {m.ref: m for m in agent.sent if isinstance(m, messages.Ack)}
     assert acks[1].ok
     assert not acks[2].ok

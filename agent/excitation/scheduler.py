@@ -135,14 +135,28 @@ class Scheduler:
             return "running"
         return "armed" if self._armed is not None else "idle"
 
-    def arm(self, plan: Plan) -> Timeline:
-        """Arm a plan; raise PlanRefused (and emit "refused") if it may not fly."""
+    async def arm_checked(self, plan: Plan) -> Timeline:
+        """arm(), with the plan rendered and checked on a thread first: a multisine's low-peak
+        phases take about 0.1 s, too long for the event loop."""
+        c = self._config
+        try:
+            timeline = await asyncio.to_thread(check, plan, c.rate_hz, c.surfaces, c.envelope)
+        except PlanRefused as exc:
+            self.counters["refused"] += 1
+            self._emit(Event("refused", plan.id, self._clock.now(), str(exc)))
+            raise
+        return self.arm(plan, timeline)
+
+    def arm(self, plan: Plan, timeline: Timeline | None = None) -> Timeline:
+        """Arm a plan (`timeline`: already checked); raise PlanRefused (and emit "refused")
+        if it may not fly."""
         now = self._clock.now()
         try:
             if self._running is not None:
                 raise PlanRefused(f"plan {plan.id!r} refused: plan {self._running.id!r} is running")
-            timeline = check(plan, self._config.rate_hz, self._config.surfaces,
-                             self._config.envelope)  # fmt: skip
+            if timeline is None:
+                timeline = check(plan, self._config.rate_hz, self._config.surfaces,
+                                 self._config.envelope)  # fmt: skip
         except PlanRefused as exc:
             self.counters["refused"] += 1
             self._emit(Event("refused", plan.id, now, str(exc)))

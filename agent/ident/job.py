@@ -6,6 +6,7 @@ event loop only hands them to a pre-started process and never waits on them.
 from __future__ import annotations
 
 import contextlib
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -98,6 +99,18 @@ def cross_tic(result: dict, preprocessing: dict, record_dt: float,
     )  # fmt: skip
     model = StateSpace(*(np.asarray(result[k], dtype=float) for k in ("A", "B", "C", "D")))
     return fit(model, batch).tic_avg
+
+
+# The worker's scheduling priority below the agent's (nice +10): on a small flight computer the
+# identification takes whatever CPU the event loop (drivers, commands, recorder) leaves over.
+WORKER_NICE = 10
+
+
+def start_worker() -> None:
+    """The worker process's initializer: lower its priority, then warm up."""
+    with contextlib.suppress(OSError, AttributeError):  # not permitted, or not POSIX: go on
+        os.nice(WORKER_NICE)
+    warm()
 
 
 def warm() -> None:

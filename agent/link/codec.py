@@ -185,14 +185,25 @@ class LinkCodec:
         """Write the highest counter accepted from each source (the session calls this about
         once a second), so a restarted receiver refuses frames it accepted before. After an
         unclean restart, frames of the last interval could be accepted once more."""
+        snapshot = self.seen_snapshot()
+        if snapshot is None:
+            return False
+        self.write_seen(snapshot)
+        return True
+
+    def seen_snapshot(self) -> dict[bytes, int] | None:
+        """What save_seen would write, taken on the caller's thread; None: nothing new."""
         current = {a: w.highest for a, w in self._windows.items()}
         if self._seen_path is None or current == self._saved:
-            return False
-        tmp = self._seen_path.with_suffix(".tmp")
-        tmp.write_text(json.dumps({a.hex(): h for a, h in current.items()}))
-        tmp.replace(self._seen_path)
+            return None
         self._saved = current
-        return True
+        return current
+
+    def write_seen(self, snapshot: dict[bytes, int]) -> None:
+        """Write a snapshot (file-system work: the session runs it off the event loop)."""
+        tmp = self._seen_path.with_suffix(".tmp")
+        tmp.write_text(json.dumps({a.hex(): h for a, h in snapshot.items()}))
+        tmp.replace(self._seen_path)
 
     def _drop(self, reason: str) -> None:
         self.counters[reason] += 1

@@ -88,16 +88,23 @@ class Status(_Message):
     link_quality: float | None = None
     flight_mode: str | None = None
     airspeed: float | None = None
+    """m/s (VFR_HUD)."""
     altitude: float | None = None
+    """m (VFR_HUD)."""
     alpha: float | None = None
+    """Degrees (AOA_SSA)."""
     beta: float | None = None
+    """Degrees (AOA_SSA)."""
     roll: float | None = None
+    """Radians, as are pitch and yaw (ATTITUDE)."""
     pitch: float | None = None
     yaw: float | None = None
     excitation: str = "idle"
     identifying: bool = False
     loop_lag_ms: float | None = None
     """The agent's worst event-loop lag since the last status."""
+    nominal: dict[str, str] = Field(default_factory=dict)
+    """The nominal model id of each identification type that has one."""
     recorder: dict[str, float] = Field(default_factory=dict)
     sensors: dict[str, dict[str, float | str | None]] = Field(default_factory=dict)
 

@@ -95,6 +95,11 @@ class LinkSession:
         self._wake.set()
 
     @property
+    def last_heard(self) -> float | None:
+        """Clock time of the last authenticated frame from the peer."""
+        return self._last_heard
+
+    @property
     def link_up(self) -> bool:
         heard = self._last_heard
         return heard is not None and self._clock.now() - heard <= self._deadline_s
@@ -172,7 +177,10 @@ class LinkSession:
             now = self._clock.now()
             if now - self._saved_at >= SAVE_SEEN_S:
                 self._saved_at = now
-                self._codec.save_seen()
+                snapshot = self._codec.seen_snapshot()
+                if snapshot is not None:
+                    # A rename can wait on the disk (ext4 flushes the data first): off the loop.
+                    await asyncio.to_thread(self._codec.write_seen, snapshot)
 
     async def _send_due(self) -> None:
         now = self._clock.now()

@@ -134,7 +134,7 @@ async def fly(options: SimOptions) -> dict:
     async with simulated(options) as sim:
         outcomes = []
         for run in range(options.runs):
-            outcomes.append(await _one_run(options, sim.aircraft, sim.ground, run, say))
+            outcomes.append(await one_run(options, sim.aircraft, sim.ground, run, say))
         return _report(options, sim.aircraft, sim.agent, outcomes)
 
 
@@ -191,7 +191,7 @@ async def _parts(options: SimOptions, tmp: Path, params: Params, say):
         axes = preset(options.preset).axes
         agent = Agent(_config(tmp, ports, aircraft.mavlink_address, axes), base=tmp, clock=clock)
         tasks.append(asyncio.create_task(agent.run(), name="agent"))
-        ground = await _ground(ground_module, key, clock, tasks)
+        ground = await ground_station(ground_module, key, clock, tasks)
         say(f"simulated {options.aircraft} at {options.speed_kts:g} kt; agent up; link up")
         if not await _until(
             lambda: agent.autopilot.connected and ground.session.link_up, CONNECT_S
@@ -213,7 +213,7 @@ async def _parts(options: SimOptions, tmp: Path, params: Params, say):
         await asyncio.gather(*tasks, return_exceptions=True)
 
 
-async def _ground(module: EmulatedXBee, key: bytes, clock, tasks) -> Ground:
+async def ground_station(module: EmulatedXBee, key: bytes, clock, tasks) -> Ground:
     holder: list[Ground] = []
     radio = XBeeRadio(
         str(module.path), 115200, clock, lambda s, p, t: holder[0].session.receive(s, p, t)
@@ -227,7 +227,7 @@ async def _ground(module: EmulatedXBee, key: bytes, clock, tasks) -> Ground:
     return ground
 
 
-async def _one_run(options: SimOptions, aircraft: SimAircraft, ground: Ground, run: int, say):
+async def one_run(options: SimOptions, aircraft: SimAircraft, ground: Ground, run: int, say):
     plan = preset(options.preset, plan_id=f"{options.preset}-{run + 1}")
     ack = await ground.command(messages.IdentSettings(axes=plan.axes))
     ack = await ground.command(messages.Arm(plan=plan))

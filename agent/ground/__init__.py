@@ -1,0 +1,1 @@
+"""The ground console: the operator's end of the XBee link (`sysid console`)."""

@@ -1,0 +1,275 @@
+"""The ground station without the screen: the link session with the aircraft, what it has
+heard (status, events, results, refusals), the commands in flight and their answers, and the
+ground log. The Textual app (`agent.ground.app`) only draws this and calls its commands, so
+nothing the operator relies on depends on the screen.
+
+The ground log (`NNNN_ground_DATE.jsonl` in `log_dir`) has one JSON object per line: every
+message received (`"dir": "rx"`, results in full), every command sent (`"tx"`, with its
+sequence number) and every answer (`"ack"`), stamped with UTC and the monotonic time. At start
+the results of earlier ground logs are read back, so a nominal model identified in an earlier
+session can still be shown beside a new candidate.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import logging
+from collections import OrderedDict, deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from agent.clock import Clock
+from agent.config import load_key
+from agent.ground.config import GroundConfig
+from agent.link import messages
+from agent.link.codec import GROUND, CounterStore, LinkCodec
+from agent.link.session import LinkSession
+from agent.logs import LogWriter, log_name, next_number
+from drivers.xbee.driver import XBeeRadio
+
+log = logging.getLogger(__name__)
+
+EVENTS_KEPT = 500
+
+
+@dataclass
+class Command:
+    """A command sent to the aircraft and, once it arrives, its answer."""
+
+    seq: int
+    label: str
+    sent_at: float
+    message: messages._Message
+    ack: messages.Ack | None = None
+
+
+@dataclass
+class Line:
+    """One line of the event log."""
+
+    time: float
+    level: str  # "info", "warning", "error"
+    text: str
+
+
+@dataclass
+class Heard:
+    status: messages.Status | None = None
+    status_at: float | None = None
+    events: deque[Line] = field(default_factory=lambda: deque(maxlen=EVENTS_KEPT))
+    results: OrderedDict[str, messages.Result] = field(default_factory=OrderedDict)
+    failures: list[messages.Failure] = field(default_factory=list)
+    excitation: messages.ExcitationEvent | None = None
+    noted: int = 0  # event lines ever noted (the deque keeps the latest)
+
+
+class GroundStation:
+    """Owns the radio and the session; `run()` serves until cancelled."""
+
+    def __init__(self, config: GroundConfig, clock: Clock, base: Path = Path(".")):
+        self.config, self.clock, self.base = config, clock, Path(base)
+        self.heard = Heard()
+        self.commands: dict[int, Command] = {}
+        self.listeners: list[Callable[[str], None]] = []
+        self.session: LinkSession | None = None
+        self.radio: XBeeRadio | None = None
+        self.writer = LogWriter(self.base / config.log_dir)
+        self._reload_results()
+        self._log = self.writer.open(
+            log_name(next_number(self.writer.directory), "ground", "jsonl")
+        )
+
+    # -- link -------------------------------------------------------------------------------
+
+    async def open(self) -> None:
+        """Open the radio and the session (raises OSError/ValueError with the reason)."""
+        cfg = self.config.link
+        if cfg.peer is None:
+            raise ValueError("ground config: [link] peer (the aircraft's address) is not set")
+        peer = bytes.fromhex(cfg.peer)
+        key = load_key(self.base / cfg.key_file)
+        codec = LinkCodec(
+            key,
+            GROUND,
+            {peer},
+            counter=CounterStore(self.base / cfg.counter_file),
+            seen=self.base / cfg.seen_file,
+        )
+        self.radio = XBeeRadio(cfg.port, cfg.baud, self.clock, self._receive)
+        await self.radio.open()
+        codec.max_payload = self.radio.max_payload
+        self.session = LinkSession(
+            codec,
+            self.radio,
+            peer,
+            self.clock,
+            self.on_message,
+            heartbeat_s=cfg.heartbeat_s,
+            deadline_s=cfg.deadline_s,
+        )
+        self.note("info", f"radio open on {cfg.port}; aircraft {cfg.peer}")
+
+    def _receive(self, source: bytes, payload: bytes, t: float) -> None:
+        if self.session is not None:
+            self.session.receive(source, payload, t)
+
+    async def run(self) -> None:
+        if self.session is None:
+            await self.open()
+        assert self.session is not None
+        await self.session.run()
+
+    async def close(self) -> None:
+        if self.radio is not None:
+            await self.radio.close()
+        self.writer.close()
+
+    @property
+    def link_up(self) -> bool:
+        return self.session is not None and self.session.link_up
+
+    def link_quality(self) -> dict:
+        """Last heard (s ago), frames sent and failed, loss rate, retransmissions."""
+        s = self.session
+        if s is None:
+            return {"up": False, "last_heard_s": None, "loss": None}
+        c = s.counters
+        sent, failed = c["frames_sent"], c["frames_failed"]
+        heard = s.last_heard
+        return {
+            "up": s.link_up,
+            "last_heard_s": None if heard is None else self.clock.now() - heard,
+            "loss": failed / (sent + failed) if sent + failed else None,
+            "retransmissions": c["retransmissions"],
+            "rejected": c["rejected_messages"],
+        }
+
+    # -- what the aircraft says -------------------------------------------------------------
+
+    def on_message(self, message: messages._Message, seq: int | None) -> None:
+        now = self.clock.now()
+        self._write("rx", messages.to_dict(message), seq=seq)
+        h = self.heard
+        if isinstance(message, messages.Status):
+            h.status, h.status_at = message, now
+            self._tell("status")
+            return
+        if isinstance(message, messages.Ack):
+            self._answered(message)
+        elif isinstance(message, messages.ExcitationEvent):
+            h.excitation = message
+            level = "warning" if message.event in ("aborted", "refused") else "info"
+            detail = f": {message.detail}" if message.detail else ""
+            self.note(level, f"excitation {message.plan_id} {message.event}{detail}")
+        elif isinstance(message, messages.Result):
+            self._keep(message)
+            verdict = "update suggested" if message.suggest_update else "no update suggested"
+            self.note("info", f"result {message.model_id} ({message.axes}): TIC "
+                              f"{message.tic_avg:.3f}, {verdict}")  # fmt: skip
+            self._tell("result")
+        elif isinstance(message, messages.Failure):
+            h.failures.append(message)
+            self.note("error", f"identification {message.model_id} failed: {message.reason}")
+            self._tell("result")
+        elif isinstance(message, messages.Notice):
+            self.note("warning", message.text)
+
+    def _answered(self, ack: messages.Ack) -> None:
+        command = self.commands.get(ack.ref)
+        if command is None:
+            self.note("warning", f"answer to an unknown command #{ack.ref}")
+            return
+        command.ack = ack
+        if ack.ok:
+            self.note("info", f"{command.label}: acknowledged")
+        else:
+            self.note("error", f"{command.label}: REFUSED — {ack.reason}")
+        self._tell("ack")
+
+    def _keep(self, result: messages.Result) -> None:
+        results = self.heard.results
+        results[result.model_id] = result
+        results.move_to_end(result.model_id)
+        while len(results) > self.config.results_kept:
+            results.popitem(last=False)
+
+    # -- commands ---------------------------------------------------------------------------
+
+    def send(self, message: messages._Message, label: str) -> Command:
+        """Send a command reliably; its answer arrives in `command.ack`."""
+        if self.session is None:
+            raise RuntimeError("the radio is not open")
+        seq = self.session.send_reliable(message)
+        command = Command(seq, label, self.clock.now(), message)
+        self.commands[seq] = command
+        self._write("tx", messages.to_dict(message), seq=seq)
+        self.note("info", f"{label}: sent")
+        return command
+
+    def arm(self, plan) -> Command:
+        return self.send(messages.Arm(plan=plan), f"arm {plan.id}")
+
+    def abort(self) -> Command:
+        return self.send(messages.Abort(reason="operator abort (ground)"), "abort")
+
+    def settings(self, settings: messages.IdentSettings) -> Command:
+        return self.send(settings, f"settings {settings.axes}")
+
+    def decide(self, model_id: str, accept: bool) -> Command:
+        verb = "accept" if accept else "reject"
+        return self.send(messages.Decision(model_id=model_id, accept=accept), f"{verb} {model_id}")
+
+    def revert(self) -> Command:
+        return self.send(messages.Revert(), "revert to the previous nominal")
+
+    # -- views ------------------------------------------------------------------------------
+
+    def nominal(self, axes: str) -> messages.Result | None:
+        """The aircraft's nominal model of these axes, if its result is known here."""
+        status = self.heard.status
+        model_id = status.nominal.get(axes) if status is not None else None
+        return self.heard.results.get(model_id) if model_id else None
+
+    def status_age(self) -> float | None:
+        at = self.heard.status_at
+        return None if at is None else self.clock.now() - at
+
+    # -- log --------------------------------------------------------------------------------
+
+    def note(self, level: str, text: str) -> None:
+        self.heard.events.append(Line(self.clock.now(), level, text))
+        self.heard.noted += 1
+        self._write("note", {"level": level, "text": text})
+        self._tell("event")
+
+    def _tell(self, what: str) -> None:
+        for listener in self.listeners:
+            listener(what)
+
+    def _write(self, direction: str, data: dict, seq: int | None = None) -> None:
+        record = {
+            "utc": dt.datetime.now(dt.UTC).isoformat(),
+            "t": self.clock.now(),
+            "dir": direction,
+            "seq": seq,
+            "message": data,
+        }
+        self.writer.write(self._log, (json.dumps(record) + "\n").encode())
+
+    def _reload_results(self) -> None:
+        directory = self.writer.directory
+        for path in sorted(directory.glob("*_ground_*.jsonl")):
+            try:
+                lines = path.read_text().splitlines()
+            except OSError as exc:
+                log.warning("%s: cannot read (%s)", path, exc)
+                continue
+            for line in lines:
+                try:
+                    record = json.loads(line)
+                    if record.get("dir") == "rx" and record["message"].get("kind") == "result":
+                        self._keep(messages.from_dict(record["message"]))
+                except (ValueError, KeyError, TypeError, AttributeError):
+                    continue  # a torn last line, or a record of another version: skipped

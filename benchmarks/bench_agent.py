@@ -1,0 +1,334 @@
+"""The agent over a simulated flight: event-loop lag (all drivers running, and while the worker
+identifies), CPU and memory, in real time.
+
+Three processes, as in the field:
+- the world (this file run as `world`): the JSBSim J-3 Cub, the emulated ArduPlane on UDP, the
+  sensor ptys, both emulated XBee modules, and the scripted ground operator, who arms the
+  lateral preset every --every seconds, has the pilot flip the switch and decides on the result;
+- the agent: `python -m agent agent --config …`, the real entry point, with its worker;
+- this parent: samples /proc for the agent and its worker every 5 s, runs the same 10 ms
+  lag probe on its own idle event loop as the machine's baseline, stops the agent with SIGTERM
+  at the end and reads the agent's health records (one a minute) from its execution log.
+
+Nothing is accelerated: a 45-minute flight takes 45 minutes. Linux only (/proc).
+
+    .venv/bin/python benchmarks/bench_agent.py --minutes 45     # make bench-agent
+    .venv/bin/python benchmarks/bench_agent.py --minutes 3      # a quick look
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import os
+import secrets
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+SAMPLE_S = 5.0
+TICKS = os.sysconf("SC_CLK_TCK")
+PAGE = os.sysconf("SC_PAGE_SIZE")
+
+
+# -- the world ---------------------------------------------------------------------------------
+
+
+async def world(directory: Path, every: float) -> None:
+    """Aircraft, radios and ground operator; writes `world.json` once the parts are up."""
+    from agent.clock import LoopClock
+    from agent.sim.aircraft import AircraftOptions, SimAircraft
+    from agent.sim.ardupilot import Params
+    from agent.sim.flight import AIR, GROUND_ADDR, SimOptions, ground_station, one_run
+    from agent.sim.radio import EmulatedXBee, RfChannel
+
+    clock = LoopClock()
+    ports = directory / "ports"
+    ports.mkdir(parents=True, exist_ok=True)
+    key = bytes.fromhex((directory / "link.key").read_text())
+    aircraft = SimAircraft(AircraftOptions(params=Params(switch_channel=7)), clock, ports)
+    channel = RfChannel()
+    air = EmulatedXBee("xbee-air", AIR, ports, channel, clock)
+    ground_module = EmulatedXBee("xbee-ground", GROUND_ADDR, ports, channel, clock)
+    air.join(ground_module)
+    ground_module.join(air)
+    tasks = [
+        asyncio.create_task(aircraft.run(), name="sim-aircraft"),
+        asyncio.create_task(air.run(), name="xbee-air"),
+        asyncio.create_task(ground_module.run(), name="xbee-ground"),
+    ]
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    loop.add_signal_handler(signal.SIGTERM, stop.set)
+    runs: list[dict] = []
+    try:
+        while aircraft.mavlink_address is None or not air.port.plugged:
+            await asyncio.sleep(0.05)
+        (directory / "world.json").write_text(
+            json.dumps({"mavlink": list(aircraft.mavlink_address), "ports": str(ports)})
+        )
+        ground = await ground_station(ground_module, key, clock, tasks)
+        options = SimOptions(preset="lateral")
+        while not ground.session.link_up:
+            await asyncio.sleep(0.5)
+        # As a pilot would: a few seconds of trimmed flight with the agent up (it must see the
+        # switch low and the servo outputs for trim) before the first excitation.
+        await asyncio.sleep(5.0)
+        while not stop.is_set():
+            if not ground.session.link_up:
+                await asyncio.sleep(0.5)
+                continue
+            began = clock.now()
+            try:
+                outcome = await one_run(options, aircraft, ground, len(runs), lambda _: None)
+                runs.append({"t": began, "ok": "result" in outcome})
+            except Exception as exc:  # a missed run is counted, the flight goes on
+                aircraft.pilot.set_switch(False)
+                runs.append({"t": began, "ok": False, "error": str(exc)})
+            (directory / "runs.json").write_text(json.dumps(runs))
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(max(0.0, began + every - clock.now())):
+                    await stop.wait()
+    finally:
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+
+
+# -- the parent --------------------------------------------------------------------------------
+
+
+def agent_config(directory: Path, mavlink: list) -> str:
+    ports = directory / "ports"
+    return f"""
+[sensors.vn200]
+port = "{ports / "vn200"}"
+[sensors.airdata]
+port = "{ports / "airdata"}"
+[sensors.surfaces]
+port = "{ports / "surfaces"}"
+[autopilot]
+url = "udpout://{mavlink[0]}:{mavlink[1]}"
+[link]
+port = "{ports / "xbee-air"}"
+peer = "0013A20041000002"
+key_file = "link.key"
+counter_file = "air.counter"
+seen_file = "air.seen"
+[recorder]
+log_dir = "logs"
+"""
+
+
+def proc_sample(pid: int) -> dict | None:
+    """CPU seconds, RSS (MB) and threads of one process, from /proc."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+        statm = Path(f"/proc/{pid}/statm").read_text().split()
+    except OSError:
+        return None
+    fields = stat[stat.rindex(")") + 2 :].split()
+    return {
+        "cpu_s": (int(fields[11]) + int(fields[12])) / TICKS,
+        "rss_mb": int(statm[1]) * PAGE / 2**20,
+        "threads": int(fields[17]),
+    }
+
+
+def children(pid: int) -> list[int]:
+    kids = []
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        with contextlib.suppress(OSError):
+            kids += [int(k) for k in (task / "children").read_text().split()]
+    return kids
+
+
+async def probe(lags: list[float]) -> None:
+    """The same 10 ms lag probe as the agent's, on this idle loop: the machine's baseline."""
+    loop = asyncio.get_running_loop()
+    while True:
+        start = loop.time()
+        await asyncio.sleep(0.01)
+        lags.append(loop.time() - start - 0.01)
+
+
+async def measure(minutes: float, every: float, keep: Path | None) -> dict:
+    with contextlib.ExitStack() as stack:
+        directory = keep or Path(stack.enter_context(tempfile.TemporaryDirectory()))
+        directory.mkdir(parents=True, exist_ok=True)
+        (directory / "link.key").write_text(secrets.token_bytes(32).hex())
+        env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+        log = stack.enter_context(open(directory / "world.log", "w"))
+        world_proc = subprocess.Popen(
+            [sys.executable, __file__, "world", str(directory), "--every", str(every)],
+            env=env,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+        )
+        agent_proc = None
+        try:
+            for _ in range(600):
+                if (directory / "world.json").exists() or world_proc.poll() is not None:
+                    break
+                await asyncio.sleep(0.1)
+            info = json.loads((directory / "world.json").read_text())
+            (directory / "agent.toml").write_text(agent_config(directory, info["mavlink"]))
+            agent_log = stack.enter_context(open(directory / "agent.log", "w"))
+            agent_proc = subprocess.Popen(
+                [sys.executable, "-m", "agent", "agent", "--config",
+                 str(directory / "agent.toml"), "--base", str(directory)],
+                env=env, stdout=agent_log, stderr=subprocess.STDOUT,
+            )  # fmt: skip
+            return await sample(directory, agent_proc, world_proc, minutes)
+        finally:
+            for proc in (agent_proc, world_proc):
+                if proc is not None and proc.poll() is None:
+                    proc.send_signal(signal.SIGTERM)
+                    try:
+                        proc.wait(30)
+                    except subprocess.TimeoutExpired:
+                        proc.kill()
+
+
+async def sample(directory: Path, agent_proc, world_proc, minutes: float) -> dict:
+    baseline: list[float] = []
+    probe_task = asyncio.create_task(probe(baseline))
+    samples = []
+    start = time.monotonic()
+    end = start + 60.0 * minutes
+    try:
+        while time.monotonic() < end:
+            await asyncio.sleep(SAMPLE_S)
+            if agent_proc.poll() is not None or world_proc.poll() is not None:
+                raise RuntimeError(f"a process stopped early; see the logs in {directory}")
+            agent = proc_sample(agent_proc.pid)
+            workers = [s for k in children(agent_proc.pid) if (s := proc_sample(k))]
+            samples.append({"t": time.monotonic() - start, "agent": agent, "workers": workers})
+            done = int((time.monotonic() - start) / 60)
+            print(f"\r{done}/{minutes:g} min", end="", file=sys.stderr, flush=True)
+    finally:
+        probe_task.cancel()
+        print(file=sys.stderr)
+    agent_proc.send_signal(signal.SIGTERM)
+    stopped = agent_proc.wait(30)
+    health = []
+    for path in (directory / "logs").glob("*_exec_*"):
+        for line in path.read_text().splitlines():
+            event = json.loads(line)
+            if event["message"].startswith("health "):
+                health.append(json.loads(event["message"][len("health ") :]))
+    runs_path = directory / "runs.json"
+    runs = json.loads(runs_path.read_text()) if runs_path.exists() else []
+    return summarise(samples, health, baseline, runs, stopped)
+
+
+def summarise(samples, health, baseline, runs, exit_code) -> dict:
+    t = np.array([s["t"] for s in samples])
+    rss = np.array([s["agent"]["rss_mb"] for s in samples])
+    cpu = np.array([s["agent"]["cpu_s"] for s in samples])
+    worker_cpu = np.array([sum(w["cpu_s"] for w in s["workers"]) for s in samples])
+    worker_rss = np.array([sum(w["rss_mb"] for w in s["workers"]) for s in samples])
+    half = t >= t[-1] / 2
+    slope = float(np.polyfit(t[half] / 3600, rss[half], 1)[0]) if half.sum() > 2 else None
+    wall = t[-1] - t[0]
+
+    def lag(key: str) -> dict:
+        rows = [h[key] for h in health if h[key]["n"]]
+        if not rows:
+            return {"minutes": 0}
+        p99 = [r["p99_ms"] for r in rows]
+        return {
+            "minutes": len(rows),
+            "samples": sum(r["n"] for r in rows),
+            "p50_ms_median": float(np.median([r["p50_ms"] for r in rows])),
+            "p99_ms_median": float(np.median(p99)),
+            "p99_ms_worst": float(max(p99)),
+            "max_ms": float(max(r["max_ms"] for r in rows)),
+        }
+
+    base = np.array(baseline) * 1000
+    return {
+        "minutes": wall / 60,
+        "runs": len(runs),
+        "runs_identified": sum(r["ok"] for r in runs),
+        "lag": lag("lag"),
+        "lag_identifying": lag("lag_identifying"),
+        "baseline_lag": {
+            "p50_ms": float(np.percentile(base, 50)),
+            "p99_ms": float(np.percentile(base, 99)),
+            "max_ms": float(base.max()),
+        },
+        "agent_cpu_percent": 100 * (cpu[-1] - cpu[0]) / wall,
+        "worker_cpu_percent": 100 * (worker_cpu[-1] - worker_cpu[0]) / wall,
+        "agent_rss_mb": {"first": rss[0], "last": rss[-1], "max": rss.max()},
+        "agent_rss_slope_mb_per_h_second_half": slope,
+        "worker_rss_mb_last": worker_rss[-1],
+        "agent_threads": {
+            "first": samples[0]["agent"]["threads"],
+            "last": samples[-1]["agent"]["threads"],
+        },
+        "health_last": health[-1] if health else None,
+        "agent_exit_code": exit_code,
+    }
+
+
+def _lag_line(label: str, lag: dict) -> str:
+    nan = float("nan")
+    return (
+        f"  {label:<20}: {lag.get('samples', 0)} samples; p50 {lag.get('p50_ms_median', nan):.2f}"
+        f" ms, p99 median {lag.get('p99_ms_median', nan):.2f} ms, worst minute "
+        f"{lag.get('p99_ms_worst', nan):.2f} ms, max {lag.get('max_ms', nan):.1f} ms"
+    )
+
+
+def report(r: dict) -> str:
+    lag, base = r["lag"], r["baseline_lag"]
+    rss, slope = r["agent_rss_mb"], r["agent_rss_slope_mb_per_h_second_half"]
+    lines = [
+        f"simulated flight: {r['minutes']:.1f} min real time, {r['runs']} lateral excitations, "
+        f"{r['runs_identified']} identified and delivered over the radio",
+        "event-loop lag (10 ms probe; p99 per minute from the agent's health records):",
+        _lag_line("agent, all drivers", lag),
+        _lag_line("agent, identifying", r["lag_identifying"]),
+        f"  {'idle loop, same box':<20}: p50 {base['p50_ms']:.2f} ms, p99 {base['p99_ms']:.2f} "
+        f"ms, max {base['max_ms']:.1f} ms",
+        f"  ratio agent/idle p99: {lag.get('p99_ms_median', float('nan')) / base['p99_ms']:.2f}",
+        f"CPU (of one core): agent {r['agent_cpu_percent']:.1f} %, "
+        f"worker {r['worker_cpu_percent']:.1f} %",
+        f"agent RSS: {rss['first']:.0f} MB first, {rss['last']:.0f} MB last, {rss['max']:.0f} MB"
+        f" max; second-half slope {slope if slope is not None else float('nan'):+.1f} MB/h; "
+        f"worker {r['worker_rss_mb_last']:.0f} MB",
+        f"agent threads: {r['agent_threads']['first']} → {r['agent_threads']['last']}; "
+        f"agent exit code after SIGTERM: {r['agent_exit_code']}",
+    ]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="mode")
+    w = sub.add_parser("world")
+    w.add_argument("directory", type=Path)
+    w.add_argument("--every", type=float, default=60.0)
+    parser.add_argument("--minutes", type=float, default=45.0)
+    parser.add_argument("--every", type=float, default=60.0, help="s between excitations")
+    parser.add_argument("--keep", type=Path, help="keep the logs in this directory")
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    if args.mode == "world":
+        asyncio.run(world(args.directory, args.every))
+        return
+    result = asyncio.run(measure(args.minutes, args.every, args.keep))
+    print(json.dumps(result, default=float) if args.json else report(result))
+
+
+if __name__ == "__main__":
+    main()

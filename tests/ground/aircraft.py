@@ -1,0 +1,145 @@
+"""The aircraft's end of the link for the console tests: a real LinkSession on the real
+digi-xbee over an emulated XBee pair, scripted to answer commands as the agent does (an ack, or
+a refusal with its reason), to send status, and to send results when told."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from agent.clock import LoopClock
+from agent.config import Link
+from agent.ground.config import GroundConfig
+from agent.link import messages
+from agent.link.codec import AIRCRAFT, CounterStore, LinkCodec
+from agent.link.session import LinkSession
+from agent.sim.radio import EmulatedXBee, RfChannel
+from drivers.xbee.driver import XBeeRadio
+
+KEY = bytes(range(32))
+AIR = bytes.fromhex("0013A20040000001")
+GROUND = bytes.fromhex("0013A20040000002")
+
+
+def mode(name, real, imag=0.0, emac=95.0) -> messages.ModeReport:
+    w = abs(complex(real, imag))
+    return messages.ModeReport(
+        name=name, real=real, imag=imag, frequency_hz=w / 6.283185307179586,
+        damping=-real / w, time_constant_s=None if imag else -1 / real, msv=0.4, mci=0.8,
+        moi=0.7, emac=emac, mpc=60.0, cmi=76.0,
+    )  # fmt: skip
+
+
+def result(model_id: str, shift: float = 0.0, update: bool = True) -> messages.Result:
+    modes = [mode("Dutch roll", -0.8 + shift, 3.1 + shift), mode("roll", -9.5 + shift),
+             mode("spiral", 0.004, emac=30.0)]  # fmt: skip
+    eye = [[1.0 if i == j else 0.0 for j in range(4)] for i in range(4)]
+    return messages.Result(
+        model_id=model_id, axes="lateral", dt=0.04, inputs=["aileron", "rudder"],
+        outputs=["beta", "p", "r", "phi"], modes=modes, tic=[0.02, 0.03, 0.02, 0.04],
+        tic_avg=0.0275, stable=False, suggest_update=update,
+        reasons=["1 stability: slowly divergent (doubles in 173 s)",
+                 "2 quality: named modes EMAC ≥ 50 %", "3 TIC_jj 0.028 < 0.3",
+                 "4–7 no nominal model yet"],
+        A=eye, B=[[0.0, 0.0]] * 4, C=eye, D=[[0.0, 0.0]] * 4,
+    )  # fmt: skip
+
+
+@dataclass
+class ScriptedAircraft:
+    session: LinkSession | None = None
+    inbox: list = field(default_factory=list)
+    refuse: dict[str, str] = field(default_factory=dict)  # message kind → reason
+    nominal: list[str] = field(default_factory=list)  # the nominal history, latest last
+    excitation: str = "idle"
+    airspeed: float = 22.0
+
+    def on_message(self, message, seq) -> None:
+        self.inbox.append(message)
+        if seq is None:
+            return
+        reason = self.refuse.get(message.kind, "")
+        if not reason:
+            if isinstance(message, messages.Arm):
+                self.excitation = "armed"
+            elif isinstance(message, messages.Abort):
+                self.excitation = "idle"
+            elif isinstance(message, messages.Decision) and message.accept:
+                self.nominal.append(message.model_id)
+            elif isinstance(message, messages.Revert):
+                if len(self.nominal) < 2:
+                    reason = "no previous lateral nominal model to revert to"
+                else:
+                    self.nominal.append(self.nominal[-2])
+        self.session.send_reliable(messages.Ack(ref=seq, ok=not reason, reason=reason))
+
+    def status(self, t: float) -> messages.Status:
+        return messages.Status(
+            time=t, flight_mode="MANUAL", airspeed=self.airspeed, altitude=305.0,
+            alpha=3.0, beta=-0.2, roll=0.02, pitch=0.05, yaw=1.2,
+            excitation=self.excitation, loop_lag_ms=0.9,
+            nominal={"lateral": self.nominal[-1]} if self.nominal else {},
+            recorder={"frames": 1200.0},
+            sensors={"vn200": {"state": "open", "rate_hz": 100.0, "gaps": 0.0,
+                               "crc_errors": 0.0, "age_s": 0.01},
+                     "airdata": {"state": "waiting", "rate_hz": 0.0, "gaps": 2.0,
+                                 "crc_errors": 1.0, "age_s": 4.2}},
+        )  # fmt: skip
+
+
+@dataclass
+class Rig:
+    channel: RfChannel
+    aircraft: ScriptedAircraft
+    config: GroundConfig
+    base: Path
+    status_task: asyncio.Task | None = None
+
+
+@contextlib.asynccontextmanager
+async def rig(tmp_path: Path, status_every: float = 0.2):
+    clock = LoopClock()
+    channel = RfChannel()
+    air_module = EmulatedXBee("air", AIR, tmp_path, channel, clock)
+    ground_module = EmulatedXBee("ground", GROUND, tmp_path, channel, clock)
+    air_module.join(ground_module)
+    ground_module.join(air_module)
+    tasks = [asyncio.create_task(m.run(), name=f"xbee-{m.name}")
+             for m in (air_module, ground_module)]  # fmt: skip
+    await asyncio.sleep(0.05)
+    (tmp_path / "link.key").write_text(KEY.hex())
+    aircraft = ScriptedAircraft()
+    codec = LinkCodec(KEY, AIRCRAFT, {GROUND}, counter=CounterStore(tmp_path / "air.counter"))
+    holder: list[LinkSession] = []
+    radio = XBeeRadio(str(air_module.path), 115200, clock,
+                      lambda s, p, t: holder[0].receive(s, p, t))  # fmt: skip
+    await radio.open()
+    codec.max_payload = radio.max_payload
+    aircraft.session = LinkSession(codec, radio, GROUND, clock, aircraft.on_message)
+    holder.append(aircraft.session)
+    tasks.append(asyncio.create_task(aircraft.session.run(), name="air-session"))
+
+    async def status() -> None:
+        while True:
+            aircraft.session.send_status(aircraft.status(clock.now()))
+            await asyncio.sleep(status_every)
+
+    status_task = asyncio.create_task(status(), name="air-status")
+    tasks.append(status_task)
+    config = GroundConfig(
+        link=Link(port=str(ground_module.path), peer=AIR.hex(), key_file="link.key",
+                  counter_file="ground.counter", seen_file="ground.seen"),
+        log_dir="ground-logs",
+    )  # fmt: skip
+    try:
+        yield Rig(channel, aircraft, config, tmp_path, status_task)
+    finally:
+        for task in tasks[2:]:
+            task.cancel()
+        await asyncio.gather(*tasks[2:], return_exceptions=True)
+        await radio.close()
+        for task in tasks[:2]:
+            task.cancel()
+        await asyncio.gather(*tasks[:2], return_exceptions=True)

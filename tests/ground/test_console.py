@@ -1,0 +1,170 @@
+"""The ground console driven by Textual's pilot, over the real link: real digi-xbee on both
+ends of an emulated XBee pair, the console's GroundStation on one, a scripted aircraft-side
+LinkSession on the other.
+
+Bad input tried: a plan the aircraft refuses (its reason shown), a plan that is not valid JSON
+in the editor (not sent), a revert with no previous nominal (refused with the reason),
+settings with a non-numeric p (not sent), the radio link going silent (shown as lost).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+
+import pytest
+
+from agent.clock import LoopClock
+from agent.ground.app import Console
+from agent.ground.splane import SPlane
+from agent.ground.station import GroundStation
+from agent.link import messages
+from tests.ground.aircraft import result, rig
+
+pytestmark = [pytest.mark.usefixtures("no_leaked_tasks"), pytest.mark.timeout(60)]
+
+
+async def until(pilot, predicate, timeout: float = 10.0, what: str = "") -> None:
+    loop = asyncio.get_running_loop()
+    end = loop.time() + timeout
+    while not predicate():
+        assert loop.time() < end, f"timed out: {what}"
+        await pilot.pause(0.05)
+
+
+def text_of(app, selector: str) -> str:
+    return str(app.query_one(selector).render())
+
+
+def log_text(app) -> str:
+    """The event log pane as rendered (its wrapped lines joined again)."""
+    return " ".join(" ".join(line.text for line in app.query_one("#log").lines).split())
+
+
+@pytest.fixture
+async def console(tmp_path):
+    async with rig(tmp_path) as r:
+        station = GroundStation(r.config, LoopClock(), base=tmp_path)
+        app = Console(station)
+        async with app.run_test(size=(110, 36)) as pilot:
+            await until(pilot, lambda: station.link_up, what="link up")
+            yield app, pilot, r, station
+
+
+async def test_status_renders_and_stale_sensors_show(console):
+    app, pilot, r, _ = console
+    await until(pilot, lambda: "22.0 m/s" in text_of(app, "#flight"), what="status")
+    assert "LINK UP" in text_of(app, "#top")
+    assert "MANUAL" in text_of(app, "#top")
+    flight = text_of(app, "#flight")
+    assert "305 m" in flight
+    assert "+3.0°" in flight  # α 0.052 rad
+    sensors = app.query_one("#sensors")
+    assert sensors.row_count == 2
+    assert [str(c) for c in sensors.get_row_at(1)][:2] == ["airdata", "waiting"]
+    r.aircraft.airspeed = 25.5
+    await until(pilot, lambda: "25.5 m/s" in text_of(app, "#flight"), what="a status update")
+
+
+async def test_a_preset_is_armed_and_acknowledged_and_a_refusal_shows_its_reason(console):
+    app, pilot, r, _ = console
+    await pilot.press("2")
+    await pilot.pause(0.1)
+    assert "RPF" in text_of(app, "#preview")
+    assert "lateral" in text_of(app, "#preview")
+    await pilot.press("f2")
+    await until(pilot, lambda: "arm lateral: acknowledged" in log_text(app), what="ack")
+    armed = [m for m in r.aircraft.inbox if isinstance(m, messages.Arm)]
+    assert armed[0].plan.id == "lateral"
+    await until(pilot, lambda: "excitation armed" in text_of(app, "#top"), what="armed status")
+    # The aircraft refuses the next one: the reason is in the log, in red.
+    r.aircraft.refuse["arm"] = "plan 'lateral' refused: aileron: 12 deg exceeds max_amplitude"
+    await pilot.press("f2")
+    await until(pilot, lambda: "REFUSED" in log_text(app), what="refusal")
+    assert "exceeds max_amplitude" in log_text(app)
+    # A plan that does not parse is not sent.
+    app.query_one("#plan").text = '{"id": "x", "axes": "lateral", "segments": ['
+    await pilot.pause(0.1)
+    assert "not a valid plan" in text_of(app, "#preview")
+    sent = len(r.aircraft.inbox)
+    await pilot.press("f2")
+    await pilot.pause(0.3)
+    assert len(r.aircraft.inbox) == sent
+    assert "not valid: not sent" in log_text(app)
+    # F5 aborts from anywhere, even with the editor focused.
+    app.query_one("#plan").focus()
+    await pilot.press("f5")
+    await until(pilot, lambda: any(isinstance(m, messages.Abort) for m in r.aircraft.inbox),
+                what="abort")  # fmt: skip
+
+
+async def test_a_result_renders_and_accept_reject_revert_round_trip(console, tmp_path):
+    app, pilot, r, _ = console
+    await pilot.press("4")
+    r.aircraft.session.send_reliable(result("lat-1"))
+    await until(pilot, lambda: "lat-1" in text_of(app, "#summary"), what="result")
+    assert app.query_one("#modes").row_count == 3
+    assert "UPDATE" in text_of(app, "#summary")
+    splane = app.query_one("#splane", SPlane)
+    assert {p.kind for p in splane.points} == {"history", "candidate"}
+    assert "◆" in text_of(app, "#splane")
+    # Accept, confirmed: the aircraft gets the decision; its status then names the nominal.
+    await pilot.press("y")
+    await pilot.press("y")
+    await until(pilot, lambda: "accept lat-1: acknowledged" in log_text(app), what="accept")
+    await until(pilot, lambda: "nominal lat lat-1" in text_of(app, "#top"), what="nominal")
+    # A second result: shown beside the nominal, which is highlighted in the s-plane.
+    r.aircraft.session.send_reliable(result("lat-2", shift=0.3, update=False))
+    await until(pilot, lambda: "lat-2" in text_of(app, "#summary"), what="second result")
+    assert "nominal lat-1" in text_of(app, "#nominal-title")
+    assert app.query_one("#nominal-modes").row_count == 3
+    assert "●" in text_of(app, "#splane")
+    # Reject it, but first say no to the confirmation: nothing is sent.
+    await pilot.press("n")
+    await pilot.press("n")
+    await pilot.pause(0.3)
+    assert not any(isinstance(m, messages.Decision) and not m.accept for m in r.aircraft.inbox)
+    await pilot.press("n")
+    await pilot.press("y")
+    await until(pilot, lambda: "reject lat-2: acknowledged" in log_text(app), what="reject")
+    # Revert with no previous nominal: refused, with the aircraft's reason.
+    await pilot.press("r")
+    await pilot.press("y")
+    await until(pilot, lambda: "REFUSED — no previous lateral" in log_text(app), what="revert")
+    decisions = [(m.model_id, m.accept) for m in r.aircraft.inbox
+                 if isinstance(m, messages.Decision)]  # fmt: skip
+    assert decisions == [("lat-1", True), ("lat-2", False)]
+    # Everything is in the ground log too, results in full.
+    log = next((tmp_path / "ground-logs").glob("*_ground_*.jsonl")).read_text().splitlines()
+    records = [json.loads(line) for line in log]
+    results = [x for x in records if x["dir"] == "rx" and x["message"]["kind"] == "result"]
+    assert [x["message"]["model_id"] for x in results] == ["lat-1", "lat-2"]
+    assert results[0]["message"]["A"][0][0] == 1.0
+    assert any(x["dir"] == "tx" and x["message"]["kind"] == "decision" for x in records)
+
+
+async def test_settings_are_sent_and_bad_ones_are_not(console):
+    app, pilot, r, _ = console
+    await pilot.press("3")
+    app.query_one("#markov").value = "twelve"
+    await pilot.click("#send-settings")
+    await pilot.pause(0.2)
+    assert "not sent" in text_of(app, "#settings-error")
+    app.query_one("#markov").value = "12"
+    app.query_one("#period").value = "30"
+    app.query_one("#batch").value = True
+    await pilot.click("#send-settings")
+    await until(pilot, lambda: "settings lateral: acknowledged" in log_text(app), what="ack")
+    settings = [m for m in r.aircraft.inbox if isinstance(m, messages.IdentSettings)][-1]
+    assert (settings.markov, settings.order, settings.batch, settings.update_period_s) == (
+        12, "auto", True, 30.0)  # fmt: skip
+
+
+async def test_a_silent_link_is_shown_as_lost_and_status_as_stale(console):
+    app, pilot, r, _ = console
+    await until(pilot, lambda: "LINK UP" in text_of(app, "#top"), what="link up")
+    r.channel.outage = True
+    await until(pilot, lambda: "LINK LOST" in text_of(app, "#top"), timeout=8, what="lost")
+    await until(pilot, lambda: "STALE" in text_of(app, "#flight"), timeout=8, what="stale")
+    r.channel.outage = False
+    await until(pilot, lambda: "LINK UP" in text_of(app, "#top"), timeout=8, what="back")
