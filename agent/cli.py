@@ -201,11 +201,32 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sim.add_argument("--keep", type=Path, metavar="DIR", help="keep logs and models in DIR")
     sim.add_argument("--json", action="store_true", help="one JSON object")
+    sim.add_argument(
+        "--interactive",
+        action="store_true",
+        help="fly it from the ground console instead of the script (the simulated pilot "
+        "flips the switch 2 s after a plan is armed)",
+    )
+
+    console = sub.add_parser(
+        "console",
+        help="the ground console (Textual) on the XBee link",
+        description="Vehicle status, excitation, identification settings, results and the "
+        "model-update decision; everything received is also in the ground log.",
+    )
+    console.add_argument("--config", type=Path, default=Path("ground.toml"))
+    console.add_argument(
+        "--base",
+        type=Path,
+        default=Path("."),
+        help="directory for the ground log, key and link state (default .)",
+    )
 
     config = sub.add_parser("config", help="configuration tools")
     config_sub = config.add_subparsers(dest="config_command", required=True)
     check = config_sub.add_parser("check", help="validate a config file")
     check.add_argument("file", nargs="?", type=Path, default=DEFAULT_CONFIG)
+    check.add_argument("--ground", action="store_true", help="the file is a ground console config")
     return parser
 
 
@@ -360,6 +381,7 @@ def cmd_agent(args: argparse.Namespace) -> int:
     import asyncio
 
     from agent.runtime import serve
+    from drivers.xbee.driver import RadioError
 
     try:
         config = load_config(args.config)
@@ -370,7 +392,7 @@ def cmd_agent(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     try:
         asyncio.run(serve(config, text, args.base))
-    except (OSError, ValueError) as exc:  # a port that cannot be opened, a bad key file
+    except (OSError, ValueError, RadioError) as exc:  # a port that cannot open, a bad key file
         _error("agent", str(exc))
         return EXIT_FAILED
     return EXIT_OK
@@ -393,6 +415,15 @@ def cmd_sim(args: argparse.Namespace) -> int:
         directory=args.keep,
         progress=progress,
     )
+    if args.interactive:
+        from agent.sim.flight import interactive
+
+        try:
+            asyncio.run(interactive(options))
+        except (PlantError, SimError) as exc:
+            _error("sim", str(exc))
+            return EXIT_FAILED
+        return EXIT_OK
     try:
         report = asyncio.run(fly(options))
     except PlantError as exc:
@@ -405,9 +436,43 @@ def cmd_sim(args: argparse.Namespace) -> int:
     return EXIT_OK if not report["failure"] else EXIT_FAILED
 
 
-def cmd_config_check(args: argparse.Namespace) -> int:
+def cmd_console(args: argparse.Namespace) -> int:
+    import asyncio
+
+    from agent.clock import LoopClock
+    from agent.ground.app import Console
+    from agent.ground.config import GroundConfig
+    from agent.ground.station import GroundStation
+    from drivers.xbee.driver import RadioError
+
     try:
-        load_config(args.file)
+        config = load_config(args.config, GroundConfig)
+    except ConfigError as exc:
+        _error("console", str(exc))
+        return EXIT_BAD_INPUT
+
+    async def run() -> None:
+        station = GroundStation(config, LoopClock(), base=args.base)
+        try:
+            await station.open()  # a port or key problem is reported before the screen opens
+        except BaseException:
+            await station.close()
+            raise
+        await Console(station).run_async()
+
+    try:
+        asyncio.run(run())
+    except (OSError, ValueError, RadioError) as exc:
+        _error("console", str(exc))
+        return EXIT_FAILED
+    return EXIT_OK
+
+
+def cmd_config_check(args: argparse.Namespace) -> int:
+    from agent.ground.config import GroundConfig
+
+    try:
+        load_config(args.file, GroundConfig if args.ground else Config)
     except ConfigError as exc:
         _error("config check", str(exc))
         return EXIT_BAD_INPUT
@@ -430,4 +495,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         return cmd_agent(args)
     if args.command == "sim":
         return cmd_sim(args)
+    if args.command == "console":
+        return cmd_console(args)
     return cmd_config_check(args)

@@ -103,12 +103,16 @@ class Console(App):
 
     TITLE = "suas-sysid ground console"
     CSS = """
+    Screen { overflow: hidden; }
     #top { height: 1; background: $boost; }
+    #tabs { height: 1fr; }
+    #tabs > ContentSwitcher { height: 1fr; }
+    TabPane { height: 1fr; padding: 0 1; }
+    TabPane > Horizontal { height: 1fr; }
     #log { height: 6; border-top: solid $primary; }
-    TabPane { padding: 0 1; }
     #flight { width: 34; }
     #sensors { height: auto; }
-    #preset-row, #buttons, #decision, #settings-buttons { height: auto; }
+    #preset-row, #buttons, #decision, #settings-buttons { height: auto; margin-bottom: 1; }
     #preset { width: 24; }
     #plan { width: 1fr; min-width: 36; height: 1fr; }
     #preview { width: 1fr; min-width: 30; padding-left: 1; }
@@ -119,7 +123,8 @@ class Console(App):
     Button { margin-right: 1; min-width: 10; }
     #settings Input, #settings Select { width: 24; }
     #settings Horizontal { height: auto; }
-    #settings Label { width: 22; padding-top: 1; }
+    #settings Label { width: 22; }
+    #settings Horizontal { margin-bottom: 0; }
     """
     BINDINGS: ClassVar = [
         Binding("f5", "abort", "ABORT", priority=True),
@@ -158,9 +163,9 @@ class Console(App):
             with TabPane("Excite 2", id="excite"):
                 with Horizontal(id="preset-row"):
                     yield Select([(p, p) for p in PRESETS], value="lateral", allow_blank=False,
-                                 id="preset")  # fmt: skip
-                    yield Button("Arm F2", id="arm", variant="primary")
-                    yield Button("ABORT F5", id="abort", variant="error")
+                                 id="preset", compact=True)  # fmt: skip
+                    yield Button("Arm F2", id="arm", variant="primary", compact=True)
+                    yield Button("ABORT F5", id="abort", variant="error", compact=True)
                 with Horizontal():
                     yield TextArea(id="plan", soft_wrap=False)
                     yield Static(id="preview")
@@ -175,28 +180,32 @@ class Console(App):
                     yield DataTable(id="nominal-modes", cursor_type="none")
                     yield SPlane(id="splane")
                     with Horizontal(id="decision"):
-                        yield Button("Accept y", id="accept", variant="success")
-                        yield Button("Reject n", id="reject", variant="warning")
-                        yield Button("Revert r", id="revert")
+                        yield Button("Accept y", id="accept", variant="success", compact=True)
+                        yield Button("Reject n", id="reject", variant="warning", compact=True)
+                        yield Button("Revert r", id="revert", compact=True)
         yield RichLog(id="log", max_lines=500, wrap=True)
         yield Footer()
 
     def _settings_form(self) -> ComposeResult:
         axes = [(a, a) for a in ("lateral", "longitudinal", "full")]
         rows = [
-            ("identification type", Select(axes, value="lateral", allow_blank=False, id="axes")),
-            ("Markov parameters p", Input("auto", id="markov")),
-            ("model order n", Input("auto", id="order")),
-            ("batch (stack runs)", Checkbox("", id="batch")),
-            ("update period s", Input("", placeholder="none", id="period")),
+            (
+                "identification type",
+                Select(axes, value="lateral", allow_blank=False, id="axes", compact=True),
+            ),
+            ("Markov parameters p", Input("auto", id="markov", compact=True)),
+            ("model order n", Input("auto", id="order", compact=True)),
+            ("batch (stack runs)", Checkbox("on", id="batch", compact=True)),
+            ("update period s", Input("", placeholder="none", id="period", compact=True)),
         ]
         for label, widget in rows:
             with Horizontal():
                 yield Label(label)
                 yield widget
         with Horizontal(id="settings-buttons"):
-            yield Button("Send settings", id="send-settings", variant="primary")
+            yield Button("Send settings", id="send-settings", variant="primary", compact=True)
         yield Static(id="settings-error")
+        yield Static(id="settings-now")
 
     def _q(self, selector: str, kind=None):
         """A widget of the main screen (the app's own query looks at the top screen, which is
@@ -231,6 +240,7 @@ class Console(App):
         self.refresh_all()
 
     def refresh_all(self) -> None:
+        self._settings_now()
         self._top()
         self._status()
         self._events()
@@ -244,17 +254,26 @@ class Console(App):
             text.append(" LINK UP ", "bold black on green")
         else:
             text.append(" LINK LOST ", "bold white on red")
-        heard = q["last_heard_s"]
-        text.append(f" heard {_num(heard, '{:.1f}')} s ago")
+        text.append(f" {_num(q['last_heard_s'], '{:.1f}')} s")
         if q["loss"] is not None:
-            text.append(f" · loss {100 * q['loss']:.0f} %")
+            text.append(f" · loss {100 * q['loss']:.0f}%")
         if s is not None:
-            text.append(f" │ {s.flight_mode or '?'} │ excitation {s.excitation}")
+            text.append(f" │ {s.flight_mode or '?'} │ {s.excitation}")
             if s.identifying:
                 text.append(" │ identifying", "bold cyan")
-            nominal = ", ".join(f"{a[:3]} {m}" for a, m in s.nominal.items()) or "none"
+            nominal = " ".join(s.nominal.values()) or "none"
             text.append(f" │ nominal {nominal}")
         self._q("#top", Static).update(text)
+
+    def _settings_now(self) -> None:
+        now = self.station.settings_in_effect
+        if now is None:
+            text = "in effect: the aircraft's configured defaults (none sent yet)"
+        else:
+            period = f"every {now.update_period_s:g} s" if now.update_period_s else "no period"
+            text = (f"in effect: {now.axes}, p {now.markov}, n {now.order}, "
+                    f"batch {'on' if now.batch else 'off'}, {period}")  # fmt: skip
+        self._q("#settings-now", Static).update(text)
 
     def _status(self) -> None:
         s, age = self.station.heard.status, self.station.status_age()
@@ -341,7 +360,8 @@ class Console(App):
         tic = ", ".join(f"{o} {t:.3f}" for o, t in zip(result.outputs, result.tic, strict=False))
         text = Text()
         text.append(f"{result.model_id} · {result.axes} · ", "bold")
-        text.append("stable" if result.stable else "UNSTABLE", "green" if result.stable else "red")
+        text.append("stable" if result.stable else "has a divergent mode",
+                    "green" if result.stable else "yellow")  # fmt: skip
         text.append(f"\nTIC {tic}; average {result.tic_avg:.3f}\n")
         text.append(
             "suggestion: UPDATE\n" if result.suggest_update else "suggestion: do not update\n",

@@ -72,14 +72,13 @@ class GroundStation:
         self.config, self.clock, self.base = config, clock, Path(base)
         self.heard = Heard()
         self.commands: dict[int, Command] = {}
+        self.settings_in_effect: messages.IdentSettings | None = None  # the last acknowledged
         self.listeners: list[Callable[[str], None]] = []
         self.session: LinkSession | None = None
         self.radio: XBeeRadio | None = None
         self.writer = LogWriter(self.base / config.log_dir)
         self._reload_results()
-        self._log = self.writer.open(
-            log_name(next_number(self.writer.directory), "ground", "jsonl")
-        )
+        self._log: int | None = None  # the ground log, created when the radio opens
 
     # -- link -------------------------------------------------------------------------------
 
@@ -99,6 +98,9 @@ class GroundStation:
         )
         self.radio = XBeeRadio(cfg.port, cfg.baud, self.clock, self._receive)
         await self.radio.open()
+        self._log = self.writer.open(
+            log_name(next_number(self.writer.directory), "ground", "jsonl")
+        )
         codec.max_payload = self.radio.max_payload
         self.session = LinkSession(
             codec,
@@ -109,7 +111,7 @@ class GroundStation:
             heartbeat_s=cfg.heartbeat_s,
             deadline_s=cfg.deadline_s,
         )
-        self.note("info", f"radio open on {cfg.port}; aircraft {cfg.peer}")
+        self.note("info", f"radio open ({Path(cfg.port).name}); aircraft {cfg.peer}")
 
     def _receive(self, source: bytes, payload: bytes, t: float) -> None:
         if self.session is not None:
@@ -182,6 +184,8 @@ class GroundStation:
             self.note("warning", f"answer to an unknown command #{ack.ref}")
             return
         command.ack = ack
+        if ack.ok and isinstance(command.message, messages.IdentSettings):
+            self.settings_in_effect = command.message
         if ack.ok:
             self.note("info", f"{command.label}: acknowledged")
         else:
@@ -249,6 +253,8 @@ class GroundStation:
             listener(what)
 
     def _write(self, direction: str, data: dict, seq: int | None = None) -> None:
+        if self._log is None:
+            return
         record = {
             "utc": dt.datetime.now(dt.UTC).isoformat(),
             "t": self.clock.now(),

@@ -125,7 +125,7 @@ class SimFlight:
     air_module: EmulatedXBee
     ground_module: EmulatedXBee
     agent: Agent
-    ground: Ground
+    ground: Ground | None
 
 
 async def fly(options: SimOptions) -> dict:
@@ -139,18 +139,20 @@ async def fly(options: SimOptions) -> dict:
 
 
 @contextlib.asynccontextmanager
-async def simulated(options: SimOptions, params: Params | None = None):
+async def simulated(options: SimOptions, params: Params | None = None, operator: bool = True):
     """The aircraft, radios, agent and ground, connected and in trimmed flight; torn down in
-    order on exit. `params`: the emulated ArduPlane's (default: switch on channel 7)."""
+    order on exit. `params`: the emulated ArduPlane's (default: switch on channel 7).
+    `operator`: False leaves the ground radio free for the console (`sim.ground` is None)."""
     say = options.progress or (lambda text: None)
     with contextlib.ExitStack() as stack:
         tmp = options.directory or Path(stack.enter_context(tempfile.TemporaryDirectory()))
-        async with _parts(options, Path(tmp), params or Params(switch_channel=7), say) as sim:
+        params = params or Params(switch_channel=7)
+        async with _parts(options, Path(tmp), params, say, operator) as sim:
             yield sim
 
 
 @contextlib.asynccontextmanager
-async def _parts(options: SimOptions, tmp: Path, params: Params, say):
+async def _parts(options: SimOptions, tmp: Path, params: Params, say, operator: bool):
     clock = LoopClock()
     ports = tmp / "ports"
     ports.mkdir(parents=True, exist_ok=True)
@@ -191,10 +193,12 @@ async def _parts(options: SimOptions, tmp: Path, params: Params, say):
         axes = preset(options.preset).axes
         agent = Agent(_config(tmp, ports, aircraft.mavlink_address, axes), base=tmp, clock=clock)
         tasks.append(asyncio.create_task(agent.run(), name="agent"))
-        ground = await ground_station(ground_module, key, clock, tasks)
-        say(f"simulated {options.aircraft} at {options.speed_kts:g} kt; agent up; link up")
+        if operator:
+            ground = await ground_station(ground_module, key, clock, tasks)
+        say(f"simulated {options.aircraft} at {options.speed_kts:g} kt; agent up")
         if not await _until(
-            lambda: agent.autopilot.connected and ground.session.link_up, CONNECT_S
+            lambda: agent.autopilot.connected and (ground is None or ground.session.link_up),
+            CONNECT_S,
         ):
             raise SimError("the agent did not connect to the autopilot and the ground in time")
         await asyncio.sleep(1.0)  # trimmed flight before the first excitation
@@ -259,6 +263,60 @@ async def one_run(options: SimOptions, aircraft: SimAircraft, ground: Ground, ru
         f"({'ok' if ack.ok else ack.reason})"
     )
     return {"plan": plan.id, "events": events, "result": answer, "decision": decision}
+
+
+async def pilot_follows_arming(sim: SimFlight, delay_s: float = 2.0) -> None:
+    """For `sysid sim --interactive`: the safety pilot flips the switch high a moment after a
+    plan is armed, and back low once the run is over (a real pilot does this on the radio)."""
+    pilot, scheduler = sim.aircraft.pilot, sim.agent.scheduler
+    armed_at = None
+    while True:
+        await asyncio.sleep(0.1)
+        status, now = scheduler.status, sim.clock.now()
+        if status == "armed" and not pilot.switch_high:
+            armed_at = armed_at or now
+            if now - armed_at >= delay_s:
+                pilot.set_switch(True)
+        elif status == "idle" and pilot.switch_high:
+            pilot.set_switch(False)
+            armed_at = None
+        elif status != "armed":
+            armed_at = None
+
+
+async def interactive(options: SimOptions) -> None:
+    """`sysid sim --interactive`: the console instead of the scripted operator."""
+    async with console_flight(options) as (_, app):
+        await app.run_async()
+
+
+@contextlib.asynccontextmanager
+async def console_flight(options: SimOptions):
+    """The simulated flight with the ground console (not yet running) on the ground radio,
+    and the simulated pilot flipping the switch for armed plans; yields (sim, app)."""
+    from agent.config import Link
+    from agent.ground.app import Console
+    from agent.ground.config import GroundConfig
+    from agent.ground.station import GroundStation
+
+    async with simulated(options, operator=False) as sim:
+        config = GroundConfig(
+            link=Link(
+                port=str(sim.ground_module.path),
+                peer=AIR.hex(),
+                key_file="link.key",
+                counter_file="ground.counter",
+                seen_file="ground.seen",
+            ),
+            log_dir="ground-logs",
+        )
+        station = GroundStation(config, sim.clock, base=sim.directory)
+        pilot = asyncio.create_task(pilot_follows_arming(sim), name="sim-pilot")
+        try:
+            yield sim, Console(station)
+        finally:
+            pilot.cancel()
+            await asyncio.gather(pilot, return_exceptions=True)
 
 
 def _operator_accepts(result: messages.Result, first: bool) -> bool:

@@ -76,7 +76,7 @@ async def test_a_preset_is_armed_and_acknowledged_and_a_refusal_shows_its_reason
     await until(pilot, lambda: "arm lateral: acknowledged" in log_text(app), what="ack")
     armed = [m for m in r.aircraft.inbox if isinstance(m, messages.Arm)]
     assert armed[0].plan.id == "lateral"
-    await until(pilot, lambda: "excitation armed" in text_of(app, "#top"), what="armed status")
+    await until(pilot, lambda: "│ armed" in text_of(app, "#top"), what="armed status")
     # The aircraft refuses the next one: the reason is in the log, in red.
     r.aircraft.refuse["arm"] = "plan 'lateral' refused: aileron: 12 deg exceeds max_amplitude"
     await pilot.press("f2")
@@ -112,7 +112,7 @@ async def test_a_result_renders_and_accept_reject_revert_round_trip(console, tmp
     await pilot.press("y")
     await pilot.press("y")
     await until(pilot, lambda: "accept lat-1: acknowledged" in log_text(app), what="accept")
-    await until(pilot, lambda: "nominal lat lat-1" in text_of(app, "#top"), what="nominal")
+    await until(pilot, lambda: "nominal lat-1" in text_of(app, "#top"), what="nominal")
     # A second result: shown beside the nominal, which is highlighted in the s-plane.
     r.aircraft.session.send_reliable(result("lat-2", shift=0.3, update=False))
     await until(pilot, lambda: "lat-2" in text_of(app, "#summary"), what="second result")
@@ -158,6 +158,8 @@ async def test_settings_are_sent_and_bad_ones_are_not(console):
     settings = [m for m in r.aircraft.inbox if isinstance(m, messages.IdentSettings)][-1]
     assert (settings.markov, settings.order, settings.batch, settings.update_period_s) == (
         12, "auto", True, 30.0)  # fmt: skip
+    await until(pilot, lambda: "p 12" in text_of(app, "#settings-now"), what="in effect")
+    assert "every 30 s" in text_of(app, "#settings-now")
 
 
 async def test_a_silent_link_is_shown_as_lost_and_status_as_stale(console):

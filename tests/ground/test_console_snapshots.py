@@ -1,0 +1,65 @@
+"""SVG snapshots of the console's main screens, committed under tests/ground/snapshots/.
+
+The state is real (the scripted aircraft's status, events and results over the emulated radios)
+and the console's clock is frozen, so the screens are the same on every run. After a deliberate
+change to the layout, refresh them with `UPDATE_SNAPSHOTS=1 pytest tests/ground` and look at
+the new SVGs before committing them.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from agent.clock import VirtualClock
+from agent.ground.app import Console
+from agent.ground.station import GroundStation
+from agent.link import messages
+from tests.ground.aircraft import result, rig
+from tests.ground.test_console import until
+
+pytestmark = [pytest.mark.usefixtures("no_leaked_tasks"), pytest.mark.timeout(60)]
+
+SNAPSHOTS = Path(__file__).parent / "snapshots"
+
+
+def matches(name: str, svg: str) -> None:
+    path = SNAPSHOTS / f"{name}.svg"
+    if os.environ.get("UPDATE_SNAPSHOTS"):
+        SNAPSHOTS.mkdir(exist_ok=True)
+        path.write_text(svg)
+    assert path.exists(), f"no snapshot {path.name}: run with UPDATE_SNAPSHOTS=1 and review it"
+    assert svg == path.read_text(), f"{name} differs from {path}"
+
+
+@pytest.mark.parametrize(
+    ("tab", "size"),
+    [("1", (80, 24)), ("2", (100, 30)), ("3", (80, 24)), ("4", (120, 44))],
+    ids=["status-80x24", "excite-100x30", "identify-80x24", "results-120x44"],
+)
+async def test_screen(tmp_path, tab, size):
+    async with rig(tmp_path) as r:
+        r.aircraft.nominal = ["lat-1"]
+        station = GroundStation(r.config, VirtualClock(1000.0), base=tmp_path)
+        app = Console(station)
+        async with app.run_test(size=size) as pilot:
+            await until(pilot, lambda: station.heard.status is not None, what="status")
+            send = r.aircraft.session.send_reliable
+            send(
+                messages.ExcitationEvent(
+                    event="started",
+                    plan_id="lateral-1",
+                    time=990.0,
+                    detail="trim aileron 1498 µs, rudder 1503 µs",
+                )
+            )
+            send(messages.ExcitationEvent(event="finished", plan_id="lateral-1", time=1004.0))
+            send(result("lat-1"))
+            send(result("lat-2", shift=0.3, update=False))
+            await until(pilot, lambda: len(station.heard.results) == 2, what="results")
+            await pilot.press(tab)
+            await pilot.pause(0.3)
+            matches(f"console-{app.query_one('#tabs').active}-{size[0]}x{size[1]}",
+                    app.export_screenshot())  # fmt: skip

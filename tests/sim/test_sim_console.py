@@ -1,0 +1,54 @@
+"""`sysid sim --interactive` under Textual's pilot: the operator arms the lateral preset from
+the console, the simulated pilot flips the switch, the real agent identifies in its worker,
+the result crosses the emulated radios and renders, and the operator's accept makes it the
+aircraft's nominal model.
+
+SAVE_SCREENSHOT=DIR also writes the console's screens as SVG there (the README's picture:
+`make screenshot`).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from agent.sim.flight import SimOptions, console_flight
+from tests.ground.test_console import log_text, text_of, until
+
+pytestmark = [pytest.mark.usefixtures("no_leaked_tasks"), pytest.mark.timeout(180)]
+
+
+async def test_operator_flies_the_lateral_preset_from_the_console(tmp_path):
+    save = os.environ.get("SAVE_SCREENSHOT")
+    flight = console_flight(SimOptions(preset="lateral", directory=tmp_path))
+    async with flight as (sim, app), app.run_test(size=(120, 40)) as pilot:
+        station = app.station
+        await until(pilot, lambda: station.link_up, 20, "link up")
+        await until(pilot, lambda: "m/s" in text_of(app, "#flight"), 10, "status")
+        if save:
+            Path(save).mkdir(parents=True, exist_ok=True)
+            app.save_screenshot("console-status.svg", path=save)
+        await pilot.press("2")
+        await pilot.press("f2")
+        await until(pilot, lambda: "arm lateral: acknowledged" in log_text(app), 10, "ack")
+        await until(pilot, lambda: "lateral started" in log_text(app), 15, "start")
+        await until(pilot, lambda: station.heard.results, 90, "the result")
+        await pilot.press("4")
+        await pilot.pause(0.5)
+        model_id = next(iter(station.heard.results))
+        assert model_id in text_of(app, "#summary")
+        assert app.query_one("#modes").row_count >= 2
+        if save:
+            app.save_screenshot("console-results.svg", path=save)
+        await pilot.press("y")
+        await pilot.press("y")
+        await until(pilot, lambda: f"accept {model_id}: acknowledged" in log_text(app), 10,
+                    "accept")  # fmt: skip
+        await until(pilot, lambda: f"nominal {model_id}" in text_of(app, "#top"), 5, "nominal")
+    assert sim.agent.models.nominal_id("lateral") == model_id
+    assert not sim.aircraft.pilot.switch_high  # the pilot took the switch back after the run
+    ground_logs = list((tmp_path / "ground-logs").glob("*_ground_*.jsonl"))
+    assert ground_logs
+    assert model_id in ground_logs[0].read_text()
