@@ -12,7 +12,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 BENCH_STAMP := $(VENV)/.installed-bench
 
-.PHONY: sim demo test bench bench-jsbsim bench-link examples clean
+.PHONY: sim demo test bench bench-jsbsim bench-link bench-agent screenshot examples clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -46,6 +46,16 @@ bench-jsbsim: $(BENCH_STAMP)
 # Issue 7: bytes on air and delivery time of a full-model result over the emulated radios.
 bench-link: $(STAMP)
 	$(BIN)/python benchmarks/bench_link.py
+
+# Issue 8: the agent's event-loop lag, CPU and memory over a simulated flight, in real time
+# (45 minutes by default: make bench-agent MINUTES=5 for a quick look).
+MINUTES ?= 45
+bench-agent: $(STAMP)
+	$(BIN)/python benchmarks/bench_agent.py --minutes $(MINUTES)
+
+# The README's console picture, from a simulated flight flown from the console.
+screenshot: $(STAMP)
+	SAVE_SCREENSHOT=docs $(BIN)/pytest -q tests/sim/test_sim_console.py
 
 examples: $(STAMP)
 	$(BIN)/python examples/generate.py

@@ -18,6 +18,7 @@ from textual import on
 from textual.app import App, ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
+from textual.css.query import NoMatches
 from textual.screen import ModalScreen
 from textual.widgets import (
     Button,
@@ -240,11 +241,14 @@ class Console(App):
         self.refresh_all()
 
     def refresh_all(self) -> None:
-        self._settings_now()
-        self._top()
-        self._status()
-        self._events()
-        self._results()
+        try:
+            self._settings_now()
+            self._top()
+            self._status()
+            self._events()
+            self._results()
+        except NoMatches:  # the screen is being taken down (quit): nothing left to draw
+            return
 
     def _top(self) -> None:
         q = self.station.link_quality()
@@ -257,6 +261,8 @@ class Console(App):
         text.append(f" {_num(q['last_heard_s'], '{:.1f}')} s")
         if q["loss"] is not None:
             text.append(f" · loss {100 * q['loss']:.0f}%")
+        if q["rssi_dbm"] is not None:
+            text.append(f" · {q['rssi_dbm']} dBm")
         if s is not None:
             text.append(f" │ {s.flight_mode or '?'} │ {s.excitation}")
             if s.identifying:
@@ -377,6 +383,7 @@ class Console(App):
         title = self._q("#nominal-title", Static)
         table = self._q("#nominal-modes", DataTable)
         table.clear()
+        table.display = nominal is not None
         if nominal is None:
             title.update(Text(f"nominal ({result.axes}): none known here", "grey70"))
         else:

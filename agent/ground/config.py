@@ -20,5 +20,7 @@ class GroundConfig(_Section):
     excitation: Excitation = Excitation()
     """A copy of the aircraft's [excitation] section: the preview checks a plan against the
     same surfaces, limits and command rate before it is sent (the aircraft decides)."""
+    rssi_s: float = Field(2.0, gt=0.0, le=60.0)
+    """How often the ground module's RSSI of the last frame (AT DB) is read."""
     results_kept: int = Field(200, ge=1, le=10_000)
     """Results reloaded from earlier ground logs at start and kept in memory."""

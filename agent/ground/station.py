@@ -12,6 +12,7 @@ session can still be shown beside a new candidate.
 
 from __future__ import annotations
 
+import asyncio
 import datetime as dt
 import json
 import logging
@@ -75,6 +76,7 @@ class GroundStation:
         self.settings_in_effect: messages.IdentSettings | None = None  # the last acknowledged
         self.listeners: list[Callable[[str], None]] = []
         self.session: LinkSession | None = None
+        self.rssi_dbm: int | None = None
         self.radio: XBeeRadio | None = None
         self.writer = LogWriter(self.base / config.log_dir)
         self._reload_results()
@@ -121,7 +123,16 @@ class GroundStation:
         if self.session is None:
             await self.open()
         assert self.session is not None
-        await self.session.run()
+        async with asyncio.TaskGroup() as group:
+            group.create_task(self.session.run(), name="ground-session")
+            group.create_task(self._rssi_loop(), name="ground-rssi")
+
+    async def _rssi_loop(self) -> None:
+        """The ground module's RSSI of the last frame heard (DB), every rssi_s."""
+        while True:
+            await asyncio.sleep(self.config.rssi_s)
+            if self.radio is not None and self.link_up:
+                self.rssi_dbm = await self.radio.rssi()
 
     async def close(self) -> None:
         if self.radio is not None:
@@ -136,7 +147,7 @@ class GroundStation:
         """Last heard (s ago), frames sent and failed, loss rate, retransmissions."""
         s = self.session
         if s is None:
-            return {"up": False, "last_heard_s": None, "loss": None}
+            return {"up": False, "last_heard_s": None, "loss": None, "rssi_dbm": None}
         c = s.counters
         sent, failed = c["frames_sent"], c["frames_failed"]
         heard = s.last_heard
@@ -145,6 +156,7 @@ class GroundStation:
             "last_heard_s": None if heard is None else self.clock.now() - heard,
             "loss": failed / (sent + failed) if sent + failed else None,
             "retransmissions": c["retransmissions"],
+            "rssi_dbm": self.rssi_dbm,
             "rejected": c["rejected_messages"],
         }
 

@@ -44,6 +44,8 @@ class RfChannel:
     """Largest RF payload (NP)."""
     outage: bool = False
     """True: nothing gets through (route not found)."""
+    rssi_dbm: int = -62
+    """Received signal strength of a frame that gets through (what DB reports)."""
     seed: int = 0
     busy_until: float = 0.0
     rng: random.Random = field(default_factory=random.Random)
@@ -120,6 +122,7 @@ class EmulatedXBee:
             b"SH": self.address[:4], b"SL": self.address[4:], b"NI": self.name.encode(),
             b"CE": b"\x00", b"NP": self.channel.payload_limit.to_bytes(2, "big"),
             b"MY": b"\xff\xfe", b"BR": b"\x01",
+            b"DB": bytes([min(255, max(0, -self.channel.rssi_dbm))]),
         }  # fmt: skip
         if value and command in answers:  # a write: accepted, value unchanged here
             self._send(api.at_response(frame_id, command, 0))

@@ -105,6 +105,18 @@ class XBeeRadio:
         device.add_packet_received_callback(self._packet)
         self._device = device
 
+    async def rssi(self) -> int | None:
+        """Signal strength of the last frame received (DB, dBm); None if it cannot be read."""
+        device = self._device
+        if device is None or self._loop is None:
+            return None
+        try:
+            value = await self._loop.run_in_executor(self._executor, device.get_parameter, "DB")
+        except (XBeeException, OSError, ValueError):
+            self.counters["rssi_errors"] += 1
+            return None
+        return -int.from_bytes(value, "big") if value else None
+
     async def close(self) -> None:
         device, self._device = self._device, None
         if device is not None and self._loop is not None:

@@ -64,6 +64,9 @@ async def test_status_renders_and_stale_sensors_show(console):
     assert [str(c) for c in sensors.get_row_at(1)][:2] == ["airdata", "waiting"]
     r.aircraft.airspeed = 25.5
     await until(pilot, lambda: "25.5 m/s" in text_of(app, "#flight"), what="a status update")
+    # The ground module's RSSI (AT DB) of the last frame heard.
+    r.channel.rssi_dbm = -71
+    await until(pilot, lambda: "-71 dBm" in text_of(app, "#top"), timeout=5, what="RSSI")
 
 
 async def test_a_preset_is_armed_and_acknowledged_and_a_refusal_shows_its_reason(console):

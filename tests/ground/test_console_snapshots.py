@@ -42,7 +42,8 @@ def matches(name: str, svg: str) -> None:
 async def test_screen(tmp_path, tab, size):
     async with rig(tmp_path) as r:
         r.aircraft.nominal = ["lat-1"]
-        station = GroundStation(r.config, VirtualClock(1000.0), base=tmp_path)
+        config = r.config.model_copy(update={"rssi_s": 0.1})
+        station = GroundStation(config, VirtualClock(1000.0), base=tmp_path)
         app = Console(station)
         async with app.run_test(size=size) as pilot:
             await until(pilot, lambda: station.heard.status is not None, what="status")
@@ -59,6 +60,7 @@ async def test_screen(tmp_path, tab, size):
             send(result("lat-1"))
             send(result("lat-2", shift=0.3, update=False))
             await until(pilot, lambda: len(station.heard.results) == 2, what="results")
+            await until(pilot, lambda: station.rssi_dbm is not None, what="RSSI")
             await pilot.press(tab)
             await pilot.pause(0.3)
             matches(f"console-{app.query_one('#tabs').active}-{size[0]}x{size[1]}",
