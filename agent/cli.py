@@ -132,6 +132,20 @@ def build_parser() -> argparse.ArgumentParser:
     decode.add_argument("file", type=Path, metavar="FILE")
     decode.add_argument("--json", action="store_true", help="one JSON object per message")
 
+    imp = sub.add_parser(
+        "import",
+        help="an autopilot log (ArduPilot .bin) as a record for sysid identify",
+        description="Map an ArduPilot DataFlash log to the channel names of `sysid identify` "
+        "(attitude, rates, accelerations, airspeed, AoA/sideslip, surface outputs, SystemID "
+        "records), uniformly resampled; see the README for the mapping.",
+    )
+    imp.add_argument("file", type=Path, metavar="FILE")
+    imp.add_argument("--out", type=Path, required=True, help="CSV to write")
+    imp.add_argument("--rate", type=float, default=50.0, help="sample rate of the record, Hz")
+    imp.add_argument(
+        "--config", type=Path, help="config.toml whose [excitation.surfaces] maps RC outputs"
+    )
+
     aircraft = sub.add_parser(
         "sim-aircraft",
         help="run the simulated aircraft alone (JSBSim, emulated ArduPlane, sensor ptys)",
@@ -341,6 +355,36 @@ def cmd_decode(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_import(args: argparse.Namespace) -> int:
+    from agent.analysis.importers import LogImportError, import_log
+
+    try:
+        config = _load_optional_config(args.config)
+    except ConfigError as exc:
+        _error("import", str(exc))
+        return EXIT_BAD_INPUT
+    if not 1.0 <= args.rate <= 1000.0:
+        _error("import", f"--rate {args.rate:g}: give 1 to 1000 Hz")
+        return EXIT_BAD_INPUT
+    try:
+        imported = import_log(args.file, config.excitation.surfaces, args.rate)
+        args.out.write_text(imported.csv())
+    except LogImportError as exc:
+        _error("import", str(exc))
+        return EXIT_BAD_INPUT
+    except OSError as exc:
+        _error("import", f"{args.out}: cannot be written ({exc.strerror or exc})")
+        return EXIT_FAILED
+    span = imported.time[-1] if len(imported.time) else 0.0
+    print(f"{args.out}: {len(imported.time)} rows over {span:.1f} s at {args.rate:g} Hz; "
+          f"columns {', '.join(imported.columns)}")  # fmt: skip
+    for note in imported.notes:
+        print(f"note: {note}")
+    if imported.missing:
+        print(f"not in the log: {', '.join(imported.missing)}")
+    return EXIT_OK
+
+
 def cmd_sim_aircraft(args: argparse.Namespace) -> int:
     import asyncio
 
@@ -491,6 +535,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return cmd_decode(args)
     if args.command == "sim-aircraft":
         return cmd_sim_aircraft(args)
+    if args.command == "import":
+        return cmd_import(args)
     if args.command == "agent":
         return cmd_agent(args)
     if args.command == "sim":

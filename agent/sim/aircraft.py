@@ -23,6 +23,7 @@ from agent.clock import Clock
 from agent.config import SurfacePort
 from agent.sim import devices
 from agent.sim.ardupilot import OUTPUTS, EmulatedArduPlane, Params, normalised_to_pwm
+from agent.sim.dataflash import DataFlashWriter
 from agent.sim.pilot import ScriptedPilot
 from agent.sim.plant import Plant
 
@@ -54,6 +55,8 @@ class AircraftOptions:
     """Where to send telemetry before any GCS has spoken (like ArduPilot's --out)."""
     params: Params = field(default_factory=Params)
     sensor_rate_hz: float = 100.0
+    dataflash: Path | None = None
+    """Where the emulated ArduPlane writes its onboard DataFlash log (.bin); None: no log."""
 
 
 def noisy(state: Callable[[], dict[str, float]], seed: int, enabled: bool):
@@ -88,6 +91,7 @@ class SimAircraft:
             trim=self.plant.trim,
             gcs=options.gcs,
             clock=clock.now,
+            dataflash=DataFlashWriter(options.dataflash) if options.dataflash else None,
         )
         self.truth = self.plant.state()
         self.ports = {
@@ -123,6 +127,8 @@ class SimAircraft:
             await self._physics()
         finally:
             transport.close()
+            if self.autopilot.dataflash is not None:
+                self.autopilot.dataflash.close()
             for port in self.ports.values():
                 if port.plugged:
                     port.unplug()

@@ -26,6 +26,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from agent.sim.dataflash import DataFlashWriter
+
 log = logging.getLogger(__name__)
 
 CHANNELS = 18
@@ -46,6 +48,9 @@ DEFAULT_INTERVAL = {
     mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 0.25,
     mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 0.25,
 }
+# The onboard log at 50 Hz (ArduPilot's LOG_BITMASK default rates are 25–50 Hz) of the 100 Hz
+# autopilot ticks.
+DATAFLASH_EVERY = 2
 # Entries kept in the wire log (about a minute of overrides at 50 Hz).
 WIRE_LOG = 4096
 # Output channel → JSBSim control (ArduPlane's default RCMAP / SERVOn_FUNCTION).
@@ -108,8 +113,12 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
         trim: dict[str, float],
         gcs: tuple[str, int] | None = None,
         clock: Callable[[], float] | None = None,
+        dataflash: DataFlashWriter | None = None,
     ):
         self.params, self._pilot, self._dt = params, pilot, dt
+        self.dataflash = dataflash
+        """The onboard log (.bin), as ArduPlane writes it at LOG_RATE; None: no log."""
+        self._ticks = 0
         self._clock = clock or (lambda: self._now)
         self.mav = mavlink.MAVLink(None, srcSystem=params.sysid, srcComponent=1)
         self.mav.robust_parsing = True
@@ -227,7 +236,26 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
                 command = -command
             commands[name] = self.servos[ch].step(command)
         self._telemetry(now, state, rc)
+        if self.dataflash is not None and self._ticks % DATAFLASH_EVERY == 0:
+            self._log(now, state, rc)
+        self._ticks += 1
         return commands
+
+    def _log(self, now: float, s: dict[str, float], rc: list[int]) -> None:
+        """ATT, IMU, ARSP, AOA, RCIN and RCOU, as ArduPlane logs them (degrees, SI units)."""
+        log, us = self.dataflash, int((now - self._boot) * 1e6)
+        if self._ticks == 0:
+            log.write("MODE", TimeUS=us, Mode=MANUAL, ModeNum=MANUAL)
+        deg = 180.0 / np.pi
+        log.write("ATT", TimeUS=us, Roll=s["phi"] * deg, Pitch=s["theta"] * deg,
+                  Yaw=(s["psi"] * deg) % 360.0)  # fmt: skip
+        log.write("IMU", TimeUS=us, GyrX=s["p"], GyrY=s["q"], GyrZ=s["r"], AccX=s["ax"],
+                  AccY=s["ay"], AccZ=s["az"], GH=1, AH=1)  # fmt: skip
+        log.write("ARSP", TimeUS=us, Airspeed=s["Vt"], U=1, H=1, Pri=1)
+        log.write("AOA", TimeUS=us, AOA=s["alpha"] * deg, SSA=s["beta"] * deg)
+        log.write("RCIN", TimeUS=us, **{f"C{ch}": rc[ch - 1] for ch in range(1, 15)})
+        log.write("RCOU", TimeUS=us,
+                  **{f"C{ch}": self.outputs.get(ch, 0) for ch in range(1, 15)})  # fmt: skip
 
     def _telemetry(self, now: float, s: dict[str, float], rc: list[int]) -> None:
         if now - self._heartbeat_at >= 1.0:

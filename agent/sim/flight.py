@@ -165,6 +165,7 @@ async def _parts(options: SimOptions, tmp: Path, params: Params, say, operator: 
             turbulence=options.turbulence,
             seed=options.seed,
             params=params,
+            dataflash=tmp / "ardupilot.bin",
         ),
         clock,
         ports,

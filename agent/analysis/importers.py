@@ -1,0 +1,162 @@
+"""Autopilot logs → the channel names of `sysid identify` (`sysid import`).
+
+ArduPilot DataFlash (.bin, read with pymavlink's DFReader). The mapping:
+
+- ATT.Roll, Pitch, Yaw → phi, theta, psi (rad; logged in degrees);
+- IMU.GyrX, GyrY, GyrZ → p, q, r (rad/s) and AccX, AccY, AccZ → ax, ay, az (m/s²), instance 0;
+- ARSP.Airspeed → Vt (m/s), instance 0; AOA.AOA, SSA → alpha, beta (rad; logged in degrees);
+- RCOU.C<n> of each [excitation.surfaces] control (its `channel`) → <control>_pwm (µs, as
+  logged) and <control>: surfaces in degrees from 1500 µs by the control's `us_per_unit`,
+  throttle in µs (PWM, as the thesis);
+- SIDD (ArduPilot's SystemID mode) Targ, F, Time → sid_target (the injected input),
+  sid_frequency_hz, sid_time (0 outside the run), and sid_active (1 while SIDD is logged).
+
+Every channel is interpolated linearly onto one uniform time grid (`rate_hz`, default 50 Hz,
+ArduPilot's usual ATT/IMU rate) over the span all mapped channels cover; `time` is seconds
+since the log's first sample. A channel the log does not have is left out and listed in
+`missing`; SIDS (the SystemID settings: axis, magnitude, frequency span) goes to `notes`.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from agent.config import Surface
+
+DEG = np.pi / 180.0
+# ArduPilot's SID_AXIS values (SystemID mode).
+SID_AXES = {1: "input roll", 2: "input pitch", 3: "input yaw", 4: "recovery roll",
+            5: "recovery pitch", 6: "recovery yaw", 7: "rate roll", 8: "rate pitch",
+            9: "rate yaw", 10: "mixer roll", 11: "mixer pitch", 12: "mixer yaw",
+            13: "mixer thrust"}  # fmt: skip
+# (message, field, column, scale, instance field or None)
+DATAFLASH = [
+    ("ATT", "Roll", "phi", DEG, None), ("ATT", "Pitch", "theta", DEG, None),
+    ("ATT", "Yaw", "psi", DEG, None),
+    ("IMU", "GyrX", "p", 1.0, "I"), ("IMU", "GyrY", "q", 1.0, "I"),
+    ("IMU", "GyrZ", "r", 1.0, "I"),
+    ("IMU", "AccX", "ax", 1.0, "I"), ("IMU", "AccY", "ay", 1.0, "I"),
+    ("IMU", "AccZ", "az", 1.0, "I"),
+    ("ARSP", "Airspeed", "Vt", 1.0, "I"),
+    ("AOA", "AOA", "alpha", DEG, None), ("AOA", "SSA", "beta", DEG, None),
+    ("SIDD", "Targ", "sid_target", 1.0, None), ("SIDD", "F", "sid_frequency_hz", 1.0, None),
+    ("SIDD", "Time", "sid_time", 1.0, None),
+]  # fmt: skip
+DEFAULT_RATE_HZ = 50.0
+
+
+class LogImportError(ValueError):
+    """A log that cannot be imported; the message says which file and why."""
+
+
+@dataclass
+class Imported:
+    path: Path
+    kind: str
+    time: np.ndarray
+    columns: dict[str, np.ndarray]
+    missing: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    def csv(self) -> str:
+        """The record as `sysid identify` reads it, with "# " lines saying where it came from."""
+        out = io.StringIO()
+        out.write(f"# imported from {self.path.name} ({self.kind}) by sysid import\n")
+        for note in self.notes:
+            out.write(f"# {note}\n")
+        if self.missing:
+            out.write(f"# not in the log: {', '.join(self.missing)}\n")
+        names = list(self.columns)
+        out.write(",".join(["time", *names]) + "\n")
+        table = np.column_stack([self.time, *(self.columns[n] for n in names)])
+        np.savetxt(out, table, delimiter=",", fmt="%.9g")
+        return out.getvalue()
+
+
+def import_log(path: str | Path, surfaces: Mapping[str, Surface],
+               rate_hz: float = DEFAULT_RATE_HZ) -> Imported:  # fmt: skip
+    """Read an autopilot log (by its extension) into uniformly sampled columns."""
+    path = Path(path)
+    if not path.exists():
+        raise LogImportError(f"{path}: no such file")
+    if path.suffix.lower() == ".bin":
+        return _dataflash(path, surfaces, rate_hz)
+    raise LogImportError(f"{path}: unknown log type {path.suffix!r} (ArduPilot .bin)")
+
+
+def _dataflash(path: Path, surfaces: Mapping[str, Surface], rate_hz: float) -> Imported:
+    from pymavlink import DFReader
+
+    try:
+        reader = DFReader.DFReader_binary(str(path), zero_time_base=True)
+    except Exception as exc:  # pymavlink raises bare exceptions on a damaged header
+        raise LogImportError(f"{path}: not a DataFlash log ({exc})") from exc
+    wanted = {m for m, *_ in DATAFLASH} | {"RCOU", "SIDS"}
+    series: dict[str, tuple[list[float], list[float]]] = {}
+    notes: list[str] = []
+    channels = {name: s.channel for name, s in surfaces.items()}
+    while True:
+        try:
+            m = reader.recv_match(type=list(wanted))
+        except Exception as exc:  # a torn last message: keep what was read before it
+            notes.append(f"stopped reading at a damaged message ({exc})")
+            break
+        if m is None:
+            break
+        kind, t = m.get_type(), m.TimeUS * 1e-6
+        if kind == "SIDS":
+            axis = SID_AXES.get(int(m.Ax), f"axis {m.Ax}")
+            notes.append(f"ArduPilot SystemID run: {axis}, magnitude {m.Mag:g}, "
+                         f"{m.FSt:g}–{m.FSp:g} Hz over {m.TR:g} s")  # fmt: skip
+            continue
+        if kind == "RCOU":
+            for control, ch in channels.items():
+                _append(series, f"{control}_pwm", t, float(getattr(m, f"C{ch}")))
+            continue
+        for message, name, column, scale, instance in DATAFLASH:
+            if message == kind and (instance is None or getattr(m, instance) == 0):
+                _append(series, column, t, float(getattr(m, name)) * scale)
+    for control, surface in surfaces.items():
+        pwm = series.get(f"{control}_pwm")
+        if pwm is not None:
+            values = np.asarray(pwm[1])
+            converted = values if control == "throttle" else (values - 1500.0) / surface.us_per_unit
+            series[control] = (pwm[0], list(converted))
+    return _resample(path, "ArduPilot DataFlash", series, rate_hz, notes)
+
+
+def _append(series, column: str, t: float, value: float) -> None:
+    times, values = series.setdefault(column, ([], []))
+    times.append(t)
+    values.append(value)
+
+
+def _resample(path: Path, kind: str, series, rate_hz: float, notes: list[str]) -> Imported:
+    core = {c: s for c, s in series.items() if not c.startswith("sid_")}
+    if not core:
+        raise LogImportError(f"{path}: none of the mapped messages are in this log")
+    start = max(min(s[0]) for s in core.values())
+    end = min(max(s[0]) for s in core.values())
+    if end - start < 2.0 / rate_hz:
+        raise LogImportError(f"{path}: the mapped channels overlap for less than two samples")
+    time = np.arange(start, end, 1.0 / rate_hz)
+    columns = {}
+    for column, (t, v) in series.items():
+        t, v = np.asarray(t), np.asarray(v)
+        order = np.argsort(t, kind="stable")
+        if column.startswith("sid_"):
+            inside = (time >= t.min()) & (time <= t.max())
+            columns[column] = np.where(inside, np.interp(time, t[order], v[order]), 0.0)
+        else:
+            columns[column] = np.interp(time, t[order], v[order])
+    if "sid_time" in series:
+        t = np.asarray(series["sid_time"][0])
+        columns["sid_active"] = ((time >= t.min()) & (time <= t.max())).astype(float)
+    expected = [c for _, _, c, _, _ in DATAFLASH if not c.startswith("sid_")]
+    missing = [c for c in expected if c not in columns]
+    return Imported(path, kind, time - time[0], columns, missing, notes)

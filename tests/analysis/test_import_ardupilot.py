@@ -1,0 +1,147 @@
+"""`sysid import` on ArduPilot DataFlash logs written here with pymavlink's DataFlash classes.
+
+A generated SystemID log: ArduPilot's SystemID mode injects a chirp on the roll input (SIDS,
+SIDD records) into a known roll-rate model p' = -4 p + 0.8 δa (δa in degrees of aileron from
+RCOU, 20 µs per degree), logged the way ArduPlane logs (ATT in degrees, IMU, ARSP, AOA, RCOU,
+each message at its own time stamp). The import must map units and names, resample uniformly,
+recognise the SystemID run, and give a record `sysid identify` turns back into the known pole.
+
+Bad input tried: a file that is not a DataFlash log, a log cut off mid-message (what was read
+before the cut is imported), a log with none of the mapped messages, a missing file, an
+unknown extension, a rate out of range.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agent.analysis.importers import LogImportError, import_log
+from agent.config import Config
+from agent.sim.dataflash import DataFlashWriter
+
+ROOT = Path(__file__).resolve().parents[2]
+SURFACES = Config().excitation.surfaces
+POLE, GAIN, RATE = -4.0, 0.8, 50.0
+
+
+def systemid_log(path: Path, seconds: float = 30.0, seed: int = 0) -> dict:
+    """The roll axis under ArduPilot's SystemID chirp; returns what was simulated."""
+    rng = np.random.default_rng(seed)
+    dt = 1.0 / RATE
+    n = int(seconds * RATE)
+    t = np.arange(n) * dt
+    sid = (t >= 5.0) & (t < 25.0)
+    tau = np.where(sid, t - 5.0, 0.0)
+    f0, f1, span = 0.2, 3.0, 20.0
+    freq = f0 + (f1 - f0) * tau / span
+    chirp = np.where(
+        sid, 4.0 * np.sin(2 * np.pi * (f0 * tau + (f1 - f0) * tau**2 / (2 * span))), 0.0
+    )
+    aileron = chirp  # degrees
+    p = np.zeros(n)
+    a, b = np.exp(POLE * dt), GAIN * (np.exp(POLE * dt) - 1) / POLE
+    for k in range(n - 1):
+        p[k + 1] = a * p[k] + b * aileron[k]
+    phi = np.cumsum(p) * dt
+    with DataFlashWriter(path) as log:
+        log.write("MODE", TimeUS=0, Mode=25, ModeNum=25)
+        log.write("SIDS", TimeUS=int(5e6), Ax=1, Mag=4.0, FSt=f0, FSp=f1, TFin=0, TC=0, TR=span)
+        for k in range(n):
+            us = int(t[k] * 1e6)
+            log.write("ATT", TimeUS=us + 300, Roll=np.degrees(phi[k]), Pitch=2.0, Yaw=90.0)
+            log.write("IMU", TimeUS=us + 600, I=0, GyrX=p[k] + rng.normal(0, 1e-4), GyrY=0.0,
+                      GyrZ=0.0, AccZ=-9.81)  # fmt: skip
+            log.write("IMU", TimeUS=us + 700, I=1, GyrX=99.0)  # a second IMU: not mapped
+            log.write("ARSP", TimeUS=us + 900, I=0, Airspeed=22.0)
+            log.write("AOA", TimeUS=us + 1000, AOA=3.0, SSA=-1.0)
+            pwm = {f"C{ch}": 1500 for ch in range(1, 15)}
+            pwm["C1"] = round(1500 + 20.0 * aileron[k])
+            pwm["C3"] = 1300
+            log.write("RCOU", TimeUS=us + 1200, **pwm)
+            if sid[k]:
+                log.write("SIDD", TimeUS=us + 1300, Time=tau[k], Targ=chirp[k], F=freq[k])
+    return {"t": t, "p": p, "aileron": aileron, "sid": sid}
+
+
+def test_units_names_and_the_systemid_run(tmp_path):
+    truth = systemid_log(tmp_path / "sid.bin")
+    imported = import_log(tmp_path / "sid.bin", SURFACES, RATE)
+    c = imported.columns
+    assert np.allclose(np.diff(imported.time), 1 / RATE)
+    assert np.allclose(c["theta"], np.radians(2.0), atol=1e-4)
+    assert np.allclose(c["psi"], np.radians(90.0), atol=1e-4)
+    assert np.allclose(c["alpha"], np.radians(3.0), atol=1e-6)
+    assert np.allclose(c["beta"], np.radians(-1.0), atol=1e-6)
+    assert np.allclose(c["Vt"], 22.0)
+    assert np.allclose(c["az"], -9.81, atol=1e-5)
+    assert c["p"].max() < 50  # instance 1 (GyrX = 99) is not mixed in
+    assert np.allclose(c["throttle"], 1300.0)  # throttle stays in µs
+    assert set(c["aileron_pwm"]) >= {1500.0}
+    # The aileron in degrees follows the simulated deflection (20 µs per degree).
+    assert np.max(np.abs(c["aileron"])) == pytest.approx(4.0, abs=0.1)
+    # SystemID: active from 5 to 25 s, its target is the injected chirp.
+    active = imported.time[c["sid_active"] == 1.0]
+    assert active[0] == pytest.approx(5.0, abs=0.05)
+    assert active[-1] == pytest.approx(25.0, abs=0.05)
+    assert np.max(np.abs(c["sid_target"])) == pytest.approx(4.0, abs=0.1)
+    assert any("SystemID run: input roll, magnitude 4, 0.2–3 Hz over 20 s" in n
+               for n in imported.notes)  # fmt: skip
+    assert imported.missing == []
+    assert len(truth["t"]) == 1500
+
+
+def test_the_imported_record_identifies_the_known_pole(tmp_path):
+    systemid_log(tmp_path / "sid.bin")
+    csv = tmp_path / "sid.csv"
+    run = lambda *args: subprocess.run(  # noqa: E731
+        [sys.executable, "-m", "agent", *args], cwd=tmp_path, capture_output=True, text=True,
+        timeout=120, env={"PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1",
+                          "PATH": "/usr/bin:/bin"},
+    )  # fmt: skip
+    done = run("import", str(tmp_path / "sid.bin"), "--out", str(csv))
+    assert done.returncode == 0, done.stderr
+    assert "1 rows" not in done.stdout
+    assert "note: ArduPilot SystemID run" in done.stdout
+    done = run("identify", str(csv), "--inputs", "aileron", "--outputs", "p", "--start", "4",
+               "--end", "27", "--order", "1", "--json")  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    modes = json.loads(done.stdout)["modes"]
+    assert modes[0]["eigenvalue"][0] == pytest.approx(POLE, rel=0.05)
+
+
+@pytest.mark.parametrize("damage", ["cut mid-message", "not a log", "no mapped messages"])
+def test_damaged_logs(tmp_path, damage):
+    path = tmp_path / "bad.bin"
+    if damage == "cut mid-message":
+        systemid_log(path, seconds=10.0)
+        path.write_bytes(path.read_bytes()[:-7])
+        imported = import_log(path, SURFACES, RATE)
+        assert imported.time[-1] > 9.0  # everything before the cut
+        return
+    if damage == "not a log":
+        path.write_bytes(bytes(range(256)) * 10)
+    else:
+        with DataFlashWriter(path) as log:
+            log.write("MODE", TimeUS=0, Mode=0, ModeNum=0)
+    with pytest.raises(LogImportError, match=r"bad\.bin"):
+        import_log(path, SURFACES, RATE)
+
+
+def test_command_line_refusals(tmp_path):
+    def run(*args):
+        return subprocess.run([sys.executable, "-m", "agent", "import", *args], cwd=tmp_path,
+                              capture_output=True, text=True, timeout=60,
+                              env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})  # fmt: skip
+
+    missing = run("nope.bin", "--out", "x.csv")
+    assert missing.returncode == 2
+    assert "nope.bin: no such file" in missing.stderr
+    (tmp_path / "log.txt").write_text("x")
+    assert "unknown log type '.txt'" in run("log.txt", "--out", "x.csv").stderr
+    assert "give 1 to 1000 Hz" in run("log.txt", "--out", "x.csv", "--rate", "0").stderr
