@@ -134,12 +134,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     imp = sub.add_parser(
         "import",
-        help="an autopilot log (ArduPilot .bin) as a record for sysid identify",
+        help="an autopilot log (ArduPilot .bin, PX4 .ulg) as a record for sysid identify",
         description="Map an ArduPilot DataFlash log to the channel names of `sysid identify` "
         "(attitude, rates, accelerations, airspeed, AoA/sideslip, surface outputs, SystemID "
         "records), uniformly resampled; see the README for the mapping.",
     )
-    imp.add_argument("file", type=Path, metavar="FILE")
+    imp.add_argument("file", type=Path, metavar="FILE", help="ArduPilot .bin or PX4 .ulg")
     imp.add_argument("--out", type=Path, required=True, help="CSV to write")
     imp.add_argument("--rate", type=float, default=50.0, help="sample rate of the record, Hz")
     imp.add_argument(

@@ -11,6 +11,14 @@ ArduPilot DataFlash (.bin, read with pymavlink's DFReader). The mapping:
 - SIDD (ArduPilot's SystemID mode) Targ, F, Time → sid_target (the injected input),
   sid_frequency_hz, sid_time (0 outside the run), and sid_active (1 while SIDD is logged).
 
+PX4 ULog (.ulg, read with pyulog), instance 0 of each topic:
+
+- vehicle_attitude.q (w, x, y, z) → phi, theta, psi (rad, ZYX Euler angles);
+- vehicle_angular_velocity.xyz → p, q, r; vehicle_acceleration.xyz → ax, ay, az;
+- airspeed_validated.true_airspeed_m_s → Vt; airflow_aoa.aoa_rad → alpha and
+  airflow_slip.slip_rad → beta where the vehicle logs them;
+- actuator_outputs.output[channel − 1] → <control>_pwm and <control>, as for ArduPilot.
+
 Every channel is interpolated linearly onto one uniform time grid (`rate_hz`, default 50 Hz,
 ArduPilot's usual ATT/IMU rate) over the span all mapped channels cover; `time` is seconds
 since the log's first sample. A channel the log does not have is left out and listed in
@@ -86,7 +94,9 @@ def import_log(path: str | Path, surfaces: Mapping[str, Surface],
         raise LogImportError(f"{path}: no such file")
     if path.suffix.lower() == ".bin":
         return _dataflash(path, surfaces, rate_hz)
-    raise LogImportError(f"{path}: unknown log type {path.suffix!r} (ArduPilot .bin)")
+    if path.suffix.lower() == ".ulg":
+        return _ulog(path, surfaces, rate_hz)
+    raise LogImportError(f"{path}: unknown log type {path.suffix!r} (ArduPilot .bin, PX4 .ulg)")
 
 
 def _dataflash(path: Path, surfaces: Mapping[str, Surface], rate_hz: float) -> Imported:
@@ -130,6 +140,52 @@ def _dataflash(path: Path, surfaces: Mapping[str, Surface], rate_hz: float) -> I
     return _resample(path, "ArduPilot DataFlash", series, rate_hz, notes)
 
 
+def _ulog(path: Path, surfaces: Mapping[str, Surface], rate_hz: float) -> Imported:
+    from pyulog import ULog
+
+    topics = ["vehicle_attitude", "vehicle_angular_velocity", "vehicle_acceleration",
+              "airspeed_validated", "airflow_aoa", "airflow_slip", "actuator_outputs"]  # fmt: skip
+    try:
+        log = ULog(str(path), message_name_filter_list=topics)
+    except Exception as exc:  # pyulog raises bare exceptions on a file that is not a ULog
+        raise LogImportError(f"{path}: not a ULog file ({exc})") from exc
+    data = {d.name: d.data for d in log.data_list if d.multi_id == 0}
+    series: dict[str, tuple[list[float], list[float]]] = {}
+
+    def put(column: str, t: np.ndarray, values: np.ndarray) -> None:
+        series[column] = (list(t), list(np.asarray(values, dtype=float)))
+
+    if "vehicle_attitude" in data:
+        d = data["vehicle_attitude"]
+        w, x, y, z = (d[f"q[{k}]"] for k in range(4))
+        t = d["timestamp"] * 1e-6
+        put("phi", t, np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y)))
+        put("theta", t, np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0)))
+        put("psi", t, np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
+    for topic, columns in (("vehicle_angular_velocity", ("p", "q", "r")),
+                           ("vehicle_acceleration", ("ax", "ay", "az"))):  # fmt: skip
+        if topic in data:
+            d = data[topic]
+            for k, column in enumerate(columns):
+                put(column, d["timestamp"] * 1e-6, d[f"xyz[{k}]"])
+    for topic, name, column in (("airspeed_validated", "true_airspeed_m_s", "Vt"),
+                                ("airflow_aoa", "aoa_rad", "alpha"),
+                                ("airflow_slip", "slip_rad", "beta")):  # fmt: skip
+        if topic in data:
+            put(column, data[topic]["timestamp"] * 1e-6, data[topic][name])
+    if "actuator_outputs" in data:
+        d = data["actuator_outputs"]
+        for control, surface in surfaces.items():
+            pwm = d[f"output[{surface.channel - 1}]"]
+            t = d["timestamp"] * 1e-6
+            put(f"{control}_pwm", t, pwm)
+            put(control, t, pwm if control == "throttle" else (pwm - 1500.0) / surface.us_per_unit)
+    if not series:
+        raise LogImportError(f"{path}: none of the mapped topics are in this log")
+    notes = [f"PX4 ({log.msg_info_dict.get('sys_name', '?')}), dropouts: {len(log.dropouts)}"]
+    return _resample(path, "PX4 ULog", series, rate_hz, notes)
+
+
 def _append(series, column: str, t: float, value: float) -> None:
     times, values = series.setdefault(column, ([], []))
     times.append(t)
@@ -158,5 +214,6 @@ def _resample(path: Path, kind: str, series, rate_hz: float, notes: list[str]) -
         t = np.asarray(series["sid_time"][0])
         columns["sid_active"] = ((time >= t.min()) & (time <= t.max())).astype(float)
     expected = [c for _, _, c, _, _ in DATAFLASH if not c.startswith("sid_")]
+    expected = list(dict.fromkeys(expected))
     missing = [c for c in expected if c not in columns]
     return Imported(path, kind, time - time[0], columns, missing, notes)

@@ -1,0 +1,79 @@
+"""`sysid import` on PX4 ULog files written here from the format specification.
+
+The same known roll-rate model as the ArduPilot test, logged as PX4 logs it: attitude as a
+quaternion, body rates, accelerations, true airspeed, AoA/sideslip topics, PWM outputs.
+
+Bad input tried: a file that is not a ULog, a ULog with none of the mapped topics.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agent.analysis.importers import LogImportError, import_log
+from agent.config import Config
+from agent.sim.ulog import ULogWriter
+from tests.analysis.test_import_ardupilot import GAIN, POLE
+
+SURFACES = Config().excitation.surfaces
+
+
+def quaternion(phi, theta, psi):
+    cr, sr = np.cos(phi / 2), np.sin(phi / 2)
+    cp, sp = np.cos(theta / 2), np.sin(theta / 2)
+    cy, sy = np.cos(psi / 2), np.sin(psi / 2)
+    return [cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy]  # fmt: skip
+
+
+def px4_log(path, seconds=20.0, rate=100.0):
+    dt, n = 1.0 / rate, int(seconds * rate)
+    t = np.arange(n) * dt
+    aileron = np.where((t > 2) & (t < 18), 5.0 * np.sign(np.sin(2 * np.pi * 0.4 * t)), 0.0)
+    p = np.zeros(n)
+    a, b = np.exp(POLE * dt), GAIN * (np.exp(POLE * dt) - 1) / POLE
+    for k in range(n - 1):
+        p[k + 1] = a * p[k] + b * aileron[k]
+    phi = np.cumsum(p) * dt
+    with ULogWriter(path) as log:
+        for k in range(n):
+            us = 1_000_000 + int(t[k] * 1e6)
+            log.write("vehicle_attitude", timestamp=us, q=quaternion(phi[k], 0.05, 1.0))
+            log.write("vehicle_angular_velocity", timestamp=us + 100, xyz=[p[k], 0.0, 0.0])
+            log.write("vehicle_acceleration", timestamp=us + 100, xyz=[0.0, 0.0, -9.81])
+            log.write("airspeed_validated", timestamp=us + 200, true_airspeed_m_s=21.5)
+            log.write("airflow_aoa", timestamp=us + 300, aoa_rad=0.06, valid=True)
+            outputs = [1500.0] * 16
+            outputs[0], outputs[2] = 1500.0 + 20.0 * aileron[k], 1350.0
+            log.write("actuator_outputs", timestamp=us + 400, noutputs=8, output=outputs)
+    return t, phi, p
+
+
+def test_px4_topics_map_to_the_channels(tmp_path):
+    t, phi, p = px4_log(tmp_path / "flight.ulg")
+    imported = import_log(tmp_path / "flight.ulg", SURFACES, 50.0)
+    c = imported.columns
+    assert np.allclose(np.diff(imported.time), 0.02)
+    assert np.allclose(c["theta"], 0.05, atol=1e-5)
+    assert np.allclose(c["psi"], 1.0, atol=1e-5)
+    assert np.interp(10.0, imported.time, c["phi"]) == pytest.approx(
+        np.interp(10.0 + 0.0, t, phi), abs=2e-3)  # fmt: skip
+    assert np.allclose(c["p"], np.interp(imported.time + 0.0004, t, p), atol=1e-3)
+    assert np.allclose(c["Vt"], 21.5)
+    assert np.allclose(c["alpha"], 0.06)
+    assert np.allclose(c["throttle"], 1350.0)
+    assert np.max(np.abs(c["aileron"])) == pytest.approx(5.0)
+    assert imported.missing == ["beta"]  # no airflow_slip topic in this log
+    assert imported.kind == "PX4 ULog"
+
+
+@pytest.mark.parametrize("damage", ["not a ulog", "no mapped topics"])
+def test_bad_ulog_files(tmp_path, damage):
+    path = tmp_path / "bad.ulg"
+    if damage == "not a ulog":
+        path.write_bytes(b"\x00" * 500)
+    else:
+        ULogWriter(path).close()
+    with pytest.raises(LogImportError, match=r"bad\.ulg"):
+        import_log(path, SURFACES, 50.0)
