@@ -26,6 +26,7 @@ import re
 import threading
 import time
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -80,6 +81,11 @@ def format_row(row: np.ndarray) -> bytes:
     return (",".join(cells) + "\n").encode()
 
 
+@dataclass(frozen=True)
+class _Create:
+    path: Path
+
+
 class LogWriter:
     """The writer thread: open files, append lines, fsync; see the module docstring."""
 
@@ -97,20 +103,29 @@ class LogWriter:
         self._lock = threading.Lock()
         self.dropped = 0
         self.errors = 0
+        self.failures: list[str] = []  # files that could not be created, and why
         self._thread = threading.Thread(target=self._serve, name="log-writer", daemon=True)
         self._thread.start()
 
     def open(self, name: str, header: bytes = b"") -> int:
-        """Create a log file (never overwrites) and queue its header; returns its handle."""
+        """Create a log file (never overwrites) and queue its header; returns its handle.
+        The file is created on the writer thread: creating a file can wait on the journal
+        while the other logs are being synced, and the caller is the event loop."""
         with self._lock:
             self._handles += 1
             handle = self._handles
         path = self.directory / name
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o644)
-        self._fds[handle], self._paths[handle] = fd, path
+        self._paths[handle] = path
+        self._put((handle, _Create(path)), block=True)
         if header:
             self._put((handle, header), block=True)
         return handle
+
+    def next_number(self) -> int:
+        """The next running number, counting the files this writer has queued but not yet
+        created as well as those on disk."""
+        queued = [int(m.group(1)) for p in self._paths.values() if (m := NAME.match(p.name))]
+        return max(next_number(self.directory), max(queued, default=0) + 1)
 
     def path(self, handle: int) -> Path:
         return self._paths[handle]
@@ -157,6 +172,14 @@ class LogWriter:
                 last_sync = time.monotonic()
 
     def _apply(self, handle: int, data) -> None:
+        if isinstance(data, _Create):
+            try:
+                flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND
+                self._fds[handle] = os.open(data.path, flags, 0o644)
+            except OSError as exc:
+                self.errors += 1
+                self.failures.append(f"{data.path}: cannot be created ({exc.strerror or exc})")
+            return
         fd = self._fds.get(handle)
         if fd is None:
             return
@@ -237,7 +260,7 @@ class Logbook:
                  config_sha256: str):  # fmt: skip
         self._writer, self._columns, self._units = writer, list(columns), list(units)
         self._sha = config_sha256
-        number = next_number(writer.directory)
+        number = writer.next_number()
         header = csv_header("flight", self._columns, self._units, config_sha256)
         self.flight = writer.open(log_name(number, "flight", "csv"), header)
         self.execution = writer.open(log_name(number, "exec", "jsonl"))
@@ -248,7 +271,7 @@ class Logbook:
 
     def excitation(self, window, rows: np.ndarray, batch: bool = False) -> Path:
         """Write one excitation's input/output log; returns its path."""
-        number = next_number(self._writer.directory)
+        number = self._writer.next_number()
         extra = (
             f"excitation plan {window.plan_id}, {window.outcome}"
             f"{': ' + window.reason if window.reason else ''}, "

@@ -40,7 +40,7 @@ from agent.ident import job as jobs
 from agent.link import messages
 from agent.link.codec import AIRCRAFT, CounterStore, LinkCodec
 from agent.link.session import LinkSession
-from agent.logs import Logbook, LogWriter, config_hash, log_name, next_number, units_of
+from agent.logs import Logbook, LogWriter, config_hash, log_name, units_of
 from agent.models import SELF_CHECK_RATIO, Candidate, ModelStore, suggest
 from agent.recorder import Recorder
 from drivers.airdata.driver import make_driver as airdata
@@ -93,9 +93,7 @@ class Agent:
         )
         self.recorder.sink = self.logbook.row
         # The result log: one JSON object per identification (thesis 2.2.1).
-        self._results = self.writer.open(
-            log_name(next_number(self.writer.directory), "results", "jsonl")
-        )
+        self._results = self.writer.open(log_name(self.writer.next_number(), "results", "jsonl"))
         excitation = config.excitation
         self.autopilot = AutopilotLink(
             config.autopilot,
@@ -523,6 +521,11 @@ class Agent:
             "open_files": _open_files(),
             "counters": dict(self.counters),
             "recorder": dict(self.recorder.counters),
+            "logs": {
+                "errors": self.writer.errors,
+                "dropped": self.writer.dropped,
+                "failures": self.writer.failures[-3:],
+            },  # fmt: skip
         }
 
     # -- status -----------------------------------------------------------------------------

@@ -136,3 +136,30 @@ def test_sysid_identify_reads_flight_logs_and_names_the_right_line(tmp_path):
     record = read_record(clean, ["p"])
     assert record.columns["p"].tolist() == pytest.approx([0.0, 0.1, 0.2, 0.3])
     assert record.dt == pytest.approx(0.01)
+
+
+def test_files_opened_in_quick_succession_get_their_own_numbers(tmp_path):
+    # Files are created on the writer thread; numbering must not wait for them to exist.
+    writer = LogWriter(tmp_path)
+    try:
+        names, handles = [], []
+        for _ in range(3):  # as Logbook.excitation does it: number, then open
+            names.append(log_name(writer.next_number(), "lateral", "csv"))
+            handles.append(writer.open(names[-1], b"# header\n"))
+    finally:
+        writer.close()
+    assert len(set(names)) == 3
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(names)
+    assert writer.errors == 0
+    assert [writer.path(h).read_text() for h in handles] == ["# header\n"] * 3
+
+
+def test_a_file_that_cannot_be_created_is_counted_and_named(tmp_path):
+    writer = LogWriter(tmp_path)
+    (tmp_path / "0001_flight_x.csv").write_text("someone else's")
+    handle = writer.open("0001_flight_x.csv", b"# ours\n")  # exists: never overwritten
+    writer.write(handle, b"1,2\n")
+    writer.close()
+    assert (tmp_path / "0001_flight_x.csv").read_text() == "someone else's"
+    assert writer.errors == 1
+    assert "0001_flight_x.csv: cannot be created (File exists)" in writer.failures[0]

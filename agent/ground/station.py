@@ -27,7 +27,7 @@ from agent.ground.config import GroundConfig
 from agent.link import messages
 from agent.link.codec import GROUND, CounterStore, LinkCodec
 from agent.link.session import LinkSession
-from agent.logs import LogWriter, log_name, next_number
+from agent.logs import LogWriter, log_name
 from drivers.xbee.driver import XBeeRadio
 
 log = logging.getLogger(__name__)
@@ -100,9 +100,7 @@ class GroundStation:
         )
         self.radio = XBeeRadio(cfg.port, cfg.baud, self.clock, self._receive)
         await self.radio.open()
-        self._log = self.writer.open(
-            log_name(next_number(self.writer.directory), "ground", "jsonl")
-        )
+        self._log = self.writer.open(log_name(self.writer.next_number(), "ground", "jsonl"))
         codec.max_payload = self.radio.max_payload
         self.session = LinkSession(
             codec,
