@@ -525,7 +525,7 @@ class Agent:
                 "errors": self.writer.errors,
                 "dropped": self.writer.dropped,
                 "failures": self.writer.failures[-3:],
-            },  # fmt: skip
+            },
         }
 
     # -- status -----------------------------------------------------------------------------
