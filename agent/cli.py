@@ -146,6 +146,16 @@ def build_parser() -> argparse.ArgumentParser:
         "--config", type=Path, help="config.toml whose [excitation.surfaces] maps RC outputs"
     )
 
+    export = sub.add_parser(
+        "export",
+        help="identified models (and data) to MATLAB .mat or JSON",
+        description="Export the models of a result log, a model store file "
+        "(models/<axes>_nominal.json) or a ground log; variable names in the README.",
+    )
+    export.add_argument("source", type=Path, metavar="SOURCE")
+    export.add_argument("--out", type=Path, required=True, help="FILE.mat or FILE.json")
+    export.add_argument("--model", action="append", metavar="ID", help="only these model ids")
+
     aircraft = sub.add_parser(
         "sim-aircraft",
         help="run the simulated aircraft alone (JSBSim, emulated ArduPlane, sensor ptys)",
@@ -385,6 +395,36 @@ def cmd_import(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_export(args: argparse.Namespace) -> int:
+    from agent.analysis.export import ExportError, load_models, to_json, to_mat
+
+    suffix = args.out.suffix.lower()
+    if suffix not in (".mat", ".json"):
+        _error("export", f"{args.out}: give a .mat or .json file to write")
+        return EXIT_BAD_INPUT
+    try:
+        models = load_models(args.source)
+    except ExportError as exc:
+        _error("export", str(exc))
+        return EXIT_BAD_INPUT
+    if args.model:
+        unknown = sorted(set(args.model) - {m["id"] for m in models})
+        if unknown:
+            _error("export", f"{args.source}: no model {', '.join(unknown)}")
+            return EXIT_BAD_INPUT
+        models = [m for m in models if m["id"] in args.model]
+    try:
+        if suffix == ".mat":
+            to_mat(models, args.out)
+        else:
+            args.out.write_text(to_json(models))
+    except OSError as exc:
+        _error("export", f"{args.out}: cannot be written ({exc.strerror or exc})")
+        return EXIT_FAILED
+    print(f"{args.out}: {len(models)} model(s): {', '.join(m['id'] for m in models)}")
+    return EXIT_OK
+
+
 def cmd_sim_aircraft(args: argparse.Namespace) -> int:
     import asyncio
 
@@ -537,6 +577,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return cmd_sim_aircraft(args)
     if args.command == "import":
         return cmd_import(args)
+    if args.command == "export":
+        return cmd_export(args)
     if args.command == "agent":
         return cmd_agent(args)
     if args.command == "sim":

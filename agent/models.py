@@ -194,6 +194,7 @@ class ModelStore:
                     "preprocessing": c.preprocessing,
                     "tic_nn": c.tic_nn,
                     "count": len(c.experiments),
+                    "extra": c.extra,
                 }
             )
         )
@@ -215,6 +216,7 @@ class ModelStore:
                 m["preprocessing"],
                 experiments,
                 m["tic_nn"],
+                m.get("extra", {}),
             )
         except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile) as exc:
             # A damaged store must not stop identification: set the files aside (kept for

@@ -365,9 +365,8 @@ class Agent:
         columns = {c: rows[:, 1 + k] for k, c in enumerate(self.recorder.channels)}
         dt = 1.0 / self.config.recorder.rate_hz
         try:
-            experiment = jobs.window_experiment(
-                columns, inputs, outputs, dt, self.config.identification.trim_seconds
-            )
+            trim_s = self.config.identification.trim_seconds
+            experiment, trim = jobs.window_and_trim(columns, inputs, outputs, dt, trim_s)
         except (ValueError, KeyError) as exc:
             return self._failed(model_id, axes, f"window unusable: {exc}")
         batch = self._batch.setdefault(axes, []) if self.ident.batch else []
@@ -384,7 +383,7 @@ class Agent:
             outcome["result"],
             outcome["preprocessing"],
             job.experiments,
-            extra={"record_s": len(experiment[0]) * dt},
+            extra={"record_s": len(experiment[0]) * dt, "trim": trim},
         )
         nominal = await loop.run_in_executor(self._store, self.models.nominal, axes)
         tic_jn = tic_nj = None
@@ -412,6 +411,7 @@ class Agent:
             "model_id": model_id,
             "axes": axes,
             "window": [window.start, window.end],
+            "trim": trim,
             "suggestion": suggestion.__dict__,
             "result": outcome["result"],
         }

@@ -34,9 +34,17 @@ class Job:
     settings: Settings = field(default_factory=Settings)
 
 
-def window_experiment(values: dict[str, np.ndarray], inputs, outputs, dt: float,
-                      trim_s: float) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    """(u, y) from recorded columns: short gaps bridged, trim (first trim_s) removed."""
+def window_and_trim(values: dict[str, np.ndarray], inputs, outputs, dt: float, trim_s: float):
+    """(u, y) from recorded columns — short gaps bridged, trim (the mean of the first trim_s)
+    removed — and that trim by channel, the model's operating point:
+    {"inputs": {name: value}, "outputs": {name: value}}."""
+    (u, y), (u0, y0) = _window(values, inputs, outputs, dt, trim_s)
+    trim = {"inputs": dict(zip(inputs, map(float, u0), strict=True)),
+            "outputs": dict(zip(outputs, map(float, y0), strict=True))}  # fmt: skip
+    return (u - u0, y - y0), trim
+
+
+def _window(values, inputs, outputs, dt: float, trim_s: float):
     names = [*inputs, *outputs]
     every = np.column_stack([values[n] for n in names])
     # Rows at the window's edges where a channel has no data yet (or no longer) are cut.
@@ -47,7 +55,7 @@ def window_experiment(values: dict[str, np.ndarray], inputs, outputs, dt: float,
     u = np.column_stack([_bridge(values[n][keep], dt, n) for n in inputs])
     y = np.column_stack([_bridge(values[n][keep], dt, n) for n in outputs])
     count = max(1, round(trim_s / dt))
-    return u - u[:count].mean(axis=0), y - y[:count].mean(axis=0)
+    return (u, y), (u[:count].mean(axis=0), y[:count].mean(axis=0))
 
 
 def _bridge(x: np.ndarray, dt: float, name: str) -> np.ndarray:

@@ -1,0 +1,188 @@
+"""Identified models (and their data) to MATLAB .mat and JSON (`sysid export`).
+
+Sources: the agent's result log (`NNNN_results_DATE.jsonl`: every identification of a flight),
+a model store file (`models/<axes>_nominal.json` or `_previous.json`, with the data set it was
+identified from, in the `.npz` beside it), or the ground console's log (`NNNN_ground_DATE.jsonl`:
+the results as they came over the radio — discrete matrices only).
+
+One MATLAB struct per model, named after its id (`lat_3` for `lat-3`), and `model_ids`, a cell
+array of the original ids. The fields (also the JSON keys):
+
+| field | meaning |
+|---|---|
+| id, axes | model id, identification type |
+| dt | sample time of the discrete model (s) |
+| inputs, outputs | channel names (cell arrays of strings), in matrix order |
+| A, B, C, D | discrete-time model x[k+1] = A x[k] + B u[k], y[k] = C x[k] + D u[k] |
+| Ac, Bc, Cc, Dc | continuous-time model (empty when the log has none) |
+| u0, y0 | trim: the input and output values removed before identification (empty if unknown) |
+| eigenvalues | continuous-time eigenvalues (complex column) |
+| mode_names | aircraft mode names ('' when not named) |
+| frequency_hz, damping | of each eigenvalue |
+| tic, tic_avg | Theil inequality coefficient per output and average |
+| u, y | (model store only) the data set: cell arrays, one matrix per experiment |
+
+Matrices are in the model's own units: surfaces in degrees, throttle in µs, angles in rad,
+rates in rad/s, airspeed in m/s, deviations from u0, y0.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+
+TWO_PI = 2 * np.pi
+
+
+class ExportError(ValueError):
+    """A source that cannot be exported; the message says which file and why."""
+
+
+def load_models(path: str | Path) -> list[dict]:
+    """Every model in a result log, a model store file or a ground log, as export dicts."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ExportError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
+    if path.suffix == ".json":
+        try:
+            return [_from_store(path, json.loads(text))]
+        except (ValueError, KeyError, TypeError) as exc:
+            raise ExportError(f"{path}: not a model store file ({exc})") from exc
+    models = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        try:
+            record = json.loads(line)
+        except ValueError:
+            continue  # a torn last line of a log written during a power cut
+        try:
+            if "result" in record and "model_id" in record:  # the agent's result log
+                models.append(_from_result(record["model_id"], record["axes"],
+                                           record["result"], record.get("trim")))  # fmt: skip
+            elif record.get("dir") == "rx" and record["message"].get("kind") == "result":
+                models.append(_from_message(record["message"]))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ExportError(f"{path}:{number}: not a result record ({exc})") from exc
+    if not models:
+        raise ExportError(f"{path}: no identified model in this file")
+    return models
+
+
+def _matrix(value) -> np.ndarray:
+    return np.atleast_2d(np.asarray(value if value is not None else [], dtype=float))
+
+
+def _modes(modes: list[dict]) -> dict:
+    lam = np.array([complex(*m["eigenvalue"]) for m in modes])
+    return {
+        "eigenvalues": lam.reshape(-1, 1),
+        "mode_names": [m.get("name") or "" for m in modes],
+        "frequency_hz": np.abs(lam) / TWO_PI,
+        "damping": np.array([_or_nan(m.get("damping")) for m in modes]),
+    }
+
+
+def _or_nan(value: float | None) -> float:
+    return np.nan if value is None else float(value)
+
+
+def _trim(trim: dict | None, inputs, outputs) -> dict:
+    if not trim:
+        return {"u0": np.zeros((0,)), "y0": np.zeros((0,))}
+    return {"u0": np.array([trim["inputs"][n] for n in inputs]),
+            "y0": np.array([trim["outputs"][n] for n in outputs])}  # fmt: skip
+
+
+def _from_result(model_id: str, axes: str, r: dict, trim: dict | None) -> dict:
+    continuous = r.get("continuous") or {}
+    return {
+        "id": model_id,
+        "axes": axes,
+        "dt": float(r["dt"]),
+        "inputs": list(r["inputs"]),
+        "outputs": list(r["outputs"]),
+        **{k: _matrix(r[k]) for k in ("A", "B", "C", "D")},
+        **{f"{k}c": _matrix(continuous.get(k)) for k in ("A", "B", "C", "D")},
+        **_trim(trim, r["inputs"], r["outputs"]),
+        **_modes(r["modes"]),
+        "tic": _tic(r["tic"], r["outputs"]),
+        "tic_avg": float(r["tic_avg"]),
+    }
+
+
+def _tic(tic, outputs) -> np.ndarray:
+    """Per output, in output order (the result log keeps them by name)."""
+    values = [tic[o] for o in outputs] if isinstance(tic, dict) else tic
+    return np.asarray(values, dtype=float)
+
+
+def _from_message(m: dict) -> dict:
+    modes = [{"name": x["name"], "eigenvalue": [x["real"], x["imag"]], "damping": x["damping"]}
+             for x in m["modes"]]  # fmt: skip
+    return {
+        "id": m["model_id"],
+        "axes": m["axes"],
+        "dt": float(m["dt"]),
+        "inputs": list(m["inputs"]),
+        "outputs": list(m["outputs"]),
+        **{k: _matrix(m[k]) for k in ("A", "B", "C", "D")},
+        **{f"{k}c": np.zeros((0, 0)) for k in ("A", "B", "C", "D")},
+        **_trim(None, m["inputs"], m["outputs"]),
+        **_modes(modes),
+        "tic": np.asarray(m["tic"], dtype=float),
+        "tic_avg": float(m["tic_avg"]),
+    }
+
+
+def _from_store(path: Path, meta: dict) -> dict:
+    model = _from_result(meta["model_id"], meta["axes"], meta["result"],
+                         (meta.get("extra") or {}).get("trim"))  # fmt: skip
+    data = path.with_suffix(".npz")
+    if data.exists():
+        with np.load(data) as arrays:
+            model["u"] = [arrays[f"u{k}"] for k in range(meta["count"])]
+            model["y"] = [arrays[f"y{k}"] for k in range(meta["count"])]
+    return model
+
+
+def variable_name(model_id: str) -> str:
+    """A MATLAB identifier for a model id: letters, digits, underscores, a letter first."""
+    name = re.sub(r"\W", "_", model_id)
+    return name if name[:1].isalpha() else f"m_{name}"
+
+
+def to_mat(models: list[dict], path: str | Path) -> None:
+    from scipy.io import savemat
+
+    variables: dict[str, object] = {}
+    for model in models:
+        struct = dict(model)
+        for key in ("inputs", "outputs", "mode_names"):
+            struct[key] = np.array(struct[key], dtype=object)
+        for key in ("u", "y"):
+            if key in struct:
+                cell = np.empty(len(struct[key]), dtype=object)
+                cell[:] = struct[key]
+                struct[key] = cell
+        variables[variable_name(model["id"])] = struct
+    variables["model_ids"] = np.array([m["id"] for m in models], dtype=object)
+    savemat(str(path), variables, do_compression=True, oned_as="column")
+
+
+def to_json(models: list[dict]) -> str:
+    def plain(value):
+        if isinstance(value, np.ndarray):
+            if np.iscomplexobj(value):
+                return [[z.real, z.imag] for z in value.ravel()]  # [re, im] pairs
+            if value.dtype.kind == "f":  # NaN (an unknown damping) is null in JSON
+                return np.where(np.isnan(value), None, value).tolist()
+            return value.tolist()
+        if isinstance(value, list):
+            return [plain(v) for v in value]
+        return value
+
+    return json.dumps([{k: plain(v) for k, v in m.items()} for m in models])

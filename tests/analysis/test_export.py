@@ -1,0 +1,154 @@
+"""`sysid export`: the agent's identified models to MATLAB .mat and JSON, and back.
+
+The models come from the agent's own identification path (`Agent._identify` on the bundled
+A.2 lateral record, the worker job run on a thread pool), its result log and its model store.
+
+Bad input tried: a file with no identified model, a damaged store file, an unknown model id,
+an output that is neither .mat nor .json.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import csv
+import json
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.io import loadmat
+
+from agent.analysis.export import ExportError, load_models, to_json, to_mat, variable_name
+from agent.config import Config, Identification, Recorder
+from agent.excitation.scheduler import Window
+from agent.runtime import Agent
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture
+def flight(tmp_path):
+    """An agent that identified the A.2 record twice and accepted the first as nominal."""
+    with (ROOT / "examples" / "a2_lateral.csv").open() as handle:
+        table = list(csv.DictReader(handle))
+    config = Config(recorder=Recorder(log_dir=str(tmp_path / "logs"), rate_hz=50.0),
+                    identification=Identification(trim_seconds=0.5))  # fmt: skip
+    agent = Agent(config, base=tmp_path)
+    agent._downlink = lambda message, reliable=True: None
+    channels = agent.recorder.channels
+    rows = np.full((len(table), 1 + 2 * len(channels)), np.nan)
+    rows[:, 0] = [float(r["time"]) for r in table]
+    for name in ("aileron", "rudder", "beta", "p", "r", "phi"):
+        offset = {"phi": 0.02, "aileron": 1.5}.get(name, 0.0)  # a trim to recover
+        rows[:, 1 + channels.index(name)] = [float(r[name]) + offset for r in table]
+
+    async def fly():
+        pool = ThreadPoolExecutor(1)
+        loop = asyncio.get_running_loop()
+        try:
+            for k in range(2):
+                window = Window(f"run{k}", "lateral", rows[0, 0], rows[-1, 0], "finished")
+                await agent._identify(loop, pool, window, rows)
+                if k == 0:
+                    await loop.run_in_executor(agent._store, agent.models.accept, "lat-1")
+        finally:
+            pool.shutdown()
+
+    asyncio.run(fly())
+    agent.writer.close()
+    agent._store.shutdown()
+    return tmp_path, agent
+
+
+def test_mat_export_loads_back_with_the_same_matrices(flight, tmp_path):
+    base, _ = flight
+    log = next((base / "logs").glob("*_results_*.jsonl"))
+    models = load_models(log)
+    assert [m["id"] for m in models] == ["lat-1", "lat-2"]
+    to_mat(models, tmp_path / "flight.mat")
+    mat = loadmat(tmp_path / "flight.mat", simplify_cells=True)
+    assert list(mat["model_ids"]) == ["lat-1", "lat-2"]
+    record = json.loads(log.read_text().splitlines()[0])["result"]
+    m = mat["lat_1"]
+    for key in ("A", "B", "C", "D"):
+        np.testing.assert_array_equal(np.atleast_2d(m[key]), np.array(record[key]))
+    np.testing.assert_array_equal(m["Ac"], np.array(record["continuous"]["A"]))
+    assert list(m["inputs"]) == ["aileron", "rudder"]
+    assert list(m["outputs"]) == ["beta", "p", "r", "phi"]
+    assert m["u0"][0] == pytest.approx(1.5, abs=1e-9)  # the aileron trim removed
+    assert m["y0"][3] == pytest.approx(0.02 + float(_first_phi()), abs=1e-3)
+    lam = np.sort_complex(np.atleast_1d(m["eigenvalues"]))
+    expected = np.sort_complex([complex(*x["eigenvalue"]) for x in record["modes"]])
+    np.testing.assert_allclose(lam, expected)
+    assert "Dutch roll" in list(m["mode_names"])
+    assert m["dt"] == pytest.approx(record["dt"])
+
+
+def _first_phi() -> float:
+    with (ROOT / "examples" / "a2_lateral.csv").open() as handle:
+        rows = list(csv.DictReader(handle))[:25]
+    return float(np.mean([float(r["phi"]) for r in rows]))
+
+
+def test_the_nominal_store_exports_its_data_set(flight, tmp_path):
+    base, _ = flight
+    models = load_models(base / "models" / "lateral_nominal.json")
+    to_mat(models, tmp_path / "nominal.mat")
+    m = loadmat(tmp_path / "nominal.mat", simplify_cells=True)["lat_1"]
+    u, y = np.atleast_2d(m["u"]), np.atleast_2d(m["y"])
+    assert u.shape[1] == 2
+    assert y.shape[1] == 4
+    assert abs(u[:25].mean()) < 1e-9  # deviations from the trim
+
+
+def test_json_and_the_command_line(flight, tmp_path):
+    base, _ = flight
+    log = next((base / "logs").glob("*_results_*.jsonl"))
+    data = json.loads(to_json(load_models(log)))
+    assert data[1]["id"] == "lat-2"
+    assert len(data[1]["eigenvalues"][0]) == 2  # [re, im]
+    env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
+    run = lambda *a: subprocess.run(  # noqa: E731
+        [sys.executable, "-m", "agent", "export", *a], capture_output=True, text=True,
+        cwd=tmp_path, timeout=60, env=env)  # fmt: skip
+    done = run(str(log), "--out", "one.mat", "--model", "lat-2")
+    assert done.returncode == 0, done.stderr
+    assert (
+        list(loadmat(tmp_path / "one.mat", simplify_cells=True)["model_ids"]) == ["lat-2"]
+        or loadmat(tmp_path / "one.mat", simplify_cells=True)["model_ids"] == "lat-2"
+    )
+    assert "no model lat-9" in run(str(log), "--out", "x.mat", "--model", "lat-9").stderr
+    assert "give a .mat or .json" in run(str(log), "--out", "x.csv").stderr
+
+
+@pytest.mark.parametrize("bad", ["no models", "damaged store"])
+def test_sources_without_models_are_refused(tmp_path, bad):
+    path = tmp_path / ("x.jsonl" if bad == "no models" else "lateral_nominal.json")
+    path.write_text('{"level": "INFO"}\n' if bad == "no models" else '{"model_id": "a"')
+    with pytest.raises(ExportError, match=path.name.replace(".", r"\.")):
+        load_models(path)
+
+
+def test_matlab_names():
+    assert variable_name("lat-3") == "lat_3"
+    assert variable_name("periodic@1234") == "periodic_1234"
+    assert variable_name("3x") == "m_3x"
+
+
+def test_results_heard_by_the_ground_console_export_too(tmp_path):
+    from agent.link import messages
+    from tests.ground.aircraft import result
+
+    message = messages.to_dict(result("lat-7"))
+    log = tmp_path / "0001_ground_20261122.jsonl"
+    log.write_text(json.dumps({"dir": "rx", "seq": 4, "message": message}) + "\n"
+                   + json.dumps({"dir": "note", "message": {"text": "x"}}) + "\n")  # fmt: skip
+    (model,) = load_models(log)
+    assert model["id"] == "lat-7"
+    np.testing.assert_array_equal(model["A"], np.eye(4))
+    assert model["Ac"].size == 0  # the radio carries the discrete model only
+    assert list(model["tic"]) == [0.02, 0.03, 0.02, 0.04]
+    assert model["mode_names"] == ["Dutch roll", "roll", "spiral"]
