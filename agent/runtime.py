@@ -269,6 +269,7 @@ class Agent:
         by the command task, which keeps rendering and model-store files off the loop."""
         if isinstance(message, messages.Abort):
             self.scheduler.abort(message.reason)
+            self._cancel_queued_runs()
             if seq is not None:
                 self._downlink(messages.Ack(ref=seq, ok=True))
             return
@@ -279,6 +280,22 @@ class Agent:
             if seq is not None:
                 reason = "busy: too many commands waiting; send it again"
                 self._downlink(messages.Ack(ref=seq, ok=False, reason=reason))
+
+    def _cancel_queued_runs(self) -> None:
+        """An abort also cancels an arm or start still waiting its turn (else a plan armed a
+        moment before the abort would be armed after it)."""
+        kept = []
+        while not self._commands.empty():
+            message, seq = self._commands.get_nowait()
+            if isinstance(message, messages.Arm | messages.Start):
+                self.counters["commands_cancelled"] += 1
+                if seq is not None:
+                    reason = "cancelled by an abort that arrived before it was carried out"
+                    self._downlink(messages.Ack(ref=seq, ok=False, reason=reason))
+            else:
+                kept.append((message, seq))
+        for item in kept:
+            self._commands.put_nowait(item)
 
     async def _command_loop(self) -> None:
         while True:

@@ -44,8 +44,7 @@ async def test_ground_commands_are_acknowledged_with_the_reason(agent):
     ]
     for seq, command in enumerate(commands, start=1):
         agent._on_ground(command, seq)  # queued for the command task, in order
-    agent._on_ground(messages.Abort(), 7)  # an abort does not wait its turn
-    assert [m.ref for m in agent.sent if isinstance(m, messages.Ack)] == [7]
+    assert not agent.sent  # nothing answered before the command task runs
     while not agent._commands.empty():
         await agent.handle(*agent._commands.get_nowait())
     acks = {m.ref: m for m in agent.sent if isinstance(m, messages.Ack)}
@@ -108,3 +107,17 @@ async def test_health_record_separates_the_lag_while_identifying(agent):
     empty = agent.health_record(wall_s=60.0, cpu_s=0.0)
     assert empty["lag"] == {"n": 0}
     assert empty["lag_identifying"] == {"n": 0}
+
+
+async def test_an_abort_cancels_an_arm_still_waiting_its_turn(agent):
+    agent._on_ground(messages.Arm(plan=preset("full")), 1)  # rendering would take 0.1 s
+    agent._on_ground(messages.IdentSettings(axes="full"), 2)
+    agent._on_ground(messages.Abort(), 3)
+    while not agent._commands.empty():
+        await agent.handle(*agent._commands.get_nowait())
+    acks = {m.ref: m for m in agent.sent if isinstance(m, messages.Ack)}
+    assert not acks[1].ok
+    assert "cancelled by an abort" in acks[1].reason
+    assert acks[2].ok  # not a run: still carried out
+    assert acks[3].ok
+    assert agent.scheduler.status == "idle"

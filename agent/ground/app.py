@@ -34,6 +34,7 @@ from textual.widgets import (
     TabPane,
     TextArea,
 )
+from textual.worker import Worker, WorkerState
 
 from agent.excitation.plan import PRESETS, Plan, preset, refusals, render, summary
 from agent.ground.splane import Point, SPlane
@@ -402,6 +403,10 @@ class Console(App):
                 points += [Point(complex(m.real, s * m.imag), kind) for m in r.modes
                            for s in ((1, -1) if m.imag else (1,))]  # fmt: skip
         self._q("#splane", SPlane).show(points)
+
+    def on_worker_state_changed(self, event: Worker.StateChanged) -> None:
+        if event.worker.name == "link" and event.state == WorkerState.ERROR:
+            self.station.note("error", f"the radio link stopped: {event.worker.error!r}")
 
     @on(DataTable.RowHighlighted, "#results")
     def _select(self, event: DataTable.RowHighlighted) -> None:

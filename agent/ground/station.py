@@ -129,8 +129,13 @@ class GroundStation:
         """The ground module's RSSI of the last frame heard (DB), every rssi_s."""
         while True:
             await asyncio.sleep(self.config.rssi_s)
-            if self.radio is not None and self.link_up:
+            if self.radio is None or not self.link_up:
+                continue
+            try:
                 self.rssi_dbm = await self.radio.rssi()
+            except Exception as exc:  # a display value: never worth the link itself
+                self.rssi_dbm = None
+                log.warning("RSSI not read: %r", exc)
 
     async def close(self) -> None:
         if self.radio is not None:
