@@ -44,6 +44,52 @@ def _trim(text: str) -> float:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def _identification_options(parser: argparse.ArgumentParser) -> None:
+    """The options `sysid identify` and `sysid analyze` share."""
+    parser.add_argument("--inputs", type=_names, metavar="NAMES", help="input columns, a,b,…")
+    parser.add_argument("--outputs", type=_names, metavar="NAMES", help="output columns, a,b,…")
+    parser.add_argument(
+        "--axes",
+        choices=("lateral", "longitudinal", "full"),
+        help="take inputs/outputs from the config's channel names for this axis set",
+    )
+    parser.add_argument("--order", type=_positive_int, metavar="N", help="model order")
+    parser.add_argument("--markov", type=_positive_int, metavar="P", help="Markov parameters")
+    parser.add_argument("--start", type=float, metavar="T0", help="first time used, s")
+    parser.add_argument("--end", type=float, metavar="T1", help="last time used, s")
+    parser.add_argument(
+        "--trim",
+        type=_trim,
+        metavar="first:SECONDS|none",
+        help="trim = mean of the first SECONDS of each record (default from config: 0.5)",
+    )
+    parser.add_argument(
+        "--decimation",
+        type=_positive_int,
+        metavar="Q",
+        help="decimation factor after the anti-alias filter (default: automatic; 1 = none)",
+    )
+    parser.add_argument(
+        "--method",
+        choices=("time", "frequency"),
+        help="OKID in the time domain (default) or from averaged spectra (thesis §4.3.1)",
+    )
+    parser.add_argument(
+        "--period",
+        type=float,
+        metavar="SECONDS",
+        help="excitation period for --method frequency (default: detected from the inputs)",
+    )
+    parser.add_argument(
+        "--refine",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="output-error refinement with Cramér–Rao standard errors (default from config: on)",
+    )
+    parser.add_argument("--config", type=Path, help="config file (default ./config.toml if any)")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="sysid", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -54,48 +100,28 @@ def build_parser() -> argparse.ArgumentParser:
         description="Identify one linear model from one or more CSV records (a batch).",
     )
     ident.add_argument("data", nargs="+", type=Path, metavar="DATA.csv")
-    ident.add_argument("--inputs", type=_names, metavar="NAMES", help="input columns, a,b,…")
-    ident.add_argument("--outputs", type=_names, metavar="NAMES", help="output columns, a,b,…")
-    ident.add_argument(
-        "--axes",
-        choices=("lateral", "longitudinal", "full"),
-        help="take inputs/outputs from the config's channel names for this axis set",
+    _identification_options(ident)
+
+    analyze = sub.add_parser(
+        "analyze",
+        help="re-run the onboard identification on logs: per excitation, batch, sweeps, "
+        "cross-validation",
+        description="Re-run the agent's identification job on excitation logs (or any "
+        "records) with changed settings (thesis 6.2.3).",
     )
-    ident.add_argument("--order", type=_positive_int, metavar="N", help="model order")
-    ident.add_argument("--markov", type=_positive_int, metavar="P", help="Markov parameters")
-    ident.add_argument("--start", type=float, metavar="T0", help="first time used, s")
-    ident.add_argument("--end", type=float, metavar="T1", help="last time used, s")
-    ident.add_argument(
-        "--trim",
-        type=_trim,
-        metavar="first:SECONDS|none",
-        help="trim = mean of the first SECONDS of each record (default from config: 0.5)",
-    )
-    ident.add_argument(
-        "--decimation",
-        type=_positive_int,
-        metavar="Q",
-        help="decimation factor after the anti-alias filter (default: automatic; 1 = none)",
-    )
-    ident.add_argument(
-        "--method",
-        choices=("time", "frequency"),
-        help="OKID in the time domain (default) or from averaged spectra (thesis §4.3.1)",
-    )
-    ident.add_argument(
-        "--period",
-        type=float,
-        metavar="SECONDS",
-        help="excitation period for --method frequency (default: detected from the inputs)",
-    )
-    ident.add_argument(
-        "--refine",
-        action=argparse.BooleanOptionalAction,
-        default=None,
-        help="output-error refinement with Cramér–Rao standard errors (default from config: on)",
-    )
-    ident.add_argument("--config", type=Path, help="config file (default ./config.toml if any)")
-    ident.add_argument("--json", action="store_true", help="print one JSON object")
+    analyze.add_argument("data", nargs="+", type=Path, metavar="LOG",
+                         help="excitation logs, records, or a log directory")  # fmt: skip
+    _identification_options(analyze)
+    analyze.add_argument("--excitation", action="append", metavar="N|PLAN",
+                         help="only this excitation log (running number or plan id)")  # fmt: skip
+    analyze.add_argument("--batch", action="store_true", help="one identification of all")
+    analyze.add_argument("--sweep", metavar="NAME=RANGE",
+                         help="markov=1:20 or order=2:12:2 or markov=1,2,5")  # fmt: skip
+    analyze.add_argument("--cross", action="store_true",
+                         help="each model on every other excitation (TIC_jN)")  # fmt: skip
+    analyze.add_argument("--jobs", type=_positive_int, default=1, help="parallel processes")
+    analyze.add_argument("--scheduler", metavar="ADDRESS",
+                         help="run the identifications on this Dask cluster")  # fmt: skip
 
     excite = sub.add_parser(
         "excite",
@@ -264,22 +290,24 @@ def _load_optional_config(path: Path | None) -> Config:
     return load_config(DEFAULT_CONFIG) if DEFAULT_CONFIG.exists() else Config()
 
 
-def cmd_identify(args: argparse.Namespace) -> int:
+def _identification_request(args: argparse.Namespace, command: str, paths):
+    """(config, request, settings) from the shared identification options; None after an
+    error message."""
     try:
         config = _load_optional_config(args.config).identification
     except ConfigError as exc:
-        _error("identify", str(exc))
-        return EXIT_BAD_INPUT
+        _error(command, str(exc))
+        return None
     inputs, outputs = args.inputs, args.outputs
     if args.axes is not None:
         axis_inputs, axis_outputs = config.channels.axis_set(args.axes)
         inputs, outputs = inputs or axis_inputs, outputs or axis_outputs
     if not inputs or not outputs:
-        _error("identify", "give --inputs and --outputs, or --axes lateral|longitudinal|full")
-        return EXIT_BAD_INPUT
+        _error(command, "give --inputs and --outputs, or --axes lateral|longitudinal|full")
+        return None
     trim = config.trim_seconds if args.trim is None else args.trim
     request = identify_cmd.Request(
-        paths=tuple(args.data),
+        paths=tuple(paths),
         inputs=inputs,
         outputs=outputs,
         start=args.start,
@@ -295,6 +323,14 @@ def cmd_identify(args: argparse.Namespace) -> int:
         method=args.method,
         period_s=args.period,
     )
+    return config, request, settings
+
+
+def cmd_identify(args: argparse.Namespace) -> int:
+    prepared = _identification_request(args, "identify", args.data)
+    if prepared is None:
+        return EXIT_BAD_INPUT
+    config, request, settings = prepared
     try:
         outcome = identify_cmd.run(request, config, settings)
     except (RecordError, DataError) as exc:
@@ -306,6 +342,112 @@ def cmd_identify(args: argparse.Namespace) -> int:
     else:
         print(format_text(outcome.result, outcome.records, outcome.samples))
     return EXIT_OK
+
+
+def cmd_analyze(args: argparse.Namespace) -> int:
+    from agent.analysis import analyze as an
+
+    try:
+        paths = an.select_logs(args.data, args.excitation)
+        sweep = an.parse_sweep(args.sweep) if args.sweep else None
+    except an.AnalyzeError as exc:
+        _error("analyze", str(exc))
+        return EXIT_BAD_INPUT
+    prepared = _identification_request(args, "analyze", paths)
+    if prepared is None:
+        return EXIT_BAD_INPUT
+    config, request, settings = prepared
+    if args.cross and args.batch:
+        _error("analyze", "--cross needs one model per excitation: drop --batch")
+        return EXIT_BAD_INPUT
+    roles = [config.channels.role_of(n) for n in request.outputs]
+    try:
+        cases, _ = an.build_cases(request, roles, settings, batch=args.batch, sweep=sweep)
+    except an.AnalyzeError as exc:
+        _error("analyze", str(exc))
+        return EXIT_BAD_INPUT
+    bar = _progress(len(cases), quiet=args.json)
+    try:
+        outcomes = an.run_cases(cases, workers=args.jobs, scheduler=args.scheduler,
+                                progress=bar)  # fmt: skip
+    except (OSError, ValueError, TimeoutError) as exc:  # a scheduler that cannot be reached
+        _error("analyze", f"cannot run the jobs: {exc}")
+        return EXIT_FAILED
+    finally:
+        bar(None, None)
+    report = {"logs": [str(p) for p in paths], "cases": [
+        {"excitation": c.label, "setting": dict(c.key), **_case_summary(o)}
+        for c, o in zip(cases, outcomes, strict=True)]}  # fmt: skip
+    excitations = 1 if args.batch else len(paths)
+    if sweep is not None:
+        table = an.sweep_table(cases, outcomes)
+        report["sweep"] = table
+        report["recommended"] = an.recommend(table, excitations)
+    if args.cross:
+        report["cross_tic"] = an.cross_validation(cases, outcomes)
+    print(json.dumps(report) if args.json else _analysis_text(report, paths))
+    return EXIT_OK if any(o["ok"] for o in outcomes) else EXIT_FAILED
+
+
+def _case_summary(outcome: dict) -> dict:
+    if not outcome["ok"]:
+        return {"ok": False, "reason": outcome["reason"]}
+    r = outcome["result"]
+    modes = [{"name": m["name"], "eigenvalue": m["eigenvalue"]} for m in r["modes"]]
+    return {"ok": True, "markov": r["markov"], "order": r["order"], "tic_avg": r["tic_avg"],
+            "modes": modes}  # fmt: skip
+
+
+def _progress(total: int, quiet: bool):
+    """A progress bar on stderr (tqdm) for long analyses; call with (None, None) to close."""
+    if quiet or total < 2:
+        return lambda done, of: None
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, unit="id", file=sys.stderr, leave=False,
+               disable=not sys.stderr.isatty())  # fmt: skip
+
+    def update(done, of):
+        if done is None:
+            bar.close()
+        else:
+            bar.n = done
+            bar.refresh()
+
+    return update
+
+
+def _analysis_text(report: dict, paths) -> str:
+    lines = [f"{len(paths)} log(s): " + ", ".join(Path(p).name for p in paths)]
+    for case in report["cases"]:
+        setting = " ".join(f"{k}={v}" for k, v in case["setting"].items())
+        head = f"excitation {case['excitation']}" + (f" ({setting})" if setting else "")
+        if not case["ok"]:
+            lines.append(f"{head}: failed: {case['reason']}")
+            continue
+        modes = ", ".join(f"{m['name']} {complex(*m['eigenvalue']):.3f}"
+                          for m in case["modes"] if m["name"])  # fmt: skip
+        lines.append(f"{head}: p {case['markov']}, n {case['order']}, "
+                     f"TIC_avg {case['tic_avg']:.3f}; {modes or 'no named mode'}")  # fmt: skip
+    if "sweep" in report:
+        lines.append("")
+        lines.append(f"{'setting':<14}{'TIC_avg':>9}  {'ok':>3}  modes (worst spread across "
+                     "excitations)")  # fmt: skip
+        for row in report["sweep"]:
+            setting = " ".join(f"{k}={v}" for k, v in row["setting"].items())
+            tic = "–" if row["tic_avg"] is None else f"{row['tic_avg']:.4f}"
+            spread = ", ".join(f"{n} {100 * s:.0f}%" for n, s in row["spread"].items())
+            lines.append(f"{setting:<14}{tic:>9}  {row['identified']:>3}  {spread or '–'}")
+        best = report["recommended"]
+        chosen = " ".join(f"{k}={v}" for k, v in best["setting"].items()) if best else None
+        lines.append(f"recommended: {chosen or 'none (nothing identified every time)'}")
+    if "cross_tic" in report:
+        lines.append("")
+        lines.append("TIC_avg of model i (rows) on excitation j (columns):")
+        for k, row in enumerate(report["cross_tic"], start=1):
+            cells = " ".join("    –" if v is None else f"{v:5.3f}" for v in row)
+            lines.append(f"  {k:>2}: {cells}")
+    return "\n".join(lines)
 
 
 def _fail(args: argparse.Namespace, kind: str, message: str, code: int) -> int:
@@ -569,6 +711,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.command == "identify":
         return cmd_identify(args)
+    if args.command == "analyze":
+        return cmd_analyze(args)
     if args.command == "excite":
         return cmd_excite(args)
     if args.command == "decode":

@@ -27,12 +27,19 @@ def no_leaked_threads():
 
 
 def _library_pool(thread: threading.Thread) -> bool:
-    """digi-xbee runs callbacks on one module-level pool that lives as long as the process
-    (digi.xbee.reader.EXECUTOR): its threads are the library's, not a leak of ours."""
+    """Library pools that live as long as the process — digi-xbee's callback pool
+    (digi.xbee.reader.EXECUTOR) and dask.distributed's offload executor: their threads are
+    the libraries', not a leak of ours."""
     import sys
 
     reader = sys.modules.get("digi.xbee.reader")
-    return reader is not None and thread in getattr(reader.EXECUTOR, "_threads", ())
+    if reader is not None and thread in getattr(reader.EXECUTOR, "_threads", ()):
+        return True
+    # dask.distributed's process-wide offload executor (distributed.utils._offload_executor),
+    # started by the first Client or LocalCluster and kept for the process.
+    utils = sys.modules.get("distributed.utils")
+    offload = getattr(utils, "_offload_executor", None) if utils is not None else None
+    return offload is not None and thread in getattr(offload, "_threads", ())
 
 
 @pytest.fixture

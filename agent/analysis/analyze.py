@@ -1,0 +1,258 @@
+"""`sysid analyze`: the onboard identification re-run on the logs with changed settings
+(thesis 6.2.3) — per excitation or as one batch, a sweep of p or the order with a table of
+TIC_avg and mode consistency (thesis table 6.6) and a recommended setting, and cross-validation
+across excitations (each model's TIC on every other excitation: the thesis's TIC_jN).
+
+Each identification is the agent's own worker job (`agent.ident.job.run`), so the numbers are
+the ones the aircraft would have produced. Jobs run in parallel processes (`jobs`), or on a
+Dask cluster (`scheduler`, a `dask.distributed` address).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from agent.analysis.identify import Request, load_experiments
+from agent.analysis.records import RecordError
+from agent.ident import Settings
+from agent.ident import job as jobs
+
+# A setting is "within" the best if its mean TIC_avg is at most this much worse (relative).
+TIC_MARGIN = 0.10
+# Named modes agree across excitations if their eigenvalues are within this (relative).
+CONSISTENT = 0.15
+SWEEPABLE = ("markov", "order")
+
+
+class AnalyzeError(ValueError):
+    """Bad arguments or logs; the message says which and why."""
+
+
+@dataclass(frozen=True)
+class Case:
+    """One identification: which experiments, with which settings."""
+
+    label: str  # "1" … per excitation, or "batch"
+    key: tuple[tuple[str, int], ...]  # the swept values, e.g. (("markov", 3),)
+    job: jobs.Job
+
+
+def parse_sweep(text: str) -> tuple[str, list[int]]:
+    """`markov=1:20`, `order=2:12:2` or `markov=1,2,5` → (name, values)."""
+    name, sep, spec = text.partition("=")
+    name = name.strip()
+    if not sep or name not in SWEEPABLE:
+        raise AnalyzeError(f"--sweep {text!r}: give markov=… or order=… (e.g. markov=1:20)")
+    try:
+        if ":" in spec:
+            parts = [int(v) for v in spec.split(":")]
+            if len(parts) not in (2, 3):
+                raise ValueError(spec)
+            start, stop, step = parts if len(parts) == 3 else (*parts, 1)
+            values = list(range(start, stop + 1, step))
+        else:
+            values = [int(v) for v in spec.split(",")]
+    except ValueError:
+        raise AnalyzeError(f"--sweep {text!r}: values must be integers") from None
+    if not values or min(values) < 1:
+        raise AnalyzeError(f"--sweep {text!r}: values must be ≥ 1")
+    return name, values
+
+
+def select_logs(paths: Sequence[Path], excitations: Sequence[str] | None) -> list[Path]:
+    """Files as given; directories give their excitation logs (NNNN_<axes>_single|batch_…);
+    `excitations` picks by running number (3 or 0003) or by plan id (header comment)."""
+    files: list[Path] = []
+    for path in paths:
+        if path.is_dir():
+            files += sorted(p for p in path.glob("*.csv")
+                            if re.match(r"\d{4}_(lateral|longitudinal|full)_", p.name))  # fmt: skip
+        elif path.exists():
+            files.append(path)
+        else:
+            raise AnalyzeError(f"{path}: no such file or directory")
+    if excitations:
+        chosen = []
+        for wanted in excitations:
+            match = [f for f in files if _number(f) == wanted.zfill(4) or _plan(f) == wanted]
+            if not match:
+                raise AnalyzeError(f"no excitation log {wanted!r} among {len(files)} file(s)")
+            chosen += match
+        files = chosen
+    if not files:
+        raise AnalyzeError("no excitation logs to analyze")
+    return files
+
+
+def _number(path: Path) -> str:
+    return path.name[:4]
+
+
+def _plan(path: Path) -> str | None:
+    with path.open(encoding="utf-8", errors="replace") as handle:
+        for line in handle:
+            if not line.startswith("#"):
+                return None
+            found = re.search(r"excitation plan (\S+),", line)
+            if found:
+                return found.group(1)
+    return None
+
+
+def build_cases(
+    request: Request,
+    roles: Sequence[str | None],
+    settings: Settings,
+    *,
+    batch: bool,
+    sweep: tuple[str, list[int]] | None,
+) -> tuple[list[Case], float]:
+    """Every identification the analysis needs, and the records' sample time."""
+    try:
+        experiments, dt, _, _ = load_experiments(request)
+    except RecordError as exc:
+        raise AnalyzeError(str(exc)) from exc
+    data = [(e.u, e.y) for e in experiments]
+    groups = [("batch", tuple(data))] if batch else [(str(k + 1), (d,)) for k, d in enumerate(data)]
+    keys: list[tuple[tuple[str, int], ...]] = [()]
+    if sweep is not None:
+        keys = [((sweep[0], v),) for v in sweep[1]]
+    cases = []
+    for key in keys:
+        case_settings = replace(settings, **dict(key))
+        for label, group in groups:
+            job = jobs.Job(label, "analysis", dt, tuple(request.inputs), tuple(request.outputs),
+                           tuple(r or "" for r in roles), group, case_settings)  # fmt: skip
+            cases.append(Case(label, key, job))
+    return cases, dt
+
+
+def run_cases(cases: Sequence[Case], *, workers: int = 1, scheduler: str | None = None,
+              progress: Callable[[int, int], None] | None = None) -> list[dict]:  # fmt: skip
+    """Run every case's job; results in case order. `scheduler`: a Dask cluster address."""
+    done = 0
+
+    def tick():
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, len(cases))
+
+    if scheduler is not None:
+        from dask.distributed import Client, as_completed
+
+        with Client(scheduler) as client:
+            futures = client.map(jobs.run, [c.job for c in cases], pure=False)
+            for _ in as_completed(futures):
+                tick()
+            return client.gather(futures)
+    if workers <= 1 or len(cases) == 1:
+        results = []
+        for case in cases:
+            results.append(jobs.run(case.job))
+            tick()
+        return results
+    import multiprocessing
+
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(workers, mp_context=context) as pool:
+        futures = [pool.submit(jobs.run, c.job) for c in cases]
+        for future in futures:
+            future.result()
+            tick()
+        return [f.result() for f in futures]
+
+
+def named_modes(outcome: dict) -> dict[str, complex]:
+    if not outcome["ok"]:
+        return {}
+    return {m["name"]: complex(*m["eigenvalue"]) for m in outcome["result"]["modes"]
+            if m["name"]}  # fmt: skip
+
+
+def sweep_table(cases: Sequence[Case], outcomes: Sequence[dict]) -> list[dict]:
+    """One row per swept value: mean TIC_avg over the excitations, the modes named in every
+    excitation, and each mode's worst relative deviation from its median across them. With
+    one excitation the spread is instead each mode's deviation from its median over the whole
+    sweep: how settled the mode is as the setting changes."""
+    rows: dict[tuple, list[dict]] = {}
+    for case, outcome in zip(cases, outcomes, strict=True):
+        rows.setdefault(case.key, []).append(outcome)
+    single = all(len(g) == 1 for g in rows.values())
+    table = []
+    for key, group in rows.items():
+        ok = [o for o in group if o["ok"]]
+        tics = [o["result"]["tic_avg"] for o in ok]
+        modes = [named_modes(o) for o in ok]
+        common = sorted(set.intersection(*(set(m) for m in modes))) if modes else []
+        spread = {}
+        for name in common:
+            values = np.array([m[name] for m in modes])
+            centre = complex(np.median(values.real), np.median(np.abs(values.imag)))
+            values = values.real + 1j * np.abs(values.imag)
+            spread[name] = float(np.max(np.abs(values - centre)) / max(abs(centre), 1e-9))
+        table.append({
+            "setting": dict(key),
+            "identified": len(ok),
+            "failed": [o["reason"] for o in group if not o["ok"]],
+            "tic_avg": float(np.mean(tics)) if tics else None,
+            "orders": sorted({o["result"]["order"] for o in ok}),
+            "markov": sorted({o["result"]["markov"] for o in ok}),
+            "modes": {n: [[m[n].real, m[n].imag] for m in modes] for n in common},
+            "spread": spread,
+        })  # fmt: skip
+    if single and len(table) > 1:
+        _spread_over_sweep(table)
+    return table
+
+
+def _spread_over_sweep(table: list[dict]) -> None:
+    names = set.intersection(*(set(r["modes"]) for r in table if r["modes"])) if table else set()
+    for name in names:
+        values = np.array([complex(*row["modes"][name][0]) for row in table if row["modes"]])
+        values = values.real + 1j * np.abs(values.imag)
+        centre = complex(np.median(values.real), np.median(values.imag))
+        for row in table:
+            if name in row["modes"]:
+                lam = complex(*row["modes"][name][0])
+                lam = complex(lam.real, abs(lam.imag))
+                row["spread"][name] = abs(lam - centre) / max(abs(centre), 1e-9)
+
+
+def recommend(table: Sequence[dict], excitations: int) -> dict | None:
+    """The first setting (smallest value) whose TIC_avg is within TIC_MARGIN of the best,
+    identified every excitation, and names the most modes consistently (spread < CONSISTENT);
+    None when nothing identified."""
+    usable = [r for r in table if r["tic_avg"] is not None and r["identified"] == excitations]
+    if not usable:
+        return None
+    best = min(r["tic_avg"] for r in usable)
+
+    def consistent(row) -> int:
+        return sum(s < CONSISTENT for s in row["spread"].values())
+
+    near = [r for r in usable if r["tic_avg"] <= best * (1 + TIC_MARGIN)]
+    most = max(consistent(r) for r in near)
+    return next(r for r in near if consistent(r) == most)
+
+
+def cross_validation(cases: Sequence[Case], outcomes: Sequence[dict]) -> list[list[float | None]]:
+    """TIC_avg of the model of excitation i on excitation j's data (rows i, columns j); the
+    diagonal is each model on its own data."""
+    matrix: list[list[float | None]] = []
+    for case, outcome in zip(cases, outcomes, strict=True):
+        row: list[float | None] = []
+        for other in cases:
+            if not outcome["ok"]:
+                row.append(None)
+                continue
+            row.append(jobs.cross_tic(outcome["result"], outcome["preprocessing"],
+                                      case.job.record_dt, other.job.experiments))  # fmt: skip
+        matrix.append(row)
+    return matrix

@@ -1,0 +1,144 @@
+"""`sysid analyze` on excitation logs: per excitation, batch, a p sweep with the thesis's
+table-6.6 view and a recommendation, cross-validation, the agent's log naming, parallel
+processes and a Dask cluster started by the test.
+
+The logs are the appendix A.2 lateral model flown three times with different multisine seeds
+and sensor noise, written as the agent writes excitation logs (comment header, plan id).
+
+Bad input tried: a sweep that is not markov/order or not integers, an excitation that is not
+there, a missing file, --cross with --batch.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agent.analysis import analyze as an
+from agent.analysis.identify import Request, settings_from
+from agent.config import Config
+from agent.ident import reference
+
+ROOT = Path(__file__).resolve().parents[2]
+NOISE = {"beta": 2e-3, "p": 2e-3, "r": 1e-3, "phi": 1e-3}
+MODEL = reference.MODELS["lateral"]
+
+
+def excitation_logs(directory: Path, count: int = 3) -> list[Path]:
+    paths = []
+    for k in range(count):
+        record = reference.make_record(MODEL, seed=10 + k, noise=NOISE, duration=25.0)
+        cols = record.columns()
+        path = directory / f"{k + 2:04d}_lateral_single_20261122.csv"
+        lines = ["# suas-sysid lateral log, created 2026-11-22",
+                 f"# excitation plan lateral-{k + 1}, finished, window 0 – 25 s",
+                 ",".join(cols)]  # fmt: skip
+        table = np.column_stack(list(cols.values()))
+        lines += [",".join(f"{v:.9g}" for v in row) for row in table]
+        path.write_text("\n".join(lines) + "\n")
+        paths.append(path)
+    return paths
+
+
+def truth() -> dict[str, complex]:
+    lam = np.linalg.eigvals(MODEL.A)
+    pairs = [z for z in lam if z.imag > 1e-6]
+    return {"Dutch roll": pairs[0]}
+
+
+def cases_for(paths, **kwargs):
+    config = Config().identification
+    inputs, outputs = config.channels.axis_set("lateral")
+    request = Request(tuple(paths), inputs, outputs)
+    roles = [config.channels.role_of(n) for n in outputs]
+    settings = settings_from(config, None, None, refine=False)
+    return an.build_cases(request, roles, settings, **kwargs)[0]
+
+
+def test_per_excitation_sweep_and_recommendation(tmp_path):
+    paths = excitation_logs(tmp_path)
+    cases = cases_for(paths, batch=False, sweep=("markov", [1, 2, 3, 4]))
+    assert len(cases) == 12
+    outcomes = an.run_cases(cases, workers=2)  # two spawned processes
+    assert all(o["ok"] for o in outcomes)
+    table = an.sweep_table(cases, outcomes)
+    assert [row["setting"] for row in table] == [{"markov": p} for p in (1, 2, 3, 4)]
+    assert all(row["identified"] == 3 for row in table)
+    dr = truth()["Dutch roll"]
+    for row in table:
+        for lam in row["modes"]["Dutch roll"]:
+            assert abs(complex(*lam) - dr) / abs(dr) < 0.15
+    best = an.recommend(table, excitations=3)
+    assert best is not None
+    tics = [row["tic_avg"] for row in table]
+    assert best["tic_avg"] <= min(tics) * (1 + an.TIC_MARGIN)
+    assert best["spread"]["Dutch roll"] < an.CONSISTENT
+
+
+def test_cross_validation_and_batch(tmp_path):
+    paths = excitation_logs(tmp_path)
+    cases = cases_for(paths, batch=False, sweep=None)
+    outcomes = an.run_cases(cases)
+    matrix = an.cross_validation(cases, outcomes)
+    assert len(matrix) == 3
+    assert all(len(row) == 3 for row in matrix)
+    for i in range(3):  # each model on its own data is what its result says
+        assert matrix[i][i] == pytest.approx(outcomes[i]["result"]["tic_avg"], rel=0.05)
+    assert max(max(row) for row in matrix) < 0.3  # same aircraft: every model fits all data
+    (batch,) = cases_for(paths, batch=True, sweep=None)
+    assert len(batch.job.experiments) == 3
+    assert an.run_cases([batch])[0]["ok"]
+
+
+def test_command_line_with_a_dask_cluster(tmp_path):
+    from dask.distributed import LocalCluster
+
+    (tmp_path / "logs").mkdir()
+    excitation_logs(tmp_path / "logs")  # a directory of logs, picked by number and plan id
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
+                      host="127.0.0.1", dashboard_address=None) as cluster:  # fmt: skip
+        done = subprocess.run(
+            [sys.executable, "-m", "agent", "analyze", str(tmp_path / "logs"), "--axes",
+             "lateral", "--excitation", "2", "--excitation", "lateral-3", "--sweep",
+             "markov=1:2", "--no-refine", "--scheduler", cluster.scheduler_address, "--json"],
+            capture_output=True, text=True, timeout=180, cwd=tmp_path,
+            env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "OPENBLAS_NUM_THREADS": "1"},
+        )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    assert [Path(p).name[:4] for p in report["logs"]] == ["0002", "0004"]
+    assert len(report["cases"]) == 4
+    assert report["recommended"]["setting"]["markov"] in (1, 2)
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--sweep", "alpha=1:3"], "give markov=… or order=…"),
+        (["--sweep", "markov=a:b"], "values must be integers"),
+        (["--excitation", "9"], "no excitation log '9'"),
+        (["--cross", "--batch"], "--cross needs one model per excitation"),
+    ],
+)
+def test_bad_arguments(tmp_path, args, message):
+    excitation_logs(tmp_path, count=1)
+    done = subprocess.run(
+        [sys.executable, "-m", "agent", "analyze", str(tmp_path), "--axes", "lateral", *args],
+        capture_output=True, text=True, timeout=60, cwd=tmp_path,
+        env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
+    )  # fmt: skip
+    assert done.returncode == 2
+    assert message in done.stderr
+
+
+def test_sweep_parsing():
+    assert an.parse_sweep("markov=1:4") == ("markov", [1, 2, 3, 4])
+    assert an.parse_sweep("order=2:10:4") == ("order", [2, 6, 10])
+    assert an.parse_sweep("markov=1,5") == ("markov", [1, 5])
+    with pytest.raises(an.AnalyzeError, match="≥ 1"):
+        an.parse_sweep("markov=0:2")
