@@ -123,6 +123,22 @@ def build_parser() -> argparse.ArgumentParser:
     analyze.add_argument("--scheduler", metavar="ADDRESS",
                          help="run the identifications on this Dask cluster")  # fmt: skip
 
+    report = sub.add_parser(
+        "report",
+        help="an HTML report with figures for excitation logs",
+        description="Time histories against the identified models with TIC, eigenvalues in "
+        "the s-plane, Hankel singular values, Bode plots against the data, input spectra "
+        "and RPF, mode tables.",
+    )
+    report.add_argument("data", nargs="+", type=Path, metavar="LOG",
+                        help="excitation logs, records, or a log directory")  # fmt: skip
+    _identification_options(report)
+    report.add_argument("--excitation", action="append", metavar="N|PLAN")
+    report.add_argument("--out", type=Path, required=True, metavar="DIR")
+    report.add_argument("--nominal", type=Path, metavar="MODEL.json",
+                        help="a model store file to highlight")  # fmt: skip
+    report.add_argument("--jobs", type=_positive_int, default=1, help="parallel processes")
+
     excite = sub.add_parser(
         "excite",
         help="preview an excitation plan before flight",
@@ -386,6 +402,48 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     if args.cross:
         report["cross_tic"] = an.cross_validation(cases, outcomes)
     print(json.dumps(report) if args.json else _analysis_text(report, paths))
+    return EXIT_OK if any(o["ok"] for o in outcomes) else EXIT_FAILED
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from agent.analysis import analyze as an
+
+    try:
+        paths = an.select_logs(args.data, args.excitation)
+    except an.AnalyzeError as exc:
+        _error("report", str(exc))
+        return EXIT_BAD_INPUT
+    prepared = _identification_request(args, "report", paths)
+    if prepared is None:
+        return EXIT_BAD_INPUT
+    config, request, settings = prepared
+    nominal = None
+    if args.nominal is not None:
+        try:
+            nominal = json.loads(args.nominal.read_text())
+            nominal = {"model_id": nominal["model_id"], "modes": nominal["result"]["modes"]}
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            _error("report", f"{args.nominal}: not a model store file ({exc})")
+            return EXIT_BAD_INPUT
+    roles = [config.channels.role_of(n) for n in request.outputs]
+    try:
+        cases, _ = an.build_cases(request, roles, settings, batch=False, sweep=None)
+    except an.AnalyzeError as exc:
+        _error("report", str(exc))
+        return EXIT_BAD_INPUT
+    bar = _progress(len(cases), quiet=False)
+    try:
+        outcomes = an.run_cases(cases, workers=args.jobs, progress=bar)
+    finally:
+        bar(None, None)
+    from agent.analysis.report import write
+
+    try:
+        page = write(args.out, paths, cases, outcomes, nominal)
+    except OSError as exc:
+        _error("report", f"{args.out}: cannot be written ({exc.strerror or exc})")
+        return EXIT_FAILED
+    print(f"{page}: {sum(o['ok'] for o in outcomes)} of {len(outcomes)} excitation(s) identified")
     return EXIT_OK if any(o["ok"] for o in outcomes) else EXIT_FAILED
 
 
@@ -713,6 +771,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return cmd_identify(args)
     if args.command == "analyze":
         return cmd_analyze(args)
+    if args.command == "report":
+        return cmd_report(args)
     if args.command == "excite":
         return cmd_excite(args)
     if args.command == "decode":

@@ -22,6 +22,8 @@ from agent.analysis.identify import Request, load_experiments
 from agent.analysis.records import RecordError
 from agent.ident import Settings
 from agent.ident import job as jobs
+from agent.ident.errors import DataError
+from agent.logs import read_log
 
 # A setting is "within" the best if its mean TIC_avg is at most this much worse (relative).
 TIC_MARGIN = 0.10
@@ -114,11 +116,14 @@ def build_cases(
     sweep: tuple[str, list[int]] | None,
 ) -> tuple[list[Case], float]:
     """Every identification the analysis needs, and the records' sample time."""
-    try:
-        experiments, dt, _, _ = load_experiments(request)
-    except RecordError as exc:
-        raise AnalyzeError(str(exc)) from exc
-    data = [(e.u, e.y) for e in experiments]
+    data, rates = [], []
+    for path in request.paths:
+        u, y, dt = _experiment(Path(path), request)
+        data.append((u, y))
+        rates.append(dt)
+    dt = rates[0]
+    if any(abs(r - dt) > 0.01 * dt for r in rates):
+        raise AnalyzeError(f"the logs are sampled at different rates ({sorted(set(rates))} s)")
     groups = [("batch", tuple(data))] if batch else [(str(k + 1), (d,)) for k, d in enumerate(data)]
     keys: list[tuple[tuple[str, int], ...]] = [()]
     if sweep is not None:
@@ -131,6 +136,47 @@ def build_cases(
                            tuple(r or "" for r in roles), group, case_settings)  # fmt: skip
             cases.append(Case(label, key, job))
     return cases, dt
+
+
+def _experiment(path: Path, request: Request) -> tuple[np.ndarray, np.ndarray, float]:
+    """(u, y, dt) of one log. The agent's own logs go through the agent's window code (edge
+    rows without data cut, gaps up to 0.1 s bridged, trim removed), as onboard; any other
+    record through `sysid identify`'s strict reader."""
+    with path.open(encoding="utf-8", errors="replace") as handle:
+        ours = handle.readline().startswith("# suas-sysid")
+    if not ours:
+        single = replace(request, paths=(path,))
+        try:
+            experiments, dt, _, _ = load_experiments(single)
+        except RecordError as exc:
+            raise AnalyzeError(str(exc)) from exc
+        return experiments[0].u, experiments[0].y, dt
+    try:
+        columns, rows = read_log(path)
+    except (OSError, ValueError, IndexError) as exc:
+        raise AnalyzeError(f"{path}: not a readable log ({exc})") from exc
+    missing = [n for n in ("time", *request.inputs, *request.outputs) if n not in columns]
+    if missing:
+        raise AnalyzeError(f"{path}: no column {', '.join(missing)}")
+    time = rows[:, columns.index("time")] - rows[0, columns.index("time")]
+    keep = np.ones(time.size, bool)
+    if request.start is not None:
+        keep &= time >= request.start
+    if request.end is not None:
+        keep &= time <= request.end
+    if keep.sum() < 3:
+        raise AnalyzeError(f"{path}: fewer than 3 samples between --start and --end")
+    dt = float(np.median(np.diff(time)))
+    values = {n: rows[keep, columns.index(n)] for n in (*request.inputs, *request.outputs)}
+    try:
+        (u, y), trim = jobs.window_and_trim(values, request.inputs, request.outputs, dt,
+                                            max(request.trim_seconds, dt))  # fmt: skip
+    except (DataError, KeyError) as exc:
+        raise AnalyzeError(f"{path}: {exc}") from exc
+    if request.trim_seconds <= 0:  # --trim none: the data as recorded
+        u = u + np.array(list(trim["inputs"].values()))
+        y = y + np.array(list(trim["outputs"].values()))
+    return u, y, dt
 
 
 def run_cases(cases: Sequence[Case], *, workers: int = 1, scheduler: str | None = None,

@@ -39,3 +39,43 @@ async def test_two_lateral_runs_end_to_end(tmp_path):
     logs = [p.name.split("_", 1)[1] for p in (tmp_path / "logs").iterdir()]
     for kind in ("flight_", "exec_", "results_", "lateral_single_"):  # thesis 2.2.1 logs
         assert any(n.startswith(kind) for n in logs), kind
+    post_flight(tmp_path, report)
+
+
+def post_flight(directory, report) -> None:
+    """Issue 10 on the logs this very flight produced: analyze, export, import, report."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from scipy.io import loadmat
+
+    root = Path(__file__).resolve().parents[2]
+    env = {"PYTHONPATH": str(root), "PATH": "/usr/bin:/bin", "OPENBLAS_NUM_THREADS": "1"}
+
+    def sysid(*args):
+        done = subprocess.run([sys.executable, "-m", "agent", *map(str, args)], cwd=directory,
+                              capture_output=True, text=True, timeout=120, env=env)  # fmt: skip
+        assert done.returncode == 0, (args, done.stderr)
+        return done.stdout
+
+    logs = directory / "logs"
+    analysed = json.loads(sysid("analyze", logs, "--axes", "lateral", "--cross", "--json"))
+    assert len(analysed["cases"]) == 2  # the two lateral excitation logs
+    truth = complex(*report["truth_modes"]["Dutch roll"])
+    for case in analysed["cases"]:
+        dutch = [complex(*m["eigenvalue"]) for m in case["modes"] if m["name"] == "Dutch roll"]
+        assert abs(dutch[0] - truth) / abs(truth) < 0.15, case
+    assert all(v < 0.3 for row in analysed["cross_tic"] for v in row)
+    results = next(logs.glob("*_results_*.jsonl"))
+    sysid("export", results, "--out", directory / "flight.mat")
+    mat = loadmat(directory / "flight.mat", simplify_cells=True)
+    assert len(mat["model_ids"]) == 2
+    sysid("import", directory / "ardupilot.bin", "--out", directory / "ardupilot.csv")
+    header = (directory / "ardupilot.csv").read_text().split("\n")
+    columns = next(line for line in header if line.startswith("time,")).split(",")
+    assert {"phi", "p", "r", "beta", "Vt", "aileron", "rudder"} <= set(columns)
+    sysid("report", logs, "--axes", "lateral", "--out", directory / "report",
+          "--nominal", directory / "models" / "lateral_nominal.json")  # fmt: skip
+    assert (directory / "report" / "s_plane.png").stat().st_size > 10_000

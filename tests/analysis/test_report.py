@@ -1,0 +1,75 @@
+"""`sysid report` renders in a browser: the page is made from three noisy flights of the A.2
+model, opened in headless Chromium, and the screenshot is checked for the figures.
+
+Bad input tried: a nominal model file that is not one (exit 2).
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+from matplotlib.image import imread
+
+from tests.analysis.test_analyze import excitation_logs
+
+ROOT = Path(__file__).resolve().parents[2]
+ENV = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "OPENBLAS_NUM_THREADS": "1"}
+
+
+def chromium() -> str:
+    found = shutil.which("chromium") or shutil.which("chromium-browser")
+    assert found, "Chromium is needed to check the report (make test installs it)"
+    return found
+
+
+def test_the_report_renders_in_headless_chromium(tmp_path):
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    excitation_logs(logs, count=2)
+    out = tmp_path / "report"
+    done = subprocess.run(
+        [sys.executable, "-m", "agent", "report", str(logs), "--axes", "lateral", "--no-refine",
+         "--out", str(out)], capture_output=True, text=True, timeout=180, env=ENV,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    page = (out / "index.html").read_text()
+    images = sorted(p.name for p in out.glob("*.png"))
+    assert images == sorted(
+        ["s_plane.png", "hankel.png"]
+        + [f"excitation_{k}_{kind}.png" for k in (1, 2) for kind in ("time", "bode", "inputs")]
+    )
+    for name in images:
+        assert f'src="{name}"' in page
+    assert "Dutch roll" in page
+    assert "Relative peak factors: aileron" in page
+    shot = tmp_path / "shot.png"
+    subprocess.run(
+        [chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+         f"--screenshot={shot}", "--window-size=1100,2400", (out / "index.html").as_uri()],
+        capture_output=True, timeout=120, check=True,
+    )  # fmt: skip
+    pixels = imread(shot)[..., :3]
+    assert pixels.shape[:2] == (2400, 1100)
+    ink = (pixels < 0.9).any(axis=2)  # anything not (near) white
+    # Figures, not just text: plotted lines in several colours over a good part of the page.
+    assert ink.mean() > 0.05
+    colours = np.unique((pixels[ink] * 15).round().astype(int), axis=0)
+    assert len(colours) > 30
+    # The s-plane figure (the first image) drew: its region has ink in many rows.
+    assert ink[200:700].any(axis=1).mean() > 0.5
+
+
+def test_a_bad_nominal_file_is_refused(tmp_path):
+    excitation_logs(tmp_path, count=1)
+    (tmp_path / "nominal.json").write_text("{}")
+    done = subprocess.run(
+        [sys.executable, "-m", "agent", "report", str(tmp_path), "--axes", "lateral",
+         "--out", str(tmp_path / "r"), "--nominal", str(tmp_path / "nominal.json")],
+        capture_output=True, text=True, timeout=60, env=ENV,
+    )  # fmt: skip
+    assert done.returncode == 2
+    assert "not a model store file" in done.stderr
