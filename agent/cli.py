@@ -138,6 +138,8 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--nominal", type=Path, metavar="MODEL.json",
                         help="a model store file to highlight")  # fmt: skip
     report.add_argument("--jobs", type=_positive_int, default=1, help="parallel processes")
+    report.add_argument("--scheduler", metavar="ADDRESS",
+                        help="run the identifications on this Dask cluster")  # fmt: skip
 
     excite = sub.add_parser(
         "excite",
@@ -433,7 +435,11 @@ def cmd_report(args: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     bar = _progress(len(cases), quiet=False)
     try:
-        outcomes = an.run_cases(cases, workers=args.jobs, progress=bar)
+        outcomes = an.run_cases(cases, workers=args.jobs, scheduler=args.scheduler,
+                                progress=bar)  # fmt: skip
+    except (OSError, ValueError, TimeoutError) as exc:  # a scheduler that cannot be reached
+        _error("report", f"cannot run the jobs: {exc}")
+        return EXIT_FAILED
     finally:
         bar(None, None)
     from agent.analysis.report import write

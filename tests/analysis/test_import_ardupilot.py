@@ -113,6 +113,17 @@ def test_the_imported_record_identifies_the_known_pole(tmp_path):
     assert done.returncode == 0, done.stderr
     modes = json.loads(done.stdout)["modes"]
     assert modes[0]["eigenvalue"][0] == pytest.approx(POLE, rel=0.05)
+    # The post-flight tools take the imported record too: a p sweep, and the report.
+    done = run("analyze", str(csv), "--inputs", "aileron", "--outputs", "p", "--start", "4",
+               "--end", "27", "--order", "1", "--sweep", "markov=1:3", "--json")  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    sweep = json.loads(done.stdout)
+    for case in sweep["cases"]:
+        assert case["modes"][0]["eigenvalue"][0] == pytest.approx(POLE, rel=0.05)
+    done = run("report", str(csv), "--inputs", "aileron", "--outputs", "p", "--start", "4",
+               "--end", "27", "--order", "1", "--out", str(tmp_path / "report"))  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "report" / "excitation_1_bode.png").exists()
 
 
 @pytest.mark.parametrize("damage", ["cut mid-message", "not a log", "no mapped messages"])

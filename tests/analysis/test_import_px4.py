@@ -77,3 +77,26 @@ def test_bad_ulog_files(tmp_path, damage):
         ULogWriter(path).close()
     with pytest.raises(LogImportError, match=r"bad\.ulg"):
         import_log(path, SURFACES, 50.0)
+
+
+def test_imported_px4_record_through_the_post_flight_tools(tmp_path):
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    env = {"PYTHONPATH": str(root), "PATH": "/usr/bin:/bin", "OPENBLAS_NUM_THREADS": "1"}
+
+    def sysid(*args):
+        done = subprocess.run([sys.executable, "-m", "agent", *args], capture_output=True,
+                              text=True, timeout=120, env=env, cwd=tmp_path)  # fmt: skip
+        assert done.returncode == 0, done.stderr
+        return done.stdout
+
+    px4_log(tmp_path / "flight.ulg")
+    sysid("import", "flight.ulg", "--out", "flight.csv", "--rate", "50")
+    out = json.loads(sysid("analyze", "flight.csv", "--inputs", "aileron", "--outputs", "p",
+                           "--order", "1", "--json"))  # fmt: skip
+    pole = out["cases"][0]["modes"][0]["eigenvalue"][0]
+    assert pole == pytest.approx(POLE, rel=0.05)
