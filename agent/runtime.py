@@ -317,7 +317,9 @@ class Agent:
             elif isinstance(message, messages.IdentSettings):
                 self.ident = message
             elif isinstance(message, messages.Decision):
-                await loop.run_in_executor(self._store, self._decide, message)
+                check = await loop.run_in_executor(self._store, self._decide, message)
+                if check is not None:  # a new nominal replacing one: self-check it next run
+                    self._self_check[check[0]] = check[1]
             elif isinstance(message, messages.Revert):
                 await loop.run_in_executor(self._store, self.models.revert, self.ident.axes)
         except (PlanRefused, KeyError, LookupError) as exc:
@@ -325,14 +327,16 @@ class Agent:
         if seq is not None:
             self._downlink(messages.Ack(ref=seq, ok=ok, reason=reason))
 
-    def _decide(self, decision: messages.Decision) -> None:
-        """On the model-store thread."""
+    def _decide(self, decision: messages.Decision) -> tuple[str, str] | None:
+        """On the model-store thread; (axes, model id) when the accepted model replaced a
+        nominal, for the 6.3.1 self-check."""
         if not decision.accept:
             self.models.reject(decision.model_id)
-            return
+            return None
         accepted = self.models.accept(decision.model_id)
-        if self.models.previous(accepted.axes) is not None:
-            self._self_check[accepted.axes] = accepted.model_id
+        if self.models.previous(accepted.axes) is None:
+            return None
+        return accepted.axes, accepted.model_id
 
     async def _periodic_loop(self) -> None:
         """Thesis B.2 4.1: identify every update period set from the ground, on the data
