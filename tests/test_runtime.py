@@ -121,3 +121,50 @@ async def test_an_abort_cancels_an_arm_still_waiting_its_turn(agent):
     assert acks[2].ok  # not a run: still carried out
     assert acks[3].ok
     assert agent.scheduler.status == "idle"
+
+
+async def test_a_new_nominal_that_predicts_worse_is_rolled_back(tmp_path):
+    """Requirement 6.3.1: lat-2 is accepted but is wrong (its B negated); on the next
+    excitation it predicts the data far worse than lat-1 did, so lat-1 is nominal again and
+    the ground is told."""
+    import asyncio
+    import csv
+    from concurrent.futures import ThreadPoolExecutor
+    from pathlib import Path
+
+    from agent.config import Identification
+    from agent.excitation.scheduler import Window
+
+    root = Path(__file__).resolve().parents[1]
+    with (root / "examples" / "a2_lateral.csv").open() as handle:
+        table = list(csv.DictReader(handle))
+    config = Config(recorder=Recorder(log_dir=str(tmp_path / "logs"), rate_hz=50.0),
+                    identification=Identification(refine=False))  # fmt: skip
+    agent = Agent(config, base=tmp_path)
+    sent = []
+    agent._downlink = lambda message, reliable=True: sent.append(message)
+    channels = agent.recorder.channels
+    rows = np.full((len(table), 1 + 2 * len(channels)), np.nan)
+    rows[:, 0] = [float(r["time"]) for r in table]
+    for name in ("aileron", "rudder", "beta", "p", "r", "phi"):
+        rows[:, 1 + channels.index(name)] = [float(r[name]) for r in table]
+    window = Window("run", "lateral", rows[0, 0], rows[-1, 0], "finished")
+    pool = ThreadPoolExecutor(1)
+    loop = asyncio.get_running_loop()
+    try:
+        await agent._identify(loop, pool, window, rows)
+        await agent.handle(messages.Decision(model_id="lat-1", accept=True), 1)
+        await agent._identify(loop, pool, window, rows)
+        wrong = agent.models.candidates["lat-2"]
+        wrong.result["B"] = (-np.asarray(wrong.result["B"])).tolist()
+        await agent.handle(messages.Decision(model_id="lat-2", accept=True), 2)
+        assert agent.models.nominal_id("lateral") == "lat-2"
+        await agent._identify(loop, pool, window, rows)
+    finally:
+        pool.shutdown()
+        agent.writer.close()
+        agent._store.shutdown()
+    assert agent.models.nominal_id("lateral") == "lat-1"
+    notices = [m.text for m in sent if isinstance(m, messages.Notice)]
+    assert any(t.startswith("self-check: nominal lat-2") and t.endswith("reverted")
+               for t in notices), notices  # fmt: skip
