@@ -20,6 +20,7 @@ import multiprocessing
 import os
 import resource
 import signal
+import sys
 import threading
 import time
 from collections import Counter, deque
@@ -61,6 +62,7 @@ STATUS_S = 1.0
 LAG_PERIOD_S = 0.01
 LAG_WARN_S = 0.1
 GC_WARN_S = 0.02
+SWITCH_INTERVAL_S = 0.001
 # Lag samples kept (10 min at 100 Hz).
 LAG_SAMPLES = 60_000
 # The health record in the execution log: this often (s).
@@ -147,6 +149,11 @@ class Agent:
             loop = asyncio.get_running_loop()
             loop.set_debug(True)
             loop.slow_callback_duration = float(slow_ms) / 1000
+        # Threads hand the GIL over every 1 ms instead of 5: with the log writer formatting an
+        # excitation log, every numpy call on the loop thread used to wait up to 5 ms to get
+        # the GIL back (a convoy that stalled the loop for 50 ms and more).
+        switch = sys.getswitchinterval()
+        sys.setswitchinterval(SWITCH_INTERVAL_S)
         handler = self.logbook.handler(self.clock)
         logging.getLogger().addHandler(handler)
         context = multiprocessing.get_context("spawn")  # no fork of a threaded process
@@ -180,6 +187,7 @@ class Agent:
                     "agent started: %s", ", ".join([d.name for d in self.drivers] + list(named))
                 )
         finally:
+            sys.setswitchinterval(switch)
             logging.getLogger().removeHandler(handler)
             pool.shutdown(wait=True, cancel_futures=True)
             self._store.shutdown(wait=True)
@@ -383,27 +391,27 @@ class Agent:
         roles = AXIS_SETS[axes][1]
         self._model_number += 1
         model_id = f"{axes[:3]}-{self._model_number}"
-        columns = {c: rows[:, 1 + k] for k, c in enumerate(self.recorder.channels)}
+        needed = {*inputs, *outputs}
+        columns = {c: rows[:, 1 + k] for k, c in enumerate(self.recorder.channels) if c in needed}
         dt = 1.0 / self.config.recorder.rate_hz
-        try:
-            trim_s = self.config.identification.trim_seconds
-            experiment, trim = jobs.window_and_trim(columns, inputs, outputs, dt, trim_s)
-        except (ValueError, KeyError) as exc:
-            return self._failed(model_id, axes, f"window unusable: {exc}")
         batch = self._batch.setdefault(axes, []) if self.ident.batch else []
-        batch.append(experiment)
         settings = _settings(self.config, self.ident)
-        job = jobs.Job(model_id, axes, dt, inputs, outputs, roles, tuple(batch), settings)
+        job = jobs.Job(model_id, axes, dt, inputs, outputs, roles, tuple(batch), settings,
+                       window=columns, trim_s=self.config.identification.trim_seconds)  # fmt: skip
         outcome = await loop.run_in_executor(pool, jobs.run, job)
         if not outcome["ok"]:
             return self._failed(model_id, axes, outcome["reason"])
+        experiment, trim = outcome["experiment"], outcome["trim"]
+        if self.ident.batch:
+            batch.append(experiment)
+        experiments = (*job.experiments, experiment)
         candidate = Candidate(
             model_id,
             axes,
             dt,
             outcome["result"],
             outcome["preprocessing"],
-            job.experiments,
+            experiments,
             extra={"record_s": len(experiment[0]) * dt, "trim": trim},
         )
         nominal = await loop.run_in_executor(self._store, self.models.nominal, axes)
@@ -495,7 +503,21 @@ class Agent:
             gc.callbacks.remove(self._on_gc)
 
     async def _lag_loop(self, loop) -> None:
+        tracer = None
+        trace_ms = os.environ.get("SYSID_STALL_TRACE_MS")
+        if trace_ms:  # diagnosis: where the loop thread is while it stalls (see StallTracer)
+            tracer = StallTracer(float(trace_ms) / 1000, threading.get_ident())
+            tracer.start()
+        try:
+            await self._probe(loop, tracer)
+        finally:
+            if tracer is not None:
+                tracer.stop()
+
+    async def _probe(self, loop, tracer) -> None:
         while True:
+            if tracer is not None:
+                tracer.beat()
             start = loop.time()
             await asyncio.sleep(LAG_PERIOD_S)
             lag = loop.time() - start - LAG_PERIOD_S
@@ -591,6 +613,52 @@ class Agent:
                 ),
                 reliable=False,
             )
+
+
+class StallTracer(threading.Thread):
+    """Diagnosis of event-loop stalls (SYSID_STALL_TRACE_MS=N): a thread that, when the lag
+    probe has not run for N ms, logs where the loop thread is and what every other thread is
+    doing, once per stall. If it cannot run during a stall either, another thread holds the
+    GIL; if the loop thread is in select(), the process was not scheduled."""
+
+    def __init__(self, threshold_s: float, loop_thread: int):
+        super().__init__(name="stall-tracer", daemon=True)
+        self.threshold_s, self.loop_thread = threshold_s, loop_thread
+        self._beat = time.monotonic()
+        self._stop = threading.Event()
+
+    def beat(self) -> None:
+        self._beat = time.monotonic()
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def run(self) -> None:
+        import sys
+        import traceback
+
+        reported = False
+        while not self._stop.wait(self.threshold_s / 4):
+            age = time.monotonic() - self._beat
+            if age <= self.threshold_s + LAG_PERIOD_S:
+                reported = False
+                continue
+            if reported:
+                continue
+            reported = True
+            frames = sys._current_frames()
+            lines = [f"loop stalled {1000 * age:.0f} ms so far; loop thread at:"]
+            loop_frame = frames.get(self.loop_thread)
+            if loop_frame is not None:
+                lines += [ln.rstrip() for ln in traceback.format_stack(loop_frame)[-6:]]
+            names = {t.ident: t.name for t in threading.enumerate()}
+            for ident, frame in frames.items():
+                if ident in (self.loop_thread, threading.get_ident()):
+                    continue
+                top = traceback.extract_stack(frame)[-1]
+                lines.append(f"thread {names.get(ident, ident)}: {top.name} "
+                             f"({Path(top.filename).name}:{top.lineno})")  # fmt: skip
+            log.warning("\n".join(lines))
 
 
 def _rss_bytes() -> int:

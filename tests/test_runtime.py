@@ -83,7 +83,12 @@ async def test_an_unusable_window_gives_a_failure_result_and_the_agent_goes_on(a
     rows[:, 0] = 100.0 + np.arange(1500) * 0.01
     aileron = 1 + agent.recorder.channels.index("aileron")
     rows[600:700, aileron] = np.nan  # the surface box was silent for 1 s mid-window
-    await agent._identify(None, None, Window("lat", "lateral", 100.0, 115.0, "finished"), rows)
+    import asyncio
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(1) as pool:  # the worker's job, here on a thread
+        await agent._identify(asyncio.get_running_loop(), pool,
+                              Window("lat", "lateral", 100.0, 115.0, "finished"), rows)  # fmt: skip
     failures = [m for m in agent.sent if isinstance(m, messages.Failure)]
     assert len(failures) == 1
     assert "1.00 s gap" in failures[0].reason

@@ -151,6 +151,7 @@ class Console(App):
         self._results_shown: list[str] = []
         self._plan: Plan | None = None
         self._main = None  # the main screen, once mounted
+        self._detail_key: tuple | None = None  # what the Results detail shows now
 
     # -- layout -----------------------------------------------------------------------------
 
@@ -359,6 +360,12 @@ class Console(App):
 
     def _detail(self) -> None:
         result = self.station.heard.results.get(self.selected or "")
+        nominal = self.station.nominal(result.axes) if result is not None else None
+        key = (self.selected, nominal.model_id if nominal else None,
+               len(self.station.heard.results))  # fmt: skip
+        if key == self._detail_key:
+            return  # nothing new: keep the tables (and where the operator scrolled) as they are
+        self._detail_key = key
         summary_w = self._q("#summary", Static)
         modes = self._q("#modes", DataTable)
         if result is None:
@@ -380,7 +387,6 @@ class Console(App):
         modes.clear()
         for m in result.modes:
             modes.add_row(*mode_row(m))
-        nominal = self.station.nominal(result.axes)
         title = self._q("#nominal-title", Static)
         table = self._q("#nominal-modes", DataTable)
         table.clear()

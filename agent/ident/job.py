@@ -32,6 +32,11 @@ class Job:
     roles: tuple[str, ...]
     experiments: tuple[tuple[np.ndarray, np.ndarray], ...]
     settings: Settings = field(default_factory=Settings)
+    window: dict[str, np.ndarray] | None = None
+    """Raw recorded columns of a new excitation, made into the last experiment here, in the
+    worker (bridging, edge cut, trim): numpy on the loop thread while a log is being written
+    made the GIL change hands at every call and stalled the loop by 50–300 ms."""
+    trim_s: float = 0.5
 
 
 def window_and_trim(values: dict[str, np.ndarray], inputs, outputs, dt: float, trim_s: float):
@@ -73,16 +78,27 @@ def _bridge(x: np.ndarray, dt: float, name: str) -> np.ndarray:
 
 
 def run(job: Job) -> dict:
-    """Identify; never raises for bad data: {"ok": False, "reason": …} instead."""
+    """Identify; never raises for bad data: {"ok": False, "reason": …} instead. With a
+    `window`, the outcome also carries the experiment made of it and the trim removed."""
+    data, extra = list(job.experiments), {}
+    if job.window is not None:
+        try:
+            (u, y), trim = window_and_trim(job.window, job.inputs, job.outputs, job.record_dt,
+                                           job.trim_s)  # fmt: skip
+        except (DataError, KeyError) as exc:
+            return {"ok": False, "model_id": job.model_id, "reason": f"window unusable: {exc}"}
+        data.append((u, y))
+        extra = {"experiment": (u, y), "trim": trim}
     try:
-        experiments = [Experiment(u, y) for u, y in job.experiments]
+        experiments = [Experiment(u, y) for u, y in data]
         result = identify(experiments, job.record_dt, input_names=job.inputs,
                           output_names=job.outputs, output_roles=job.roles,
                           settings=job.settings)  # fmt: skip
     except (DataError, IdentificationFailed, np.linalg.LinAlgError, ValueError) as exc:
-        return {"ok": False, "model_id": job.model_id, "reason": str(exc)}
+        return {**extra, "ok": False, "model_id": job.model_id, "reason": str(exc)}
     prep = result.preprocessing
     return {
+        **extra,
         "ok": True,
         "model_id": job.model_id,
         "axes": job.axes,
