@@ -94,6 +94,7 @@ class LogWriter:
     ):
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
+        self._first_number = next_number(self.directory)
         self._queue: queue.Queue = queue.Queue(maxsize=queue_lines)
         self._fsync_s = fsync_s
         self._fds: dict[int, int] = {}
@@ -122,10 +123,11 @@ class LogWriter:
         return handle
 
     def next_number(self) -> int:
-        """The next running number, counting the files this writer has queued but not yet
-        created as well as those on disk."""
+        """The next running number: after those on disk when the writer started (listed once:
+        listing a directory while the logs are synced can take 0.1 s, too long for the loop)
+        and those this writer has opened since."""
         queued = [int(m.group(1)) for p in self._paths.values() if (m := NAME.match(p.name))]
-        return max(next_number(self.directory), max(queued, default=0) + 1)
+        return max(self._first_number, max(queued, default=0) + 1)
 
     def path(self, handle: int) -> Path:
         return self._paths[handle]
