@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import logging
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -679,13 +678,33 @@ def cmd_agent(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         _error("agent", str(exc))
         return EXIT_BAD_INPUT
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    listener = _log_to_stderr_off_the_loop()
     try:
         asyncio.run(serve(config, text, args.base))
     except (OSError, ValueError, RadioError) as exc:  # a port that cannot open, a bad key file
         _error("agent", str(exc))
         return EXIT_FAILED
+    finally:
+        listener.stop()
     return EXIT_OK
+
+
+def _log_to_stderr_off_the_loop():
+    """INFO and up to stderr through a queue and a listener thread: a write to stderr (a file,
+    a pipe to journald) can block for 0.1 s when the disk is busy, and the loop thread must
+    never wait on it. Returns the started listener."""
+    import logging.handlers
+    import queue
+
+    records: queue.SimpleQueue = queue.SimpleQueue()
+    console = logging.StreamHandler(sys.stderr)
+    console.setFormatter(logging.Formatter("%(asctime)s %(name)s %(levelname)s %(message)s"))
+    listener = logging.handlers.QueueListener(records, console)
+    root = logging.getLogger()
+    root.setLevel(logging.INFO)
+    root.addHandler(logging.handlers.QueueHandler(records))
+    listener.start()
+    return listener
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
