@@ -116,11 +116,14 @@ def build_cases(
     sweep: tuple[str, list[int]] | None,
 ) -> tuple[list[Case], float]:
     """Every identification the analysis needs, and the records' sample time."""
-    data, rates = [], []
+    data, rates, ours = [], [], []
     for path in request.paths:
-        u, y, dt = _experiment(Path(path), request)
+        u, y, dt, own = _experiment(Path(path), request)
         data.append((u, y))
         rates.append(dt)
+        ours.append(own)
+    if any(ours):  # as onboard: the surface pots sample moving surfaces, not held commands
+        settings = replace(settings, held_inputs=False)
     dt = rates[0]
     if any(abs(r - dt) > 0.01 * dt for r in rates):
         raise AnalyzeError(f"the logs are sampled at different rates ({sorted(set(rates))} s)")
@@ -138,10 +141,10 @@ def build_cases(
     return cases, dt
 
 
-def _experiment(path: Path, request: Request) -> tuple[np.ndarray, np.ndarray, float]:
-    """(u, y, dt) of one log. The agent's own logs go through the agent's window code (edge
-    rows without data cut, gaps up to 0.1 s bridged, trim removed), as onboard; any other
-    record through `sysid identify`'s strict reader."""
+def _experiment(path: Path, request: Request) -> tuple[np.ndarray, np.ndarray, float, bool]:
+    """(u, y, dt, whether it is the agent's log) of one log. The agent's own logs go through
+    the agent's window code (edge rows without data cut, gaps up to 0.1 s bridged, trim
+    removed), as onboard; any other record through `sysid identify`'s strict reader."""
     with path.open(encoding="utf-8", errors="replace") as handle:
         ours = handle.readline().startswith("# suas-sysid")
     if not ours:
@@ -150,7 +153,7 @@ def _experiment(path: Path, request: Request) -> tuple[np.ndarray, np.ndarray, f
             experiments, dt, _, _ = load_experiments(single)
         except RecordError as exc:
             raise AnalyzeError(str(exc)) from exc
-        return experiments[0].u, experiments[0].y, dt
+        return experiments[0].u, experiments[0].y, dt, False
     try:
         columns, rows = read_log(path)
     except (OSError, ValueError, IndexError) as exc:
@@ -176,7 +179,7 @@ def _experiment(path: Path, request: Request) -> tuple[np.ndarray, np.ndarray, f
     if request.trim_seconds <= 0:  # --trim none: the data as recorded
         u = u + np.array(list(trim["inputs"].values()))
         y = y + np.array(list(trim["outputs"].values()))
-    return u, y, dt
+    return u, y, dt, True
 
 
 def run_cases(cases: Sequence[Case], *, workers: int = 1, scheduler: str | None = None,

@@ -69,6 +69,14 @@ def post_flight(directory, report) -> None:
         assert abs(dutch[0] - truth) / abs(truth) < 0.15, case
     assert all(v < 0.3 for row in analysed["cross_tic"] for v in row)
     results = next(logs.glob("*_results_*.jsonl"))
+    # The replay is the aircraft's own computation: the same p, order and modes.
+    onboard = [json.loads(line)["result"] for line in results.read_text().splitlines()]
+    for case, flown in zip(analysed["cases"], onboard, strict=True):
+        assert (case["markov"], case["order"]) == (flown["markov"], flown["order"])
+        replayed = sorted(complex(*m["eigenvalue"]) for m in case["modes"] if m["name"])
+        original = sorted(complex(*m["eigenvalue"]) for m in flown["modes"] if m["name"])
+        for a, b in zip(replayed, original, strict=True):
+            assert abs(a - b) <= 0.01 * abs(b), (a, b)
     sysid("export", results, "--out", directory / "flight.mat")
     mat = loadmat(directory / "flight.mat", simplify_cells=True)
     assert len(mat["model_ids"]) == 2
