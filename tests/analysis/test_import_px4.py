@@ -100,3 +100,6 @@ def test_imported_px4_record_through_the_post_flight_tools(tmp_path):
                            "--order", "1", "--json"))  # fmt: skip
     pole = out["cases"][0]["modes"][0]["eigenvalue"][0]
     assert pole == pytest.approx(POLE, rel=0.05)
+    sysid("report", "flight.csv", "--inputs", "aileron", "--outputs", "p", "--order", "1",
+          "--out", "report")  # fmt: skip
+    assert (tmp_path / "report" / "excitation_1_time.png").exists()
