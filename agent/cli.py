@@ -89,6 +89,18 @@ def _identification_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 
+def _replay_options(parser: argparse.ArgumentParser) -> None:
+    """The logs and running options `sysid analyze` and `sysid report` share."""
+    parser.add_argument("data", nargs="+", type=Path, metavar="LOG",
+                        help="excitation logs, records, or a log directory")  # fmt: skip
+    _identification_options(parser)
+    parser.add_argument("--excitation", action="append", metavar="N|PLAN",
+                        help="only this excitation log (running number or plan id)")  # fmt: skip
+    parser.add_argument("--jobs", type=_positive_int, default=1, help="parallel processes")
+    parser.add_argument("--scheduler", metavar="ADDRESS",
+                        help="run the identifications on this Dask cluster")  # fmt: skip
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="sysid", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -108,19 +120,12 @@ def build_parser() -> argparse.ArgumentParser:
         description="Re-run the agent's identification job on excitation logs (or any "
         "records) with changed settings (thesis 6.2.3).",
     )
-    analyze.add_argument("data", nargs="+", type=Path, metavar="LOG",
-                         help="excitation logs, records, or a log directory")  # fmt: skip
-    _identification_options(analyze)
-    analyze.add_argument("--excitation", action="append", metavar="N|PLAN",
-                         help="only this excitation log (running number or plan id)")  # fmt: skip
+    _replay_options(analyze)
     analyze.add_argument("--batch", action="store_true", help="one identification of all")
     analyze.add_argument("--sweep", metavar="NAME=RANGE",
                          help="markov=1:20 or order=2:12:2 or markov=1,2,5")  # fmt: skip
     analyze.add_argument("--cross", action="store_true",
                          help="each model on every other excitation (TIC_jN)")  # fmt: skip
-    analyze.add_argument("--jobs", type=_positive_int, default=1, help="parallel processes")
-    analyze.add_argument("--scheduler", metavar="ADDRESS",
-                         help="run the identifications on this Dask cluster")  # fmt: skip
 
     report = sub.add_parser(
         "report",
@@ -129,16 +134,10 @@ def build_parser() -> argparse.ArgumentParser:
         "the s-plane, Hankel singular values, Bode plots against the data, input spectra "
         "and RPF, mode tables.",
     )
-    report.add_argument("data", nargs="+", type=Path, metavar="LOG",
-                        help="excitation logs, records, or a log directory")  # fmt: skip
-    _identification_options(report)
-    report.add_argument("--excitation", action="append", metavar="N|PLAN")
+    _replay_options(report)
     report.add_argument("--out", type=Path, required=True, metavar="DIR")
     report.add_argument("--nominal", type=Path, metavar="MODEL.json",
                         help="a model store file to highlight")  # fmt: skip
-    report.add_argument("--jobs", type=_positive_int, default=1, help="parallel processes")
-    report.add_argument("--scheduler", metavar="ADDRESS",
-                        help="run the identifications on this Dask cluster")  # fmt: skip
 
     excite = sub.add_parser(
         "excite",

@@ -33,14 +33,14 @@ import numpy as np
 from agent.analysis.identify import settings_from
 from agent.channels import AXIS_SETS, SENSOR_CHANNELS
 from agent.clock import Clock, LoopClock
-from agent.config import Config, load_key
+from agent.config import Config
 from agent.excitation.plan import PlanRefused
 from agent.excitation.scheduler import Event, Scheduler, Window
 from agent.ident import Settings
 from agent.ident import job as jobs
 from agent.link import messages
-from agent.link.codec import AIRCRAFT, CounterStore, LinkCodec
-from agent.link.session import LinkSession
+from agent.link.codec import AIRCRAFT
+from agent.link.endpoint import open_endpoint
 from agent.logs import Logbook, LogWriter, config_hash, log_name, units_of
 from agent.models import SELF_CHECK_RATIO, Candidate, ModelStore, suggest
 from agent.recorder import Recorder
@@ -48,7 +48,6 @@ from drivers.airdata.driver import make_driver as airdata
 from drivers.autopilot.driver import AutopilotLink
 from drivers.surfaces.driver import make_driver as surfaces
 from drivers.vectornav.driver import make_driver as vn200
-from drivers.xbee.driver import XBeeRadio
 
 log = logging.getLogger(__name__)
 
@@ -210,33 +209,11 @@ class Agent:
                 delay = min(delay * 2, RESTART_MAX_S)
 
     async def _open_link(self) -> None:
-        cfg = self.config.link
-        if cfg.peer is None:
+        if self.config.link.peer is None:
             log.info("link: no [link] peer configured, radio not started")
             return
-
-        peer = bytes.fromhex(cfg.peer)
-        key = load_key(self.base / cfg.key_file)
-        codec = LinkCodec(
-            key,
-            AIRCRAFT,
-            {peer},
-            counter=CounterStore(self.base / cfg.counter_file),
-            seen=self.base / cfg.seen_file,
-        )
-        self.radio = XBeeRadio(
-            cfg.port, cfg.baud, self.clock, lambda s, p, t: self.session.receive(s, p, t)
-        )
-        await self.radio.open()
-        codec.max_payload = self.radio.max_payload
-        self.session = LinkSession(
-            codec,
-            self.radio,
-            peer,
-            self.clock,
-            self._on_ground,
-            heartbeat_s=cfg.heartbeat_s,
-            deadline_s=cfg.deadline_s,
+        self.radio, self.session = await open_endpoint(
+            self.config.link, AIRCRAFT, self.base, self.clock, self._on_ground
         )
 
     # -- events -----------------------------------------------------------------------------

@@ -48,18 +48,16 @@ async def world(directory: Path, every: float) -> None:
     from agent.sim.aircraft import AircraftOptions, SimAircraft
     from agent.sim.ardupilot import Params
     from agent.sim.flight import AIR, GROUND_ADDR, SimOptions, ground_station, one_run
-    from agent.sim.radio import EmulatedXBee, RfChannel
+    from agent.sim.radio import module_pair
 
     clock = LoopClock()
     ports = directory / "ports"
     ports.mkdir(parents=True, exist_ok=True)
     key = bytes.fromhex((directory / "link.key").read_text())
     aircraft = SimAircraft(AircraftOptions(params=Params(switch_channel=7)), clock, ports)
-    channel = RfChannel()
-    air = EmulatedXBee("xbee-air", AIR, ports, channel, clock)
-    ground_module = EmulatedXBee("xbee-ground", GROUND_ADDR, ports, channel, clock)
-    air.join(ground_module)
-    ground_module.join(air)
+    _, air, ground_module = module_pair(
+        ports, clock, ("xbee-air", AIR), ("xbee-ground", GROUND_ADDR)
+    )
     tasks = [
         asyncio.create_task(aircraft.run(), name="sim-aircraft"),
         asyncio.create_task(air.run(), name="xbee-air"),

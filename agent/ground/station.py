@@ -22,10 +22,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from agent.clock import Clock
-from agent.config import load_key
 from agent.ground.config import GroundConfig
 from agent.link import messages
-from agent.link.codec import GROUND, CounterStore, LinkCodec
+from agent.link.codec import GROUND
+from agent.link.endpoint import open_endpoint
 from agent.link.session import LinkSession
 from agent.logs import LogWriter, log_name
 from drivers.xbee.driver import XBeeRadio
@@ -85,37 +85,14 @@ class GroundStation:
     # -- link -------------------------------------------------------------------------------
 
     async def open(self) -> None:
-        """Open the radio and the session (raises OSError/ValueError with the reason)."""
+        """Open the radio and the session (raises OSError/ValueError/RadioError with the
+        reason)."""
         cfg = self.config.link
-        if cfg.peer is None:
-            raise ValueError("ground config: [link] peer (the aircraft's address) is not set")
-        peer = bytes.fromhex(cfg.peer)
-        key = load_key(self.base / cfg.key_file)
-        codec = LinkCodec(
-            key,
-            GROUND,
-            {peer},
-            counter=CounterStore(self.base / cfg.counter_file),
-            seen=self.base / cfg.seen_file,
+        self.radio, self.session = await open_endpoint(
+            cfg, GROUND, self.base, self.clock, self.on_message
         )
-        self.radio = XBeeRadio(cfg.port, cfg.baud, self.clock, self._receive)
-        await self.radio.open()
         self._log = self.writer.open(log_name(self.writer.next_number(), "ground", "jsonl"))
-        codec.max_payload = self.radio.max_payload
-        self.session = LinkSession(
-            codec,
-            self.radio,
-            peer,
-            self.clock,
-            self.on_message,
-            heartbeat_s=cfg.heartbeat_s,
-            deadline_s=cfg.deadline_s,
-        )
         self.note("info", f"radio open ({Path(cfg.port).name}); aircraft {cfg.peer}")
-
-    def _receive(self, source: bytes, payload: bytes, t: float) -> None:
-        if self.session is not None:
-            self.session.receive(source, payload, t)
 
     async def run(self) -> None:
         if self.session is None:

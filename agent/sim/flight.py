@@ -33,7 +33,7 @@ from agent.link.session import LinkSession
 from agent.runtime import Agent
 from agent.sim.aircraft import AircraftOptions, SimAircraft
 from agent.sim.ardupilot import Params
-from agent.sim.radio import EmulatedXBee, RfChannel
+from agent.sim.radio import EmulatedXBee, RfChannel, module_pair
 from drivers.xbee.driver import XBeeRadio
 
 AIR = bytes.fromhex("0013A20041000001")
@@ -170,11 +170,9 @@ async def _parts(options: SimOptions, tmp: Path, params: Params, say, operator: 
         clock,
         ports,
     )
-    channel = RfChannel()
-    air = EmulatedXBee("xbee-air", AIR, ports, channel, clock)
-    ground_module = EmulatedXBee("xbee-ground", GROUND_ADDR, ports, channel, clock)
-    air.join(ground_module)
-    ground_module.join(air)
+    channel, air, ground_module = module_pair(
+        ports, clock, ("xbee-air", AIR), ("xbee-ground", GROUND_ADDR)
+    )
     tasks = [
         asyncio.create_task(aircraft.run(), name="sim-aircraft"),
         asyncio.create_task(air.run(), name="xbee-air"),

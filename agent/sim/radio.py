@@ -166,3 +166,19 @@ class EmulatedXBee:
         if frame_id:  # frame id 0: the sender asked for no status
             with contextlib.suppress(OSError):
                 self._send(api.transmit_status(frame_id, status, retries))
+
+
+def module_pair(
+    directory: Path,
+    clock,
+    air: tuple[str, bytes],
+    ground: tuple[str, bytes],
+    channel: RfChannel | None = None,
+) -> tuple[RfChannel, EmulatedXBee, EmulatedXBee]:
+    """Two modules (name, address) on one channel, each the other's only neighbour."""
+    channel = channel or RfChannel()
+    a = EmulatedXBee(air[0], air[1], directory, channel, clock)
+    g = EmulatedXBee(ground[0], ground[1], directory, channel, clock)
+    a.join(g)
+    g.join(a)
+    return channel, a, g

@@ -30,6 +30,15 @@ SURFACES = Config().excitation.surfaces
 POLE, GAIN, RATE = -4.0, 0.8, 50.0
 
 
+def roll_response(aileron: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """p and phi of the known roll model p' = POLE p + GAIN δa, δa held between samples."""
+    p = np.zeros(aileron.size)
+    a, b = np.exp(POLE * dt), GAIN * (np.exp(POLE * dt) - 1) / POLE
+    for k in range(aileron.size - 1):
+        p[k + 1] = a * p[k] + b * aileron[k]
+    return p, np.cumsum(p) * dt
+
+
 def systemid_log(path: Path, seconds: float = 30.0, seed: int = 0) -> dict:
     """The roll axis under ArduPilot's SystemID chirp; returns what was simulated."""
     rng = np.random.default_rng(seed)
@@ -44,11 +53,7 @@ def systemid_log(path: Path, seconds: float = 30.0, seed: int = 0) -> dict:
         sid, 4.0 * np.sin(2 * np.pi * (f0 * tau + (f1 - f0) * tau**2 / (2 * span))), 0.0
     )
     aileron = chirp  # degrees
-    p = np.zeros(n)
-    a, b = np.exp(POLE * dt), GAIN * (np.exp(POLE * dt) - 1) / POLE
-    for k in range(n - 1):
-        p[k + 1] = a * p[k] + b * aileron[k]
-    phi = np.cumsum(p) * dt
+    p, phi = roll_response(aileron, dt)
     with DataFlashWriter(path) as log:
         log.write("MODE", TimeUS=0, Mode=25, ModeNum=25)
         log.write("SIDS", TimeUS=int(5e6), Ax=1, Mag=4.0, FSt=f0, FSp=f1, TFin=0, TC=0, TR=span)

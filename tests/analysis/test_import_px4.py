@@ -14,7 +14,7 @@ import pytest
 from agent.analysis.importers import LogImportError, import_log
 from agent.config import Config
 from agent.sim.ulog import ULogWriter
-from tests.analysis.test_import_ardupilot import GAIN, POLE
+from tests.analysis.test_import_ardupilot import POLE, roll_response
 
 SURFACES = Config().excitation.surfaces
 
@@ -31,11 +31,7 @@ def px4_log(path, seconds=20.0, rate=100.0):
     dt, n = 1.0 / rate, int(seconds * rate)
     t = np.arange(n) * dt
     aileron = np.where((t > 2) & (t < 18), 5.0 * np.sign(np.sin(2 * np.pi * 0.4 * t)), 0.0)
-    p = np.zeros(n)
-    a, b = np.exp(POLE * dt), GAIN * (np.exp(POLE * dt) - 1) / POLE
-    for k in range(n - 1):
-        p[k + 1] = a * p[k] + b * aileron[k]
-    phi = np.cumsum(p) * dt
+    p, phi = roll_response(aileron, dt)
     with ULogWriter(path) as log:
         for k in range(n):
             us = 1_000_000 + int(t[k] * 1e6)
