@@ -135,3 +135,13 @@ def test_no_roles_no_names(lateral):
     named = name_modes(lateral.modes, [None, None, None, None])
     assert all(m.name is None for m in named)
     assert [dataclasses.replace(m, name=None) for m in named] == list(named)
+
+
+def test_a_nearly_real_pair_is_not_the_dutch_roll():
+    # Seen in the simulator: noise split the roll pole into a pair with ζ = 0.999 that carried
+    # more of the response than the real Dutch roll; the oscillatory pair must get the name.
+    roles = ("beta", "p", "r", "phi")
+    split_roll = _mode(-12.2 + 0.6j, [0.05, 1, 0.1, 0.3], msv=80.0)
+    dutch = _mode(-0.65 + 2.2j, [1, 0.5, 0.9, 0.2], msv=30.0)
+    named = name_modes([split_roll, dutch], roles)
+    assert [m.name for m in named] == [None, "Dutch roll"]
