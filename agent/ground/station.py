@@ -77,6 +77,7 @@ class GroundStation:
         self.listeners: list[Callable[[str], None]] = []
         self.session: LinkSession | None = None
         self.rssi_dbm: int | None = None
+        self.rssi_errors = 0  # RSSI reads that failed (logged; the link goes on)
         self.radio: XBeeRadio | None = None
         self.writer = LogWriter(self.base / config.log_dir)
         self._reload_results()
@@ -112,6 +113,7 @@ class GroundStation:
                 self.rssi_dbm = await self.radio.rssi()
             except Exception as exc:  # a display value: never worth the link itself
                 self.rssi_dbm = None
+                self.rssi_errors += 1
                 log.warning("RSSI not read: %r", exc)
 
     async def close(self) -> None:
@@ -137,6 +139,7 @@ class GroundStation:
             "loss": failed / (sent + failed) if sent + failed else None,
             "retransmissions": c["retransmissions"],
             "rssi_dbm": self.rssi_dbm,
+            "rssi_errors": self.rssi_errors,
             "rejected": c["rejected_messages"],
         }
 
