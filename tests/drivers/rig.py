@@ -82,6 +82,13 @@ class Rig:
                 )
 
     async def stop(self) -> None:
+        # Emitters stop first and the drivers get a few periods to read what is already in the
+        # pty: a frame written just before the stop is otherwise counted as sent but never read.
+        emitters = [t for t in self.tasks if "emitter" in t.get_name()]
+        for task in emitters:
+            task.cancel()
+        await asyncio.gather(*emitters, return_exceptions=True)
+        await asyncio.sleep(5 / RATE)
         for task in self.tasks:
             task.cancel()
         await asyncio.gather(*self.tasks, return_exceptions=True)
