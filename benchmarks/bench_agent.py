@@ -158,7 +158,7 @@ async def probe(lags: list[float]) -> None:
         lags.append(loop.time() - start - 0.01)
 
 
-async def measure(minutes: float, every: float, keep: Path | None) -> dict:
+async def measure(minutes: float, every: float, keep: Path | None, world_nice: int) -> dict:
     with contextlib.ExitStack() as stack:
         directory = keep or Path(stack.enter_context(tempfile.TemporaryDirectory()))
         directory.mkdir(parents=True, exist_ok=True)
@@ -168,6 +168,7 @@ async def measure(minutes: float, every: float, keep: Path | None) -> dict:
         world_proc = subprocess.Popen(
             [sys.executable, __file__, "world", str(directory), "--every", str(every)],
             env=env,
+            preexec_fn=(lambda: os.nice(world_nice)) if world_nice else None,
             stdout=log,
             stderr=subprocess.STDOUT,
         )
@@ -319,12 +320,16 @@ def main() -> None:
     parser.add_argument("--minutes", type=float, default=45.0)
     parser.add_argument("--every", type=float, default=60.0, help="s between excitations")
     parser.add_argument("--keep", type=Path, help="keep the logs in this directory")
+    parser.add_argument(
+        "--world-nice", type=int, default=0,
+        help="run the world (aircraft, sensors, radios, ground) at this nice value",
+    )  # fmt: skip
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     if args.mode == "world":
         asyncio.run(world(args.directory, args.every))
         return
-    result = asyncio.run(measure(args.minutes, args.every, args.keep))
+    result = asyncio.run(measure(args.minutes, args.every, args.keep, args.world_nice))
     print(json.dumps(result, default=float) if args.json else report(result))
 
 

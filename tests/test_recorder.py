@@ -88,6 +88,22 @@ def test_ring_keeps_the_newest_rows():
     assert ring.between(4, 6)[:, 1].tolist() == [40, 50, 60]
 
 
+def test_ring_windows_by_binary_search_equal_the_mask_at_every_fill_and_wrap():
+    for appended in range(0, 16):
+        ring = Ring(7, 2)
+        for k in range(appended):
+            ring.append(np.array([0.5 * k, k]))
+        rows = ring.ordered()
+        assert rows[:, 0].tolist() == [0.5 * k for k in range(max(0, appended - 7), appended)]
+        for t0 in np.arange(-1.0, 9.0, 0.25):
+            for t1 in np.arange(t0 - 0.5, 9.0, 0.75):
+                keep = (rows[:, 0] >= t0) & (rows[:, 0] <= t1)
+                window = ring.between(t0, t1)
+                assert np.array_equal(window, rows[keep]), (appended, t0, t1)
+                if len(window):  # a copy: the ring moving on does not change it
+                    assert not np.shares_memory(window, ring._data)
+
+
 async def test_excitation_window_goes_to_its_log_after_the_margin():
     clock = VirtualClock(0.0)
     logged = []

@@ -133,3 +133,17 @@ def test_a_restarted_receiver_still_refuses_old_frames(tmp_path):
     assert all(restarted.decode(AIR, f, 0) is None for f in frames)  # replayed after restart
     assert restarted.counters["replayed"] + restarted.counters["stale"] == 3
     assert restarted.decode(AIR, air.encode({"kind": "ping", "v": 1})[0], 0) is not None
+
+
+def test_a_counter_jump_far_past_the_window_is_accepted_without_blowing_up(tmp_path):
+    """A sender whose counter file was lost falls back to the wall clock in µs (≈ 2**50): the
+    receiver, which had seen small counters, must take the jump (hypothesis found the window
+    shift asking for petabytes at a jump to 2**64 − 1)."""
+    ground = LinkCodec(KEY, GROUND, {AIR}, counter=CounterStore(tmp_path / "g"))
+    air = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(tmp_path / "a"))
+    assert ground.decode(AIR, air.encode({"kind": "ping", "v": 1})[0], 0) is not None
+    clocked = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(None))
+    frames = [clocked.encode({"kind": "ping", "v": 1, "n": k})[0] for k in range(3)]
+    assert [ground.decode(AIR, f, 0) is not None for f in frames] == [True] * 3
+    assert ground.decode(AIR, frames[0], 0) is None  # and the window works after the jump
+    assert ground.counters["replayed"] == 1
