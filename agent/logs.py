@@ -75,10 +75,20 @@ def csv_header(
     return ("\n".join(lines) + "\n").encode()
 
 
+_TEMPLATES: dict[int, str] = {}
+
+
 def format_row(row: np.ndarray) -> bytes:
-    """One CSV line: time with µs resolution, values to 9 significant digits, NaN empty."""
-    cells = [f"{row[0]:.6f}"] + ["" if v != v else f"{v:.9g}" for v in row[1:].tolist()]
-    return (",".join(cells) + "\n").encode()
+    """One CSV line: time with µs resolution, values to 9 significant digits, NaN empty.
+    One %-format per row (13 µs for the agent's 83 columns, against 20 µs cell by cell): the
+    flight log's rows are formatted on the event loop, so the writer thread never holds the
+    GIL for long while the loop waits for it."""
+    width = len(row)
+    template = _TEMPLATES.get(width)
+    if template is None:
+        template = _TEMPLATES[width] = "%.6f" + ",%.9g" * (width - 1) + "\n"
+    # A cell reads "nan" only for NaN (numbers never start with n): an empty cell.
+    return (template % tuple(row.tolist())).replace(",nan", ",").encode()
 
 
 @dataclass(frozen=True)
@@ -98,12 +108,15 @@ class LogWriter:
         self._queue: queue.Queue = queue.Queue(maxsize=queue_lines)
         self._fsync_s = fsync_s
         self._fds: dict[int, int] = {}
+        self._sizes: dict[int, int] = {}  # bytes of whole lines in each open file
         self._paths: dict[int, Path] = {}
         self._dirty: set[int] = set()
         self._handles = 0
         self._lock = threading.Lock()
         self.dropped = 0
         self.errors = 0
+        self.lost_lines = 0  # lines the disk refused (full, or failing): counted, not written
+        self.failing: str | None = None  # the last write error while writes are failing
         self.failures: list[str] = []  # files that could not be created, and why
         self._thread = threading.Thread(target=self._serve, name="log-writer", daemon=True)
         self._thread.start()
@@ -178,6 +191,7 @@ class LogWriter:
             try:
                 flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND
                 self._fds[handle] = os.open(data.path, flags, 0o644)
+                self._sizes[handle] = 0
             except OSError as exc:
                 self.errors += 1
                 self.failures.append(f"{data.path}: cannot be created ({exc.strerror or exc})")
@@ -189,18 +203,33 @@ class LogWriter:
             with contextlib.suppress(OSError):
                 os.fsync(fd)
             os.close(self._fds.pop(handle))
+            self._sizes.pop(handle, None)
             self._dirty.discard(handle)
             return
         if isinstance(data, np.ndarray):
             lines = [format_row(r) for r in np.atleast_2d(data)]
         else:
             lines = [data]
-        try:
-            for line in lines:
-                os.write(fd, line)  # one write per whole line: a kill leaves whole lines
-        except OSError:
+        for k, line in enumerate(lines):
+            # One write per whole line: a kill leaves whole lines.
+            try:
+                written = os.write(fd, line)
+                problem = None if written == len(line) else "short write (disk full?)"
+            except OSError as exc:
+                written, problem = 0, exc.strerror or str(exc)
+            if problem is None:
+                self._sizes[handle] += written
+                continue
+            # Disk full (or failing): cut the file back to its last whole line, so what was
+            # written before stays readable and a later line never lands after half of one;
+            # count what was not written and go on (the next line tries again).
+            with contextlib.suppress(OSError):
+                os.ftruncate(fd, self._sizes[handle])
             self.errors += 1
+            self.lost_lines += len(lines) - k
+            self.failing = problem
             return
+        self.failing = None
         self._dirty.add(handle)
 
     def _sync(self) -> None:
@@ -268,8 +297,9 @@ class Logbook:
         self.execution = writer.open(log_name(number, "exec", "jsonl"))
 
     def row(self, row: np.ndarray) -> None:
-        """A recorder frame into the flight log (dropped and counted if the queue is full)."""
-        self._writer.write(self.flight, row)
+        """A recorder frame into the flight log (dropped and counted if the queue is full),
+        formatted here, on the caller's thread (see format_row)."""
+        self._writer.write(self.flight, format_row(row))
 
     def excitation(self, window, rows: np.ndarray, batch: bool = False) -> Path:
         """Write one excitation's input/output log; returns its path."""

@@ -126,6 +126,7 @@ class Agent:
         self._period_lags: list[tuple[float, bool]] = []  # since the last health record
         self.identifying = False  # a window is in the worker (lag while identifying)
         self._status_lag = 0.0  # the worst lag since the last status
+        self._logs_failing = False
         self._gc_start: float | None = None
         self.health: list[dict] = []  # the health records written so far (latest last)
         self.drivers = self._drivers()
@@ -180,6 +181,7 @@ class Agent:
                 }
                 if self.session is not None:
                     named["link"] = self.session.run
+                    named["radio"] = self.radio.watch
                 for name, factory in named.items():
                     group.create_task(self._supervised(name, factory), name=name)
                 log.info(
@@ -544,15 +546,32 @@ class Agent:
             "logs": {
                 "errors": self.writer.errors,
                 "dropped": self.writer.dropped,
+                "lost_lines": self.writer.lost_lines,
                 "failures": self.writer.failures[-3:],
             },
         }
 
     # -- status -----------------------------------------------------------------------------
 
+    def _watch_logs(self) -> None:
+        """Tell the ground once when the logs stop being written (disk full or failing) and
+        once when they are written again; recording to memory and identification go on."""
+        failing = self.writer.failing
+        if failing is not None and not self._logs_failing:
+            text = (f"logs not written: {failing}; {self.writer.lost_lines} lines lost so far; "
+                    "recording in memory and identification go on")  # fmt: skip
+            log.error(text)
+            self._downlink(messages.Notice(text=text[:200]))
+        elif failing is None and self._logs_failing:
+            text = f"logs written again after {self.writer.lost_lines} lines lost"
+            log.warning(text)
+            self._downlink(messages.Notice(text=text))
+        self._logs_failing = failing is not None
+
     async def _status_loop(self) -> None:
         while True:
             await asyncio.sleep(STATUS_S)
+            self._watch_logs()
             t = self.autopilot.telemetry
             lag, self._status_lag = self._status_lag, 0.0
             att, hud, aoa = t.get("ATTITUDE", {}), t.get("VFR_HUD", {}), t.get("AOA_SSA", {})
@@ -585,7 +604,11 @@ class Agent:
                         for axes in AXIS_SETS
                         if (model_id := self.models.nominal_id(axes)) is not None
                     },
-                    recorder={k: float(v) for k, v in self.recorder.counters.items()},
+                    recorder={
+                        **{k: float(v) for k, v in self.recorder.counters.items()},
+                        "log_lost_lines": float(self.writer.lost_lines),
+                        "log_dropped": float(self.writer.dropped),
+                    },
                     sensors=sensors,
                 ),
                 reliable=False,

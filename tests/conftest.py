@@ -71,3 +71,27 @@ def matched_relative_errors(found: np.ndarray, truth: np.ndarray) -> np.ndarray:
         k = int(np.argmin([abs(f - t) for f in remaining]))
         errors.append(abs(remaining.pop(k) - t) / abs(t))
     return np.array(errors)
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A real file system that fills up: a 256 KiB tmpfs mounted on a fresh directory (root or
+    passwordless sudo, as CI has), unmounted afterwards. Writes past it fail with ENOSPC from
+    the kernel, partial writes included — no simulated error."""
+    import os
+    import shutil
+    import subprocess
+
+    where = tmp_path / "disk"
+    where.mkdir()
+    prefix = [] if os.geteuid() == 0 else ["sudo", "-n"]
+    mount = [*prefix, "mount", "-t", "tmpfs", "-o", "size=256k,mode=0777", "tmpfs", str(where)]
+    done = subprocess.run(mount, capture_output=True, text=True, check=False)
+    assert done.returncode == 0, (
+        f"the disk-full tests need to mount a small tmpfs (root or `sudo -n`): {done.stderr}"
+    )
+    try:
+        yield where
+    finally:
+        subprocess.run([*prefix, "umount", "-l", str(where)], check=False)
+        shutil.rmtree(where, ignore_errors=True)

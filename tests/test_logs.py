@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -163,3 +164,46 @@ def test_a_file_that_cannot_be_created_is_counted_and_named(tmp_path):
     assert (tmp_path / "0001_flight_x.csv").read_text() == "someone else's"
     assert writer.errors == 1
     assert "0001_flight_x.csv: cannot be created (File exists)" in writer.failures[0]
+
+
+def test_a_full_disk_loses_only_new_lines_and_every_line_before_stays_whole(small_disk):
+    """Bad input tried: the log directory's file system fills up mid-flight (a real 256 KiB
+    tmpfs), then space comes back."""
+    cols = ["time", *(f"c{k}" for k in range(20))]
+    writer = LogWriter(small_disk, fsync_s=0.05)
+    book = Logbook(writer, cols, ["s"] * len(cols), "0" * 64)
+    filler = small_disk / "filler"
+    k = 0
+
+    def rows(n: int) -> None:
+        nonlocal k
+        for _ in range(n):
+            row = np.full(len(cols), 1.0 / 3.0) * k
+            row[0] = k * 0.01
+            book.row(row)
+            k += 1
+            time.sleep(0.0005)
+
+    rows(200)
+    # Fill the disk with another file until the kernel refuses.
+    with open(filler, "wb", buffering=0) as handle, contextlib.suppress(OSError):
+        while True:
+            handle.write(b"x" * 4096)
+    rows(300)  # these cannot be written
+    deadline = time.monotonic() + 5
+    while writer.lost_lines == 0 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert writer.lost_lines > 0
+    assert writer.failing is not None
+    filler.unlink()  # space again
+    rows(200)
+    writer.close()
+    assert writer.failing is None  # writing resumed by itself
+    header, data = read_log(writer.path(book.flight))  # every line whole and parsable
+    assert header == cols
+    times = np.round(data[:, 0] / 0.01).astype(int)
+    assert times[:200].tolist() == list(range(200))  # everything before the fault is there
+    assert times[-1] == k - 1  # and writing resumed after it
+    assert len(data) + writer.lost_lines == k  # every row written or counted as lost
+    raw = writer.path(book.flight).read_bytes()
+    assert raw.endswith(b"\n")

@@ -20,6 +20,7 @@ import random
 from pathlib import Path
 
 import msgpack
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
@@ -37,6 +38,7 @@ from agent.link.codec import (
     CounterStore,
     LinkCodec,
 )
+from agent.logs import format_row
 from drivers.airdata.codec import MAX_LINE, AirData, AirDataCodec
 from drivers.codec import StreamDecoder
 from drivers.surfaces.codec import LENGTH, SurfaceCodec, SurfaceFrame
@@ -309,3 +311,24 @@ def test_any_text_loads_or_is_refused_with_a_config_error(tmp_path_factory, text
     path.write_bytes(text.encode("utf-8", "surrogateescape"))
     config, error = _outcome(load_config, path, error=ConfigError)
     assert isinstance(config, Config) if error is None else error.problems
+
+
+# -- the log line format --------------------------------------------------------------------
+
+
+@PROPERTY
+@given(row=st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=2, max_size=90))
+def test_a_log_row_reads_back_to_nine_significant_digits_with_nan_empty(row):
+    time = abs(row[0]) % 1e6 if math.isfinite(row[0]) else 0.0  # the time: finite, seconds
+    values = np.array([time, *row[1:]])
+    line = format_row(values)
+    assert line.endswith(b"\n")
+    assert line.count(b"\n") == 1
+    cells = line.decode().rstrip("\n").split(",")
+    assert len(cells) == len(values)
+    assert float(cells[0]) == pytest.approx(values[0], abs=5e-7)
+    for cell, value in zip(cells[1:], values[1:], strict=True):
+        if math.isnan(value):
+            assert cell == ""
+        else:
+            assert float(cell) == pytest.approx(value, rel=5e-9, abs=0)

@@ -101,6 +101,7 @@ class GroundStation:
         assert self.session is not None
         async with asyncio.TaskGroup() as group:
             group.create_task(self.session.run(), name="ground-session")
+            group.create_task(self.radio.watch(), name="ground-radio")
             group.create_task(self._rssi_loop(), name="ground-rssi")
 
     async def _rssi_loop(self) -> None:

@@ -79,17 +79,33 @@ class EmulatedXBee:
             self.network[module.address] = module
 
     async def run(self) -> None:
-        loop = asyncio.get_running_loop()
-        self.port.plug()
-        fd = self.port.master_fd
-        loop.add_reader(fd, self._readable)
+        self.plug()
         try:
             await asyncio.Event().wait()  # serve until cancelled
         finally:
-            loop.remove_reader(fd)
+            self.unplug()
             for task in self._tasks:
                 task.cancel()
-            self.port.unplug()
+
+    def plug(self) -> None:
+        """The module's USB cable plugged in (a new pty behind the same path)."""
+        if self.port.plugged:
+            return
+        self.port.plug()
+        self._decoder = StreamDecoder(self._codec)
+        asyncio.get_running_loop().add_reader(self.port.master_fd, self._readable)
+
+    def unplug(self) -> None:
+        """The cable pulled: the host's port goes away mid-stream."""
+        if not self.port.plugged:
+            return
+        asyncio.get_running_loop().remove_reader(self.port.master_fd)
+        self.port.unplug()
+
+    def emit(self, frame: api.ApiFrame) -> None:
+        """Any API frame to the host, checksum correct (a frame corrupted on the UART that
+        still passes the 8-bit checksum, or a firmware oddity)."""
+        self._send(frame)
 
     def _readable(self) -> None:
         try:

@@ -16,11 +16,17 @@ from drivers.timing import Unwrap
 
 
 def counts_to_degrees(counts: float, calibration: Calibration) -> float:
-    """One potentiometer: table (linear between points, held beyond) or polynomial."""
+    """One potentiometer: table (linear between points, held beyond) or polynomial
+    (coefficients lowest order first, evaluated by Horner's rule in plain Python: seven of
+    these run on the event loop for every frame, and numpy's polyval on one number costs five
+    times as much)."""
     if calibration.table is not None:
         points = np.asarray(calibration.table, dtype=float)
         return float(np.interp(counts, points[:, 0], points[:, 1]))
-    return float(np.polynomial.polynomial.polyval(counts, calibration.poly))
+    value = 0.0
+    for coefficient in reversed(calibration.poly):
+        value = value * counts + coefficient
+    return float(value)
 
 
 def gang(surfaces: Mapping[str, float]) -> dict[str, float]:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
 import threading
 from collections import Counter
 from collections.abc import Callable
@@ -40,6 +41,9 @@ STATUS_TIMEOUT_S = 5.0
 INBOX = 256
 # Opening a module takes milliseconds; a missing or wedged one must not hang us.
 OPEN_TIMEOUT_S = 10.0
+# How often `watch` looks at the port, and the longest wait between attempts to reopen it.
+WATCH_S = 1.0
+REOPEN_MAX_S = 8.0
 DELIVERY = {0x00: "ok", 0x01: "MAC ACK failure", 0x21: "network ACK failure",
             0x25: "route not found", 0x74: "payload too large"}  # fmt: skip
 
@@ -104,6 +108,52 @@ class XBeeRadio:
             raise RadioError(f"{self.port}: cannot open the XBee: {exc}") from exc
         device.add_packet_received_callback(self._packet)
         self._device = device
+
+    def healthy(self) -> bool:
+        """The module's port is open, digi-xbee's reader is serving it, and the device behind
+        the port's path is still the one we opened. The reader thread ends, and closes the
+        port, on any exception other than InvalidPacketException while it builds a frame:
+        fuzzing found frames with a good checksum that make its factory raise IndexError
+        (fuzz/, target digi-xbee), and a corrupted UART byte passes an 8-bit checksum one time
+        in 256. On an unplugged USB radio it does not end: it spins on "device reports
+        readiness to read but returned no data", so the path is checked too."""
+        device = self._device
+        if device is None:
+            return False
+        try:
+            if not device.comm_iface.is_interface_open:
+                return False
+            opened = os.fstat(device.serial_port.fileno()).st_rdev
+            return os.stat(self.port).st_rdev == opened
+        except Exception:  # the path gone, or a half-torn-down device
+            return False
+
+    async def watch(self) -> None:
+        """Reopen the module whenever its port is lost, with backoff, until cancelled; each
+        loss and each reopen is counted and logged. Frames waiting for a status on the lost
+        port time out as unconfirmed (the session retransmits)."""
+        delay = WATCH_S
+        while True:
+            await asyncio.sleep(WATCH_S)
+            if self.healthy():
+                continue
+            self.counters["port_lost"] += 1
+            log.warning("%s: the XBee's port was lost; reopening", self.port)
+            old, self._device = self._device, None
+            if old is not None:
+                with contextlib.suppress(Exception):
+                    await self._loop.run_in_executor(self._executor, old.close)
+            while self._device is None:
+                try:
+                    await self.open()
+                except RadioError as exc:
+                    self.counters["reopen_failures"] += 1
+                    log.warning("%s; retrying in %.0f s", exc, delay)
+                    await asyncio.sleep(delay)
+                    delay = min(2 * delay, REOPEN_MAX_S)
+            delay = WATCH_S
+            self.counters["reopened"] += 1
+            log.warning("%s: the XBee is open again", self.port)
 
     async def rssi(self) -> int | None:
         """Signal strength of the last frame received (DB, dBm); None if it cannot be read."""

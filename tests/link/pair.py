@@ -62,6 +62,7 @@ async def link_pair(tmp_path: Path, *, escaped: bool = False, channel: RfChannel
                               deadline_s=deadline_s)  # fmt: skip
         holder.append(session)
         tasks.append(asyncio.create_task(session.run(), name=f"session-{name}"))
+        tasks.append(asyncio.create_task(radio.watch(), name=f"radio-{name}"))
         ends[name] = End(radio, codec, session, inbox)
     pair = Pair(channel, ends["air"], ends["ground"], (air_module, ground_module), tasks)
     try:

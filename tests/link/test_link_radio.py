@@ -93,3 +93,41 @@ async def test_a_payload_larger_than_the_radio_takes_is_refused_not_sent(tmp_pat
     async with link_pair(tmp_path) as pair:
         result = await pair.air.radio.send(pair.modules[1].address, bytes(300))
     assert result.reason == "payload too large"
+
+
+# A frame digi-xbee's factory cannot build: 0x28 (Send Data Request) whose path length points
+# past its end. Found by fuzzing (fuzz/, target digi-xbee): build_frame raises IndexError, and
+# digi-xbee's reader thread ends and closes the port on it.
+READER_KILLER = bytes([0x28]) + b"\xd6" * 8
+
+
+async def test_a_frame_that_ends_digi_xbees_reader_costs_a_reopen_not_the_link(tmp_path):
+    """Bad input tried: a well-checksummed frame from the ground's own module that makes
+    digi-xbee's frame factory raise (its reader thread then dies and closes the port)."""
+    from drivers.xbee import codec as api
+
+    async with link_pair(tmp_path) as pair:
+        radio = pair.ground.radio
+        pair.modules[1].emit(api.ApiFrame(READER_KILLER))
+        assert await wait_for(lambda: not radio.healthy(), 2), "digi-xbee survived the frame"
+        assert await wait_for(lambda: radio.counters["reopened"] == 1, 5)
+        pair.air.session.send_reliable(messages.Notice(text="after the reopen"))
+        assert await wait_for(lambda: pair.ground.inbox, 10)
+    assert pair.ground.inbox[-1].text == "after the reopen"
+    assert radio.counters["port_lost"] == 1
+
+
+async def test_an_unplugged_radio_is_reopened_and_the_message_sent_meanwhile_arrives(tmp_path):
+    """Bad input tried: the ground's USB radio pulled for 3 s while the aircraft sends."""
+    async with link_pair(tmp_path) as pair:
+        radio, module = pair.ground.radio, pair.modules[1]
+        module.unplug()
+        pair.air.session.send_reliable(messages.Notice(text="sent while unplugged"))
+        await asyncio.sleep(3.0)
+        assert not pair.ground.inbox
+        assert radio.counters["reopen_failures"] >= 1  # it kept trying, and said so
+        module.plug()
+        assert await wait_for(lambda: radio.counters["reopened"] == 1, 12)
+        assert await wait_for(lambda: pair.ground.inbox, 15)
+    assert [m.text for m in pair.ground.inbox] == ["sent while unplugged"]
+    assert radio.counters["port_lost"] == 1
