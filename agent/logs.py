@@ -38,6 +38,8 @@ FSYNC_S = 1.0
 # How long close() waits for the writer to drain before giving up (a stuck disk).
 CLOSE_TIMEOUT_S = 10.0
 NAME = re.compile(r"^(\d{4})_")
+# Files that could not be created, remembered (the newest).
+FAILURES_KEPT = 20
 
 
 def next_number(directory: Path) -> int:
@@ -195,6 +197,7 @@ class LogWriter:
             except OSError as exc:
                 self.errors += 1
                 self.failures.append(f"{data.path}: cannot be created ({exc.strerror or exc})")
+                del self.failures[:-FAILURES_KEPT]
             return
         fd = self._fds.get(handle)
         if fd is None:
@@ -211,12 +214,14 @@ class LogWriter:
         else:
             lines = [data]
         for k, line in enumerate(lines):
-            # One write per whole line: a kill leaves whole lines.
+            # One write per whole line: a kill leaves whole lines (a short write, which only a
+            # full disk gives, is completed or cut back below).
+            written, problem = 0, None
             try:
-                written = os.write(fd, line)
-                problem = None if written == len(line) else "short write (disk full?)"
+                while written < len(line):  # a short write: the rest, to learn why
+                    written += os.write(fd, line[written:])
             except OSError as exc:
-                written, problem = 0, exc.strerror or str(exc)
+                problem = exc.strerror or str(exc)
             if problem is None:
                 self._sizes[handle] += written
                 continue

@@ -26,6 +26,7 @@ import time
 from collections import Counter, deque
 from collections.abc import Awaitable, Callable
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import numpy as np
@@ -156,8 +157,7 @@ class Agent:
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         handler = self.logbook.handler(self.clock)
         logging.getLogger().addHandler(handler)
-        context = multiprocessing.get_context("spawn")  # no fork of a threaded process
-        pool = ProcessPoolExecutor(1, mp_context=context, initializer=jobs.start_worker)
+        self._pool = self._new_worker()
         try:
             await self._open_link()
             # Everything built so far lives as long as the agent: moved out of the collector's
@@ -176,7 +176,7 @@ class Agent:
                     "scheduler": self.scheduler.run,
                     "status": self._status_loop,
                     "periodic": self._periodic_loop,
-                    "identification": lambda: self._job_loop(pool),
+                    "identification": self._job_loop,
                     "commands": self._command_loop,
                 }
                 if self.session is not None:
@@ -190,7 +190,7 @@ class Agent:
         finally:
             sys.setswitchinterval(switch)
             logging.getLogger().removeHandler(handler)
-            pool.shutdown(wait=True, cancel_futures=True)
+            self._pool.shutdown(wait=True, cancel_futures=True)
             self._store.shutdown(wait=True)
             if self.radio is not None:
                 await self.radio.close()
@@ -350,14 +350,29 @@ class Agent:
 
     # -- identification ---------------------------------------------------------------------
 
-    async def _job_loop(self, pool: ProcessPoolExecutor) -> None:
+    @staticmethod
+    def _new_worker() -> ProcessPoolExecutor:
+        """The identification worker: one process, spawned (no fork of a threaded process)."""
+        context = multiprocessing.get_context("spawn")
+        return ProcessPoolExecutor(1, mp_context=context, initializer=jobs.start_worker)
+
+    async def _job_loop(self) -> None:
         loop = asyncio.get_running_loop()
-        await loop.run_in_executor(pool, jobs.warm)  # the worker is up before the first window
+        # The worker is up before the first window.
+        await loop.run_in_executor(self._pool, jobs.warm)
         while True:
             window, rows = await self._jobs.get()
             self.identifying = True
             try:
-                await self._identify(loop, pool, window, rows)
+                await self._identify(loop, self._pool, window, rows)
+            except BrokenProcessPool as exc:  # the worker died (killed, out of memory): anew
+                self.counters["worker_restarts"] += 1
+                log.error("the identification worker died (%s); starting a new one", exc)
+                self._pool.shutdown(wait=False, cancel_futures=True)
+                self._pool = self._new_worker()
+                self._failed(f"{window.plan_id}", self.ident.axes,
+                             "the identification worker process died; a new one is started "
+                             "for the next window")  # fmt: skip
             except Exception as exc:  # a fault in one identification: a failure result, go on
                 log.exception("identification of %s failed", window.plan_id)
                 self._failed(f"{window.plan_id}", self.ident.axes, f"internal error: {exc!r}")

@@ -74,24 +74,33 @@ def matched_relative_errors(found: np.ndarray, truth: np.ndarray) -> np.ndarray:
 
 
 @pytest.fixture
-def small_disk(tmp_path):
-    """A real file system that fills up: a 256 KiB tmpfs mounted on a fresh directory (root or
-    passwordless sudo, as CI has), unmounted afterwards. Writes past it fail with ENOSPC from
-    the kernel, partial writes included — no simulated error."""
+def small_disk_at():
+    """Mount a real file system that fills up — a tmpfs of the given size — on a directory
+    (root or passwordless sudo, as CI has); unmounted afterwards. Writes past it fail with
+    ENOSPC from the kernel, partial writes included: no simulated error."""
     import os
-    import shutil
     import subprocess
 
-    where = tmp_path / "disk"
-    where.mkdir()
     prefix = [] if os.geteuid() == 0 else ["sudo", "-n"]
-    mount = [*prefix, "mount", "-t", "tmpfs", "-o", "size=256k,mode=0777", "tmpfs", str(where)]
-    done = subprocess.run(mount, capture_output=True, text=True, check=False)
-    assert done.returncode == 0, (
-        f"the disk-full tests need to mount a small tmpfs (root or `sudo -n`): {done.stderr}"
-    )
-    try:
-        yield where
-    finally:
+    mounted = []
+
+    def mount(where, size: str = "256k"):
+        where.mkdir(parents=True, exist_ok=True)
+        command = [*prefix, "mount", "-t", "tmpfs", "-o", f"size={size},mode=0777", "tmpfs",
+                   str(where)]  # fmt: skip
+        done = subprocess.run(command, capture_output=True, text=True, check=False)
+        assert done.returncode == 0, (
+            f"the disk-full tests need to mount a small tmpfs (root or `sudo -n`): {done.stderr}"
+        )
+        mounted.append(where)
+        return where
+
+    yield mount
+    for where in mounted:
         subprocess.run([*prefix, "umount", "-l", str(where)], check=False)
-        shutil.rmtree(where, ignore_errors=True)
+
+
+@pytest.fixture
+def small_disk(tmp_path, small_disk_at):
+    """A 256 KiB tmpfs on a fresh directory (see small_disk_at)."""
+    return small_disk_at(tmp_path / "disk")

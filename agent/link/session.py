@@ -2,8 +2,12 @@
 
 Reliable (commands, results, acknowledgements): each message gets a sequence number within a
 session epoch (a random number drawn at start, so a restarted end is recognised rather than
-taken for a replay of old numbers); the receiver delivers in order exactly once, buffers up
-to 64 ahead, and answers every reliable frame with a cumulative link ack; the sender keeps up
+taken for a replay of old numbers); each reliable frame also carries the lowest number still
+unacknowledged, where a receiver that meets a new epoch — the sender restarted, or the
+receiver itself did and knows none — starts counting (so a restarted aircraft still takes
+the ground's next command; the message in flight when it died may come twice, the only
+duplicate across a restart); the receiver delivers in order exactly once, buffers up to 64
+ahead, and answers every reliable frame with a cumulative link ack; the sender keeps up
 to 4 messages in flight, retransmits each after 0.5 s, doubling to at most 4 s, and keeps the
 rest queued (up to 64; the oldest is dropped and counted beyond that) — so results queued
 during an outage go out when the link returns. Best effort (status, heartbeat): sent once;
@@ -100,6 +104,11 @@ class LinkSession:
         return self._last_heard
 
     @property
+    def codec(self) -> LinkCodec:
+        """The framing underneath: its counters say what was dropped, and why."""
+        return self._codec
+
+    @property
     def link_up(self) -> bool:
         heard = self._last_heard
         return heard is not None and self._clock.now() - heard <= self._deadline_s
@@ -135,23 +144,30 @@ class LinkSession:
 
     def _reliable(self, data: dict) -> None:
         epoch, seq = data.get("e"), int(data["s"])
-        if epoch != self._peer_epoch:  # the other end (re)started: a new numbering
-            self._peer_epoch, self._expected, self._ahead = epoch, 1, {}
+        base = int(data.get("b", 1))
+        if epoch != self._peer_epoch:  # the other end, or this one, (re)started: its numbering
+            self._peer_epoch, self._expected, self._ahead = epoch, base, {}
+            self.counters["peer_epochs"] += 1
+        elif base > self._expected:
+            # Acknowledged below `base` — by this end before a restart (an ack it sent then
+            # arrived late): they will never come again, so stop waiting for them.
+            self._ahead = {k: v for k, v in self._ahead.items() if k >= base}
+            self._expected = base
+            self.counters["skipped_to_base"] += 1
         self._acks_due = True
         self._wake.set()
         if seq < self._expected or seq in self._ahead:
             self.counters["duplicates"] += 1
-            return
-        if seq >= self._expected + AHEAD:
+        elif seq >= self._expected + AHEAD:
             self.counters["too_far_ahead"] += 1
-            return
-        self._ahead[seq] = data
+        else:
+            self._ahead[seq] = data
         while self._expected in self._ahead:
             self._deliver(self._ahead.pop(self._expected), self._expected)
             self._expected += 1
 
     def _deliver(self, data: dict, seq: int | None = None) -> None:
-        data = {k: v for k, v in data.items() if k not in ("e", "s")}
+        data = {k: v for k, v in data.items() if k not in ("e", "s", "b")}
         try:
             message = messages.from_dict(data)
         except messages.LinkMessageError as exc:
@@ -194,7 +210,7 @@ class LinkSession:
             if item.due <= now and item.seq in self._flight:
                 if item.backoff > RETRY_FIRST_S:
                     self.counters["retransmissions"] += 1
-                await self._send(item.data)
+                await self._send(item.data | {"b": min(self._flight)})
                 item.due = self._clock.now() + item.backoff
                 item.backoff = min(item.backoff * 2, RETRY_MAX_S)
         if self._status is not None:

@@ -125,6 +125,7 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
         self._transport: asyncio.DatagramTransport | None = None
         self.peers: set[tuple[str, int]] = {gcs} if gcs else set()
         self._overrides: dict[int, tuple[int, float]] = {}
+        self.default_intervals = dict(DEFAULT_INTERVAL)
         self.intervals = dict(DEFAULT_INTERVAL)
         self._due: dict[int, float] = {}
         self._heartbeat_at = -1.0
@@ -141,6 +142,24 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
                                       params.servo_travel, dt, start[ch])
                        for ch in OUTPUTS}  # fmt: skip
         self.outputs: dict[int, int] = {ch: normalised_to_pwm(ch, start[ch]) for ch in OUTPUTS}
+
+    async def reboot(self, silent_s: float = 2.0) -> None:
+        """ArduPlane restarting (a brown-out, a watchdog reset): silent both ways for
+        `silent_s`, then back with a new boot time and MAVLink sequence, no RC override, and the
+        stream rates at their defaults (the GCS's SET_MESSAGE_INTERVAL requests are forgotten).
+        The emulation keeps ticking meanwhile (a simplification): with the overrides gone, the
+        pilot's sticks drive the servos."""
+        self.counters["reboots"] += 1
+        self.link_up = False
+        self._overrides.clear()
+        await asyncio.sleep(silent_s)
+        self.mav = mavlink.MAVLink(None, srcSystem=self.params.sysid, srcComponent=1)
+        self.mav.robust_parsing = True
+        self.intervals = dict(DEFAULT_INTERVAL)
+        self._due.clear()
+        self._heartbeat_at = -1.0
+        self._boot = None
+        self.link_up = True
 
     # -- MAVLink in -----------------------------------------------------------------------
 

@@ -7,7 +7,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import os
 import secrets
+import signal
+import subprocess
+import sys
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -75,6 +79,13 @@ class Ground:
         else:
             self.inbox.append(message)
 
+    def flight_mode(self) -> str | None:
+        """The flight mode in the aircraft's latest status (None: no status, or no autopilot)."""
+        for message in reversed(self.inbox):
+            if isinstance(message, messages.Status):
+                return message.flight_mode
+        return None
+
     async def command(self, message) -> messages.Ack:
         seq = self.session.send_reliable(message)
         if not await _until(lambda: seq in self.acks, ACK_S):
@@ -112,6 +123,69 @@ def _config(tmp: Path, ports: Path, mavlink: tuple[str, int], axes: str) -> Conf
     )
 
 
+def _config_toml(config: Config) -> str:
+    """The settings `_config` makes, as the agent's config file (for the agent as a process):
+    only what differs from the defaults."""
+    s, link = config.sensors, config.link
+    return "\n".join([
+        "[identification]", f'axes = "{config.identification.axes}"',
+        "[sensors.vn200]", f'port = "{s.vn200.port}"',
+        "[sensors.airdata]", f'port = "{s.airdata.port}"',
+        "[sensors.surfaces]", f'port = "{s.surfaces.port}"',
+        "[autopilot]", f'url = "{config.autopilot.url}"',
+        "[link]", f'port = "{link.port}"', f'peer = "{link.peer}"',
+        f'key_file = "{link.key_file}"', f'counter_file = "{link.counter_file}"',
+        f'seen_file = "{link.seen_file}"',
+        "[recorder]", f'log_dir = "{config.recorder.log_dir}"', "",
+    ])  # fmt: skip
+
+
+class AgentProcess:
+    """The real `sysid agent` entry point in its own process, for faults only a process can
+    have (kill -9) and for the benchmark; output in agent-N.log in the flight's directory."""
+
+    def __init__(self, directory: Path, config: Config):
+        self.directory = directory
+        self.config_path = directory / "agent.toml"
+        self.config_path.write_text(_config_toml(config))
+        self.proc: subprocess.Popen | None = None
+        self.starts = 0
+
+    def start(self) -> None:
+        self.starts += 1
+        log = open(self.directory / f"agent-{self.starts}.log", "w")  # noqa: SIM115
+        with log:
+            env = {**os.environ, "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS",
+                                                                        "1")}  # fmt: skip
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", "agent", "agent", "--config", str(self.config_path),
+                 "--base", str(self.directory)],
+                stdout=log, stderr=subprocess.STDOUT, env=env,
+            )  # fmt: skip
+
+    @property
+    def pid(self) -> int | None:
+        return None if self.proc is None else self.proc.pid
+
+    def alive(self) -> bool:
+        return self.proc is not None and self.proc.poll() is None
+
+    def kill(self, sig: int = signal.SIGKILL) -> None:
+        if self.alive():
+            self.proc.send_signal(sig)
+
+    async def stop(self, timeout: float = 20.0) -> int | None:
+        """SIGTERM (the agent's clean shutdown), then SIGKILL after `timeout`."""
+        if self.proc is None:
+            return None
+        self.kill(signal.SIGTERM)
+        try:
+            return await asyncio.to_thread(self.proc.wait, timeout)
+        except subprocess.TimeoutExpired:
+            self.kill(signal.SIGKILL)
+            return await asyncio.to_thread(self.proc.wait)
+
+
 @dataclass
 class SimFlight:
     """A simulated flight in progress: every part, for the scripted operator and for the
@@ -124,7 +198,8 @@ class SimFlight:
     channel: RfChannel
     air_module: EmulatedXBee
     ground_module: EmulatedXBee
-    agent: Agent
+    agent: Agent | AgentProcess
+    """In this process, or (agent_process=True) the real entry point in its own."""
     ground: Ground | None
 
 
@@ -139,20 +214,24 @@ async def fly(options: SimOptions) -> dict:
 
 
 @contextlib.asynccontextmanager
-async def simulated(options: SimOptions, params: Params | None = None, operator: bool = True):
+async def simulated(options: SimOptions, params: Params | None = None, operator: bool = True,
+                    agent_process: bool = False):  # fmt: skip
     """The aircraft, radios, agent and ground, connected and in trimmed flight; torn down in
     order on exit. `params`: the emulated ArduPlane's (default: switch on channel 7).
-    `operator`: False leaves the ground radio free for the console (`sim.ground` is None)."""
+    `operator`: False leaves the ground radio free for the console (`sim.ground` is None).
+    `agent_process`: run `sysid agent` as its own process (`sim.agent` is an AgentProcess;
+    needs the operator, whose link coming up tells that the agent is up)."""
     say = options.progress or (lambda text: None)
     with contextlib.ExitStack() as stack:
         tmp = options.directory or Path(stack.enter_context(tempfile.TemporaryDirectory()))
         params = params or Params(switch_channel=7)
-        async with _parts(options, Path(tmp), params, say, operator) as sim:
+        async with _parts(options, Path(tmp), params, say, operator, agent_process) as sim:
             yield sim
 
 
 @contextlib.asynccontextmanager
-async def _parts(options: SimOptions, tmp: Path, params: Params, say, operator: bool):
+async def _parts(options: SimOptions, tmp: Path, params: Params, say, operator: bool,
+                 agent_process: bool):  # fmt: skip
     clock = LoopClock()
     ports = tmp / "ports"
     ports.mkdir(parents=True, exist_ok=True)
@@ -178,7 +257,7 @@ async def _parts(options: SimOptions, tmp: Path, params: Params, say, operator: 
         asyncio.create_task(air.run(), name="xbee-air"),
         asyncio.create_task(ground_module.run(), name="xbee-ground"),
     ]
-    ground = None
+    ground = agent = None
     try:
         if not await _until(
             lambda: (
@@ -190,15 +269,23 @@ async def _parts(options: SimOptions, tmp: Path, params: Params, say, operator: 
         ):
             raise SimError("the simulated aircraft did not start")
         axes = preset(options.preset).axes
-        agent = Agent(_config(tmp, ports, aircraft.mavlink_address, axes), base=tmp, clock=clock)
-        tasks.append(asyncio.create_task(agent.run(), name="agent"))
+        config = _config(tmp, ports, aircraft.mavlink_address, axes)
+        if agent_process:
+            agent = AgentProcess(tmp, config)
+            agent.start()
+        else:
+            agent = Agent(config, base=tmp, clock=clock)
+            tasks.append(asyncio.create_task(agent.run(), name="agent"))
         if operator:
             ground = await ground_station(ground_module, key, clock, tasks)
         say(f"simulated {options.aircraft} at {options.speed_kts:g} kt; agent up")
-        if not await _until(
-            lambda: agent.autopilot.connected and (ground is None or ground.session.link_up),
-            CONNECT_S,
-        ):
+
+        def connected() -> bool:
+            if agent_process:  # the agent's status names the autopilot's flight mode
+                return ground is not None and ground.flight_mode() is not None
+            return agent.autopilot.connected and (ground is None or ground.session.link_up)
+
+        if not await _until(connected, CONNECT_S):
             raise SimError("the agent did not connect to the autopilot and the ground in time")
         await asyncio.sleep(1.0)  # trimmed flight before the first excitation
         yield SimFlight(options, tmp, clock, aircraft, channel, air, ground_module, agent, ground)
@@ -209,6 +296,8 @@ async def _parts(options: SimOptions, tmp: Path, params: Params, say, operator: 
         for task in inner:
             task.cancel()
         await asyncio.gather(*inner, return_exceptions=True)
+        if agent_process and agent is not None:
+            await agent.stop()
         if ground is not None:
             await ground.radio.close()
         for task in tasks:

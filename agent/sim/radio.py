@@ -14,7 +14,7 @@ import asyncio
 import contextlib
 import os
 import random
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -51,6 +51,8 @@ class RfChannel:
     rng: random.Random = field(default_factory=random.Random)
     air_bytes: int = 0
     """Bytes put on the air, retries and overhead included."""
+    heard: deque = field(default_factory=lambda: deque(maxlen=256))
+    """(source, destination, payload) of frames delivered: what an eavesdropper records."""
 
     def __post_init__(self) -> None:
         self.rng.seed(self.seed)
@@ -147,7 +149,15 @@ class EmulatedXBee:
         else:
             self._send(api.at_response(frame_id, command, 2))  # invalid command
 
-    async def _transmit(self, frame_id: int, destination: bytes, payload: bytes) -> None:
+    async def transmit_as(self, source: bytes, destination: bytes, payload: bytes) -> None:
+        """A hostile transmitter on the channel that forges its MAC source address (an SDR,
+        not an XBee): the frame reaches `destination` as if from `source`, through the same
+        air time, loss and outages."""
+        self.counters["forged_source"] += 1
+        await self._transmit(0, destination, payload, source=source)
+
+    async def _transmit(self, frame_id: int, destination: bytes, payload: bytes,
+                        source: bytes | None = None) -> None:  # fmt: skip
         ch = self.channel
         if len(payload) > ch.payload_limit:
             self.counters["too_large"] += 1
@@ -175,7 +185,8 @@ class EmulatedXBee:
             self._status(frame_id, 0x21, attempts - 1)
             return
         self.counters["delivered"] += 1
-        peer._send(api.receive_packet(self.address, payload))
+        ch.heard.append((source or self.address, destination, payload))
+        peer._send(api.receive_packet(source or self.address, payload))
         self._status(frame_id, 0x00, attempts - 1)
 
     def _status(self, frame_id: int, status: int, retries: int) -> None:

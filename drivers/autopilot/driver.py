@@ -42,6 +42,8 @@ IGNORE, RELEASE_LOW, RELEASE_HIGH = 65535, 0, 65534
 # Releases are repeated so one lost datagram does not leave a surface overridden until
 # RC_OVERRIDE_TIME.
 RELEASE_REPEATS = 3
+# Stopping while channels are overridden: how long the link stays up for the trim and release.
+HOLD_GRACE_S = 1.0
 # The watchdog looks this often (s): link loss is reported within link_timeout_s + this.
 WATCH_S = 0.05
 # MAVSDK's own log lines kept for the loop to pass on (it may log from any thread).
@@ -112,6 +114,7 @@ class AutopilotLink:
         self.connected = False
         self.status = "connecting"
         self.counters: Counter[str] = Counter()
+        self._held: set[int] = set()  # channels overridden and not yet released
         self.telemetry: dict[str, dict] = {}
         self._state_parts: dict[str, float] = {}
         self.mavsdk_log: deque[str] = deque(maxlen=MAVSDK_LOG)
@@ -162,6 +165,7 @@ class AutopilotLink:
             await self._set_rates(loop, executor)
             await self._watch(loop, executor)
         finally:
+            await self._let_go()
             for handle in handles:
                 self._direct.unsubscribe_message(handle)
             if self._direct is not None:
@@ -170,6 +174,22 @@ class AutopilotLink:
             self.connected = False
             mavsdk.destroy()
             executor.shutdown(wait=False, cancel_futures=True)
+
+    async def _let_go(self) -> None:
+        """Stopping (the agent shutting down): while an override is held — a run being ended,
+        its trim and release still to go out — keep the link up to HOLD_GRACE_S, so the
+        scheduler's trim and release reach the autopilot instead of ArduPilot's timeout."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + HOLD_GRACE_S
+        while self._held and self._direct is not None and loop.time() < deadline:
+            try:
+                await asyncio.sleep(0.01)
+            except asyncio.CancelledError:  # cancelled again: stop waiting
+                break
+        if self._held:
+            self.counters["closed_holding_override"] += 1
+            log.warning("autopilot link closed while channels %s were overridden",
+                        sorted(self._held))  # fmt: skip
 
     async def _set_rates(self, loop, executor) -> None:
 
@@ -261,6 +281,7 @@ class AutopilotLink:
         if self._switch in pwm:
             raise AutopilotError(f"channel {self._switch} is the pilot's switch: never overridden")
         self._send_override({ch: int(v) for ch, v in pwm.items()})
+        self._held |= set(pwm)
         self.counters["overrides"] += 1
 
     async def release(self, channels: Sequence[int]) -> None:
@@ -268,6 +289,7 @@ class AutopilotLink:
         values = {ch: RELEASE_LOW if ch <= 8 else RELEASE_HIGH for ch in channels}
         for _ in range(RELEASE_REPEATS):
             self._send_override(values)
+        self._held -= set(channels)
         self.counters["releases"] += 1
 
     def _send_override(self, values: Mapping[int, int]) -> None:

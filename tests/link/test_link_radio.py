@@ -110,11 +110,14 @@ async def test_a_frame_that_ends_digi_xbees_reader_costs_a_reopen_not_the_link(t
         radio = pair.ground.radio
         pair.modules[1].emit(api.ApiFrame(READER_KILLER))
         assert await wait_for(lambda: not radio.healthy(), 2), "digi-xbee survived the frame"
-        assert await wait_for(lambda: radio.counters["reopened"] == 1, 5)
+        t0 = asyncio.get_running_loop().time()
+        assert await wait_for(lambda: radio.counters["reopened"] == 1, 30), radio.counters
+        took = asyncio.get_running_loop().time() - t0
         pair.air.session.send_reliable(messages.Notice(text="after the reopen"))
         assert await wait_for(lambda: pair.ground.inbox, 10)
     assert pair.ground.inbox[-1].text == "after the reopen"
     assert radio.counters["port_lost"] == 1
+    assert took < 30  # digi-xbee's open retries its AT reads on a 4 s timeout: 1-9 s here
 
 
 async def test_an_unplugged_radio_is_reopened_and_the_message_sent_meanwhile_arrives(tmp_path):
@@ -127,7 +130,42 @@ async def test_an_unplugged_radio_is_reopened_and_the_message_sent_meanwhile_arr
         assert not pair.ground.inbox
         assert radio.counters["reopen_failures"] >= 1  # it kept trying, and said so
         module.plug()
-        assert await wait_for(lambda: radio.counters["reopened"] == 1, 12)
+        assert await wait_for(lambda: radio.counters["reopened"] == 1, 30)
         assert await wait_for(lambda: pair.ground.inbox, 15)
     assert [m.text for m in pair.ground.inbox] == ["sent while unplugged"]
     assert radio.counters["port_lost"] == 1
+
+
+async def test_a_restarted_receiver_takes_the_senders_next_message(tmp_path):
+    """Bad input tried: the aircraft's session replaced by a new one (the agent restarted
+    after a crash) while the ground's numbering goes on: it used to wait forever for message 1."""
+    from agent.link.codec import AIRCRAFT, CounterStore, LinkCodec
+    from agent.link.session import LinkSession
+    from tests.link.pair import GROUND_ADDR, KEY
+
+    async with link_pair(tmp_path) as pair:
+        pair.ground.session.send_reliable(messages.Notice(text="one"))
+        assert await wait_for(lambda: len(pair.air.inbox) == 1, 5)
+        # The aircraft restarts: a new codec (its counter and replay state from disk would do
+        # the same) and a new session on the same radio.
+        old = pair.tasks[2]
+        old.cancel()
+        await asyncio.gather(old, return_exceptions=True)
+        inbox: list = []
+        codec = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(tmp_path / "a2"))
+        codec.max_payload = pair.air.radio.max_payload
+        session = LinkSession(codec, pair.air.radio, GROUND_ADDR, pair.air.session._clock,
+                              lambda m, _seq: inbox.append(m))  # fmt: skip
+        pair.air.session = session
+        pair.air.radio._on_frame = session.receive
+        task = asyncio.create_task(session.run(), name="session-air-restarted")
+        try:
+            pair.ground.session.send_reliable(messages.Notice(text="two"))
+            pair.ground.session.send_reliable(messages.Notice(text="three"))
+            assert await wait_for(lambda: inbox and inbox[-1].text == "three", 10), inbox
+        finally:
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
+    # "one" again only if its acknowledgement had not reached the ground before the restart.
+    assert [m.text for m in inbox] in (["two", "three"], ["one", "two", "three"])
+    assert session.counters["peer_epochs"] == 1
