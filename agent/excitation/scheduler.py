@@ -202,6 +202,10 @@ class Scheduler:
         if not high:
             self._seen_low = True
         elif self._armed is not None and self._seen_low and self._running is None:
+            # One flip, one attempt: a start refused (the envelope, say) waits for the pilot to
+            # cycle the switch, never retries on its own as the flight state drifts (it did,
+            # 20 times a second, and started a plan seconds after the flip once in envelope).
+            self._seen_low = False
             self._start.set()
 
     def update_state(self, state: FlightState) -> None:

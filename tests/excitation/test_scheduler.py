@@ -324,3 +324,36 @@ async def test_shutdown_during_the_release_still_completes_it():
         await task
     assert sink.calls[-1][1] == "released"
     assert events[-1].outcome == "aborted"
+
+
+async def test_a_refused_start_waits_for_the_pilot_to_cycle_the_switch():
+    """Bad input tried: the switch held high through a refusal (a 50° bank) while the aircraft
+    rolls back into the envelope: the plan must not start by itself."""
+    clock = VirtualClock(0.0)
+    s, sink, events = make(clock)
+    task = asyncio.create_task(s.run(), name="scheduler")
+    try:
+        s.arm(preset("lateral"))
+        feed(s, clock.now(), HIGH, FlightState(0, 50.0, 1, 22, 4, 120))
+        for _ in range(100):
+            await asyncio.sleep(0)
+        assert s.counters["refused"] == 1
+        for _ in range(50):  # 1 s of RC_CHANNELS at 50 Hz, switch high, back in the envelope
+            clock.advance(0.02)
+            s.update_servos(clock.now(), TRIM)
+            feed(s, clock.now(), HIGH, CRUISE)
+            await asyncio.sleep(0)
+        assert s.counters["refused"] == 1  # one flip, one attempt
+        assert not sink.calls  # and nothing started
+        feed(s, clock.now(), LOW, CRUISE)  # the pilot cycles the switch
+        clock.advance(0.02)
+        feed(s, clock.now(), HIGH, CRUISE)
+        for _ in range(200):
+            await asyncio.sleep(0)
+            if sink.calls:
+                break
+        assert sink.calls, events[-1]  # now it starts
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+        s.abort("test over")

@@ -164,8 +164,8 @@ async def test_a_hostile_transmitter_and_half_the_frames_lost_change_nothing(tmp
     assert counters["replayed"] + counters["stale"] >= 1
     assert counters["wrong_source"] >= 1
     assert counters["malformed"] >= 1
-    assert trim_of(started)  # the run played and ended normally; the switch back low:
     assert overrides == {}, f"overrides held after the run: {overrides} ({released})"
+    assert_trimmed_then_released(sim, started, started.time)  # the run ended as it should
     assert_logs_whole(tmp_path)
 
 
@@ -242,7 +242,7 @@ async def test_kill_9_mid_run_lets_the_pilot_back_and_loses_no_logged_byte(tmp_p
     async with simulated(SimOptions(preset="lateral", directory=tmp_path),
                          agent_process=True) as sim:  # fmt: skip
         ap, agent = sim.aircraft.autopilot, sim.agent
-        seen = await start_run(sim, "kill-9")
+        await start_run(sim, "kill-9")
         await asyncio.sleep(1.5)  # inside the aileron doublet: overrides held
         assert ap._overrides
         killed = sim.clock.now()
@@ -260,9 +260,13 @@ async def test_kill_9_mid_run_lets_the_pilot_back_and_loses_no_logged_byte(tmp_p
         agent.start()
         await until(lambda: received(sim, messages.Status, mark), 30, "the restarted agent")
         await until(lambda: sim.ground.flight_mode() is not None, 30, "the autopilot again")
-        seen = await start_run(sim, "after-restart")
-        result = await answer(sim, seen)
-        assert isinstance(result, messages.Result), result
+        # The restarted agent takes the ground's next commands (its session starts counting
+        # where the ground's stands). No second run: the interrupted doublet left the aircraft
+        # out of the envelope for a while, which the envelope check rightly refuses.
+        ack = await sim.ground.command(messages.IdentSettings(axes="lateral"))
+        assert ack.ok, ack.reason
+        ack = await sim.ground.command(messages.Arm(plan=preset("lateral", plan_id="again")))
+        assert ack.ok, ack.reason
     assert lapsed <= timeout + 0.5
     assert rc == pilot
     assert any("_flight_" in n for n in logged)
@@ -301,11 +305,15 @@ async def test_an_ins_dropout_and_a_corrupted_stream_during_an_excitation(tmp_pa
     assert crc + box.health().rejected >= corrupted - 3  # each bad frame counted
     assert vn200.health().gaps >= 1
     assert overrides == {}
-    # What the agent did with a window that has a 0.5 s hole in p, r and φ: see the README.
-    if isinstance(outcome, messages.Failure):
-        assert "missing" in outcome.reason or "gap" in outcome.reason, outcome.reason
-    else:
-        assert end.event == "finished"
+    # The run played to its end (the scheduler flies on the autopilot's attitude, not the
+    # INS); the identification refused a window with a hole in the INS channels, and said so.
+    # Single corrupted surface frames (10 ms each) are bridged by the recorder.
+    assert end.event == "finished", end.detail
+    assert isinstance(outcome, messages.Failure), outcome
+    found = re.search(r"channel '(\w+)' has a ([\d.]+) s gap in the window", outcome.reason)
+    assert found, outcome.reason
+    assert found.group(1) in ("p", "r", "phi", "psi", "theta", "q")
+    assert 0.4 < float(found.group(2)) < 1.5
     assert_logs_whole(tmp_path)
 
 
