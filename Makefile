@@ -11,8 +11,9 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 BENCH_STAMP := $(VENV)/.installed-bench
+FUZZ_STAMP := $(VENV)/.installed-fuzz
 
-.PHONY: sim demo test chromium bench bench-jsbsim bench-link bench-agent screenshot examples clean
+.PHONY: sim demo test chromium bench bench-jsbsim bench-link bench-agent soak fuzz screenshot examples clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -54,11 +55,26 @@ bench-jsbsim: $(BENCH_STAMP)
 bench-link: $(STAMP)
 	$(BIN)/python benchmarks/bench_link.py
 
+# Coverage-guided fuzzing (atheris) of every parser: RUNS inputs per target, two targets at a
+# time (about 45 minutes for a million each here; make fuzz RUNS=20000 for a quick look).
+$(FUZZ_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet -e '.[test,fuzz]'
+	touch $(FUZZ_STAMP)
+
+RUNS ?= 1000000
+fuzz: $(FUZZ_STAMP)
+	$(BIN)/python fuzz/fuzz.py --runs $(RUNS)
+
 # Issue 8: the agent's event-loop lag, CPU and memory over a simulated flight, in real time
 # (45 minutes by default: make bench-agent MINUTES=5 for a quick look).
 MINUTES ?= 45
 bench-agent: $(STAMP)
 	$(BIN)/python benchmarks/bench_agent.py --minutes $(MINUTES)
+
+# Issue 11's soak: the same flight for HOURS (default 3) in real time, an excitation a minute.
+HOURS ?= 3
+soak: $(STAMP)
+	$(BIN)/python benchmarks/bench_agent.py --minutes $$(( $(HOURS) * 60 )) --keep soak-logs
 
 # The README's console picture, from a simulated flight flown from the console.
 screenshot: $(STAMP)

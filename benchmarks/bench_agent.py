@@ -274,6 +274,7 @@ def summarise(samples, health, baseline, runs, exit_code) -> dict:
             "first": samples[0]["agent"]["threads"],
             "last": samples[-1]["agent"]["threads"],
         },
+        "health_first": health[0] if health else None,
         "health_last": health[-1] if health else None,
         "agent_exit_code": exit_code,
     }
@@ -308,6 +309,16 @@ def report(r: dict) -> str:
         f"agent threads: {r['agent_threads']['first']} → {r['agent_threads']['last']}; "
         f"agent exit code after SIGTERM: {r['agent_exit_code']}",
     ]
+    first, last = r["health_first"], r["health_last"]
+    if first and last:  # from the agent's own health records, first and last minute
+        lines.append(
+            f"tasks {first['tasks']} → {last['tasks']}; open files {first['open_files']} → "
+            f"{last['open_files']}; log lines dropped {last['logs']['dropped']}, lost "
+            f"{last['logs'].get('lost_lines', 0)}"
+        )
+        counters = {k: v for k, v in sorted(last["counters"].items()) if v}
+        lines.append(f"agent counters: {json.dumps(counters)}")
+        lines.append(f"recorder counters: {json.dumps(last['recorder'])}")
     return "\n".join(lines)
 
 

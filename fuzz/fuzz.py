@@ -58,6 +58,9 @@ def campaign(name: str, runs: int) -> dict:
     corpus.mkdir(parents=True, exist_ok=True)
     for k, seed in enumerate(targets.seeds(name)):
         (corpus / f"seed-{k}").write_bytes(seed)
+    for old in out.glob("*-*"):  # findings of an earlier run: this run's stand alone
+        if old.is_file():
+            old.unlink()
     log = out / "fuzz.log"
     began = time.monotonic()
     with open(log, "w") as handle:
@@ -67,7 +70,17 @@ def campaign(name: str, runs: int) -> dict:
             stdout=handle, stderr=subprocess.STDOUT, cwd=ROOT,
         )  # fmt: skip
     wall = time.monotonic() - began
-    text = log.read_text(errors="replace")
+    (out / "exit").write_text(f"{code} {wall:.1f}\n")
+    return summary(name)
+
+
+def summary(name: str) -> dict:
+    """A target's last run, from its log (`--report` prints these without running)."""
+    out = OUT / name
+    log = out / "fuzz.log"
+    code, wall = (out / "exit").read_text().split() if (out / "exit").exists() else (-1, 0)
+    code, wall = int(code), float(wall)
+    text = log.read_text(errors="replace") if log.exists() else ""
     stat = {k: int(v) for k, v in re.findall(r"stat::(\w+):\s+(\d+)", text)}
     cov = re.findall(r"cov: (\d+) ft: (\d+)", text)
     crashes = sorted(p.name for p in out.glob("*-*") if p.is_file() and p.name[:4] in
@@ -90,6 +103,7 @@ def main() -> int:
     parser.add_argument("targets", nargs="*", help="default: every target")
     parser.add_argument("--runs", type=int, default=1_000_000, help="inputs per target")
     parser.add_argument("--jobs", type=int, default=2, help="targets at a time")
+    parser.add_argument("--report", action="store_true", help="the table of the last runs only")
     if sys.argv[1:2] == ["--one"]:  # the child: libFuzzer's own flags follow, untouched
         run_one(sys.argv[2], [a for a in sys.argv[3:] if a != "--"])
         return 0
@@ -102,13 +116,16 @@ def main() -> int:
     unknown = set(names) - set(targets.TARGETS)
     if unknown:
         parser.error(f"unknown targets {sorted(unknown)}; known: {list(targets.TARGETS)}")
-    with ThreadPoolExecutor(args.jobs) as pool:
-        results = list(pool.map(lambda n: campaign(n, args.runs), names))
+    if args.report:
+        results = [summary(n) for n in names]
+    else:
+        with ThreadPoolExecutor(args.jobs) as pool:
+            results = list(pool.map(lambda n: campaign(n, args.runs), names))
     print(f"{'target':<13} {'inputs':>10} {'time s':>8} {'inputs/s':>9} {'cov':>6} {'ft':>6} "
           f"{'peak MB':>8}  result")  # fmt: skip
     failed = False
     for r in results:
-        ok = r["exit"] == 0 and not r["findings"] and r["runs"] >= args.runs
+        ok = r["exit"] == 0 and not r["findings"] and r["runs"] >= (0 if args.report else args.runs)
         failed |= not ok
         verdict = "ok" if ok else f"FAILED (exit {r['exit']}; {', '.join(r['findings'])})"
         print(
