@@ -38,13 +38,14 @@ from agent.runtime import Agent
 from agent.sim.aircraft import AircraftOptions, SimAircraft
 from agent.sim.ardupilot import Params
 from agent.sim.radio import EmulatedXBee, RfChannel, module_pair
-from drivers.xbee.driver import XBeeRadio
+from drivers.xbee.driver import RadioError, XBeeRadio
 
 AIR = bytes.fromhex("0013A20041000001")
 GROUND_ADDR = bytes.fromhex("0013A20041000002")
 # Deadlines of the scripted operator (s): connection, an acknowledgement, a result after the
 # plan ends (recorder margin + identification + radio).
 CONNECT_S, ACK_S, RESULT_S = 30.0, 10.0, 90.0
+OPEN_ATTEMPTS = 3
 
 
 class SimError(RuntimeError):
@@ -292,7 +293,7 @@ async def _parts(options: SimOptions, tmp: Path, params: Params, say, operator: 
     finally:
         # The agent and the ground stop first (their radios close while the emulated modules
         # still exist), then the radios and the aircraft.
-        inner = [t for t in tasks if t.get_name() in ("agent", "ground-session")]
+        inner = [t for t in tasks if t.get_name() in ("agent", "ground-session", "ground-radio")]
         for task in inner:
             task.cancel()
         await asyncio.gather(*inner, return_exceptions=True)
@@ -310,12 +311,21 @@ async def ground_station(module: EmulatedXBee, key: bytes, clock, tasks) -> Grou
     radio = XBeeRadio(
         str(module.path), 115200, clock, lambda s, p, t: holder[0].session.receive(s, p, t)
     )
-    await radio.open()
+    for attempt in range(OPEN_ATTEMPTS):
+        try:
+            await radio.open()
+            break
+        except RadioError:
+            # Once in a few dozen starts here digi-xbee's open of an emulated module timed out,
+            # its reader spinning on "readiness to read but returned no data": try again.
+            if attempt == OPEN_ATTEMPTS - 1:
+                raise
     codec = LinkCodec(key, GROUND, {AIR}, counter=CounterStore(), max_payload=radio.max_payload)
     ground = Ground(None, radio)  # type: ignore[arg-type]
     ground.session = LinkSession(codec, radio, AIR, clock, ground.on_message)
     holder.append(ground)
     tasks.append(asyncio.create_task(ground.session.run(), name="ground-session"))
+    tasks.append(asyncio.create_task(radio.watch(), name="ground-radio"))
     return ground
 
 

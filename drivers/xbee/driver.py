@@ -86,16 +86,29 @@ class XBeeRadio:
 
     async def open(self) -> None:
         """Open the module (digi-xbee reads its parameters), read NP and our address."""
-        self._loop = asyncio.get_running_loop()
+        self._loop = loop = asyncio.get_running_loop()
+        opening = loop.run_in_executor(self._executor, self._open_blocking)
         try:
             async with asyncio.timeout(OPEN_TIMEOUT_S):
-                await self._loop.run_in_executor(self._executor, self._open_blocking)
+                device = await asyncio.shield(opening)
         except TimeoutError as exc:
+            # The blocking open goes on in its thread; should it still succeed, that device is
+            # closed, never left reading the port beside the next attempt's (two readers on one
+            # port split its frames between them).
+            opening.add_done_callback(self._close_late)
             raise RadioError(
                 f"{self.port}: the XBee did not answer in {OPEN_TIMEOUT_S:g} s"
             ) from exc
+        device.add_packet_received_callback(self._packet)
+        self._device = device
 
-    def _open_blocking(self) -> None:
+    def _close_late(self, opening: asyncio.Future) -> None:
+        if opening.cancelled() or opening.exception() is not None:
+            return
+        self.counters["late_opens_closed"] += 1
+        self._loop.run_in_executor(self._executor, opening.result().close)
+
+    def _open_blocking(self):
 
         device = DigiMeshDevice(self.port, self.baud)
         try:
@@ -106,8 +119,7 @@ class XBeeRadio:
             with contextlib.suppress(Exception):  # closing a half-open device may fail too
                 device.close()
             raise RadioError(f"{self.port}: cannot open the XBee: {exc}") from exc
-        device.add_packet_received_callback(self._packet)
-        self._device = device
+        return device
 
     def healthy(self) -> bool:
         """The module's port is open, digi-xbee's reader is serving it, and the device behind
