@@ -10,9 +10,12 @@ Three processes, as in the field:
   lag probe on its own idle event loop as the machine's baseline, stops the agent with SIGTERM
   at the end and reads the agent's health records (one a minute) from its execution log.
 
-Nothing is accelerated: a 45-minute flight takes 45 minutes. Linux only (/proc).
+Nothing is accelerated: a 45-minute flight takes 45 minutes. Linux only (/proc). With
+--world-nice 10 (what `make bench-agent` uses) the world runs below the agent's priority: in the
+field it is not on the flight computer, and on a 2-core machine its CPU use would otherwise be
+measured as the agent's lag.
 
-    .venv/bin/python benchmarks/bench_agent.py --minutes 45     # make bench-agent
+    .venv/bin/python benchmarks/bench_agent.py --minutes 45 --world-nice 10  # make bench-agent
     .venv/bin/python benchmarks/bench_agent.py --minutes 3      # a quick look
 """
 
