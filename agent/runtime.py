@@ -128,6 +128,7 @@ class Agent:
         self.identifying = False  # a window is in the worker (lag while identifying)
         self._status_lag = 0.0  # the worst lag since the last status
         self._logs_failing = False
+        self._pool: ProcessPoolExecutor | None = None  # the worker; replaced if it dies
         self._gc_start: float | None = None
         self.health: list[dict] = []  # the health records written so far (latest last)
         self.drivers = self._drivers()
