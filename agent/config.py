@@ -483,6 +483,16 @@ def load_key(path: str | Path) -> bytes:
     return key
 
 
+class Runtime(_Section):
+    """How the agent's process runs on the flight computer."""
+
+    realtime_priority: int | None = Field(None, ge=1, le=99)
+    """SCHED_FIFO priority (1-99) for the event loop's thread alone (Linux; needs root or
+    CAP_SYS_NICE, else a warning and normal scheduling): the loop then preempts everything else
+    on the computer, the worker included. Threads and processes it starts get normal
+    scheduling. Unset: normal scheduling."""
+
+
 class Config(_Section):
     """The whole configuration file."""
 
@@ -498,6 +508,8 @@ class Config(_Section):
     """The MAVLink link to ArduPlane."""
     link: Link = Link()
     """The XBee air–ground link."""
+    runtime: Runtime = Runtime()
+    """The agent process's scheduling."""
 
 
 class ConfigError(Exception):

@@ -159,6 +159,7 @@ class Agent:
         handler = self.logbook.handler(self.clock)
         logging.getLogger().addHandler(handler)
         self._pool = self._new_worker()
+        restore = self._realtime(self.config.runtime.realtime_priority)
         try:
             await self._open_link()
             # Everything built so far lives as long as the agent: moved out of the collector's
@@ -189,6 +190,8 @@ class Agent:
                     "agent started: %s", ", ".join([d.name for d in self.drivers] + list(named))
                 )
         finally:
+            if restore is not None:
+                os.sched_setscheduler(0, *restore)
             sys.setswitchinterval(switch)
             logging.getLogger().removeHandler(handler)
             self._pool.shutdown(wait=True, cancel_futures=True)
@@ -350,6 +353,23 @@ class Agent:
         return True
 
     # -- identification ---------------------------------------------------------------------
+
+    def _realtime(self, priority: int | None) -> tuple[int, os.sched_param] | None:
+        """The loop's thread to SCHED_FIFO `priority` ([runtime] realtime_priority), with
+        SCHED_RESET_ON_FORK so threads and processes started from it run normally; the policy
+        to restore, or None. Not permitted: a warning, counted, and normal scheduling."""
+        if priority is None:
+            return None
+        previous = (os.sched_getscheduler(0), os.sched_getparam(0))
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK,
+                                  os.sched_param(priority))  # fmt: skip
+        except (OSError, AttributeError) as exc:
+            self.counters["realtime_refused"] += 1
+            log.warning("realtime_priority %d not set (%s): normal scheduling", priority, exc)
+            return None
+        log.info("event loop thread at SCHED_FIFO %d", priority)
+        return previous
 
     @staticmethod
     def _new_worker() -> ProcessPoolExecutor:

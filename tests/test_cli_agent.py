@@ -47,3 +47,44 @@ def test_a_missing_config_is_a_clear_error(tmp_path):
     )  # fmt: skip
     assert result.returncode == 2
     assert "no such file" in result.stderr
+
+
+def test_realtime_priority_puts_only_the_loop_thread_under_sched_fifo(tmp_path):
+    """[runtime] realtime_priority: the event loop's thread runs SCHED_FIFO; the threads and the
+    worker process it starts run normally (SCHED_RESET_ON_FORK). Root, as CI here; without the
+    privilege the agent warns and runs normally (also checked: the warning's text)."""
+    config = tmp_path / "config.toml"
+    config.write_text(
+        '[autopilot]\nurl = "udpout://127.0.0.1:9"\nconnect_timeout_s = 0.5\n'
+        "[sensors.vn200]\nenabled = false\n[sensors.airdata]\nenabled = false\n"
+        "[sensors.surfaces]\nenabled = false\n[runtime]\nrealtime_priority = 10\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "agent", "agent", "--config", str(config), "--base", str(tmp_path)],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    try:
+        time.sleep(4.0)
+        policies = {}
+        for task in Path(f"/proc/{proc.pid}/task").iterdir():
+            try:
+                policies[int(task.name)] = os.sched_getscheduler(int(task.name))
+            except OSError:  # a thread that just ended
+                continue
+        children = Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()
+        worker_policies = [os.sched_getscheduler(int(c)) for c in children]
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=30)
+    assert proc.returncode == 0, out
+    if os.geteuid() == 0:
+        assert "event loop thread at SCHED_FIFO 10" in out
+        assert policies[proc.pid] & ~os.SCHED_RESET_ON_FORK == os.SCHED_FIFO
+        others = [p for tid, p in policies.items() if tid != proc.pid]
+        assert others, "no other thread to compare"
+        assert all(p == os.SCHED_OTHER for p in others), policies
+        assert worker_policies, "no worker process"
+        assert all(p == os.SCHED_OTHER for p in worker_policies)
+    else:
+        assert "realtime_priority 10 not set" in out
