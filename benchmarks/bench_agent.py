@@ -107,9 +107,12 @@ async def world(directory: Path, every: float) -> None:
 # -- the parent --------------------------------------------------------------------------------
 
 
-def agent_config(directory: Path, mavlink: list) -> str:
+def agent_config(directory: Path, mavlink: list, realtime: int | None = None) -> str:
     ports = directory / "ports"
-    return f"""
+    runtime = f"[runtime]\nrealtime_priority = {realtime}\n" if realtime else ""
+    return (
+        runtime
+        + f"""
 [sensors.vn200]
 port = "{ports / "vn200"}"
 [sensors.airdata]
@@ -127,6 +130,7 @@ seen_file = "air.seen"
 [recorder]
 log_dir = "logs"
 """
+    )
 
 
 def proc_sample(pid: int) -> dict | None:
@@ -161,7 +165,8 @@ async def probe(lags: list[float]) -> None:
         lags.append(loop.time() - start - 0.01)
 
 
-async def measure(minutes: float, every: float, keep: Path | None, world_nice: int) -> dict:
+async def measure(minutes: float, every: float, keep: Path | None, world_nice: int,
+                  realtime: int | None = None) -> dict:  # fmt: skip
     with contextlib.ExitStack() as stack:
         directory = keep or Path(stack.enter_context(tempfile.TemporaryDirectory()))
         directory.mkdir(parents=True, exist_ok=True)
@@ -182,7 +187,8 @@ async def measure(minutes: float, every: float, keep: Path | None, world_nice: i
                     break
                 await asyncio.sleep(0.1)
             info = json.loads((directory / "world.json").read_text())
-            (directory / "agent.toml").write_text(agent_config(directory, info["mavlink"]))
+            config = agent_config(directory, info["mavlink"], realtime)
+            (directory / "agent.toml").write_text(config)
             agent_log = stack.enter_context(open(directory / "agent.log", "w"))
             agent_proc = subprocess.Popen(
                 [sys.executable, "-m", "agent", "agent", "--config",
@@ -338,12 +344,18 @@ def main() -> None:
         "--world-nice", type=int, default=0,
         help="run the world (aircraft, sensors, radios, ground) at this nice value",
     )  # fmt: skip
+    parser.add_argument(
+        "--realtime", type=int, metavar="PRIORITY",
+        help="the agent's [runtime] realtime_priority (SCHED_FIFO for its loop thread)",
+    )  # fmt: skip
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     if args.mode == "world":
         asyncio.run(world(args.directory, args.every))
         return
-    result = asyncio.run(measure(args.minutes, args.every, args.keep, args.world_nice))
+    result = asyncio.run(
+        measure(args.minutes, args.every, args.keep, args.world_nice, args.realtime)
+    )
     print(json.dumps(result, default=float) if args.json else report(result))
 
 
