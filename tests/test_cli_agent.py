@@ -16,18 +16,23 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_sigterm_shuts_the_agent_down_cleanly(tmp_path):
+def _start_agent(tmp_path: Path, extra: str = "") -> subprocess.Popen:
+    """`sysid agent` with no sensors and no autopilot to be found (plus `extra` TOML)."""
     config = tmp_path / "config.toml"
     config.write_text(
         '[autopilot]\nurl = "udpout://127.0.0.1:9"\nconnect_timeout_s = 0.5\n'
         "[sensors.vn200]\nenabled = false\n[sensors.airdata]\nenabled = false\n"
-        "[sensors.surfaces]\nenabled = false\n"
+        "[sensors.surfaces]\nenabled = false\n" + extra
     )
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"}
-    proc = subprocess.Popen(
+    return subprocess.Popen(
         [sys.executable, "-m", "agent", "agent", "--config", str(config), "--base", str(tmp_path)],
         env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
     )  # fmt: skip
+
+
+def test_sigterm_shuts_the_agent_down_cleanly(tmp_path):
+    proc = _start_agent(tmp_path)
     time.sleep(4.0)  # started: the worker process warmed up, the autopilot searched for
     proc.send_signal(signal.SIGTERM)
     out, _ = proc.communicate(timeout=30)
@@ -53,17 +58,7 @@ def test_realtime_priority_puts_only_the_loop_thread_under_sched_fifo(tmp_path):
     """[runtime] realtime_priority: the event loop's thread runs SCHED_FIFO; the threads and the
     worker process it starts run normally (SCHED_RESET_ON_FORK). Root, as CI here; without the
     privilege the agent warns and runs normally (also checked: the warning's text)."""
-    config = tmp_path / "config.toml"
-    config.write_text(
-        '[autopilot]\nurl = "udpout://127.0.0.1:9"\nconnect_timeout_s = 0.5\n'
-        "[sensors.vn200]\nenabled = false\n[sensors.airdata]\nenabled = false\n"
-        "[sensors.surfaces]\nenabled = false\n[runtime]\nrealtime_priority = 10\n"
-    )
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"}
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "agent", "agent", "--config", str(config), "--base", str(tmp_path)],
-        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
+    proc = _start_agent(tmp_path, "[runtime]\nrealtime_priority = 10\n")
     try:
         time.sleep(4.0)
         policies = {}
