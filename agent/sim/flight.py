@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import os
 import secrets
 import signal
@@ -39,6 +40,8 @@ from agent.sim.aircraft import AircraftOptions, SimAircraft
 from agent.sim.ardupilot import Params
 from agent.sim.radio import EmulatedXBee, RfChannel, module_pair
 from drivers.xbee.driver import RadioError, XBeeRadio
+
+log = logging.getLogger(__name__)
 
 AIR = bytes.fromhex("0013A20041000001")
 GROUND_ADDR = bytes.fromhex("0013A20041000002")
@@ -315,11 +318,12 @@ async def ground_station(module: EmulatedXBee, key: bytes, clock, tasks) -> Grou
         try:
             await radio.open()
             break
-        except RadioError:
+        except RadioError as exc:
             # Once in a few dozen starts here digi-xbee's open of an emulated module timed out,
             # its reader spinning on "readiness to read but returned no data": try again.
             if attempt == OPEN_ATTEMPTS - 1:
                 raise
+            log.warning("simulated ground radio: %s; opening again", exc)
     codec = LinkCodec(key, GROUND, {AIR}, counter=CounterStore(), max_payload=radio.max_payload)
     ground = Ground(None, radio)  # type: ignore[arg-type]
     ground.session = LinkSession(codec, radio, AIR, clock, ground.on_message)

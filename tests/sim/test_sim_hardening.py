@@ -349,3 +349,26 @@ async def test_an_autopilot_reboot_mid_run_aborts_to_trim_and_the_agent_reconnec
     assert all(v in (trim, release) for v in after), after[:5]
     assert overrides == {}
     assert_logs_whole(tmp_path)
+
+
+# -- shutdown in the middle of a run --------------------------------------------------------
+
+
+async def test_an_agent_stopped_mid_run_trims_and_releases_before_its_link_closes(tmp_path):
+    """The agent's task cancelled 1.5 s into a run (a shutdown): the autopilot link stays up
+    until the scheduler's trim and release have gone out (it used to close first)."""
+    async with simulated(SimOptions(preset="lateral", directory=tmp_path)) as sim:
+        seen = await start_run(sim, "shutdown")
+        started = received(sim, messages.ExcitationEvent, seen, event="started")[0]
+        await asyncio.sleep(1.5)
+        assert sim.aircraft.autopilot._overrides
+        agent_task = next(t for t in asyncio.all_tasks() if t.get_name() == "agent")
+        agent_task.cancel()
+        await asyncio.gather(agent_task, return_exceptions=True)
+        held = sim.agent.autopilot.counters["closed_holding_override"]
+        await asyncio.sleep(0.2)
+        overrides = dict(sim.aircraft.autopilot._overrides)
+    assert held == 0
+    assert_trimmed_then_released(sim, started, started.time)
+    assert overrides == {}
+    assert_logs_whole(tmp_path)
