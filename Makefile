@@ -13,7 +13,7 @@ STAMP := $(VENV)/.installed
 BENCH_STAMP := $(VENV)/.installed-bench
 FUZZ_STAMP := $(VENV)/.installed-fuzz
 
-.PHONY: sim demo test chromium bench bench-jsbsim bench-link bench-agent soak fuzz screenshot examples clean
+.PHONY: sim demo test chromium bench bench-jsbsim bench-link bench-abort bench-agent bench-table soak fuzz screenshot examples clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -54,6 +54,16 @@ bench-jsbsim: $(BENCH_STAMP)
 # Issue 7: bytes on air and delivery time of a full-model result over the emulated radios.
 bench-link: $(STAMP)
 	$(BIN)/python benchmarks/bench_link.py
+
+# Issue 11: abort latency, switch low to trim on the MAVLink wire, over 30 drops mid-run.
+bench-abort: $(STAMP)
+	$(BIN)/python benchmarks/bench_abort.py --drops 30 --realtime 10
+
+# Issue 11's performance table (Markdown, with date, machine and commit; about 35 minutes):
+# identification against the peers, loop lag at 100 and 400 Hz, CPU per component, bytes on
+# air, abort latency. make bench-table ARGS=--quick for a shorter look.
+bench-table: $(BENCH_STAMP)
+	$(BIN)/python benchmarks/table.py $(ARGS)
 
 # Coverage-guided fuzzing (atheris) of every parser: RUNS inputs per target, two targets at a
 # time (4,329 s of fuzzing for a million each here, about 40 minutes two at a time; make fuzz

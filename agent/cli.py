@@ -232,6 +232,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="flip the switch at these seconds: high, low, …",
     )
     aircraft.add_argument("--no-noise", action="store_true", help="perfect sensors")
+    aircraft.add_argument(
+        "--sensor-rate",
+        type=float,
+        default=100.0,
+        metavar="HZ",
+        help="frame rate of the three sensors (default 100; 400 is the VN-200's IMU rate)",
+    )
     aircraft.add_argument("--duration", type=float, help="stop after this many seconds")
 
     agent = sub.add_parser(
@@ -632,7 +639,7 @@ def cmd_export(args: argparse.Namespace) -> int:
 def cmd_sim_aircraft(args: argparse.Namespace) -> int:
     import asyncio
 
-    from agent.sim.aircraft import AircraftOptions, serve
+    from agent.sim.aircraft import AircraftOptions, check_sensor_rate, serve
     from agent.sim.plant import PlantError
 
     options = AircraftOptions(
@@ -643,7 +650,13 @@ def cmd_sim_aircraft(args: argparse.Namespace) -> int:
         seed=args.seed,
         noise=not args.no_noise,
         mavlink_port=args.mavlink_port,
+        sensor_rate_hz=args.sensor_rate,
     )
+    try:
+        check_sensor_rate(args.sensor_rate)
+    except ValueError as exc:
+        _error("sim-aircraft", str(exc))
+        return EXIT_BAD_INPUT
     try:
         asyncio.run(
             serve(

@@ -6,9 +6,13 @@ Three processes, as in the field:
   sensor ptys, both emulated XBee modules, and the scripted ground operator, who arms the
   lateral preset every --every seconds, has the pilot flip the switch and decides on the result;
 - the agent: `python -m agent agent --config …`, the real entry point, with its worker;
-- this parent: samples /proc for the agent and its worker every 5 s, runs the same 10 ms
-  lag probe on its own idle event loop as the machine's baseline, stops the agent with SIGTERM
-  at the end and reads the agent's health records (one a minute) from its execution log.
+- this parent: samples /proc for the agent (its event-loop thread apart), its worker and the
+  world every 5 s, runs the same 10 ms lag probe on its own idle event loop as the machine's
+  baseline, stops the agent with SIGTERM at the end and reads the agent's health records (one
+  a minute) from its execution log.
+
+--rate 400 runs the three sensors and the recorder at 400 Hz (the VN-200's IMU rate) instead
+of 100 Hz. --realtime 10 sets the agent's [runtime] realtime_priority.
 
 Nothing is accelerated: a 45-minute flight takes 45 minutes. Linux only (/proc). With
 --world-nice 10 (what `make bench-agent` uses) the world runs below the agent's priority: in the
@@ -17,6 +21,7 @@ measured as the agent's lag.
 
     .venv/bin/python benchmarks/bench_agent.py --minutes 45 --world-nice 10  # make bench-agent
     .venv/bin/python benchmarks/bench_agent.py --minutes 3      # a quick look
+    .venv/bin/python benchmarks/bench_agent.py --minutes 10 --rate 400 --realtime 10
 """
 
 from __future__ import annotations
@@ -45,7 +50,7 @@ PAGE = os.sysconf("SC_PAGE_SIZE")
 # -- the world ---------------------------------------------------------------------------------
 
 
-async def world(directory: Path, every: float) -> None:
+async def world(directory: Path, every: float, rate: float = 100.0) -> None:
     """Aircraft, radios and ground operator; writes `world.json` once the parts are up."""
     from agent.clock import LoopClock
     from agent.sim.aircraft import AircraftOptions, SimAircraft
@@ -57,7 +62,8 @@ async def world(directory: Path, every: float) -> None:
     ports = directory / "ports"
     ports.mkdir(parents=True, exist_ok=True)
     key = bytes.fromhex((directory / "link.key").read_text())
-    aircraft = SimAircraft(AircraftOptions(params=Params(switch_channel=7)), clock, ports)
+    options = AircraftOptions(params=Params(switch_channel=7), sensor_rate_hz=rate)
+    aircraft = SimAircraft(options, clock, ports)
     _, air, ground_module = module_pair(
         ports, clock, ("xbee-air", AIR), ("xbee-ground", GROUND_ADDR)
     )
@@ -107,7 +113,8 @@ async def world(directory: Path, every: float) -> None:
 # -- the parent --------------------------------------------------------------------------------
 
 
-def agent_config(directory: Path, mavlink: list, realtime: int | None = None) -> str:
+def agent_config(directory: Path, mavlink: list, realtime: int | None = None,
+                 rate: float = 100.0) -> str:  # fmt: skip
     ports = directory / "ports"
     runtime = f"[runtime]\nrealtime_priority = {realtime}\n" if realtime else ""
     return (
@@ -115,10 +122,13 @@ def agent_config(directory: Path, mavlink: list, realtime: int | None = None) ->
         + f"""
 [sensors.vn200]
 port = "{ports / "vn200"}"
+rate_hz = {rate}
 [sensors.airdata]
 port = "{ports / "airdata"}"
+rate_hz = {rate}
 [sensors.surfaces]
 port = "{ports / "surfaces"}"
+rate_hz = {rate}
 [autopilot]
 url = "udpout://{mavlink[0]}:{mavlink[1]}"
 [link]
@@ -129,22 +139,33 @@ counter_file = "air.counter"
 seen_file = "air.seen"
 [recorder]
 log_dir = "logs"
+rate_hz = {rate}
 """
     )
 
 
+def _cpu_s(stat: str) -> float:
+    fields = stat[stat.rindex(")") + 2 :].split()
+    return (int(fields[11]) + int(fields[12])) / TICKS
+
+
 def proc_sample(pid: int) -> dict | None:
-    """CPU seconds, RSS (MB) and threads of one process, from /proc."""
+    """CPU seconds (the process, and its main thread: the event loop), RSS (MB), threads and
+    what it is (the worker or multiprocessing's resource tracker), from /proc."""
     try:
         stat = Path(f"/proc/{pid}/stat").read_text()
         statm = Path(f"/proc/{pid}/statm").read_text().split()
+        main = Path(f"/proc/{pid}/task/{pid}/stat").read_text()
+        cmdline = Path(f"/proc/{pid}/cmdline").read_bytes()
     except OSError:
         return None
     fields = stat[stat.rindex(")") + 2 :].split()
     return {
-        "cpu_s": (int(fields[11]) + int(fields[12])) / TICKS,
+        "cpu_s": _cpu_s(stat),
+        "main_thread_cpu_s": _cpu_s(main),
         "rss_mb": int(statm[1]) * PAGE / 2**20,
         "threads": int(fields[17]),
+        "tracker": b"resource_tracker" in cmdline,
     }
 
 
@@ -166,7 +187,7 @@ async def probe(lags: list[float]) -> None:
 
 
 async def measure(minutes: float, every: float, keep: Path | None, world_nice: int,
-                  realtime: int | None = None) -> dict:  # fmt: skip
+                  realtime: int | None = None, rate: float = 100.0) -> dict:  # fmt: skip
     with contextlib.ExitStack() as stack:
         directory = keep or Path(stack.enter_context(tempfile.TemporaryDirectory()))
         directory.mkdir(parents=True, exist_ok=True)
@@ -174,7 +195,16 @@ async def measure(minutes: float, every: float, keep: Path | None, world_nice: i
         env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
         log = stack.enter_context(open(directory / "world.log", "w"))
         world_proc = subprocess.Popen(
-            [sys.executable, __file__, "world", str(directory), "--every", str(every)],
+            [
+                sys.executable,
+                __file__,
+                "world",
+                str(directory),
+                "--every",
+                str(every),
+                "--rate",
+                str(rate),
+            ],
             env=env,
             preexec_fn=(lambda: os.nice(world_nice)) if world_nice else None,
             stdout=log,
@@ -187,7 +217,7 @@ async def measure(minutes: float, every: float, keep: Path | None, world_nice: i
                     break
                 await asyncio.sleep(0.1)
             info = json.loads((directory / "world.json").read_text())
-            config = agent_config(directory, info["mavlink"], realtime)
+            config = agent_config(directory, info["mavlink"], realtime, rate)
             (directory / "agent.toml").write_text(config)
             agent_log = stack.enter_context(open(directory / "agent.log", "w"))
             agent_proc = subprocess.Popen(
@@ -195,7 +225,8 @@ async def measure(minutes: float, every: float, keep: Path | None, world_nice: i
                  str(directory / "agent.toml"), "--base", str(directory)],
                 env=env, stdout=agent_log, stderr=subprocess.STDOUT,
             )  # fmt: skip
-            return await sample(directory, agent_proc, world_proc, minutes)
+            result = await sample(directory, agent_proc, world_proc, minutes)
+            return {"rate_hz": rate, "realtime": realtime, "world_nice": world_nice, **result}
         finally:
             for proc in (agent_proc, world_proc):
                 if proc is not None and proc.poll() is None:
@@ -217,9 +248,10 @@ async def sample(directory: Path, agent_proc, world_proc, minutes: float) -> dic
             await asyncio.sleep(SAMPLE_S)
             if agent_proc.poll() is not None or world_proc.poll() is not None:
                 raise RuntimeError(f"a process stopped early; see the logs in {directory}")
-            agent = proc_sample(agent_proc.pid)
+            agent, world_now = proc_sample(agent_proc.pid), proc_sample(world_proc.pid)
             workers = [s for k in children(agent_proc.pid) if (s := proc_sample(k))]
-            samples.append({"t": time.monotonic() - start, "agent": agent, "workers": workers})
+            samples.append({"t": time.monotonic() - start, "agent": agent, "workers": workers,
+                            "world": world_now})  # fmt: skip
             done = int((time.monotonic() - start) / 60)
             print(f"\r{done}/{minutes:g} min", end="", file=sys.stderr, flush=True)
     finally:
@@ -242,8 +274,11 @@ def summarise(samples, health, baseline, runs, exit_code) -> dict:
     t = np.array([s["t"] for s in samples])
     rss = np.array([s["agent"]["rss_mb"] for s in samples])
     cpu = np.array([s["agent"]["cpu_s"] for s in samples])
+    loop_cpu = np.array([s["agent"]["main_thread_cpu_s"] for s in samples])
     worker_cpu = np.array([sum(w["cpu_s"] for w in s["workers"]) for s in samples])
-    worker_rss = np.array([sum(w["rss_mb"] for w in s["workers"]) for s in samples])
+    worker_rss = np.array([sum(w["rss_mb"] for w in s["workers"] if not w["tracker"])
+                           for s in samples])  # fmt: skip
+    world_cpu = np.array([s["world"]["cpu_s"] for s in samples])
     half = t >= t[-1] / 2
     slope = float(np.polyfit(t[half] / 3600, rss[half], 1)[0]) if half.sum() > 2 else None
     wall = t[-1] - t[0]
@@ -275,7 +310,9 @@ def summarise(samples, health, baseline, runs, exit_code) -> dict:
             "max_ms": float(base.max()),
         },
         "agent_cpu_percent": 100 * (cpu[-1] - cpu[0]) / wall,
+        "agent_loop_thread_cpu_percent": 100 * (loop_cpu[-1] - loop_cpu[0]) / wall,
         "worker_cpu_percent": 100 * (worker_cpu[-1] - worker_cpu[0]) / wall,
+        "world_cpu_percent": 100 * (world_cpu[-1] - world_cpu[0]) / wall,
         "agent_rss_mb": {"first": rss[0], "last": rss[-1], "max": rss.max()},
         "agent_rss_slope_mb_per_h_second_half": slope,
         "worker_rss_mb_last": worker_rss[-1],
@@ -302,7 +339,8 @@ def report(r: dict) -> str:
     lag, base = r["lag"], r["baseline_lag"]
     rss, slope = r["agent_rss_mb"], r["agent_rss_slope_mb_per_h_second_half"]
     lines = [
-        f"simulated flight: {r['minutes']:.1f} min real time, {r['runs']} lateral excitations, "
+        f"simulated flight: {r['minutes']:.1f} min real time, sensors and recorder at "
+        f"{r.get('rate_hz', 100):g} Hz, {r['runs']} lateral excitations, "
         f"{r['runs_identified']} identified and delivered over the radio",
         "event-loop lag (10 ms probe; p99 per minute from the agent's health records):",
         _lag_line("agent, all drivers", lag),
@@ -310,8 +348,9 @@ def report(r: dict) -> str:
         f"  {'idle loop, same box':<20}: p50 {base['p50_ms']:.2f} ms, p99 {base['p99_ms']:.2f} "
         f"ms, max {base['max_ms']:.1f} ms",
         f"  ratio agent/idle p99: {lag.get('p99_ms_median', float('nan')) / base['p99_ms']:.2f}",
-        f"CPU (of one core): agent {r['agent_cpu_percent']:.1f} %, "
-        f"worker {r['worker_cpu_percent']:.1f} %",
+        f"CPU (of one core): agent {r['agent_cpu_percent']:.1f} % (event-loop thread "
+        f"{r['agent_loop_thread_cpu_percent']:.1f} %, MAVSDK, radio and serial threads the "
+        f"rest), worker {r['worker_cpu_percent']:.1f} %, world {r['world_cpu_percent']:.1f} %",
         f"agent RSS: {rss['first']:.0f} MB first, {rss['last']:.0f} MB last, {rss['max']:.0f} MB"
         f" max; second-half slope {slope if slope is not None else float('nan'):+.1f} MB/h; "
         f"worker {r['worker_rss_mb_last']:.0f} MB",
@@ -337,6 +376,7 @@ def main() -> None:
     w = sub.add_parser("world")
     w.add_argument("directory", type=Path)
     w.add_argument("--every", type=float, default=60.0)
+    w.add_argument("--rate", type=float, default=100.0)
     parser.add_argument("--minutes", type=float, default=45.0)
     parser.add_argument("--every", type=float, default=60.0, help="s between excitations")
     parser.add_argument("--keep", type=Path, help="keep the logs in this directory")
@@ -348,13 +388,17 @@ def main() -> None:
         "--realtime", type=int, metavar="PRIORITY",
         help="the agent's [runtime] realtime_priority (SCHED_FIFO for its loop thread)",
     )  # fmt: skip
+    parser.add_argument(
+        "--rate", type=float, default=100.0, metavar="HZ",
+        help="sensor and recorder rate (100, or 400 as the VN-200's IMU rate)",
+    )  # fmt: skip
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     if args.mode == "world":
-        asyncio.run(world(args.directory, args.every))
+        asyncio.run(world(args.directory, args.every, args.rate))
         return
     result = asyncio.run(
-        measure(args.minutes, args.every, args.keep, args.world_nice, args.realtime)
+        measure(args.minutes, args.every, args.keep, args.world_nice, args.realtime, args.rate)
     )
     print(json.dumps(result, default=float) if args.json else report(result))
 

@@ -2,9 +2,11 @@
 the three sensors on pseudo-terminals, stepped together in real time on the event loop.
 
 Physics runs at JSBSim's 200 Hz, two steps per 100 Hz tick of the autopilot (servo outputs in,
-telemetry out). The sensors sample the state of each tick (at most 100 Hz), with white noise
-at the instruments' levels (thesis chapter 3) and the µADC's ±20° probe limit; their frames
-carry the simulated time of the state they hold.
+telemetry out). The sensors sample the state of each tick, with white noise at the
+instruments' levels (thesis chapter 3) and the µADC's ±20° probe limit; their frames carry the
+simulated time of the state they hold. Sensors faster than the tick (`sensor_rate_hz` 400: the
+VN-200's IMU rate) subdivide it: JSBSim then integrates at the sensor rate (at least 200 Hz),
+the autopilot still acts every 10 ms, and each sample is written at its own time.
 """
 
 from __future__ import annotations
@@ -73,15 +75,30 @@ def noisy(state: Callable[[], dict[str, float]], seed: int, enabled: bool):
     return sample
 
 
+def check_sensor_rate(hz: float) -> None:
+    """The sensors sample whole ticks or whole subdivisions of one: 100 Hz divided or
+    multiplied by a whole number (50, 100, 200, 400…, at most 1000)."""
+    ratio = hz / TICK_HZ if hz >= TICK_HZ else TICK_HZ / hz if hz > 0 else 0.0
+    if not 0 < hz <= 1000 or abs(ratio - round(ratio)) > 1e-9:
+        raise ValueError(
+            f"sensor rate {hz:g} Hz: must be {TICK_HZ:g} Hz divided or multiplied by a whole "
+            "number, at most 1000 Hz (for example 50, 100, 200 or 400)"
+        )
+
+
 class SimAircraft:
     """Owns the plant, the autopilot emulation, the pilot and the sensor ports."""
 
     def __init__(self, options: AircraftOptions, clock: Clock, directory: Path):
+        check_sensor_rate(options.sensor_rate_hz)
         self.options, self._clock = options, clock
         self.directory = Path(directory)
+        self.per_tick = max(1, round(options.sensor_rate_hz / TICK_HZ))
+        """Sensor samples per autopilot tick."""
         self.plant = Plant(options.aircraft, airspeed_kts=options.speed_kts,
                            altitude_ft=options.altitude_ft, turbulence=options.turbulence,
-                           seed=options.seed)  # fmt: skip
+                           seed=options.seed,
+                           integration_hz=max(200.0, TICK_HZ * self.per_tick))  # fmt: skip
         sticks = {ch: normalised_to_pwm(ch, self.plant.trim[name]) for ch, name in OUTPUTS.items()}
         self.pilot = ScriptedPilot(sticks, options.params.switch_channel)
         self.autopilot = EmulatedArduPlane(
@@ -134,25 +151,31 @@ class SimAircraft:
                     port.unplug()
 
     async def _physics(self) -> None:
-        """Tick i is simulated time start + i/TICK_HZ: the autopilot acts, JSBSim steps, and
-        the sensors sample that very state. A late loop runs the ticks it owes back to back,
-        so the data stay true to their time stamps and only their delivery is late."""
+        """Sample s is simulated time start + s·h (h = 1/(TICK_HZ·per_tick)): at each tick
+        the autopilot acts, then JSBSim steps to the sample's end and the sensors sample that
+        very state. A late loop runs the samples it owes back to back, so the data stay true to
+        their time stamps and only their delivery is late."""
         dt = 1.0 / TICK_HZ
-        steps = round(dt / self.plant.dt)
-        every = {name: max(1, round(TICK_HZ / e.rate_hz)) for name, e in self.emitters.items()}
+        h = dt / self.per_tick
+        steps = round(h / self.plant.dt)
+        rate = TICK_HZ * self.per_tick
+        every = {name: max(1, round(rate / e.rate_hz)) for name, e in self.emitters.items()}
         start = self._clock.now()
+        sample = 0
         while True:
-            t = start + self.ticks * dt
-            commands = self.autopilot.tick(t, self.truth)
-            self.plant.set_normalised(commands)
+            t = start + sample * h
+            if sample % self.per_tick == 0:
+                commands = self.autopilot.tick(t, self.truth)
+                self.plant.set_normalised(commands)
+                self.ticks += 1
             for _ in range(steps):
                 self.plant.step()
             self.truth = self.plant.state()
             for name, emitter in self.emitters.items():
-                if self.ticks % every[name] == 0:
-                    emitter.emit(t + dt, self.ticks // every[name])
-            self.ticks += 1
-            await self._clock.sleep_until(start + self.ticks * dt)
+                if sample % every[name] == 0:
+                    emitter.emit(t + h, sample // every[name])
+            sample += 1
+            await self._clock.sleep_until(start + sample * h)
 
 
 async def serve(options: AircraftOptions, directory: Path, duration: float | None,
@@ -180,13 +203,14 @@ async def serve(options: AircraftOptions, directory: Path, duration: float | Non
         loop.add_signal_handler(signal.SIGUSR1, lambda: aircraft.pilot.set_switch(
             not aircraft.pilot.switch_high))  # fmt: skip
         trim = ", ".join(f"{k} {v:+.3f}" for k, v in aircraft.plant.trim.items())
+        hz, ports = options.sensor_rate_hz, aircraft.ports
         announce(
             f"simulated {options.aircraft} trimmed at {options.speed_kts:g} kt, "
             f"{options.altitude_ft:g} ft (normalised trim: {trim})\n"
             f'MAVLink (emulated ArduPlane, system 1): [autopilot] url = "udpout://{host}:{port}"\n'
-            f'VN-200 (binary, 100 Hz): [sensors.vn200] port = "{aircraft.ports["vn200"].path}"\n'
-            f'µADC (100 Hz): [sensors.airdata] port = "{aircraft.ports["airdata"].path}"\n'
-            f'surface box (100 Hz): [sensors.surfaces] port = "{aircraft.ports["surfaces"].path}"\n'
+            f'VN-200 (binary, {hz:g} Hz): [sensors.vn200] port = "{ports["vn200"].path}"\n'
+            f'µADC ({hz:g} Hz): [sensors.airdata] port = "{ports["airdata"].path}"\n'
+            f'surface box ({hz:g} Hz): [sensors.surfaces] port = "{ports["surfaces"].path}"\n'
             f"excitation switch: RC channel {options.params.switch_channel}, low; "
             f"kill -USR1 {os.getpid()} toggles it"
         )

@@ -27,6 +27,7 @@ from agent.config import (
     Identification,
     Link,
     Recorder,
+    Runtime,
     Sensors,
     SurfacePort,
     VectorNav,
@@ -65,6 +66,8 @@ class SimOptions:
     runs: int = 1
     directory: Path | None = None
     progress: object = None  # callable(str) for progress lines
+    realtime_priority: int | None = None
+    """The agent's [runtime] realtime_priority (the benchmarks run it as in the field)."""
 
 
 @dataclass
@@ -107,8 +110,10 @@ async def _until(predicate, timeout: float) -> bool:
     return True
 
 
-def _config(tmp: Path, ports: Path, mavlink: tuple[str, int], axes: str) -> Config:
+def _config(tmp: Path, ports: Path, mavlink: tuple[str, int], axes: str,
+            realtime_priority: int | None = None) -> Config:  # fmt: skip
     return Config(
+        runtime=Runtime(realtime_priority=realtime_priority),
         identification=Identification(axes=axes),
         sensors=Sensors(
             vn200=VectorNav(port=str(ports / "vn200")),
@@ -140,7 +145,10 @@ def _config_toml(config: Config) -> str:
         "[link]", f'port = "{link.port}"', f'peer = "{link.peer}"',
         f'key_file = "{link.key_file}"', f'counter_file = "{link.counter_file}"',
         f'seen_file = "{link.seen_file}"',
-        "[recorder]", f'log_dir = "{config.recorder.log_dir}"', "",
+        "[recorder]", f'log_dir = "{config.recorder.log_dir}"',
+        *(["[runtime]", f"realtime_priority = {config.runtime.realtime_priority}"]
+          if config.runtime.realtime_priority else []),
+        "",
     ])  # fmt: skip
 
 
@@ -273,7 +281,7 @@ async def _parts(options: SimOptions, tmp: Path, params: Params, say, operator: 
         ):
             raise SimError("the simulated aircraft did not start")
         axes = preset(options.preset).axes
-        config = _config(tmp, ports, aircraft.mavlink_address, axes)
+        config = _config(tmp, ports, aircraft.mavlink_address, axes, options.realtime_priority)
         if agent_process:
             agent = AgentProcess(tmp, config)
             agent.start()

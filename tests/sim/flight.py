@@ -28,9 +28,11 @@ class Flight:
 
 @contextlib.asynccontextmanager
 async def flight(tmp_path: Path, *, params: Params | None = None, system_id: int = 255,
-                 noise: bool = True, **link_options):  # fmt: skip
+                 noise: bool = True, sensor_rate_hz: float = 100.0,
+                 **link_options):  # fmt: skip
     clock = LoopClock()
-    options = AircraftOptions(params=params or Params(switch_channel=SWITCH), noise=noise)
+    options = AircraftOptions(params=params or Params(switch_channel=SWITCH), noise=noise,
+                              sensor_rate_hz=sensor_rate_hz)  # fmt: skip
     aircraft = SimAircraft(options, clock, tmp_path)
     sim_task = asyncio.create_task(aircraft.run(), name="sim-aircraft")
     while aircraft.mavlink_address is None:

@@ -1,6 +1,7 @@
 """`sysid sim-aircraft`: announces where to connect, runs, and cleans up its ports.
 
-Bad input tried: an aircraft JSBSim does not have.
+Bad input tried: an aircraft JSBSim does not have; sensor rates that are not 100 Hz divided
+or multiplied by a whole number, zero, negative and over 1000 Hz.
 """
 
 from __future__ import annotations
@@ -34,3 +35,14 @@ def test_unknown_aircraft_is_a_clear_error(tmp_path):
     result = _run("--aircraft", "NoSuchPlane", "--duration", "1", "--pty-dir", str(tmp_path))
     assert result.returncode == 2
     assert "JSBSim has no aircraft 'NoSuchPlane'" in result.stderr
+
+
+def test_sensor_rate_is_announced_and_checked(tmp_path):
+    result = _run("--duration", "1", "--pty-dir", str(tmp_path), "--mavlink-port", "0",
+                  "--sensor-rate", "400")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert "VN-200 (binary, 400 Hz)" in result.stdout
+    for rate in ("250", "0", "-100", "1200", "30"):
+        bad = _run("--duration", "1", "--pty-dir", str(tmp_path), "--sensor-rate", rate)
+        assert bad.returncode == 2, (rate, bad.stderr)
+        assert f"sensor rate {float(rate):g} Hz: must be 100 Hz divided or multiplied" in bad.stderr

@@ -10,7 +10,16 @@ import asyncio
 import numpy as np
 import pytest
 
-from agent.config import AirDataPort, Config, Sensors, SurfacePort, VectorNav
+from agent.config import (
+    AirDataPort,
+    Config,
+    Sensors,
+    SurfacePort,
+    VectorNav,
+)
+from agent.config import (
+    Recorder as RecorderConfig,
+)
 from agent.excitation.plan import preset
 from agent.excitation.scheduler import Scheduler, Window
 from agent.ident import Experiment, Settings, identify
@@ -77,3 +86,44 @@ async def test_lateral_preset_through_the_whole_chain_finds_the_dutch_roll(tmp_p
     error = abs(dutch[0].eigenvalue - truth) / abs(truth)
     print(f"Dutch roll {dutch[0].eigenvalue:.3f} vs JSBSim {truth:.3f}: {error:.1%}")
     assert error < 0.10, f"Dutch roll {dutch[0].eigenvalue:.3f} vs JSBSim {truth:.3f}"
+
+
+async def test_sensors_at_400_hz_subdivide_the_autopilot_tick(tmp_path):
+    # The VN-200's IMU rate: JSBSim integrates at 400 Hz, the autopilot still ticks at 100 Hz,
+    # and each of the three devices writes a frame every 2.5 ms, stamped with its own time,
+    # through the real drivers into a 400 Hz recorder.
+    async with flight(tmp_path, sensor_rate_hz=400.0) as f:
+        clock, aircraft = f.aircraft._clock, f.aircraft
+        sensors = Sensors(
+            vn200=VectorNav(port=str(tmp_path / "vn200"), rate_hz=400.0),
+            airdata=AirDataPort(port=str(tmp_path / "airdata"), rate_hz=400.0),
+            surfaces=SurfacePort(port=str(tmp_path / "surfaces"), rate_hz=400.0),
+        )
+        recorder = Recorder(RecorderConfig(rate_hz=400.0), clock)
+        drivers = [make(sensors, clock, recorder.push)
+                   for make in (vn200_driver, airdata_driver, surfaces_driver)]  # fmt: skip
+        f.tasks += [asyncio.create_task(d.run(), name=d.name) for d in drivers]
+        f.tasks.append(asyncio.create_task(recorder.run(), name="recorder"))
+        await asyncio.sleep(1.0)
+        ticks, sent = aircraft.ticks, {n: e.sent for n, e in aircraft.emitters.items()}
+        start = clock.now()
+        await asyncio.sleep(2.0)
+        elapsed = clock.now() - start
+        ticks, sent = (
+            aircraft.ticks - ticks,
+            {n: e.sent - sent[n] for n, e in aircraft.emitters.items()},
+        )
+        stamps = {n: [t for _, t in e.truth][-400:] for n, e in aircraft.emitters.items()}
+        health = [d.health() for d in drivers]
+        frames = recorder.window(start, start + 1.0)
+    assert aircraft.plant.dt == pytest.approx(1 / 400)
+    assert ticks == pytest.approx(100 * elapsed, abs=3)
+    for name, count in sent.items():
+        assert count == pytest.approx(400 * elapsed, abs=6), name
+        assert np.diff(stamps[name]) == pytest.approx(0.0025, abs=1e-9), name
+    for h in health:
+        assert h.rate_hz == pytest.approx(400, abs=8), h
+        assert (h.gaps, h.crc_errors, h.bytes_skipped) == (0, 0, 0), h
+    assert len(frames.time) == pytest.approx(400, abs=1)
+    for channel in ("p", "beta", "aileron"):
+        assert np.isfinite(frames.values[channel]).all(), channel

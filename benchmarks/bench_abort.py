@@ -1,0 +1,139 @@
+"""Abort latency: the pilot drops the excitation switch mid-run; how long until the agent's trim
+override is on the MAVLink wire.
+
+    .venv/bin/python benchmarks/bench_abort.py --drops 30
+
+The whole simulated flight (JSBSim J-3 Cub, the emulated ArduPlane on UDP, sensor ptys, radios,
+the scripted ground) runs here; the agent is the real `sysid agent` in its own process. The
+emulated ArduPlane stamps, with the one clock of this process, every RC_CHANNELS it sends (the
+switch position, 20 Hz) and every RC_CHANNELS_OVERRIDE it receives. ArduPilot's own kill
+(RCx_OPTION 46: overrides ignored while the switch is low) is off, so what reaches the aircraft
+is the agent's doing alone.
+
+For each drop (a lateral preset armed, the switch flipped high, dropped at a random moment
+0.5–3 s into the run) two intervals:
+- report → trim: from the first RC_CHANNELS carrying the low switch to the first override
+  holding the trim (the agent's reaction: MAVSDK, the loop, one command period of 20 ms);
+- flip → trim: from the pilot's flip (what the pilot feels; adds the telemetry period).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import random
+import re
+import statistics
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+os.environ.setdefault("JSBSIM_DEBUG", "0")  # no JSBSim banner on stdout
+
+from agent.excitation.plan import preset
+from agent.link import messages
+from agent.sim.ardupilot import Params
+from agent.sim.flight import SimOptions, simulated
+
+CHANNEL = {"aileron": 1, "elevator": 2, "throttle": 3, "rudder": 4}
+
+
+async def _until(predicate, timeout: float, what: str):
+    loop = asyncio.get_running_loop()
+    end = loop.time() + timeout
+    while not (found := predicate()):
+        if loop.time() > end:
+            raise TimeoutError(f"no {what} in {timeout:g} s")
+        await asyncio.sleep(0.01)
+    return found
+
+
+def _events(ground, since: int, event: str) -> list:
+    return [
+        m
+        for m in ground.inbox[since:]
+        if isinstance(m, messages.ExcitationEvent) and m.event == event
+    ]
+
+
+async def measure(drops: int, seed: int = 0, realtime: int | None = None) -> list[dict]:
+    """One dict per drop: report_to_trim_s, flip_to_trim_s, commands_before_trim."""
+    rng = random.Random(seed)
+    params = Params(switch_channel=7, switch_option_46=False)
+    options = SimOptions(preset="lateral", realtime_priority=realtime)
+    out = []
+    async with simulated(options, params, agent_process=True) as sim:
+        ap, ground, pilot, clock = sim.aircraft.autopilot, sim.ground, sim.aircraft.pilot, sim.clock
+        for k in range(drops):
+            ack = await ground.command(messages.Arm(plan=preset("lateral", plan_id=f"drop-{k}")))
+            if not ack.ok:
+                raise RuntimeError(f"the agent refused the plan: {ack.reason}")
+            seen = len(ground.inbox)
+            pilot.set_switch(True)
+            started = (await _until(lambda s=seen: _events(ground, s, "started"), 10, "start"))[0]
+            await asyncio.sleep(rng.uniform(0.5, 3.0))
+            dropped = clock.now()
+            pilot.set_switch(False)
+            await _until(lambda s=seen: _events(ground, s, "aborted"), 5, "abort")
+            await asyncio.sleep(0.5)
+            trim = {CHANNEL[name]: int(us)
+                    for name, us in re.findall(r"(\w+) (\d+) µs", started.detail)}  # fmt: skip
+            wire = list(ap.wire)
+            reported = next(t for t, kind, *rest in wire
+                            if kind == "switch" and t >= dropped and rest[0] < 1500)  # fmt: skip
+            after = [(t, values) for t, kind, values, _ in
+                     (e for e in wire if e[1] == "override") if t >= reported]  # fmt: skip
+            first = next(i for i, (_, values) in enumerate(after) if values == trim)
+            t_trim = after[first][0]
+            out.append({
+                "report_to_trim_s": t_trim - reported,
+                "flip_to_trim_s": t_trim - dropped,
+                "commands_before_trim": first,
+            })  # fmt: skip
+            await asyncio.sleep(1.0)  # the release, then trimmed flight before the next run
+    return out
+
+
+def summary(drops: list[dict]) -> dict:
+    def stats(key: str) -> dict:
+        ms = sorted(1e3 * d[key] for d in drops)
+        return {
+            "median_ms": statistics.median(ms),
+            "p95_ms": ms[min(len(ms) - 1, round(0.95 * (len(ms) - 1)))],
+            "max_ms": ms[-1],
+        }
+
+    return {
+        "drops": len(drops),
+        "report_to_trim": stats("report_to_trim_s"),
+        "flip_to_trim": stats("flip_to_trim_s"),
+        "most_commands_before_trim": max(d["commands_before_trim"] for d in drops),
+    }
+
+
+def report(s: dict) -> str:
+    a, b = s["report_to_trim"], s["flip_to_trim"]
+    return (
+        f"abort latency over {s['drops']} switch drops mid-run:\n"
+        f"  switch report on the wire → trim on the wire: median {a['median_ms']:.1f} ms, "
+        f"p95 {a['p95_ms']:.1f} ms, max {a['max_ms']:.1f} ms\n"
+        f"  pilot's flip → trim on the wire:               median {b['median_ms']:.1f} ms, "
+        f"p95 {b['p95_ms']:.1f} ms, max {b['max_ms']:.1f} ms\n"
+        f"  excitation commands after the report, before the trim: at most "
+        f"{s['most_commands_before_trim']}"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--drops", type=int, default=30)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--realtime", type=int, metavar="PRIORITY",
+                        help="the agent's [runtime] realtime_priority")  # fmt: skip
+    args = parser.parse_args()
+    print(report(summary(asyncio.run(measure(args.drops, args.seed, args.realtime)))))
+
+
+if __name__ == "__main__":
+    main()
