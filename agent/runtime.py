@@ -68,7 +68,40 @@ LAG_SAMPLES = 60_000
 # The health record in the execution log: this often (s).
 HEALTH_S = 60.0
 HEALTH_KEPT = 60
+# Each health record also counts its lag samples in these bins (ms; 0.05 ms wide to 10 ms,
+# 1 ms wide to 100 ms, then one open bin), so percentiles over a whole flight can be pooled
+# from the records: `lag_percentile`.
+LAG_EDGES_MS = np.round(
+    np.concatenate([np.arange(0.0, 10.0, 0.05), np.arange(10.0, 100.5, 1.0)]), 2
+)
 RESULTS_KEPT = 100
+
+
+def lag_histogram(ms: np.ndarray) -> dict[str, int]:
+    """Lag samples (ms) counted by bin: {upper edge: count} for the bins that have any; the
+    open bin above the last edge is "inf"."""
+    bins = np.clip(np.searchsorted(LAG_EDGES_MS, ms, side="right"), 1, len(LAG_EDGES_MS))
+    upper = [*(f"{e:g}" for e in LAG_EDGES_MS[1:]), "inf"]
+    index, counts = np.unique(bins, return_counts=True)
+    return {upper[i - 1]: int(c) for i, c in zip(index, counts, strict=True)}
+
+
+def lag_percentile(histograms: list[dict[str, int]], q: float) -> float:
+    """The q-th percentile (0-100) of the samples in several `lag_histogram`s together, as the
+    upper edge of the bin it falls in (so never below the true value; inf if in the open bin)."""
+    total: Counter[float] = Counter()
+    for h in histograms:
+        for edge, count in h.items():
+            total[float(edge)] += count
+    n = sum(total.values())
+    if n == 0:
+        raise ValueError("no lag samples")
+    seen = 0
+    for edge in sorted(total):
+        seen += total[edge]
+        if seen >= q / 100 * n:
+            return edge
+    return float("inf")
 
 
 class Agent:
@@ -566,7 +599,8 @@ class Agent:
             if not len(ms):
                 return {"n": 0}
             p50, p99 = np.percentile(ms, [50, 99])
-            return {"n": len(ms), "p50_ms": p50, "p99_ms": p99, "max_ms": float(ms.max())}
+            return {"n": len(ms), "p50_ms": p50, "p99_ms": p99, "max_ms": float(ms.max()),
+                    "hist": lag_histogram(ms)}  # fmt: skip
 
         return {
             "t": self.clock.now(),

@@ -16,7 +16,7 @@ from agent.clock import VirtualClock
 from agent.config import Config, Recorder
 from agent.excitation.plan import Doublet, Plan, Segment, preset
 from agent.link import messages
-from agent.runtime import Agent
+from agent.runtime import Agent, lag_histogram, lag_percentile
 
 
 @pytest.fixture
@@ -108,6 +108,9 @@ async def test_health_record_separates_the_lag_while_identifying(agent):
     assert record["cpu_percent"] == pytest.approx(10.0)
     assert record["rss_mb"] > 10
     assert record["threads"] >= 1
+    # The bins count every sample: 0.1 ms falls in [0.1, 0.15), 10 ms in [10, 11).
+    assert record["lag"]["hist"] == {"0.15": 99, "0.25": 1, "11": 1}
+    assert record["lag_identifying"]["hist"] == {"0.25": 1, "11": 1}
     # The period starts afresh; an empty period is reported as such, not as zeros.
     empty = agent.health_record(wall_s=60.0, cpu_s=0.0)
     assert empty["lag"] == {"n": 0}
@@ -173,3 +176,22 @@ async def test_a_new_nominal_that_predicts_worse_is_rolled_back(tmp_path):
     notices = [m.text for m in sent if isinstance(m, messages.Notice)]
     assert any(t.startswith("self-check: nominal lat-2") and t.endswith("reverted")
                for t in notices), notices  # fmt: skip
+
+
+def test_lag_percentiles_pool_the_health_records_histograms():
+    # Two minutes of made-up lags (ms), one with a tail; the pooled percentile is the upper
+    # edge of the bin the true percentile of all samples falls in.
+    rng = np.random.default_rng(1)
+    minutes = [rng.exponential(0.4, 5000), np.r_[rng.exponential(0.4, 5000), [3.3] * 80, [250]]]
+    pooled = np.concatenate(minutes)
+    hists = [lag_histogram(m) for m in minutes]
+    assert sum(sum(h.values()) for h in hists) == pooled.size
+    assert hists[1]["inf"] == 1  # 250 ms: beyond the last edge
+    for q in (50, 99, 99.9):
+        true = np.percentile(pooled, q, method="inverted_cdf")
+        edge = lag_percentile(hists, q)
+        assert true <= edge < true + 0.05 + 1e-9, (q, true, edge)
+    assert lag_percentile(hists, 100) == float("inf")
+    assert lag_percentile([hists[0]], 100) == pytest.approx(np.ceil(minutes[0].max() / 0.05) * 0.05)
+    with pytest.raises(ValueError, match="no lag samples"):
+        lag_percentile([{}], 99)
