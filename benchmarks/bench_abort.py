@@ -80,11 +80,16 @@ async def measure(drops: int, seed: int = 0, realtime: int | None = None) -> lis
             trim = {CHANNEL[name]: int(us)
                     for name, us in re.findall(r"(\w+) (\d+) µs", started.detail)}  # fmt: skip
             wire = list(ap.wire)
-            reported = next(t for t, kind, *rest in wire
-                            if kind == "switch" and t >= dropped and rest[0] < 1500)  # fmt: skip
+            reports = [t for t, kind, *rest in wire
+                       if kind == "switch" and t >= dropped and rest[0] < 1500]  # fmt: skip
+            if not reports:
+                raise RuntimeError(f"drop {k}: no RC_CHANNELS with the switch low on the wire")
             after = [(t, values) for t, kind, values, _ in
-                     (e for e in wire if e[1] == "override") if t >= reported]  # fmt: skip
-            first = next(i for i, (_, values) in enumerate(after) if values == trim)
+                     (e for e in wire if e[1] == "override") if t >= reports[0]]  # fmt: skip
+            trims = [i for i, (_, values) in enumerate(after) if values == trim]
+            if not trims:
+                raise RuntimeError(f"drop {k}: no trim override {trim} after the switch report")
+            reported, first = reports[0], trims[0]
             t_trim = after[first][0]
             out.append({
                 "report_to_trim_s": t_trim - reported,
