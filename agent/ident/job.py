@@ -125,8 +125,11 @@ def cross_tic(result: dict, preprocessing: dict, record_dt: float,
     return fit(model, batch).tic_avg
 
 
-# The worker's scheduling priority below the agent's (nice +10): on a small flight computer the
-# identification takes whatever CPU the event loop (drivers, commands, recorder) leaves over.
+# The worker's scheduling below the agent's: on a small flight computer the identification takes
+# whatever CPU the agent (event loop, drivers, MAVSDK and radio threads) leaves over. SCHED_IDLE
+# (Linux; no privilege needed to lower oneself) lets any waking agent thread preempt it at once,
+# where a nice +10 worker could still hold a core for a scheduler slice while a thread the loop
+# waits on (the GIL's holder, MAVSDK's) queues behind it. Elsewhere: nice +10.
 WORKER_NICE = 10
 
 
@@ -134,6 +137,8 @@ def start_worker() -> None:
     """The worker process's initializer: lower its priority, then warm up."""
     with contextlib.suppress(OSError, AttributeError):  # not permitted, or not POSIX: go on
         os.nice(WORKER_NICE)
+    with contextlib.suppress(OSError, AttributeError):  # not Linux: nice +10 alone
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
     warm()
 
 
