@@ -80,13 +80,16 @@ fuzz: $(FUZZ_STAMP)
 # (45 minutes by default: make bench-agent MINUTES=5 for a quick look).
 MINUTES ?= 45
 bench-agent: $(STAMP)
-	$(BIN)/python benchmarks/bench_agent.py --minutes $(MINUTES) --world-nice 10
+	$(BIN)/python benchmarks/bench_agent.py --minutes $(MINUTES) --world-nice 10 --realtime 10
 
-# Issue 11's soak: the same flight for HOURS (default 3) in real time, an excitation a minute.
-HOURS ?= 3
+# Issue 11's soak: the same flight for HOURS (default 2) in real time, an excitation a minute;
+# the logs stay in soak-logs/ (replaced at each run), read period by period at the end.
+HOURS ?= 2
 soak: $(STAMP)
+	rm -rf soak-logs
 	$(BIN)/python benchmarks/bench_agent.py --minutes $$(( $(HOURS) * 60 )) --world-nice 10 \
-	  --keep soak-logs
+	  --realtime 10 --keep soak-logs
+	$(BIN)/python benchmarks/soak_report.py soak-logs
 
 # The README's console picture, from a simulated flight flown from the console.
 screenshot: $(STAMP)
