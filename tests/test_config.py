@@ -135,3 +135,17 @@ def test_link_key_file_problems_are_explained(tmp_path):
         load_key(tmp_path / "short.key")
     (tmp_path / "good.key").write_text("ab" * 32 + "\n")
     assert load_key(tmp_path / "good.key") == bytes([0xAB]) * 32
+
+
+def test_the_simulators_agent_config_file_loads_back_to_the_same_config(tmp_path):
+    # `simulated(agent_process=True)` writes only what differs from the defaults: the sensor
+    # ports, the autopilot URL, the link files, the log directory, and the real-time priority
+    # the benchmarks fly with.
+    from agent.sim.flight import _config, _config_toml
+
+    for priority in (None, 10):
+        config = _config(tmp_path, tmp_path / "ports", ("127.0.0.1", 14555), "lateral", priority)
+        path = tmp_path / "agent.toml"
+        path.write_text(_config_toml(config))
+        assert load_config(path) == config
+        assert load_config(path).runtime.realtime_priority == priority
