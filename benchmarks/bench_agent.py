@@ -96,10 +96,11 @@ async def world(directory: Path, every: float, rate: float = 100.0) -> None:
             if not ground.session.link_up:
                 await asyncio.sleep(0.5)
                 continue
-            began = clock.now()
+            began, seen = clock.now(), len(ground.inbox)
             try:
                 outcome = await one_run(options, aircraft, ground, len(runs), lambda _: None)
-                runs.append({"t": began, "ok": "result" in outcome})
+                runs.append({"t": began, "ok": "result" in outcome,
+                             "result_after_s": _result_after(ground, seen)})  # fmt: skip
             except Exception as exc:  # a missed run is counted, the flight goes on
                 aircraft.pilot.set_switch(False)
                 runs.append({"t": began, "ok": False, "error": str(exc)})
@@ -111,6 +112,19 @@ async def world(directory: Path, every: float, rate: float = 100.0) -> None:
         for task in tasks:
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
+
+
+def _result_after(ground, seen: int) -> float | None:
+    """From the excitation's end (the agent's "finished" event, its own clock) to the result's
+    arrival at the ground (both on this machine's monotonic clock): the recorder's delay, the
+    identification in the worker, and the radio link."""
+    from agent.link import messages
+
+    new = list(zip(ground.inbox[seen:], ground.received_at[seen:], strict=True))
+    ends = [m.time for m, _ in new if isinstance(m, messages.ExcitationEvent)
+            and m.event == "finished"]  # fmt: skip
+    results = [t for m, t in new if isinstance(m, messages.Result)]
+    return results[0] - ends[0] if ends and results else None
 
 
 # -- the parent --------------------------------------------------------------------------------
@@ -306,10 +320,14 @@ def summarise(samples, health, baseline, runs, exit_code) -> dict:
         return out
 
     base = np.array(baseline) * 1000
+    after = [r["result_after_s"] for r in runs if r.get("result_after_s") is not None]
     return {
         "minutes": wall / 60,
         "runs": len(runs),
         "runs_identified": sum(r["ok"] for r in runs),
+        "result_after_s": {"median": float(np.median(after)), "max": float(max(after))}
+        if after
+        else None,
         "lag": lag("lag"),
         "lag_identifying": lag("lag_identifying"),
         "baseline_lag": {
@@ -345,6 +363,15 @@ def _lag_line(label: str, lag: dict) -> str:
     )
 
 
+def _after_line(after: dict | None) -> str:
+    if after is None:
+        return "no result reached the ground"
+    return (
+        f"result at the ground after the excitation's end: median {after['median']:.2f} s, "
+        f"max {after['max']:.2f} s (recorder delay, worker, radio)"
+    )
+
+
 def report(r: dict) -> str:
     lag, base = r["lag"], r["baseline_lag"]
     rss, slope = r["agent_rss_mb"], r["agent_rss_slope_mb_per_h_second_half"]
@@ -352,6 +379,7 @@ def report(r: dict) -> str:
         f"simulated flight: {r['minutes']:.1f} min real time, sensors and recorder at "
         f"{r.get('rate_hz', 100):g} Hz, {r['runs']} lateral excitations, "
         f"{r['runs_identified']} identified and delivered over the radio",
+        _after_line(r["result_after_s"]),
         "event-loop lag (10 ms probe, from the agent's health records; percentiles of all "
         "samples are bin upper edges, 0.05 ms bins):",
         _lag_line("agent, all drivers", lag),

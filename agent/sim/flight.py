@@ -14,6 +14,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -77,6 +78,8 @@ class Ground:
     session: LinkSession
     radio: XBeeRadio
     inbox: list = field(default_factory=list)
+    received_at: list = field(default_factory=list)
+    """When each inbox message arrived (monotonic s, the agent's clock base on this machine)."""
     acks: dict = field(default_factory=dict)
     accepted: bool = False
 
@@ -85,6 +88,7 @@ class Ground:
             self.acks[message.ref] = message
         else:
             self.inbox.append(message)
+            self.received_at.append(time.monotonic())
 
     def flight_mode(self) -> str | None:
         """The flight mode in the aircraft's latest status (None: no status, or no autopilot)."""
