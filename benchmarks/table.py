@@ -224,8 +224,8 @@ def main() -> None:
     args = parser.parse_args()
     realtime = args.realtime or None
     seeds = args.seeds or (3 if args.quick else 10)
-    minutes = args.minutes or (3.0 if args.quick else 12.0)
-    drops = args.drops or (10 if args.quick else 30)
+    minutes = args.minutes or (3.0 if args.quick else 8.0)
+    drops = args.drops or (10 if args.quick else 20)
     sections = [
         lambda: [machine(), "", "Command: `make bench-table` (`benchmarks/table.py`)."],
         lambda: identification(seeds),
