@@ -75,8 +75,12 @@ async def measure(drops: int, seed: int = 0, realtime: int | None = None) -> lis
             await asyncio.sleep(rng.uniform(0.5, 3.0))
             dropped = clock.now()
             pilot.set_switch(False)
-            await _until(lambda s=seen: _events(ground, s, "aborted"), 5, "abort")
+            aborted = (await _until(lambda s=seen: _events(ground, s, "aborted"), 5, "abort"))[0]
             await asyncio.sleep(0.5)
+            if "switch" not in aborted.detail:  # the run ended otherwise before the drop
+                out.append({"other_end": aborted.detail})
+                await asyncio.sleep(1.0)
+                continue
             trim = {CHANNEL[name]: int(us)
                     for name, us in re.findall(r"(\w+) (\d+) µs", started.detail)}  # fmt: skip
             wire = list(ap.wire)
@@ -100,7 +104,10 @@ async def measure(drops: int, seed: int = 0, realtime: int | None = None) -> lis
     return out
 
 
-def summary(drops: list[dict]) -> dict:
+def summary(runs: list[dict]) -> dict:
+    drops = [d for d in runs if "other_end" not in d]
+    other = [d["other_end"] for d in runs if "other_end" in d]
+
     def stats(key: str) -> dict:
         ms = sorted(1e3 * d[key] for d in drops)
         return {
@@ -111,6 +118,7 @@ def summary(drops: list[dict]) -> dict:
 
     return {
         "drops": len(drops),
+        "other_ends": other,
         "report_to_trim": stats("report_to_trim_s"),
         "flip_to_trim": stats("flip_to_trim_s"),
         "most_commands_before_trim": max(d["commands_before_trim"] for d in drops),
@@ -127,6 +135,7 @@ def report(s: dict) -> str:
         f"p95 {b['p95_ms']:.1f} ms, max {b['max_ms']:.1f} ms\n"
         f"  excitation commands after the report, before the trim: at most "
         f"{s['most_commands_before_trim']}"
+        + "".join(f"\n  a run that ended before its drop: {d}" for d in s["other_ends"])
     )
 
 

@@ -204,7 +204,8 @@ def abort(drops: int, realtime: int | None) -> list[str]:
         f"| {b['p95_ms']:.1f} ms | {b['max_ms']:.1f} ms |",
         "",
         f"At most {s['most_commands_before_trim']} excitation command(s) went out between the "
-        "switch report and the trim.",
+        "switch report and the trim."
+        + "".join(f" A run ended before its drop (not counted): {d}." for d in s["other_ends"]),
     ]
 
 
