@@ -11,7 +11,7 @@ switch position, 20 Hz) and every RC_CHANNELS_OVERRIDE it receives. ArduPilot's 
 is the agent's doing alone.
 
 For each drop (a lateral preset armed, the switch flipped high, dropped at a random moment
-0.5–3 s into the run) two intervals:
+0.5–3 s into the run; then the safety pilot levels the wings) two intervals:
 - report → trim: from the first RC_CHANNELS carrying the low switch to the first override
   holding the trim (the agent's reaction: MAVSDK, the loop, one command period of 20 ms);
 - flip → trim: from the pilot's flip (what the pilot feels; adds the telemetry period).
@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import math
 import os
 import random
 import re
@@ -49,6 +50,30 @@ async def _until(predicate, timeout: float, what: str):
     return found
 
 
+async def level_wings(aircraft, timeout: float = 20.0) -> None:
+    """The safety pilot levels the wings with the aileron stick (a cut doublet leaves the
+    aircraft banked, and twenty of them in a row would leave it outside the envelope), then
+    puts the stick back at trim: |bank| < 2° and |roll rate| < 1°/s for a second."""
+    loop = asyncio.get_running_loop()
+    pilot, trim = aircraft.pilot, aircraft.pilot.stick(1)
+    end, level_since = loop.time() + timeout, None
+    try:
+        while loop.time() < end:
+            phi, p = aircraft.truth["phi"], aircraft.truth["p"]
+            push = max(-150.0, min(150.0, -(500.0 * phi + 200.0 * p)))  # µs; + aileron rolls right
+            pilot.set_stick(1, round(trim + push))
+            if abs(phi) < math.radians(2) and abs(p) < math.radians(1):
+                level_since = level_since or loop.time()
+                if loop.time() - level_since >= 1.0:
+                    return
+            else:
+                level_since = None
+            await asyncio.sleep(0.02)
+        raise RuntimeError(f"the wings are not level after {timeout:g} s")
+    finally:
+        pilot.set_stick(1, trim)
+
+
 def _events(ground, since: int, event: str) -> list:
     return [
         m
@@ -71,7 +96,11 @@ async def measure(drops: int, seed: int = 0, realtime: int | None = None) -> lis
                 raise RuntimeError(f"the agent refused the plan: {ack.reason}")
             seen = len(ground.inbox)
             pilot.set_switch(True)
-            started = (await _until(lambda s=seen: _events(ground, s, "started"), 10, "start"))[0]
+            begun = await _until(lambda s=seen: _events(ground, s, "started")
+                                 or _events(ground, s, "refused"), 10, "start")  # fmt: skip
+            if begun[0].event == "refused":
+                raise RuntimeError(f"drop {k}: the agent refused the start: {begun[0].detail}")
+            started = begun[0]
             await asyncio.sleep(rng.uniform(0.5, 3.0))
             dropped = clock.now()
             pilot.set_switch(False)
@@ -79,7 +108,8 @@ async def measure(drops: int, seed: int = 0, realtime: int | None = None) -> lis
             await asyncio.sleep(0.5)
             if "switch" not in aborted.detail:  # the run ended otherwise before the drop
                 out.append({"other_end": aborted.detail})
-                await asyncio.sleep(1.0)
+                await level_wings(sim.aircraft)
+                await asyncio.sleep(1.5)
                 continue
             trim = {CHANNEL[name]: int(us)
                     for name, us in re.findall(r"(\w+) (\d+) µs", started.detail)}  # fmt: skip
@@ -100,7 +130,8 @@ async def measure(drops: int, seed: int = 0, realtime: int | None = None) -> lis
                 "flip_to_trim_s": t_trim - dropped,
                 "commands_before_trim": first,
             })  # fmt: skip
-            await asyncio.sleep(1.0)  # the release, then trimmed flight before the next run
+            await level_wings(sim.aircraft)
+            await asyncio.sleep(1.5)  # trimmed flight (the agent captures trim) before the next
     return out
 
 

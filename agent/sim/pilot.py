@@ -26,6 +26,15 @@ class ScriptedPilot:
             self.set_switch(high)
         return list(self._rc)
 
+    def set_stick(self, channel: int, pwm: int) -> None:
+        """Move one stick (RC channel 1…) to a PWM value; the switch channel is not a stick."""
+        if channel == self.switch_channel:
+            raise ValueError(f"channel {channel} is the excitation switch")
+        self._rc[channel - 1] = int(pwm)
+
+    def stick(self, channel: int) -> int:
+        return self._rc[channel - 1]
+
     def set_switch(self, high: bool) -> None:
         """Flip the excitation switch now."""
         self._rc[self.switch_channel - 1] = HIGH_US if high else LOW_US
