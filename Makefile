@@ -59,7 +59,7 @@ bench-link: $(STAMP)
 bench-abort: $(STAMP)
 	$(BIN)/python benchmarks/bench_abort.py --drops 30 --realtime 10
 
-# Issue 11's performance table (Markdown, with date, machine and commit; about 35 minutes):
+# Issue 11's performance table (Markdown, with date, machine and commit; 20-25 minutes here):
 # identification against the peers, loop lag at 100 and 400 Hz, CPU per component, bytes on
 # air, abort latency. make bench-table ARGS=--quick for a shorter look.
 bench-table: $(BENCH_STAMP)

@@ -1,8 +1,8 @@
 """The performance table: every number measured on this machine, now, by one command; printed
 as Markdown with the date, the machine and the commit, for the README.
 
-    make bench-table                                  # about 35 minutes
-    .venv/bin/python benchmarks/table.py --quick      # about 10 minutes, fewer samples
+    make bench-table                                  # 20-25 minutes here
+    .venv/bin/python benchmarks/table.py --quick      # fewer samples, about 10 minutes
 
 Sections, each from its own benchmark (run alone for more detail):
 1. identification time and accuracy against python-control and SIPPY, side by side in this
