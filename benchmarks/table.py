@@ -2,7 +2,7 @@
 as Markdown with the date, the machine and the commit, for the README.
 
     make bench-table                                  # 20-25 minutes here
-    .venv/bin/python benchmarks/table.py --quick      # fewer samples, about 10 minutes
+    .venv/bin/python benchmarks/table.py --quick      # fewer samples
 
 Sections, each from its own benchmark (run alone for more detail):
 1. identification time and accuracy against python-control and SIPPY, side by side in this
