@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import sys
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -133,8 +134,23 @@ def cross_tic(result: dict, preprocessing: dict, record_dt: float,
 WORKER_NICE = 10
 
 
+def _die_with_the_agent() -> None:
+    """Linux: the kernel kills the worker when the agent's thread that started it (the event
+    loop's, the main thread) ends, even by SIGKILL; a `kill -9` of the agent otherwise left
+    the worker, idle with its 130 MB, running forever."""
+    import ctypes
+    import signal
+
+    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    if os.getppid() == 1:  # the agent died before the line above
+        os._exit(0)
+
+
 def start_worker() -> None:
-    """The worker process's initializer: lower its priority, then warm up."""
+    """The worker process's initializer: tie its life to the agent's, lower its priority, then
+    warm up."""
+    if sys.platform == "linux":
+        _die_with_the_agent()
     with contextlib.suppress(OSError, AttributeError):  # not permitted, or not POSIX: go on
         os.nice(WORKER_NICE)
     with contextlib.suppress(OSError, AttributeError):  # not Linux: nice +10 alone

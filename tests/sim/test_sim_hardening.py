@@ -238,6 +238,15 @@ async def test_a_full_log_disk_is_reported_and_the_flight_and_identification_go_
 # -- kill -9 of the agent -------------------------------------------------------------------
 
 
+def _dead(pid: int) -> bool:
+    """Gone, or a zombie waiting for init to reap it."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return True
+    return stat[stat.rindex(")") + 2] == "Z"
+
+
 async def test_kill_9_mid_run_lets_the_pilot_back_and_loses_no_logged_byte(tmp_path):
     async with simulated(SimOptions(preset="lateral", directory=tmp_path),
                          agent_process=True) as sim:  # fmt: skip
@@ -245,6 +254,9 @@ async def test_kill_9_mid_run_lets_the_pilot_back_and_loses_no_logged_byte(tmp_p
         await start_run(sim, "kill-9")
         await asyncio.sleep(1.5)  # inside the aileron doublet: overrides held
         assert ap._overrides
+        children = Path(f"/proc/{agent.pid}/task/{agent.pid}/children").read_text().split()
+        worker = next(int(c) for c in children
+                      if b"spawn_main" in Path(f"/proc/{c}/cmdline").read_bytes())  # fmt: skip
         killed = sim.clock.now()
         agent.kill(signal.SIGKILL)
         # Nothing of ours can act now: ArduPilot's RC_OVERRIDE_TIME hands every channel back
@@ -252,6 +264,8 @@ async def test_kill_9_mid_run_lets_the_pilot_back_and_loses_no_logged_byte(tmp_p
         timeout = ap.params.rc_override_time_s
         await until(lambda: not ap._overrides, timeout + 1.0, "the overrides lapsing")
         lapsed = sim.clock.now() - killed
+        # The worker died with the agent (PR_SET_PDEATHSIG), not left running orphaned.
+        await until(lambda: _dead(worker), 5, "the worker to die")
         rc, pilot = ap.rc_inputs(sim.clock.now()), sim.aircraft.pilot(sim.clock.now())
         sim.aircraft.pilot.set_switch(False)
         logged = assert_logs_whole(tmp_path)  # read while the agent is dead
