@@ -77,18 +77,21 @@ def csv_header(
     return ("\n".join(lines) + "\n").encode()
 
 
-_TEMPLATES: dict[int, str] = {}
+_TEMPLATES: dict[tuple[int, bool], str] = {}
 
 
-def format_row(row: np.ndarray) -> bytes:
+def format_row(row: np.ndarray, exact: bool = False) -> bytes:
     """One CSV line: time with µs resolution, values to 9 significant digits, NaN empty.
+    `exact`: values to 17 significant digits, which read back to the same float64 — the
+    excitation logs, so that a replay computes on exactly the numbers the aircraft did.
     One %-format per row (13 µs for the agent's 83 columns, against 20 µs cell by cell): the
     flight log's rows are formatted on the event loop, so the writer thread never holds the
     GIL for long while the loop waits for it."""
     width = len(row)
-    template = _TEMPLATES.get(width)
+    template = _TEMPLATES.get((width, exact))
     if template is None:
-        template = _TEMPLATES[width] = "%.6f" + ",%.9g" * (width - 1) + "\n"
+        cell = ",%.17g" if exact else ",%.9g"
+        template = _TEMPLATES[width, exact] = "%.6f" + cell * (width - 1) + "\n"
     # A cell reads "nan" only for NaN (numbers never start with n): an empty cell.
     return (template % tuple(row.tolist())).replace(",nan", ",").encode()
 
@@ -148,8 +151,9 @@ class LogWriter:
         return self._paths[handle]
 
     def write(self, handle: int, line: bytes | np.ndarray) -> bool:
-        """Queue a line (bytes ending in a newline), a recorder row, or a 2-D block of rows
-        (one queue slot); False if dropped."""
+        """Queue a line (bytes ending in a newline), or a recorder row or 2-D block of rows (one
+        queue slot, formatted on the writer thread with `format_row(exact=True)`); False if
+        dropped."""
         return self._put((handle, line), block=False)
 
     def close_file(self, handle: int) -> None:
@@ -210,7 +214,7 @@ class LogWriter:
             self._dirty.discard(handle)
             return
         if isinstance(data, np.ndarray):
-            lines = [format_row(r) for r in np.atleast_2d(data)]
+            lines = [format_row(r, exact=True) for r in np.atleast_2d(data)]
         else:
             lines = [data]
         for k, line in enumerate(lines):
@@ -293,9 +297,9 @@ class Logbook:
     and an input/output log per excitation window."""
 
     def __init__(self, writer: LogWriter, columns: Sequence[str], units: Sequence[str],
-                 config_sha256: str):  # fmt: skip
+                 config_sha256: str, rate_hz: float | None = None):  # fmt: skip
         self._writer, self._columns, self._units = writer, list(columns), list(units)
-        self._sha = config_sha256
+        self._sha, self._rate_hz = config_sha256, rate_hz
         number = writer.next_number()
         header = csv_header("flight", self._columns, self._units, config_sha256)
         self.flight = writer.open(log_name(number, "flight", "csv"), header)
@@ -313,6 +317,7 @@ class Logbook:
             f"excitation plan {window.plan_id}, {window.outcome}"
             f"{': ' + window.reason if window.reason else ''}, "
             f"window {window.start:.6f} – {window.end:.6f} s"
+            + (f", recorded at {self._rate_hz:.17g} Hz" if self._rate_hz else "")
         )
         header = csv_header(window.axes, self._columns, self._units, self._sha, extra)
         handle = self._writer.open(log_name(number, window.axes, "csv", batch=batch), header)

@@ -67,6 +67,25 @@ def test_logbook_flight_excitation_and_execution_logs(tmp_path):
     assert '"message": "airdata: port lost"' in execution[0]
 
 
+def test_an_excitation_log_reads_back_the_exact_float64_values_and_the_rate(tmp_path):
+    """Replay must compute on the aircraft's numbers: values that 9 digits would round (random
+    float64, subnormal, huge, a gap) read back bit for bit, and the header names the rate."""
+    rng = np.random.default_rng(7)
+    rows = np.column_stack([100.0 + 0.01 * np.arange(50), rng.normal(size=(50, 3))])
+    rows[3, 1], rows[4, 2], rows[5, 3], rows[6, 1] = 5e-324, -1.7976931348623157e308, np.nan, 0.1
+    writer = LogWriter(tmp_path)
+    try:
+        book = Logbook(writer, ["time", "a", "b", "c"], ["s", "-", "-", "-"], "0" * 64, 400.0)
+        path = book.excitation(Window("lat1", "lateral", 100.1, 100.4, "finished", ""), rows)
+    finally:
+        writer.close()
+    _, back = read_log(path)
+    assert np.array_equal(back[:, 1:], rows[:, 1:], equal_nan=True)
+    assert np.abs(back[:, 0] - rows[:, 0]).max() < 1e-6  # time: µs
+    assert "recorded at 400 Hz" in path.read_text().split("\ntime,")[0]
+    assert not np.array_equal(np.float64(f"{rows[0, 1]:.9g}"), rows[0, 1])  # 9 digits would not
+
+
 def test_a_full_queue_drops_and_counts_but_never_tears_a_line(tmp_path):
     writer = LogWriter(tmp_path, queue_lines=2)
     handle = writer.open("0001_flight_x.csv", b"time,a\n")

@@ -96,15 +96,20 @@ def _number(path: Path) -> str:
     return path.name[:4]
 
 
-def _plan(path: Path) -> str | None:
+def _header(path: Path, pattern: str) -> str | None:
+    """The first match of `pattern`'s group in the log's comment lines."""
     with path.open(encoding="utf-8", errors="replace") as handle:
         for line in handle:
             if not line.startswith("#"):
                 return None
-            found = re.search(r"excitation plan (\S+),", line)
+            found = re.search(pattern, line)
             if found:
                 return found.group(1)
     return None
+
+
+def _plan(path: Path) -> str | None:
+    return _header(path, r"excitation plan (\S+),")
 
 
 def build_cases(
@@ -169,7 +174,10 @@ def _experiment(path: Path, request: Request) -> tuple[np.ndarray, np.ndarray, f
         keep &= time <= request.end
     if keep.sum() < 3:
         raise AnalyzeError(f"{path}: fewer than 3 samples between --start and --end")
-    dt = float(np.median(np.diff(time)))
+    # The recorder's rate from the header, as onboard (the agent's sample time is 1/rate, not
+    # the µs-rounded times); logs written before the header named it: the median step.
+    rate = _header(path, r"recorded at (\S+) Hz")
+    dt = 1.0 / float(rate) if rate else float(np.median(np.diff(time)))
     values = {n: rows[keep, columns.index(n)] for n in (*request.inputs, *request.outputs)}
     try:
         (u, y), trim = jobs.window_and_trim(values, request.inputs, request.outputs, dt,

@@ -155,6 +155,12 @@ def identify(
         else:
             refinement, fitted = refined
             continuous = refinement.continuous
+            if not refinement.converged:
+                warnings.append(
+                    f"refinement stopped at its iteration limit ({refinement.iterations}) before "
+                    "the cost settled: poorly determined modes can move with the data's last "
+                    "digits; a lower order or a richer excitation helps"
+                )
             A, B = _zoh(continuous, dt)
             model = StateSpace(A, B, continuous.C, continuous.D)
     modes = _modes(model, okid_model, factors, candidate, batch, dt, refinement)

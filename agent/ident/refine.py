@@ -85,6 +85,11 @@ class Refinement:
     cost: float
     iterations: int
     passes: int
+    # The last Levenberg–Marquardt pass ended because the cost stopped falling (by less than
+    # RELATIVE_DECREASE, or no step lowered it), not at MAX_ITERATIONS: the estimate sits at a
+    # minimum. When False the result is wherever the search stopped, and can move with the
+    # data's last digits (seen on 6-state lateral models with two poorly excited extra poles).
+    converged: bool = True
 
     @property
     def improvement(self) -> float:
@@ -330,7 +335,7 @@ class _Problem:
 
 def _levenberg_marquardt(
     problem: _Problem, beta: np.ndarray, max_iterations: int
-) -> tuple[np.ndarray, int]:
+) -> tuple[np.ndarray, int, bool]:
     """Minimise ‖residuals‖² from beta: Marquardt-scaled Levenberg–Marquardt steps.
 
     The normal equations are (P × P) with P the free parameters, far cheaper than an SVD of
@@ -340,7 +345,7 @@ def _levenberg_marquardt(
     res, jac = problem.evaluate(beta, with_jacobian=True)
     cost = float(res @ res)
     damping = 1e-3
-    iterations = 0
+    iterations, settled = 0, False
     for iterations in range(1, max_iterations + 1):  # noqa: B007 - reported
         g = jac.T @ res
         H = jac.T @ jac
@@ -361,14 +366,16 @@ def _levenberg_marquardt(
                 break
             damping *= 10
         if not improved:
+            settled = True
             break
         decrease = (cost - new_cost) / cost
         beta, cost = trial, new_cost
         damping = max(damping / 10, 1e-9)
         if decrease < RELATIVE_DECREASE:
+            settled = True
             break
         res, jac = problem.evaluate(beta, with_jacobian=True)
-    return beta, iterations
+    return beta, iterations, settled
 
 
 def refine(
@@ -409,10 +416,10 @@ def refine(
         raise IdentificationFailed(
             "the starting model's simulation (or predictor) diverges: nothing to refine"
         )
-    iterations, passes = 0, 0
+    iterations, passes, settled = 0, 0, True
     for passes in range(1, max_passes + 1):  # noqa: B007 - reported
         problem.weights = 1.0 / sigma
-        beta, used = _levenberg_marquardt(problem, beta, MAX_ITERATIONS)
+        beta, used, settled = _levenberg_marquardt(problem, beta, MAX_ITERATIONS)
         iterations += used
         new_sigma = np.maximum(problem.rms_errors(beta), floor)
         change = np.max(np.abs(new_sigma - sigma) / sigma)
@@ -436,6 +443,7 @@ def refine(
         cost=float(final_res @ final_res),
         iterations=iterations,
         passes=passes,
+        converged=settled,
     )
 
 

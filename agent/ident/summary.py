@@ -116,6 +116,7 @@ def _refinement(result: Identification) -> dict[str, Any] | None:
         "criterion": "output error" if ref.gain is None else "prediction error (innovation form)",
         "hold": ref.hold,
         "iterations": ref.iterations,
+        "converged": ref.converged,
         "noise_std": {n: float(v) for n, v in zip(result.output_names, ref.noise_std, strict=True)},
         "okid_tic_avg": float(result.okid_fit.tic_avg),
         "Ac_std": _rows(std.A) if out_coords else None,

@@ -96,6 +96,31 @@ def test_refinement_from_a_perturbed_model_converges_to_the_truth_on_noise_free_
     assert result.cost < 1e-6 * result.cost_initial
 
 
+def test_a_refinement_stopped_at_its_iteration_limit_says_it_did_not_converge(monkeypatch):
+    """The same perturbed start: with the default limit the search settles (converged); cut
+    to 1 iteration a pass it stops mid-way, and the result and its warning say so."""
+    import agent.ident.refine as refine_module
+
+    exp = _record(0.01)
+    start = StateSpace(LAT.A * 1.15, LAT.B * 0.9, np.eye(4), np.zeros((4, 2)))
+    settled = refine(start, DT, [exp], output_coordinates=True, estimate_d=False, hold="zoh")
+    assert settled.converged
+    monkeypatch.setattr(refine_module, "MAX_ITERATIONS", 1)
+    cut = refine(start, DT, [exp], output_coordinates=True, estimate_d=False, hold="zoh",
+                 max_passes=1)  # fmt: skip
+    assert not cut.converged
+    assert cut.iterations == 1
+    assert np.abs(cut.continuous.A - settled.continuous.A).max() > 1e-3  # stopped short of it
+    result = identify(exp, DT)
+    assert result.refinement is not None
+    assert not result.refinement.converged
+    assert any("iteration limit" in w for w in result.warnings)
+    monkeypatch.undo()
+    result = identify(exp, DT)
+    assert result.refinement.converged
+    assert not any("iteration limit" in w for w in result.warnings)
+
+
 def test_refinement_in_era_coordinates_moves_only_off_the_similarity_orbit():
     """Three of four states measured: C is refined too; the eigenvalues still come out exact."""
     exp = _record(0.0)
