@@ -41,7 +41,7 @@ from agent.ident import Settings
 from agent.ident import job as jobs
 from agent.link import messages
 from agent.link.codec import AIRCRAFT
-from agent.link.endpoint import open_endpoint
+from agent.link.endpoint import build_endpoint
 from agent.logs import Logbook, LogWriter, config_hash, log_name, units_of
 from agent.models import SELF_CHECK_RATIO, Candidate, ModelStore, suggest
 from agent.recorder import Recorder
@@ -125,6 +125,7 @@ class Agent:
             self.recorder.columns,
             units_of(self.recorder.columns, SENSOR_CHANNELS),
             config_hash(config_text),
+            config.recorder.rate_hz,
         )
         self.recorder.sink = self.logbook.row
         # The result log: one JSON object per identification (thesis 2.2.1).
@@ -194,7 +195,7 @@ class Agent:
         self._pool = self._new_worker()
         restore = self._realtime(self.config.runtime.realtime_priority)
         try:
-            await self._open_link()
+            self._build_link()
             # Everything built so far lives as long as the agent: moved out of the collector's
             # way, so a full collection (which walked it and stalled the loop for up to 0.8 s
             # in the simulator) only looks at what the flight allocates.
@@ -247,11 +248,13 @@ class Agent:
                 await asyncio.sleep(delay)
                 delay = min(delay * 2, RESTART_MAX_S)
 
-    async def _open_link(self) -> None:
+    def _build_link(self) -> None:
         if self.config.link.peer is None:
             log.info("link: no [link] peer configured, radio not started")
             return
-        self.radio, self.session = await open_endpoint(
+        # Built, not opened: the radio's watch task opens it beside the drivers, so a module
+        # that does not answer at power-up leaves the aircraft recording without a link.
+        self.radio, self.session = build_endpoint(
             self.config.link, AIRCRAFT, self.base, self.clock, self._on_ground
         )
 

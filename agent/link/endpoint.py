@@ -12,11 +12,13 @@ from agent.link.session import LinkSession
 from drivers.xbee.driver import XBeeRadio
 
 
-async def open_endpoint(cfg: Link, role: str, base: Path, clock: Clock,
-                        on_message: Callable) -> tuple[XBeeRadio, LinkSession]:  # fmt: skip
-    """Open the radio and build the session: the shared key, this end's counter and replay
-    state under `base`, the peer as the only source accepted. Raises ValueError (no peer, a
-    bad key file) or the radio's error with the reason."""
+def build_endpoint(cfg: Link, role: str, base: Path, clock: Clock,
+                   on_message: Callable) -> tuple[XBeeRadio, LinkSession]:  # fmt: skip
+    """The radio and the session: the shared key, this end's counter and replay state under
+    `base`, the peer as the only source accepted. The radio is not opened here: its `watch()`
+    opens it and reopens it whenever it is lost, and the session's frames until then are
+    counted as transport errors (reliable messages wait and retry). Raises ValueError (no
+    peer, a bad key file) with the reason."""
     if cfg.peer is None:
         raise ValueError("[link] peer (the other end's 64-bit address) is not set")
     peer = bytes.fromhex(cfg.peer)
@@ -33,10 +35,20 @@ async def open_endpoint(cfg: Link, role: str, base: Path, clock: Clock,
         if sessions:  # a frame before the session exists is dropped, as noise would be
             sessions[0].receive(source, payload, t)
 
-    radio = XBeeRadio(cfg.port, cfg.baud, clock, receive)
-    await radio.open()
-    codec.max_payload = radio.max_payload
+    def opened(radio: XBeeRadio) -> None:  # the module's NP, read at every open
+        codec.max_payload = radio.max_payload
+
+    radio = XBeeRadio(cfg.port, cfg.baud, clock, receive, on_open=opened)
     session = LinkSession(codec, radio, peer, clock, on_message,
                           heartbeat_s=cfg.heartbeat_s, deadline_s=cfg.deadline_s)  # fmt: skip
     sessions.append(session)
+    return radio, session
+
+
+async def open_endpoint(cfg: Link, role: str, base: Path, clock: Clock,
+                        on_message: Callable) -> tuple[XBeeRadio, LinkSession]:  # fmt: skip
+    """`build_endpoint` with the radio opened now (the ground console: an operator at the
+    keyboard is told at once). Raises ValueError or the radio's error with the reason."""
+    radio, session = build_endpoint(cfg, role, base, clock, on_message)
+    await radio.open()
     return radio, session

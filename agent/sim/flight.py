@@ -302,7 +302,13 @@ async def _parts(options: SimOptions, tmp: Path, params: Params, say, operator: 
             return agent.autopilot.connected and (ground is None or ground.session.link_up)
 
         if not await _until(connected, CONNECT_S):
-            raise SimError("the agent did not connect to the autopilot and the ground in time")
+            if agent_process:
+                missing = "the autopilot and the ground (no status with a flight mode)"
+            else:
+                parts = [("the autopilot", agent.autopilot.connected),
+                         ("the ground", ground is None or ground.session.link_up)]  # fmt: skip
+                missing = " and ".join(name for name, up in parts if not up)
+            raise SimError(f"the agent did not connect to {missing} in {CONNECT_S:g} s")
         await asyncio.sleep(1.0)  # trimmed flight before the first excitation
         yield SimFlight(options, tmp, clock, aircraft, channel, air, ground_module, agent, ground)
     finally:

@@ -70,8 +70,10 @@ class XBeeRadio:
     """One XBee module on a serial port."""
 
     def __init__(self, port: str, baud: int, clock: Clock,
-                 on_frame: Callable[[bytes, bytes, float], None]):  # fmt: skip
+                 on_frame: Callable[[bytes, bytes, float], None],
+                 on_open: Callable[[XBeeRadio], None] | None = None):  # fmt: skip
         self.port, self.baud, self._clock, self._on_frame = port, baud, clock, on_frame
+        self._on_open = on_open
         self._device = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="xbee-open")
@@ -101,6 +103,8 @@ class XBeeRadio:
             ) from exc
         device.add_packet_received_callback(self._packet)
         self._device = device
+        if self._on_open is not None:
+            self._on_open(self)
 
     def _close_late(self, opening: asyncio.Future) -> None:
         if opening.cancelled() or opening.exception() is not None:
@@ -141,31 +145,38 @@ class XBeeRadio:
             return False
 
     async def watch(self) -> None:
-        """Reopen the module whenever its port is lost, with backoff, until cancelled; each
-        loss and each reopen is counted and logged. Frames waiting for a status on the lost
-        port time out as unconfirmed (the session retransmits)."""
+        """Open the module if it is not open yet, then reopen it whenever its port is lost,
+        with backoff, until cancelled. Each failed open, loss and reopen is counted and
+        logged; frames waiting for a status on the lost port time out as unconfirmed (the
+        session retransmits). An agent starts flying with its radio closed this way: a module
+        that does not answer at power-up costs the link, never the recording."""
         delay = WATCH_S
         while True:
-            await asyncio.sleep(WATCH_S)
-            if self.healthy():
-                continue
-            self.counters["port_lost"] += 1
-            log.warning("%s: the XBee's port was lost; reopening", self.port)
-            old, self._device = self._device, None
-            if old is not None:
-                with contextlib.suppress(Exception):
-                    await self._loop.run_in_executor(self._executor, old.close)
+            if self._device is not None:
+                await asyncio.sleep(WATCH_S)
+                if self.healthy():
+                    continue
+                self.counters["port_lost"] += 1
+                log.warning("%s: the XBee's port was lost; reopening", self.port)
+                old, self._device = self._device, None
+                if old is not None:
+                    with contextlib.suppress(Exception):
+                        await self._loop.run_in_executor(self._executor, old.close)
+            reopening = self.counters["port_lost"] > 0
             while self._device is None:
                 try:
                     await self.open()
                 except RadioError as exc:
-                    self.counters["reopen_failures"] += 1
+                    self.counters["reopen_failures" if reopening else "open_failures"] += 1
                     log.warning("%s; retrying in %.0f s", exc, delay)
                     await asyncio.sleep(delay)
                     delay = min(2 * delay, REOPEN_MAX_S)
             delay = WATCH_S
-            self.counters["reopened"] += 1
-            log.warning("%s: the XBee is open again", self.port)
+            if reopening:
+                self.counters["reopened"] += 1
+                log.warning("%s: the XBee is open again", self.port)
+            else:
+                log.info("%s: the XBee is open", self.port)
 
     async def rssi(self) -> int | None:
         """Signal strength of the last frame received (DB, dBm); None if it cannot be read."""

@@ -15,7 +15,7 @@ import pytest
 
 from agent.excitation.plan import preset
 from agent.link import messages
-from agent.sim.radio import RfChannel
+from agent.sim.radio import EmulatedXBee, RfChannel
 from tests.link.pair import link_pair, wait_for
 
 pytestmark = pytest.mark.usefixtures("no_leaked_tasks")
@@ -170,3 +170,65 @@ async def test_a_restarted_receiver_takes_the_senders_next_message(tmp_path):
     # "one" again only if its acknowledgement had not reached the ground before the restart.
     assert [m.text for m in inbox] in (["two", "three"], ["one", "two", "three"])
     assert session.counters["peer_epochs"] == 1
+
+
+async def test_an_agent_whose_radio_does_not_answer_at_start_records_and_links_later(tmp_path):
+    """Bad input tried: the aircraft's XBee unplugged when the agent starts (it used to stop
+    the agent: `sysid agent` exited when the module did not answer in 10 s, recording nothing).
+    The agent flies without a link, counts and logs each failed open, and links up once the
+    module is plugged in."""
+    from agent.clock import LoopClock
+    from agent.config import Autopilot, Config, Link, Recorder, Sensors
+    from agent.link.codec import GROUND
+    from agent.link.endpoint import open_endpoint
+    from agent.runtime import Agent
+    from tests.link.pair import AIR_ADDR, GROUND_ADDR, KEY
+
+    clock, channel = LoopClock(), RfChannel()
+    air = EmulatedXBee("air", AIR_ADDR, tmp_path, channel, clock)
+    ground_module = EmulatedXBee("ground", GROUND_ADDR, tmp_path, channel, clock)
+    air.join(ground_module)
+    ground_module.join(air)
+    modules = [asyncio.create_task(m.run(), name=f"xbee-{m.name}") for m in (air, ground_module)]
+    await asyncio.sleep(0.05)
+    air.unplug()
+    (tmp_path / "link.key").write_text(KEY.hex())
+    off = {"enabled": False}
+    config = Config(
+        recorder=Recorder(log_dir=str(tmp_path / "logs"), capacity_s=60.0),
+        sensors=Sensors(vn200=off, airdata=off, surfaces=off),
+        autopilot=Autopilot(url="udpout://127.0.0.1:9", connect_timeout_s=0.5),
+        link=Link(port=str(air.path), peer=GROUND_ADDR.hex(), key_file="link.key",
+                  counter_file="air.counter", seen_file="air.seen"),
+    )  # fmt: skip
+    agent = Agent(config, base=tmp_path, clock=clock)
+    running = asyncio.create_task(agent.run(), name="agent")
+    inbox: list = []
+    ground_link = Link(port=str(ground_module.path), peer=AIR_ADDR.hex(), key_file="link.key",
+                       counter_file="ground.counter", seen_file="ground.seen")  # fmt: skip
+    radio, session = await open_endpoint(ground_link, GROUND, tmp_path, clock,
+                                         lambda m, _seq: inbox.append(m))  # fmt: skip
+    ground = [asyncio.create_task(session.run(), name="ground-session")]
+    try:
+        assert await wait_for(lambda: agent.radio is not None, 10)
+        assert await wait_for(lambda: agent.radio.counters["open_failures"] >= 2, 20)
+        frames = agent.recorder.ring.count
+        await asyncio.sleep(0.5)
+        assert not running.done()  # the agent flies on
+        assert agent.recorder.ring.count > frames  # and records
+        assert not session.link_up
+        air.plug()
+        assert await wait_for(lambda: session.link_up, 30)  # the agent's frames arrive
+        assert agent.session.link_up  # and the ground's reach the agent
+        assert agent.radio.counters["reopened"] == 0  # a first open, not a reopen
+    finally:
+        running.cancel()
+        for task in ground:
+            task.cancel()
+        await asyncio.gather(running, *ground, return_exceptions=True)
+        await radio.close()
+        for task in modules:
+            task.cancel()
+        await asyncio.gather(*modules, return_exceptions=True)
+    execution = next((tmp_path / "logs").glob("*_exec_*")).read_text()
+    assert "cannot open the XBee" in execution or "did not answer" in execution
