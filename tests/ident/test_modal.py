@@ -145,3 +145,17 @@ def test_a_nearly_real_pair_is_not_the_dutch_roll():
     dutch = _mode(-0.65 + 2.2j, [1, 0.5, 0.9, 0.2], msv=30.0)
     named = name_modes([split_roll, dutch], roles)
     assert [m.name for m in named] == [None, "Dutch roll"]
+
+
+def test_a_lightly_damped_pair_is_preferred_for_the_dutch_roll():
+    # Seen in the simulator: the roll pole split into a pair at ζ = 0.92 that carried more of
+    # the response than the real Dutch roll (ζ = 0.29), and took its name.
+    roles = ("beta", "p", "r", "phi")
+    split_roll = _mode(-13.4 + 5.8j, [0.05, 1, 0.1, 0.3], msv=80.0)
+    dutch = _mode(-0.65 + 2.2j, [1, 0.5, 0.9, 0.2], msv=30.0)
+    assert [m.name for m in name_modes([split_roll, dutch], roles)] == [None, "Dutch roll"]
+    # A heavily damped Dutch roll (the thesis's A.2 model: ζ = 0.76) is still one, and with no
+    # lightly damped pair at all the most energetic pair below ζ = 0.95 keeps the name.
+    heavy = _mode(-3.69 + 3.18j, [1, 0.5, 0.9, 0.2], msv=30.0)
+    assert [m.name for m in name_modes([split_roll, heavy], roles)] == [None, "Dutch roll"]
+    assert name_modes([split_roll], roles)[0].name == "Dutch roll"
