@@ -62,7 +62,7 @@ STATUS_S = 1.0
 LAG_PERIOD_S = 0.01
 LAG_WARN_S = 0.1
 GC_WARN_S = 0.02
-SWITCH_INTERVAL_S = 0.001
+SWITCH_INTERVAL_S = 0.00025
 # Lag samples kept (10 min at 100 Hz).
 LAG_SAMPLES = 60_000
 # The health record in the execution log: this often (s).
@@ -185,9 +185,12 @@ class Agent:
             loop = asyncio.get_running_loop()
             loop.set_debug(True)
             loop.slow_callback_duration = float(slow_ms) / 1000
-        # Threads hand the GIL over every 1 ms instead of 5: with the log writer formatting an
-        # excitation log, every numpy call on the loop thread used to wait up to 5 ms to get
-        # the GIL back (a convoy that stalled the loop for 50 ms and more).
+        # Threads hand the GIL over every 0.25 ms instead of 5: a thread that wants the GIL
+        # waits up to this long for the holder to let go, so with the log writer formatting an
+        # excitation log (just as the worker starts identifying) the loop thread waited up to
+        # 5 ms at every wake-up (a convoy that stalled the loop for 50 ms and more). At 1 ms the
+        # p99 lag while identifying was 2.00–2.10 ms in four runs; at 0.25 ms 1.60 and 1.80 ms
+        # (benchmarks/bench_agent.py; README, *Measured resource use*).
         switch = sys.getswitchinterval()
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         handler = self.logbook.handler(self.clock)
