@@ -189,7 +189,7 @@ class Agent:
         # waits up to this long for the holder to let go, so with the log writer formatting an
         # excitation log (just as the worker starts identifying) the loop thread waited up to
         # 5 ms at every wake-up (a convoy that stalled the loop for 50 ms and more). At 1 ms the
-        # p99 lag while identifying was 2.00–2.10 ms in four runs; at 0.25 ms 1.60 and 1.80 ms
+        # p99 lag while identifying was 2.00–2.10 ms in four runs; at 0.25 ms 1.40–1.80 ms in four
         # (benchmarks/bench_agent.py; README, *Measured resource use*).
         switch = sys.getswitchinterval()
         sys.setswitchinterval(SWITCH_INTERVAL_S)
