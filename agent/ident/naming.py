@@ -8,7 +8,8 @@ Rules (thesis §4.1.3; Klein & Morelli, *Aircraft System Identification*, 2006, 
    `LIGHT_DAMPING` — or, when none is, among those below `DUTCH_ROLL_MAX_DAMPING` — is
    the Dutch roll; of the real modes the
    fastest is roll and the slowest spiral (a single real mode is roll when τ < 1 s, spiral
-   when τ > 3 s).
+   when τ > 3 s). A pair damped at `DUTCH_ROLL_MAX_DAMPING` or more is a real pole that noise
+   split in two, and counts as one real mode at its natural frequency.
 3. Longitudinal: of two or more complex pairs the fastest is the short period and the slowest
    the phugoid; a single pair is the short period when α and q dominate its shape, the phugoid
    when V and θ do. Real longitudinal modes (relaxed stability) get no standard name.
@@ -88,7 +89,12 @@ def _name_lateral(modes: Sequence[Mode], lat: list[int], names: dict[int, str]) 
     ]
     if pairs:
         names[max(pairs, key=lambda i: modes[i].msv)] = "Dutch roll"
-    reals = sorted((i for i in lat if not modes[i].pair), key=lambda i: modes[i].frequency)
+    # Seen in the simulator: the roll pole split into −11.35 ± 0.41j (ζ = 0.999) while an
+    # extra real pole at −0.65 took the roll's name.
+    reals = sorted(
+        (i for i in lat if not modes[i].pair or modes[i].damping >= DUTCH_ROLL_MAX_DAMPING),
+        key=lambda i: modes[i].frequency,
+    )
     if len(reals) >= 2:
         names[reals[-1]] = "roll"
         names[reals[0]] = "spiral"

@@ -137,14 +137,19 @@ def test_no_roles_no_names(lateral):
     assert [dataclasses.replace(m, name=None) for m in named] == list(named)
 
 
-def test_a_nearly_real_pair_is_not_the_dutch_roll():
+def test_a_nearly_real_pair_is_not_the_dutch_roll_but_a_split_real_pole():
     # Seen in the simulator: noise split the roll pole into a pair with ζ = 0.999 that carried
-    # more of the response than the real Dutch roll; the oscillatory pair must get the name.
+    # more of the response than the real Dutch roll; the oscillatory pair must get the name,
+    # and the split pair is the roll (τ = 0.08 s), not the extra real pole beside it.
     roles = ("beta", "p", "r", "phi")
     split_roll = _mode(-12.2 + 0.6j, [0.05, 1, 0.1, 0.3], msv=80.0)
     dutch = _mode(-0.65 + 2.2j, [1, 0.5, 0.9, 0.2], msv=30.0)
     named = name_modes([split_roll, dutch], roles)
-    assert [m.name for m in named] == [None, "Dutch roll"]
+    assert [m.name for m in named] == ["roll", "Dutch roll"]
+    spiral = _mode(0.04 + 0j, [0.3, 0.1, 0.5, 1], msv=30.0)
+    extra = _mode(-0.65 + 0j, [0.2, 0.5, 0.3, 1], msv=3.0)
+    named = name_modes([spiral, extra, dutch, split_roll], roles)
+    assert [m.name for m in named] == ["spiral", None, "Dutch roll", "roll"]
 
 
 def test_a_lightly_damped_pair_is_preferred_for_the_dutch_roll():
