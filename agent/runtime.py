@@ -619,6 +619,10 @@ class Agent:
             "open_files": _open_files(),
             "counters": dict(self.counters),
             "recorder": dict(self.recorder.counters),
+            # The radio's failed opens, losses and reopens, and the link's drops: a flight whose
+            # radio never answered shows it here, not only in warning lines.
+            "radio": dict(self.radio.counters) if self.radio is not None else None,
+            "link": dict(self.session.counters) if self.session is not None else None,
             "logs": {
                 "errors": self.writer.errors,
                 "dropped": self.writer.dropped,

@@ -216,6 +216,8 @@ async def test_an_agent_whose_radio_does_not_answer_at_start_records_and_links_l
         await asyncio.sleep(0.5)
         assert not running.done()  # the agent flies on
         assert agent.recorder.ring.count > frames  # and records
+        health = agent.health_record(wall_s=1.0, cpu_s=0.1)
+        assert health["radio"]["open_failures"] >= 2  # the health log says why there is no link
         assert not session.link_up
         air.plug()
         assert await wait_for(lambda: session.link_up, 30)  # the agent's frames arrive
