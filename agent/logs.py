@@ -2,7 +2,10 @@
 and the execution log — written off the event loop, crash-safe.
 
 One writer thread owns every log file. The loop hands it whole lines (or recorder rows, which
-the thread formats) through one bounded queue; a full queue drops the line and counts it.
+the thread formats) through one bounded queue; a full queue drops the line and counts it. The
+queue is a `queue.SimpleQueue`, whose put takes no Python-level lock and may interrupt another
+put on the same thread: a line logged from any thread, at any point — a library's thread, or
+a thread already inside a put — never waits for a lock, so logging can never deadlock here.
 Each line goes to the file in a single write() of complete bytes, so a process killed at any
 moment leaves only whole lines (the reader still ignores a final line with no line end, which
 only a power cut can leave). Files are fsynced at least once a second: a power cut loses at
@@ -18,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import datetime as dt
 import hashlib
+import itertools
 import json
 import logging
 import os
@@ -110,14 +114,14 @@ class LogWriter:
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
         self._first_number = next_number(self.directory)
-        self._queue: queue.Queue = queue.Queue(maxsize=queue_lines)
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._bound = queue_lines
         self._fsync_s = fsync_s
         self._fds: dict[int, int] = {}
         self._sizes: dict[int, int] = {}  # bytes of whole lines in each open file
         self._paths: dict[int, Path] = {}
         self._dirty: set[int] = set()
-        self._handles = 0
-        self._lock = threading.Lock()
+        self._handles = itertools.count(1)
         self.dropped = 0
         self.errors = 0
         self.lost_lines = 0  # lines the disk refused (full, or failing): counted, not written
@@ -130,9 +134,7 @@ class LogWriter:
         """Create a log file (never overwrites) and queue its header; returns its handle.
         The file is created on the writer thread: creating a file can wait on the journal
         while the other logs are being synced, and the caller is the event loop."""
-        with self._lock:
-            self._handles += 1
-            handle = self._handles
+        handle = next(self._handles)
         path = self.directory / name
         self._paths[handle] = path
         self._put((handle, _Create(path)), block=True)
@@ -160,11 +162,15 @@ class LogWriter:
         self._put((handle, None), block=True)
 
     def _put(self, item, *, block: bool) -> bool:
-        try:
-            self._queue.put(item, block=block, timeout=CLOSE_TIMEOUT_S if block else None)
-        except queue.Full:
+        """Hand an item to the writer thread without waiting for any lock (see the module
+        docstring). A line (`block` False) beyond the bound is dropped and counted; files to
+        create or close and excitation logs (`block` True) are always queued: they are few, and
+        dropping one would lose a whole log. The drop count is kept without a lock, so two
+        threads dropping at the same instant may count one."""
+        if not block and self._queue.qsize() >= self._bound:
             self.dropped += 1
             return False
+        self._queue.put(item)
         return True
 
     def close(self) -> None:
@@ -259,7 +265,29 @@ class JsonLinesHandler(logging.Handler):
         super().__init__()
         self._writer, self._handle, self._clock = writer, handle, clock
 
+    def handle(self, record: logging.LogRecord) -> logging.LogRecord | bool:
+        """Filter and emit without the handler's lock (logging.Handler.handle takes one): emit
+        only formats and hands one line to the writer's lock-free queue, so it is safe on any
+        thread and re-entered on one — where a lock held by the interrupted call would
+        deadlock."""
+        passed = self.filter(record)
+        if isinstance(passed, logging.LogRecord):  # Python 3.12+: a filter may replace it
+            record = passed
+        if passed:
+            self.emit(record)
+        return passed
+
     def emit(self, record: logging.LogRecord) -> None:
+        try:
+            line = self._line(record)
+        except RecursionError:
+            raise
+        except Exception:  # a bad format string in a library's call: the stdlib's way
+            self.handleError(record)
+            return
+        self._writer.write(self._handle, line)
+
+    def _line(self, record: logging.LogRecord) -> bytes:
         event = {
             "utc": dt.datetime.fromtimestamp(record.created, dt.UTC).isoformat(),
             # time.monotonic: the loop clock's base, and safe on any thread (libraries log
@@ -271,7 +299,7 @@ class JsonLinesHandler(logging.Handler):
         }
         if record.exc_info:
             event["exception"] = self.format(record).splitlines()[-1]
-        self._writer.write(self._handle, (json.dumps(event) + "\n").encode())
+        return (json.dumps(event) + "\n").encode()
 
 
 def read_log(path: Path) -> tuple[list[str], np.ndarray]:

@@ -37,6 +37,7 @@ from agent.clock import Clock, LoopClock
 from agent.config import Config
 from agent.excitation.plan import PlanRefused
 from agent.excitation.scheduler import Event, Scheduler, Window
+from agent.health import GcWatch
 from agent.ident import Settings
 from agent.ident import job as jobs
 from agent.link import messages
@@ -163,7 +164,9 @@ class Agent:
         self._status_lag = 0.0  # the worst lag since the last status
         self._logs_failing = False
         self._pool: ProcessPoolExecutor | None = None  # the worker; replaced if it dies
-        self._gc_start: float | None = None
+        # Full collections, timed by a gc callback (which must neither log nor lock: see
+        # agent/health.py) and reported by the lag monitor.
+        self.gc_watch = GcWatch(GC_WARN_S)
         self.health: list[dict] = []  # the health records written so far (latest last)
         self.drivers = self._drivers()
 
@@ -532,29 +535,15 @@ class Agent:
         self.writer.write(self._results, (json.dumps(self.results[-1]) + "\n").encode())
         self._downlink(messages.Failure(model_id=model_id, axes=axes, reason=reason[:300]))
 
-    def _on_gc(self, phase: str, info: dict) -> None:
-        """Times the collector's full (generation 2) passes: a stall's likeliest cause."""
-        if info.get("generation") != 2:
-            return
-        if phase == "start":
-            self._gc_start = time.perf_counter()
-        elif self._gc_start is not None:
-            took = time.perf_counter() - self._gc_start
-            self._gc_start = None
-            self.counters["gc_full"] += 1
-            if took > GC_WARN_S:
-                self.counters["gc_slow"] += 1
-                log.warning("full garbage collection took %.0f ms", took * 1000)
-
     async def _lag_monitor(self) -> None:
         """Event-loop lag: how late a 10 ms sleep wakes (kept for the benchmark; > 100 ms is
         logged, as it starves the 50–100 Hz command and recording deadlines)."""
         loop = asyncio.get_running_loop()
-        gc.callbacks.append(self._on_gc)
+        gc.callbacks.append(self.gc_watch)
         try:
             await self._lag_loop(loop)
         finally:
-            gc.callbacks.remove(self._on_gc)
+            gc.callbacks.remove(self.gc_watch)
 
     async def _lag_loop(self, loop) -> None:
         tracer = None
@@ -581,6 +570,15 @@ class Agent:
             if lag > LAG_WARN_S:
                 self.counters["loop_stalls"] += 1
                 log.warning("event loop stalled for %.0f ms", lag * 1000)
+            self._report_gc()
+
+    def _report_gc(self) -> None:
+        """Slow full collections, counted by the gc callback, logged here on the loop."""
+        if not self.gc_watch.pending:
+            return
+        slow, longest = self.gc_watch.take()
+        log.warning("%d full garbage collection%s slower than %.0f ms, the longest %.0f ms",
+                    slow, "s" * (slow != 1), GC_WARN_S * 1000, longest * 1000)  # fmt: skip
 
     async def _health_loop(self) -> None:
         """Every HEALTH_S: one `health {json}` line in the execution log — loop lag
@@ -618,6 +616,7 @@ class Agent:
             "tasks": len(asyncio.all_tasks()),
             "open_files": _open_files(),
             "counters": dict(self.counters),
+            "gc": {"full": self.gc_watch.full, "slow": self.gc_watch.slow},
             "recorder": dict(self.recorder.counters),
             # The radio's failed opens, losses and reopens, and the link's drops: a flight whose
             # radio never answered shows it here, not only in warning lines.

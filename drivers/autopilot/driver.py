@@ -16,7 +16,6 @@ import contextlib
 import json
 import logging
 import math
-import threading
 from collections import Counter, deque
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -63,30 +62,40 @@ class AutopilotError(RuntimeError):
 
 
 class _Seam:
-    """MAVSDK's threads → the loop: newest message per name, at most one pending drain."""
+    """MAVSDK's threads → the loop: newest message per name, at most one pending drain. The
+    callback takes no lock and logs nothing (README, *Reliability*): it stores into dicts, one
+    atomic operation each under the GIL, and the drain pops what it finds."""
 
     def __init__(self, loop: asyncio.AbstractEventLoop, deliver: Callable[[dict], None]):
         self._loop, self._deliver = loop, deliver
-        self._lock = threading.Lock()
         self._latest: dict[str, str] = {}
         self._pending = False
-        self.received: Counter[str] = Counter()
+        self._received: dict[str, int] = {}
+
+    @property
+    def received(self) -> Counter[str]:
+        """Messages received by name (a copy; two callback threads counting the same name at
+        the same instant may count one)."""
+        return Counter(self._received.copy())
 
     def callback(self, message, _user_data=None) -> None:  # on a MAVSDK thread
-        with self._lock:
-            self._latest[message.message_name] = message.fields_json
-            self.received[message.message_name] += 1
-            if self._pending:
-                return
-            self._pending = True
+        name = message.message_name
+        self._latest[name] = message.fields_json
+        self._received[name] = self._received.get(name, 0) + 1
+        if self._pending:
+            return
+        self._pending = True
         with contextlib.suppress(RuntimeError):  # a closed loop: we are shutting down
             self._loop.call_soon_threadsafe(self._drain)
 
     def _drain(self) -> None:
-        with self._lock:
-            latest, self._latest, self._pending = self._latest, {}, False
-        for text in latest.values():
-            self._deliver(json.loads(text))
+        # Cleared before popping: a message stored after this point either is popped below or
+        # schedules the next drain; a second drain scheduled by a race finds nothing to do.
+        self._pending = False
+        for name in list(self._latest):
+            text = self._latest.pop(name, None)
+            if text is not None:
+                self._deliver(json.loads(text))
 
 
 class AutopilotLink:
