@@ -64,6 +64,8 @@ LAG_PERIOD_S = 0.01
 LAG_WARN_S = 0.1
 GC_WARN_S = 0.02
 SWITCH_INTERVAL_S = 0.00025
+# At shutdown, how long an identification in the worker may go on before the worker is killed.
+WORKER_STOP_S = 2.0
 # Lag samples kept (10 min at 100 Hz).
 LAG_SAMPLES = 60_000
 # The health record in the execution log: this often (s).
@@ -234,11 +236,13 @@ class Agent:
                 os.sched_setscheduler(0, *restore)
             sys.setswitchinterval(switch)
             logging.getLogger().removeHandler(handler)
-            self._pool.shutdown(wait=True, cancel_futures=True)
-            self._store.shutdown(wait=True)
-            if self.radio is not None:
-                await self.radio.close()
-            self.writer.close()
+            try:
+                await _stop_worker(self._pool)
+                self._store.shutdown(wait=True)
+                if self.radio is not None:
+                    await self.radio.close()
+            finally:  # cancelled again while stopping: the logs are still flushed and closed
+                self.writer.close()
 
     async def _supervised(self, name: str, factory: Callable[[], Awaitable[None]]) -> None:
         delay = RESTART_S
@@ -738,6 +742,34 @@ class StallTracer(threading.Thread):
                 lines.append(f"thread {names.get(ident, ident)}: {top.name} "
                              f"({Path(top.filename).name}:{top.lineno})")  # fmt: skip
             log.warning("\n".join(lines))
+
+
+async def _stop_worker(pool: ProcessPoolExecutor) -> None:
+    """Stop the worker without waiting on it for ever: an idle worker exits at once; one still
+    identifying (or starved of CPU on a busy machine) is killed after WORKER_STOP_S — its
+    window is lost either way at shutdown, and the loop must not block on it. Then the pool's
+    manager thread, which notices the exit, is given WORKER_STOP_S to end."""
+    # Python < 3.14 has no public way to reach the processes or the manager thread.
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    manager = getattr(pool, "_executor_manager_thread", None)
+    pool.shutdown(wait=False, cancel_futures=True)
+    loop = asyncio.get_running_loop()
+
+    async def wait(done: Callable[[], bool]) -> None:
+        deadline = loop.time() + WORKER_STOP_S
+        while not done() and loop.time() < deadline:
+            await asyncio.sleep(0.05)
+
+    try:
+        await wait(lambda: not any(p.is_alive() for p in processes))
+    finally:  # the deadline, or cancelled while waiting
+        for process in processes:
+            if process.is_alive():
+                process.kill()
+                log.warning("the identification worker did not stop in time: killed")
+    await wait(lambda: not any(p.is_alive() for p in processes))
+    if manager is not None:
+        await wait(lambda: not manager.is_alive())
 
 
 def _rss_bytes() -> int:

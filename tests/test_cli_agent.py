@@ -56,7 +56,7 @@ def test_a_missing_config_is_a_clear_error(tmp_path):
 
 def test_realtime_priority_puts_only_the_loop_thread_under_sched_fifo(tmp_path):
     """[runtime] realtime_priority: the event loop's thread runs SCHED_FIFO; the threads it
-    starts run normally (SCHED_RESET_ON_FORK), the worker process at SCHED_IDLE. Root, as CI
+    starts run normally (SCHED_RESET_ON_FORK), the worker process at SCHED_BATCH. Root, as CI
     here; without the privilege the agent warns and runs normally (also checked: the warning's
     text)."""
     proc = _start_agent(tmp_path, "[runtime]\nrealtime_priority = 10\n")
@@ -85,7 +85,8 @@ def test_realtime_priority_puts_only_the_loop_thread_under_sched_fifo(tmp_path):
         others = [p for tid, p in policies.items() if tid != proc.pid]
         assert others, "no other thread to compare"
         assert all(p == os.SCHED_OTHER for p in others), policies
-        # The worker lowers itself to SCHED_IDLE: any waking agent thread preempts it.
-        assert child_policies == {"worker": os.SCHED_IDLE, "tracker": os.SCHED_OTHER}
+        # The worker lowers itself to SCHED_BATCH (never preempts a waking agent thread, yet
+        # gets its share on a busy machine, which SCHED_IDLE did not).
+        assert child_policies == {"worker": os.SCHED_BATCH, "tracker": os.SCHED_OTHER}
     else:
         assert "realtime_priority 10 not set" in out

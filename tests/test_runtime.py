@@ -9,9 +9,16 @@ agent goes on).
 
 from __future__ import annotations
 
+import asyncio
+import signal
+import time
+from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
+
 import numpy as np
 import pytest
 
+from agent import runtime
 from agent.clock import VirtualClock
 from agent.config import Config, Recorder
 from agent.excitation.plan import Doublet, Plan, Segment, preset
@@ -195,3 +202,25 @@ def test_lag_percentiles_pool_the_health_records_histograms():
     assert lag_percentile([hists[0]], 100) == pytest.approx(np.ceil(minutes[0].max() / 0.05) * 0.05)
     with pytest.raises(ValueError, match="no lag samples"):
         lag_percentile([{}], 99)
+
+
+def _say_then_sleep(path: str) -> None:  # runs in the worker process
+    Path(path).touch()
+    time.sleep(3600)
+
+
+async def test_stopping_a_worker_stuck_in_a_job_kills_it_instead_of_waiting_for_ever(tmp_path):
+    # Bad input: the worker busy with a job that would take an hour (as a worker starved of
+    # CPU, or one deep in a long identification, is) when the agent shuts down.
+    loop = asyncio.get_running_loop()
+    pool = Agent._new_worker()  # the real worker: spawned, with its initializer
+    started = tmp_path / "started"
+    stuck = loop.run_in_executor(pool, _say_then_sleep, str(started))
+    while not started.exists():  # the worker has warmed up and is in the job
+        await asyncio.sleep(0.05)
+    (process,) = pool._processes.values()
+    await runtime._stop_worker(pool)
+    assert not process.is_alive()
+    assert process.exitcode == -signal.SIGKILL  # killed, not finished
+    with pytest.raises(BrokenProcessPool):  # the job is reported lost, not left pending
+        await stuck

@@ -127,10 +127,12 @@ def cross_tic(result: dict, preprocessing: dict, record_dt: float,
 
 
 # The worker's scheduling below the agent's: on a small flight computer the identification takes
-# whatever CPU the agent (event loop, drivers, MAVSDK and radio threads) leaves over. SCHED_IDLE
-# (Linux; no privilege needed to lower oneself) lets any waking agent thread preempt it at once,
-# where a nice +10 worker could still hold a core for a scheduler slice while a thread the loop
-# waits on (the GIL's holder, MAVSDK's) queues behind it. Elsewhere: nice +10.
+# the CPU the agent (event loop, drivers, MAVSDK and radio threads) leaves over. SCHED_BATCH at
+# nice +10 (Linux): the scheduler treats it as CPU-bound, so it never preempts a waking agent
+# thread, and its nice weight gives it about a tenth of a busy core's time. Not SCHED_IDLE: a
+# SCHED_IDLE process runs only when nothing else wants the CPU, so on a machine kept busy by
+# other work (two CPU hogs here) the worker never finished even its warm-up, identification
+# stopped, and the agent's shutdown waited for it for ever. Elsewhere: nice +10 alone.
 WORKER_NICE = 10
 
 
@@ -154,7 +156,7 @@ def start_worker() -> None:
     with contextlib.suppress(OSError, AttributeError):  # not permitted, or not POSIX: go on
         os.nice(WORKER_NICE)
     with contextlib.suppress(OSError, AttributeError):  # not Linux: nice +10 alone
-        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+        os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
     warm()
 
 
