@@ -747,12 +747,11 @@ def cmd_sim(args: argparse.Namespace) -> int:
         return EXIT_OK
     try:
         report = asyncio.run(fly(options))
-    except PlantError as exc:
+    except (PlantError, SimError) as exc:
         _error("sim", str(exc))
-        return EXIT_BAD_INPUT
-    except SimError as exc:
-        _error("sim", str(exc))
-        return EXIT_FAILED
+        if args.json:  # stdout holds exactly one JSON object, on this path too
+            print(json.dumps({"error": str(exc)}))
+        return EXIT_BAD_INPUT if isinstance(exc, PlantError) else EXIT_FAILED
     print(json.dumps(report) if args.json else format_report(report))
     return EXIT_OK if not report["failure"] else EXIT_FAILED
 

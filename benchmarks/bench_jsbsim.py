@@ -4,16 +4,17 @@
     .venv/bin/python benchmarks/bench_jsbsim.py --seeds 3    # a quick look
 
 Each seed flies the Cub in JSBSim (trimmed at 60 kt, 1000 ft) for 1 s of trim and 60 s of
-excitation at 50 Hz: the thesis's Schroeder multisines on elevator (k = 7, 14, 21, 28),
-aileron (3, 6, 9, 12) and rudder (5, 10, 15, 20) of a 20 s period, ±0.1 throttle steps every
-10 s, light Dryden turbulence (seeded), and white sensor noise at the thesis's instrument
-levels. Inputs are JSBSim's normalised command deltas; outputs Vt, α, q, θ, β, p, r, φ.
-Truth: JSBSim's own linearisation at the trim point (`FGLinearization`), heading, position
-and altitude left out. Named modes: short period (two real poles on the Cub), Dutch roll,
-roll, phugoid. Printed per method: the eigenvalue error of each (median and worst over
-seeds), the number of seeds with every named mode within 10 %, the worst training TIC, and
-the median time per identification. Peers get the order of the truth without the heading,
-position and altitude states (9).
+excitation at 50 Hz: the thesis's Schroeder multisines on elevator (k = 7, 14, 21, 28), aileron
+(3, 6, 9, 12) and rudder (5, 10, 15, 20) of a 20 s period, ±0.1 throttle steps every 10 s,
+light Dryden turbulence (seeded), and white sensor noise at the thesis's instrument levels.
+Inputs are JSBSim's normalised command deltas; outputs Vt, α, q, θ, β, p, r, φ. Truth: JSBSim's
+validated linear model at the trim point (`agent.sim.truth`: the best linear approximation from
+paired ± multisines, checked against JSBSim's own doublet and step responses; `FGLinearization`
+fails that check). Named modes: short period (two real poles on the Cub), Dutch roll, roll,
+phugoid. Printed per method: the eigenvalue error of each (median and worst over seeds), the
+number of seeds with every named mode within 10 %, the worst training TIC, and the median time
+per identification. Peers get the order of the truth without the heading, position and altitude
+states (9).
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ from agent.ident.convert import StateSpace
 from agent.ident.errors import DataError, IdentificationFailed
 from agent.ident.fit import fit
 from agent.sim.plant import INPUTS, Plant
+from agent.sim.truth import linear_truth
 
 DT = 0.02
 DEG = np.pi / 180
@@ -66,7 +68,7 @@ def excitation(duration: float) -> np.ndarray:
 
 def flight(seed: int, duration: float = 60.0) -> tuple[Experiment, np.ndarray]:
     """One record (trim removed) and the true named-mode eigenvalues."""
-    plant = Plant(turbulence=1.0, seed=seed)
+    plant = Plant(turbulence=1.0, seed=seed, linearise=False)
     u = np.vstack([np.zeros((round(1.0 / DT), len(INPUTS))), excitation(duration)])
     y = plant.fly(u, DT)
     y = y + np.random.default_rng(seed).normal(size=y.shape) * NOISE
@@ -75,12 +77,10 @@ def flight(seed: int, duration: float = 60.0) -> tuple[Experiment, np.ndarray]:
 
 
 def true_modes(plant: Plant) -> np.ndarray:
-    """Dutch roll, phugoid, roll, short period (two real) from JSBSim's linearisation."""
-    lam = plant.linearisation.eigenvalues(exclude=("Psi", "Latitude", "Longitude", "Alt"))
-    pairs = sorted([s for s in lam if s.imag > 1e-6], key=abs)
-    reals = sorted([s.real for s in lam if abs(s.imag) <= 1e-6 and s.real < -1.0])
-    # Fast real poles: roll (most negative, p-dominated on the Cub) and the short period.
-    return np.array([pairs[-1], pairs[0], reals[0], reals[1], reals[2]])
+    """Dutch roll, phugoid, roll, short period (two real on the Cub) from the validated truth."""
+    modes = linear_truth("J3Cub", 60.0).modes()
+    return np.array([*modes["Dutch roll"], *modes["phugoid"], *modes["roll"],
+                     *modes["short period"]])  # fmt: skip
 
 
 def mode_errors(found: np.ndarray, truth: np.ndarray) -> np.ndarray:

@@ -97,7 +97,7 @@ class SimAircraft:
         """Sensor samples per autopilot tick."""
         self.plant = Plant(options.aircraft, airspeed_kts=options.speed_kts,
                            altitude_ft=options.altitude_ft, turbulence=options.turbulence,
-                           seed=options.seed,
+                           seed=options.seed, linearise=False,
                            integration_hz=max(200.0, TICK_HZ * self.per_tick))  # fmt: skip
         sticks = {ch: normalised_to_pwm(ch, self.plant.trim[name]) for ch, name in OUTPUTS.items()}
         self.pilot = ScriptedPilot(sticks, options.params.switch_channel)

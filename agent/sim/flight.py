@@ -41,6 +41,7 @@ from agent.runtime import Agent
 from agent.sim.aircraft import AircraftOptions, SimAircraft
 from agent.sim.ardupilot import Params
 from agent.sim.radio import EmulatedXBee, RfChannel, module_pair
+from agent.sim.truth import linear_truth
 from drivers.xbee.driver import RadioError, XBeeRadio
 
 log = logging.getLogger(__name__)
@@ -449,16 +450,21 @@ def _operator_accepts(result: messages.Result, first: bool) -> bool:
     return first and all("UNSTABLE" not in r and "≥" not in r for r in basics)
 
 
-def _truth(aircraft: SimAircraft, axes: str) -> dict[str, complex]:
-    lam = aircraft.plant.linearisation.eigenvalues(exclude=("Psi", "Latitude", "Longitude", "Alt"))
-    pairs = sorted((s for s in lam if s.imag > 1e-6), key=abs)
-    reals = sorted((s.real for s in lam if abs(s.imag) <= 1e-6), key=abs)
-    truth = {"Dutch roll": pairs[-1], "spiral": complex(reals[0]) if reals else None}
-    fast = sorted(r for r in reals if r < -1.0)
-    truth["roll"] = complex(fast[0]) if fast else None
+def _truth(aircraft: SimAircraft, axes: str) -> dict[str, complex | list[complex] | None]:
+    """The named modes of JSBSim's validated linear model at this trim (agent.sim.truth)."""
+    options = aircraft.options
+    truth_model = linear_truth(options.aircraft, options.speed_kts, altitude_ft=options.altitude_ft)
+    modes = truth_model.modes()
+
+    def one(name: str) -> complex | None:
+        return modes[name][0] if modes.get(name) else None
+
+    truth: dict[str, complex | list[complex] | None] = {
+        "Dutch roll": one("Dutch roll"), "roll": one("roll"), "spiral": one("spiral"),
+    }  # fmt: skip
     if axes != "lateral":
-        truth["phugoid"] = pairs[0]
-        truth["short period"] = [complex(r) for r in fast[1:]]
+        truth["phugoid"] = one("phugoid")
+        truth["short period"] = list(modes.get("short period", []))
     return truth
 
 

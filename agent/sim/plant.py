@@ -16,6 +16,9 @@ the 20 ft wind that goes with it (15 kt, MIL-HDBK-1797), seeded through
 
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -57,6 +60,21 @@ LINEAR_INPUTS = {"throttle": "ThtlCmd", "elevator": "DeCmd", "aileron": "DaCmd",
 LIGHT_TURBULENCE_WIND_FPS = 15 * KT / FT
 
 
+@contextlib.contextmanager
+def _stdout_to_stderr():
+    """Point file descriptor 1 at 2 for a while: JSBSim's C++ prints its banner with printf,
+    below Python's sys.stdout, so only the descriptor itself can move it."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        os.dup2(2, 1)
+        yield
+    finally:
+        sys.stdout.flush()
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
 class PlantError(RuntimeError):
     """JSBSim could not load, trim or linearise the aircraft."""
 
@@ -91,13 +109,15 @@ class Plant:
         turbulence: float = 0.0,
         seed: int = 0,
         integration_hz: float = 200.0,
+        linearise: bool = True,
     ):
         import jsbsim  # imported here: the identification core does not need it
 
-        self.fdm = jsbsim.FGFDMExec(None)
-        self.fdm.set_debug_level(0)
-        if not self.fdm.load_model(aircraft):
-            raise PlantError(f"JSBSim has no aircraft {aircraft!r}")
+        with _stdout_to_stderr():  # JSBSim's banner: stdout is for `--json`'s one object
+            self.fdm = jsbsim.FGFDMExec(None)
+            self.fdm.set_debug_level(0)
+            if not self.fdm.load_model(aircraft):
+                raise PlantError(f"JSBSim has no aircraft {aircraft!r}")
         self.fdm.set_dt(1.0 / integration_hz)
         self.fdm["simulation/randomseed"] = seed
         self.fdm["atmosphere/randomseed"] = seed
@@ -116,7 +136,9 @@ class Plant:
                 f"JSBSim could not trim {aircraft} at {airspeed_kts} kt: {exc}"
             ) from exc
         self.trim = {name: float(self.fdm[prop]) for name, prop in COMMAND_PROPERTY.items()}
-        self.linearisation = self._linearise()
+        # FGLinearization at the trim (slow on some aircraft: ten seconds for the PA-28);
+        # agent.sim.truth explains why it is not the truth identified models are judged by.
+        self.linearisation = self._linearise() if linearise else None
         if turbulence > 0:
             self.fdm["atmosphere/turb-type"] = 3
             self.fdm["atmosphere/turbulence/milspec/severity"] = turbulence

@@ -76,3 +76,15 @@ def test_bad_requests_are_refused_with_the_reason(cub):
         Plant("NoSuchPlane")
     with pytest.raises(PlantError, match="whole number"):
         cub.fly(np.zeros((2, len(INPUTS))), 0.0123)
+
+
+def test_jsbsims_banner_stays_off_stdout():
+    # `--json` promises one JSON object on stdout; JSBSim's C++ prints a banner on creation.
+    import subprocess
+    import sys
+
+    code = "from agent.sim.plant import Plant; Plant(); print('{\"ok\": 1}')"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, check=True)  # fmt: skip
+    assert done.stdout == '{"ok": 1}\n'
+    assert "JSBSim" in done.stderr  # moved, not lost

@@ -1,7 +1,8 @@
 """A whole open-loop excitation through the real parts: the scheduler plays the lateral preset
 through MAVSDK → the emulated ArduPlane → JSBSim; the response comes back as VN-200, µADC and
 surface-box bytes on pseudo-terminals through the real drivers into the recorder; the
-identification core finds the Dutch roll, compared with JSBSim's own linearisation."""
+identification core finds the Dutch roll, compared with JSBSim's validated linear model
+(agent.sim.truth)."""
 
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from agent.excitation.plan import preset
 from agent.excitation.scheduler import Scheduler, Window
 from agent.ident import Experiment, Settings, identify
 from agent.recorder import Recorder
+from agent.sim.truth import linear_truth
 from drivers.airdata.driver import make_driver as airdata_driver
 from drivers.surfaces.driver import make_driver as surfaces_driver
 from drivers.vectornav.driver import make_driver as vn200_driver
@@ -33,10 +35,11 @@ pytestmark = pytest.mark.usefixtures("no_leaked_tasks")
 OUTPUTS = ("beta", "p", "r", "phi")
 
 
-def _dutch_roll(plant) -> complex:
-    lam = plant.linearisation.eigenvalues(exclude=("Psi", "Latitude", "Longitude", "Alt"))
-    pairs = sorted((s for s in lam if s.imag > 1e-6), key=abs)
-    return pairs[-1]  # the faster oscillatory pair; the slower is the phugoid
+def _dutch_roll(options) -> complex:
+    """JSBSim's Dutch roll at this trim, from the validated truth (agent.sim.truth)."""
+    truth = linear_truth(options.aircraft, options.speed_kts, altitude_ft=options.altitude_ft)
+    (dutch,) = truth.modes()["Dutch roll"]
+    return dutch
 
 
 async def test_lateral_preset_through_the_whole_chain_finds_the_dutch_roll(tmp_path):
@@ -71,7 +74,7 @@ async def test_lateral_preset_through_the_whole_chain_finds_the_dutch_roll(tmp_p
         await asyncio.sleep(0.2)
         window = windows[0]
         frames = recorder.window(window.start - 0.5, window.end)
-        truth = _dutch_roll(f.aircraft.plant)
+        truth = _dutch_roll(f.aircraft.options)
     assert window.outcome == "finished"
     u = np.column_stack([frames.values["aileron"], frames.values["rudder"]])
     y = np.column_stack([frames.values[c] for c in OUTPUTS])

@@ -1,0 +1,278 @@
+"""The truth an identified model is judged against: JSBSim's own linear response at the trim
+point, measured from the nonlinear simulation and checked against it.
+
+Why not JSBSim's `FGLinearization`: on the benchmark aircraft it does not reproduce JSBSim's
+own small-amplitude response. Its engine-speed state is broken (the column of `Rpm0` is zero,
+so nothing depends on it, and its row depends on latitude and longitude), so the throttle
+moves the airspeed at once instead of through the propeller's spin-up of about a second; on
+the Cessna 182 the `Rpm0` row even gives an unstable pole at +1.12 1/s, and a doublet on any
+surface diverges from JSBSim's response (TIC 1.0 on every output). `benchmarks/truth_check.py`
+prints both checks side by side.
+
+What is done instead (the best linear approximation of the nonlinear model; Pintelon &
+Schoukens, *System Identification: A Frequency Domain Approach*, 2nd ed., 2012, ch. 3):
+
+1. From the trim, JSBSim flies a small multisine on all four controls at once, twice: once
+   as is and once negated. Half the difference of the two responses is their odd part, so
+   every even-order nonlinearity cancels exactly. Sideslip drag (∝ β²) is one example, and so
+   is the speed lost in a bank. These would otherwise show up as a linear coupling that is
+   not there.
+2. Each control's multisine holds its own harmonics of 1/300 s, log-spaced from 0.01 to 2 Hz
+   and disjoint between the controls, so their effects can be told apart. The phugoid and the
+   spiral are in the band.
+3. The states are the eight measured outputs plus the unmeasured engine speed, manifold
+   pressure and altitude (density). The inputs are the surfaces' positions, as the potentiometer
+   box measures them, and the throttle's. Actuator dynamics therefore stay outside the truth,
+   as they stay outside what is identified.
+4. A least-squares regression of the state derivatives (central differences at the 200 Hz
+   integration rate) on the states and inputs gives ẋ = A x + B u.
+
+The check (`check`): the odd part of a doublet on each surface and of a throttle step, each
+flown as a ± pair, against the truth driven by the same recorded positions; every output that
+the test moves is held to TIC ≤ 0.05. An output counts for a test when that test moves it at
+least a tenth as much as the test that moves it most. Aileron → airspeed, for instance, is
+0.35 % of throttle → airspeed on the Cessna: a linear coupling below any sensor's noise.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, replace
+
+import numpy as np
+import scipy.linalg
+
+from agent.sim.plant import FT, INPUTS, Plant
+
+STATES = ("Vt", "alpha", "q", "theta", "beta", "p", "r", "phi", "rpm", "alt", "map")
+OUTPUTS = STATES[:8]
+LONGITUDINAL, LATERAL = ("Vt", "alpha", "q", "theta"), ("beta", "p", "r", "phi")
+# The multisine: its period (s), its band (Hz), harmonics per control, and the amplitude of each
+# control's command (normalised; about 0.5–1° of surface and 3 % of throttle).
+PERIOD_S = 300.0
+BAND_HZ = (0.01, 2.0)
+HARMONICS = 60
+AMPLITUDE = 0.03
+# Random-phase realisations of the multisine: the odd nonlinear distortions that remain (third
+# order and up) differ between realisations and average out of the regression.
+REALISATIONS = 4
+# The check: each test's length (s), when its input starts (s), the doublet's half-period (s),
+# the bound on TIC, and the share of an output's largest response below which a test does not
+# count it.
+CHECK_S, CHECK_START_S, DOUBLET_S = 20.0, 1.0, 1.0
+CHECK_TIC = 0.05
+COUNTED_SHARE = 0.1
+
+_PROPERTIES = (
+    ("velocities/vt-fps", FT), ("aero/alpha-rad", 1.0), ("velocities/q-rad_sec", 1.0),
+    ("attitude/theta-rad", 1.0), ("aero/beta-rad", 1.0), ("velocities/p-rad_sec", 1.0),
+    ("velocities/r-rad_sec", 1.0), ("attitude/phi-rad", 1.0),
+    ("propulsion/engine/engine-rpm", 1.0), ("position/h-sl-meters", 1.0),
+    ("propulsion/engine/map-inhg", 1.0),
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Truth:
+    """ẋ = A x + B u about the trim: x in STATES (SI, rpm, inHg), u in INPUTS as positions
+    (throttle 0–1, surfaces in degrees)."""
+
+    A: np.ndarray
+    B: np.ndarray
+    trim_state: np.ndarray
+    trim_input: np.ndarray
+    aircraft: str
+    airspeed_kts: float
+
+    def modes(self) -> dict[str, list[complex]]:
+        """The aircraft's modes by name (one eigenvalue per pair, upper half-plane)."""
+        return name_modes(self.A, self.trim_state)
+
+    def eigenvalues(self) -> np.ndarray:
+        return np.linalg.eigvals(self.A)
+
+    def simulate(self, u: np.ndarray, dt: float) -> np.ndarray:
+        """States (deviations from trim) driven by input deviations held over each step."""
+        n, r = self.A.shape[0], self.B.shape[1]
+        block = np.zeros((n + r, n + r))
+        block[:n, :n], block[:n, n:] = self.A, self.B
+        phi = scipy.linalg.expm(block * dt)
+        Ad, Bd = phi[:n, :n], phi[:n, n:]
+        x = np.zeros(n)
+        out = np.empty((len(u), n))
+        for k, row in enumerate(u):
+            out[k] = x
+            x = Ad @ x + Bd @ row
+        return out
+
+
+def _states(plant: Plant) -> np.ndarray:
+    f = plant.fdm
+    return np.array([float(f[name]) * scale for name, scale in _PROPERTIES])
+
+
+def _positions(plant: Plant) -> np.ndarray:
+    s = plant.state()
+    return np.array([s[name] for name in INPUTS])
+
+
+def _fly(plant: Plant, commands: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Commands (normalised deltas, one row per integration step) in; states and positions
+    after each step out."""
+    x = np.empty((len(commands), len(STATES)))
+    u = np.empty((len(commands), len(INPUTS)))
+    for k, row in enumerate(commands):
+        plant.command(dict(zip(INPUTS, row, strict=True)))
+        plant.step()
+        x[k], u[k] = _states(plant), _positions(plant)
+    return x, u
+
+
+def odd_response(aircraft: str, airspeed_kts: float, commands: np.ndarray, **plant):
+    """The odd part of JSBSim's response to `commands` from the trim: (states, positions) as
+    deviations, and the trim (states, positions)."""
+    up = Plant(aircraft, airspeed_kts=airspeed_kts, linearise=False, **plant)
+    trim = _states(up), _positions(up)
+    xp, up_u = _fly(up, commands)
+    down = Plant(aircraft, airspeed_kts=airspeed_kts, linearise=False, **plant)
+    xm, down_u = _fly(down, -commands)
+    return (xp - xm) / 2, (up_u - down_u) / 2, trim
+
+
+def excitation(rate_hz: float, realisation: int = 0, seconds: float = PERIOD_S,
+               amplitude: float = AMPLITUDE) -> np.ndarray:  # fmt: skip
+    """The fitting multisine: each control its own log-spaced harmonics in BAND_HZ (disjoint
+    between controls), random phases (seeded: the truth is deterministic), faded in over 2 s."""
+    rng = np.random.default_rng(realisation)
+    n = round(seconds * rate_hz)
+    t = np.arange(n) / rate_hz
+    u = np.zeros((n, len(INPUTS)))
+    wanted = np.round(np.geomspace(*BAND_HZ, HARMONICS) * seconds)
+    for j in range(len(INPUTS)):
+        k = np.unique(len(INPUTS) * (wanted // len(INPUTS)) + j)
+        k = k[k > 0]
+        phases = rng.uniform(0, 2 * np.pi, k.size)
+        s = np.sin(2 * np.pi * np.outer(t, k / seconds) + phases).sum(axis=1)
+        u[:, j] = amplitude * s / np.abs(s).max()
+    return u * np.minimum(t / 2.0, 1.0)[:, None]
+
+
+@functools.lru_cache(maxsize=8)
+def linear_truth(aircraft: str, airspeed_kts: float, **plant) -> Truth:
+    """JSBSim's best linear approximation at the trim (module docstring); about 10 s, so kept
+    for the process (JSBSim is deterministic: the same trim gives the same truth)."""
+    rate = float(plant.get("integration_hz", 200.0))
+    derivatives, rows = [], []
+    for m in range(REALISATIONS):
+        x, u, (x0, u0) = odd_response(
+            aircraft, airspeed_kts, excitation(rate, m, amplitude=AMPLITUDE), **plant
+        )
+        derivatives.append((x[2:] - x[:-2]) * rate / 2)
+        rows.append(np.hstack([x[1:-1], u[1:-1], np.ones((len(x) - 2, 1))]))
+    derivative, regressors = np.vstack(derivatives), np.vstack(rows)
+    scale = regressors.std(axis=0)
+    scale[scale == 0] = 1.0
+    theta, *_ = np.linalg.lstsq(regressors / scale, derivative, rcond=None)
+    theta = theta / scale[:, None]
+    n = len(STATES)
+    return Truth(theta[:n].T, theta[n : n + len(INPUTS)].T, x0, u0, aircraft, airspeed_kts)
+
+
+@dataclass(frozen=True)
+class Check:
+    """One test of the truth against JSBSim: TIC per output, and which outputs counted."""
+
+    test: str
+    tic: dict[str, float]
+    rms: dict[str, float]
+    counted: tuple[str, ...] = ()
+
+    @property
+    def worst(self) -> float:
+        return max((self.tic[o] for o in self.counted), default=0.0)
+
+
+def check(truth: Truth, amplitude: float = AMPLITUDE, **plant) -> list[Check]:
+    """A doublet on each surface and a throttle step, each as a ± pair (odd part), against the
+    truth driven by the same positions; see the module docstring for which outputs count."""
+    rate = float(plant.get("integration_hz", 200.0))
+    t = np.arange(round(CHECK_S * rate)) / rate
+    checks = []
+    for j, name in enumerate(INPUTS):
+        commands = np.zeros((len(t), len(INPUTS)))
+        if name == "throttle":
+            commands[t >= CHECK_START_S, j] = amplitude
+        else:
+            first = (t >= CHECK_START_S) & (t < CHECK_START_S + DOUBLET_S)
+            second = (t >= CHECK_START_S + DOUBLET_S) & (t < CHECK_START_S + 2 * DOUBLET_S)
+            commands[first, j], commands[second, j] = amplitude, -amplitude
+        x, u, _ = odd_response(truth.aircraft, truth.airspeed_kts, commands, **plant)
+        # The truth is driven by the positions: each sample holds over the step it starts.
+        predicted = truth.simulate(np.vstack([np.zeros(len(INPUTS)), u[:-1]]), 1.0 / rate)
+        tic = _theil(x, predicted)
+        rms = np.sqrt(np.mean(x**2, axis=0))
+        checks.append(Check(name, {o: float(tic[k]) for k, o in enumerate(OUTPUTS)},
+                            {o: float(rms[k]) for k, o in enumerate(OUTPUTS)}))  # fmt: skip
+    largest = {o: max(c.rms[o] for c in checks) for o in OUTPUTS}
+    return [
+        replace(c, counted=tuple(o for o in OUTPUTS if c.rms[o] >= COUNTED_SHARE * largest[o]))
+        for c in checks
+    ]
+
+
+def _theil(y: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+    num = np.sqrt(np.mean((y - predicted) ** 2, axis=0))
+    den = np.sqrt(np.mean(y**2, axis=0)) + np.sqrt(np.mean(predicted**2, axis=0))
+    return np.divide(num, den, out=np.zeros_like(num), where=den > 0)
+
+
+def name_modes(A: np.ndarray, trim_state: np.ndarray) -> dict[str, list[complex]]:
+    """Short period, phugoid, Dutch roll, roll and spiral from the eigenvectors.
+
+    Each state is scaled to a comparable size (airspeed by the trim airspeed, engine speed and
+    manifold pressure by their trim values, altitude as the climb angle |λ| h / V it makes)
+    and a mode belongs to the axis holding most of its scaled eigenvector. Modes mostly in the
+    engine speed, the manifold pressure or the altitude are the engine's and the atmosphere's,
+    not named. Longitudinal: the slowest oscillation is the phugoid; the short period is the
+    fastest other oscillation or, when it is overdamped (the J-3 Cub), the two fastest real
+    poles. Lateral: the oscillation is the Dutch roll, the fastest real pole the roll, and of
+    the others the most purely lateral the spiral (the altitude's slow mode can lean lateral
+    through the engine's torque)."""
+    index = {s: k for k, s in enumerate(STATES)}
+    v0 = trim_state[index["Vt"]]
+    scale = np.ones(len(STATES))
+    scale[index["Vt"]] = scale[index["alt"]] = 1.0 / v0
+    scale[index["rpm"]] = 1.0 / trim_state[index["rpm"]]
+    scale[index["map"]] = 1.0 / trim_state[index["map"]]
+    values, vectors = np.linalg.eig(A)
+    groups: dict[str, list[complex]] = {"long": [], "lat": []}
+    purity: dict[complex, float] = {}  # the share of its axis in each mode
+    for lam, v in zip(values, vectors.T, strict=True):
+        if lam.imag < -1e-9:
+            continue
+        w = np.abs(v) * scale
+        w[index["alt"]] *= abs(lam)  # as a climb angle: ḣ / V
+        share = {
+            "long": np.linalg.norm(w[[index[s] for s in LONGITUDINAL]]),
+            "lat": np.linalg.norm(w[[index[s] for s in LATERAL]]),
+            "other": np.linalg.norm(w[[index[s] for s in ("rpm", "alt", "map")]]),
+        }
+        axis = max(share, key=share.get)
+        if axis != "other":
+            groups[axis].append(complex(lam))
+            purity[complex(lam)] = share[axis] / sum(share.values())
+    named: dict[str, list[complex]] = {}
+    pairs = sorted((s for s in groups["long"] if s.imag > 1e-9), key=abs)
+    reals = sorted((s for s in groups["long"] if s.imag <= 1e-9), key=lambda s: -abs(s))
+    if pairs:
+        named["phugoid"] = [pairs[0]]
+    named["short period"] = [pairs[-1]] if len(pairs) > 1 else reals[:2]
+    lat_pairs = sorted((s for s in groups["lat"] if s.imag > 1e-9), key=abs)
+    lat_reals = sorted((s for s in groups["lat"] if s.imag <= 1e-9), key=lambda s: -abs(s))
+    if lat_pairs:
+        named["Dutch roll"] = [lat_pairs[-1]]
+    if lat_reals:
+        named["roll"] = [lat_reals[0]]
+    if len(lat_reals) > 1:  # the slow real pole that is most purely lateral
+        named["spiral"] = [max(lat_reals[1:], key=lambda s: purity[s])]
+    return named

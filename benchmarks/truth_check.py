@@ -1,0 +1,76 @@
+"""The truth check for each benchmark aircraft, JSBSim's `FGLinearization` beside ours.
+
+    .venv/bin/python benchmarks/truth_check.py          # about a minute
+
+For a doublet on each surface and a throttle step, each flown as a ± pair (the odd part of
+JSBSim's response), it prints the worst TIC over the outputs the test moves (agent.sim.truth
+says which count). FGLinearization's model is driven by the commands, which its B is for;
+ours by the surface and throttle positions. Both are held to TIC ≤ 0.05.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np
+import scipy.linalg
+
+from agent.sim import truth as T  # noqa: N812 — T for truth, as in the docs
+from agent.sim.plant import FT, INPUTS, Plant
+
+BENCHMARK = [("J3Cub", 60.0), ("c182", 90.0), ("pa28", 90.0)]
+FG_STATES = {"Vt": "Vt", "alpha": "Alpha", "q": "Q", "theta": "Theta", "beta": "Beta",
+             "p": "P", "r": "R", "phi": "Phi"}  # fmt: skip
+FG_INPUTS = {"throttle": "ThtlCmd", "elevator": "DeCmd", "aileron": "DaCmd", "rudder": "DrCmd"}
+
+
+def fg_worst(aircraft: str, speed: float, ours: list[T.Check]) -> dict[str, float]:
+    """FGLinearization's worst TIC per test, over the outputs our check counted."""
+    lin = Plant(aircraft, airspeed_kts=speed).linearisation
+    names = list(lin.state_names)
+    B = lin.B[:, [lin.input_names.index(FG_INPUTS[i]) for i in INPUTS]]
+    rate = 200.0
+    block = np.zeros((len(names) + len(INPUTS),) * 2)
+    block[: len(names), : len(names)], block[: len(names), len(names) :] = lin.A, B
+    phi = scipy.linalg.expm(block / rate)
+    Ad, Bd = phi[: len(names), : len(names)], phi[: len(names), len(names) :]
+    t = np.arange(round(T.CHECK_S * rate)) / rate
+    worst = {}
+    for j, (name, check) in enumerate(zip(INPUTS, ours, strict=True)):
+        commands = np.zeros((len(t), len(INPUTS)))
+        if name == "throttle":
+            commands[t >= T.CHECK_START_S, j] = T.AMPLITUDE
+        else:
+            first = (t >= T.CHECK_START_S) & (t < T.CHECK_START_S + T.DOUBLET_S)
+            second = (t >= T.CHECK_START_S + T.DOUBLET_S) & (t < T.CHECK_START_S + 2 * T.DOUBLET_S)
+            commands[first, j], commands[second, j] = T.AMPLITUDE, -T.AMPLITUDE
+        x, _, _ = T.odd_response(aircraft, speed, commands)
+        state = np.zeros(len(names))
+        predicted = np.empty((len(t), len(T.OUTPUTS)))
+        for k, row in enumerate(commands):
+            state = Ad @ state + Bd @ row
+            predicted[k] = [state[names.index(FG_STATES[o])] for o in T.OUTPUTS]
+        predicted[:, 0] *= FT  # Vt: ft/s → m/s, as the truth's states
+        tic = T._theil(x[:, :8], predicted)
+        worst[name] = max(tic[T.OUTPUTS.index(o)] for o in check.counted)
+    return worst
+
+
+def main() -> None:
+    print(f"worst TIC over the outputs each test moves (bound {T.CHECK_TIC})")
+    print(f"{'aircraft':<8}{'test':<10}{'FGLinearization':>17}{'agent.sim.truth':>17}")
+    for aircraft, speed in BENCHMARK:
+        truth = T.linear_truth(aircraft, speed)
+        ours = T.check(truth)
+        theirs = fg_worst(aircraft, speed, ours)
+        for check in ours:
+            print(f"{aircraft:<8}{check.test:<10}{theirs[check.test]:>17.3f}{check.worst:>17.3f}",
+                  flush=True)  # fmt: skip
+        modes = ", ".join(f"{k} {v[0]:.3f}" for k, v in truth.modes().items() if v)
+        print(f"  truth modes: {modes}")
+
+
+if __name__ == "__main__":
+    main()

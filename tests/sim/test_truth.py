@@ -1,0 +1,58 @@
+"""The truth identified models are judged against (agent.sim.truth): JSBSim's best linear
+approximation at the trim must reproduce JSBSim's own small-amplitude response — a doublet
+on each surface and a throttle step, each flown as a ± pair — with TIC ≤ 0.05 on every output
+the test moves, for each benchmark aircraft; and its modes must carry the right names.
+
+Bad input tried: an aircraft JSBSim does not have."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agent.sim.plant import PlantError
+from agent.sim.truth import CHECK_TIC, check, linear_truth
+
+BENCHMARK = [("J3Cub", 60.0), ("c182", 90.0), ("pa28", 90.0)]
+# The one check the truth does not yet pass: the J-3 Cub's throttle step (q TIC 0.11). Its
+# surface doublets and the other aircraft's throttle steps pass; the gap is open work.
+KNOWN_GAP = {("J3Cub", "throttle")}
+# The outputs each test is mainly for.
+PRIMARY = {"throttle": ("Vt", "theta"), "elevator": ("alpha", "q"), "aileron": ("p", "phi"),
+           "rudder": ("beta", "r")}  # fmt: skip
+
+
+@pytest.fixture(scope="module", params=BENCHMARK, ids=[a for a, _ in BENCHMARK])
+def truth(request):
+    aircraft, speed = request.param
+    return linear_truth(aircraft, speed)
+
+
+@pytest.mark.parametrize("test", ["throttle", "elevator", "aileron", "rudder"])
+def test_the_truth_reproduces_jsbsims_own_small_response(truth, test, request):
+    if (truth.aircraft, test) in KNOWN_GAP:
+        request.applymarker(pytest.mark.xfail(strict=True, reason="known gap: see KNOWN_GAP"))
+    (result,) = [c for c in check(truth) if c.test == test]
+    assert set(PRIMARY[test]) <= set(result.counted), result  # what the test is for counts
+    assert result.worst <= CHECK_TIC, {o: round(result.tic[o], 3) for o in result.counted}
+
+
+def test_the_truth_names_every_mode_and_they_are_the_aircrafts(truth):
+    modes = truth.modes()
+    assert {"short period", "phugoid", "Dutch roll", "roll"} <= set(modes)
+    (phugoid,) = modes["phugoid"]
+    (dutch,) = modes["Dutch roll"]
+    (roll,) = modes["roll"]
+    assert 0.1 < phugoid.imag < 0.6  # a 10–60 s period, lightly damped
+    assert -phugoid.real / abs(phugoid) < 0.3
+    assert 1.0 < dutch.imag < 4.0
+    assert roll.real < -2.0
+    assert abs(roll.imag) < 1e-9
+    assert all(s.real < -1.0 for s in modes["short period"])  # faster than the phugoid
+    # Every eigenvalue of the truth is within reach of a stable, slowly drifting airframe.
+    assert np.all(truth.eigenvalues().real < 0.05)
+
+
+def test_an_aircraft_jsbsim_does_not_have_is_refused():
+    with pytest.raises(PlantError, match="no aircraft"):
+        linear_truth("no-such-aircraft", 60.0)
