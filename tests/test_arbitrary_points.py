@@ -33,8 +33,9 @@ from drivers.xbee.driver import XBeeRadio
 
 # How long a thread that logs a few lines may take before it is called deadlocked: each line
 # here runs dozens of full collections (about 15 ms each on this machine, longer when it is
-# busy), so a few seconds per line; a deadlocked thread never ends.
-DEADLOCK_S = 120.0
+# busy), so a few seconds per line; a deadlocked thread never ends. Below the suite's 120 s
+# per-test timeout, so the test fails with its own message.
+DEADLOCK_S = 60.0
 LINES = 3
 
 
@@ -58,36 +59,43 @@ def execution_log(tmp_path):
     writer.close()
 
 
-def test_a_slow_full_collection_inside_the_log_path_neither_deadlocks_nor_logs(execution_log):
+def _log_while_collecting(execution_log, callback, lines, beside=()) -> list[str]:
+    """Log `lines` from a library-like thread that runs a full collection at every Python call
+    it makes, and `beside` from this thread meanwhile, with `callback` in gc.callbacks; the
+    execution log's messages afterwards. Fails if the thread deadlocks."""
     logger, writer = execution_log
-    watch = GcWatch(slow_s=0.0)  # every full pass counts as slow: the callback's worst path
     finished = threading.Event()
 
     def library_thread() -> None:  # a library logging from its own thread, as digi-xbee does
         sys.setprofile(_collect_at_every_call)
         try:
-            for k in range(LINES):
-                logger.warning("library line %d", k)
+            for line in lines:
+                logger.warning(line)
         finally:
             sys.setprofile(None)
             finished.set()
 
-    gc.callbacks.append(watch)
-    thread = threading.Thread(target=library_thread, name="library", daemon=True)
+    gc.callbacks.append(callback)
     try:
+        thread = threading.Thread(target=library_thread, name="library", daemon=True)
         thread.start()
-        for k in range(LINES):  # the loop thread logs beside it
-            logger.warning("loop line %d", k)
+        for line in beside:
+            logger.warning(line)
         assert finished.wait(DEADLOCK_S), "the logging thread deadlocked in a gc callback"
         thread.join()
     finally:
-        gc.callbacks.remove(watch)
+        gc.callbacks.remove(callback)
     writer.close()
-    lines = (writer.directory / "0001_exec_x.jsonl").read_text().splitlines()
-    messages = sorted(json.loads(line)["message"] for line in lines)
-    assert messages == sorted(
-        [f"library line {k}" for k in range(LINES)] + [f"loop line {k}" for k in range(LINES)]
-    )
+    text = (writer.directory / "0001_exec_x.jsonl").read_text()
+    return [json.loads(line)["message"] for line in text.splitlines()]
+
+
+def test_a_slow_full_collection_inside_the_log_path_neither_deadlocks_nor_logs(execution_log):
+    watch = GcWatch(slow_s=0.0)  # every full pass counts as slow: the callback's worst path
+    library = [f"library line {k}" for k in range(LINES)]
+    loop = [f"loop line {k}" for k in range(LINES)]  # the loop thread logs beside it
+    messages = _log_while_collecting(execution_log, watch, library, loop)
+    assert sorted(messages) == sorted(library + loop)
     # Every forced pass was timed and counted; none of them logged (the loop reports them).
     assert watch.slow >= LINES * 10
     assert watch.full == watch.slow
@@ -233,33 +241,13 @@ async def test_slow_collections_are_reported_from_the_loop(tmp_path, caplog):
 def test_a_gc_callback_that_logs_cannot_deadlock_the_execution_log(execution_log):
     # A library's gc callback may log; the execution log's handler and queue take no lock, so
     # even a line logged from inside another line's put goes through.
-    logger, writer = execution_log
+    logger, _ = execution_log
 
     def logs_from_gc(phase: str, info: dict) -> None:
         if phase == "stop" and info.get("generation") == 2:
             logger.warning("from a gc callback")
 
-    finished = threading.Event()
-
-    def library_thread() -> None:
-        sys.setprofile(_collect_at_every_call)
-        try:
-            logger.warning("library line")
-        finally:
-            sys.setprofile(None)
-            finished.set()
-
-    gc.callbacks.append(logs_from_gc)
-    try:
-        thread = threading.Thread(target=library_thread, name="library", daemon=True)
-        thread.start()
-        assert finished.wait(DEADLOCK_S), "the logging thread deadlocked in a gc callback"
-        thread.join()
-    finally:
-        gc.callbacks.remove(logs_from_gc)
-    writer.close()
-    lines = (writer.directory / "0001_exec_x.jsonl").read_text().splitlines()
-    messages = [json.loads(line)["message"] for line in lines]
+    messages = _log_while_collecting(execution_log, logs_from_gc, ["library line"])
     assert "library line" in messages
     assert messages.count("from a gc callback") >= 10
 
