@@ -10,6 +10,9 @@ import pytest
 
 from agent.ident import Experiment, reference
 
+# The last-resort watchdog: a test hung after pytest-timeout gave up on it still ends the run.
+pytest_plugins = ["tests.watchdog"]
+
 DT = 0.02  # 50 Hz, as the thesis's appendix models are used in the known-answer tests
 LEAD_IN = 1.0
 

@@ -277,23 +277,59 @@ def test_never_reached():
 """
 
 
-def test_a_hung_test_ends_the_run_with_every_threads_stack(tmp_path):
-    # The suite's own pytest settings (pyproject.toml), on a test stuck on a lock in its body
-    # and again in its teardown: the run ends, failing, with each thread's stack. The signal
-    # method interrupts the body once, then hangs in the teardown for ever.
+HUNG_AFTER_FAILING = """
+import threading
+
+import pytest
+
+
+@pytest.fixture
+def held():
+    lock = threading.Lock()
+    lock.acquire()
+    yield lock
+    lock.acquire()  # the teardown waits for ever, as a shutdown joining a deadlocked thread
+
+
+def test_fails_then_hangs_in_its_teardown(held):
+    raise AssertionError("the test failed")
+"""
+
+
+def _run_pytest_on(tmp_path, text: str) -> tuple[int, str]:
+    """pytest with the suite's own settings (pyproject.toml, and the watchdog plugin) on one
+    test file; its exit code and its output."""
     import subprocess
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1]
-    (tmp_path / "test_hung.py").write_text(HUNG)
+    (tmp_path / "test_hung.py").write_text(text)
     done = subprocess.run(
         [sys.executable, "-m", "pytest", "-c", str(root / "pyproject.toml"), "--rootdir",
-         str(tmp_path), "-p", "no:cacheprovider", "--timeout", "3", str(tmp_path / "test_hung.py")],
-        capture_output=True, text=True, timeout=DEADLOCK_S, check=False,
+         str(tmp_path), "-p", "no:cacheprovider", "-p", "tests.watchdog", "--timeout", "3",
+         str(tmp_path / "test_hung.py")],
+        capture_output=True, text=True, timeout=DEADLOCK_S, check=False, cwd=root,
     )  # fmt: skip
-    out = done.stdout + done.stderr
-    assert done.returncode != 0
+    return done.returncode, done.stdout + done.stderr
+
+
+def test_a_hung_test_ends_the_run_with_every_threads_stack(tmp_path):
+    # A test stuck on a lock in its body and again in its teardown: pytest-timeout's thread
+    # method ends the run, failing, with each thread's stack. The signal method interrupts the
+    # body once, then hangs in the teardown for ever.
+    code, out = _run_pytest_on(tmp_path, HUNG)
+    assert code != 0
     assert "Timeout" in out
     assert "Stack of lock-holder" in out
     assert "held.acquire()  # never returns" in out  # the main thread, where it is stuck
     assert "passed" not in out  # the run ended there: no later test, no summary
+
+
+def test_a_failed_test_that_hangs_in_its_teardown_ends_the_run(tmp_path):
+    # pytest-timeout stops its timer when a test fails, so this used to hang the run for ever;
+    # the watchdog (tests/watchdog.py) ends it with every thread's traceback.
+    code, out = _run_pytest_on(tmp_path, HUNG_AFTER_FAILING)
+    assert code == 1
+    assert "Timeout (0:00:" in out  # faulthandler's dump: every thread, most recent call first
+    assert "(most recent call first)" in out
+    assert "line 12 in held" in out  # stuck in the fixture's teardown
