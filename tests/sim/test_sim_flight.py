@@ -79,7 +79,7 @@ def post_flight(directory, report) -> None:
     # The replay runs the aircraft's own job on the very numbers it had (the excitation log
     # holds them to 17 digits, and the recorder's rate): the same p and order, the flown modes
     # under the same names, a fit as good. Not yet the same numbers: the replay's TIC_avg has
-    # differed from the aircraft's by up to 2.6 %, an open defect (README, *Replaying the
+    # differed from the aircraft's by up to 2.7 %, an open defect (README, *Replaying the
     # logs*): the same identification repeats bit for bit across processes on the bundled
     # record, so something still differs between the worker's job and the replay.
     onboard = [json.loads(line)["result"] for line in results.read_text().splitlines()]
