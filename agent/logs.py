@@ -264,6 +264,7 @@ class JsonLinesHandler(logging.Handler):
     def __init__(self, writer: LogWriter, handle: int, clock=None):
         super().__init__()
         self._writer, self._handle, self._clock = writer, handle, clock
+        self.unformattable = 0  # records whose message could not be formatted (kept, raw)
 
     def handle(self, record: logging.LogRecord) -> logging.LogRecord | bool:
         """Filter and emit without the handler's lock (logging.Handler.handle takes one): emit
@@ -282,10 +283,19 @@ class JsonLinesHandler(logging.Handler):
             line = self._line(record)
         except RecursionError:
             raise
-        except Exception:  # a bad format string in a library's call: the stdlib's way
-            self.handleError(record)
-            return
+        except Exception:  # a library's bad format string, say: counted, kept unformatted
+            # Not logging.Handler.handleError: it writes a traceback to stderr, which takes the
+            # stream's lock, and this may run at any point on any thread.
+            self.unformattable += 1
+            line = self._raw_line(record)
         self._writer.write(self._handle, line)
+
+    @staticmethod
+    def _raw_line(record: logging.LogRecord) -> bytes:
+        template = record.msg if isinstance(record.msg, str) else type(record.msg).__name__
+        event = {"t": time.monotonic(), "level": record.levelname, "logger": record.name,
+                 "message": f"unformattable log record: {template}"}  # fmt: skip
+        return (json.dumps(event) + "\n").encode()
 
     def _line(self, record: logging.LogRecord) -> bytes:
         event = {

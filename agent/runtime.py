@@ -169,6 +169,7 @@ class Agent:
         # Full collections, timed by a gc callback (which must neither log nor lock: see
         # agent/health.py) and reported by the lag monitor.
         self.gc_watch = GcWatch(GC_WARN_S)
+        self._log_handler = None  # the execution log's handler while running
         self.health: list[dict] = []  # the health records written so far (latest last)
         self.drivers = self._drivers()
 
@@ -198,7 +199,7 @@ class Agent:
         # (benchmarks/bench_agent.py; README, *Measured resource use*).
         switch = sys.getswitchinterval()
         sys.setswitchinterval(SWITCH_INTERVAL_S)
-        handler = self.logbook.handler(self.clock)
+        handler = self._log_handler = self.logbook.handler(self.clock)
         logging.getLogger().addHandler(handler)
         self._pool = self._new_worker()
         restore = self._realtime(self.config.runtime.realtime_priority)
@@ -630,6 +631,7 @@ class Agent:
                 "errors": self.writer.errors,
                 "dropped": self.writer.dropped,
                 "lost_lines": self.writer.lost_lines,
+                "unformattable": getattr(self._log_handler, "unformattable", 0),
                 "failures": self.writer.failures[-3:],
             },
         }

@@ -36,24 +36,17 @@ def fg_worst(aircraft: str, speed: float, ours: list[T.Check]) -> dict[str, floa
     block[: len(names), : len(names)], block[: len(names), len(names) :] = lin.A, B
     phi = scipy.linalg.expm(block / rate)
     Ad, Bd = phi[: len(names), : len(names)], phi[: len(names), len(names) :]
-    t = np.arange(round(T.CHECK_S * rate)) / rate
     worst = {}
-    for j, (name, check) in enumerate(zip(INPUTS, ours, strict=True)):
-        commands = np.zeros((len(t), len(INPUTS)))
-        if name == "throttle":
-            commands[t >= T.CHECK_START_S, j] = T.AMPLITUDE
-        else:
-            first = (t >= T.CHECK_START_S) & (t < T.CHECK_START_S + T.DOUBLET_S)
-            second = (t >= T.CHECK_START_S + T.DOUBLET_S) & (t < T.CHECK_START_S + 2 * T.DOUBLET_S)
-            commands[first, j], commands[second, j] = T.AMPLITUDE, -T.AMPLITUDE
+    for name, check in zip(INPUTS, ours, strict=True):
+        commands = T.check_commands(name, rate)
         x, _, _ = T.odd_response(aircraft, speed, commands)
         state = np.zeros(len(names))
-        predicted = np.empty((len(t), len(T.OUTPUTS)))
+        predicted = np.empty((len(commands), len(T.OUTPUTS)))
         for k, row in enumerate(commands):
             state = Ad @ state + Bd @ row
             predicted[k] = [state[names.index(FG_STATES[o])] for o in T.OUTPUTS]
         predicted[:, 0] *= FT  # Vt: ft/s → m/s, as the truth's states
-        tic = T._theil(x[:, :8], predicted)
+        tic = T.theil(x[:, :8], predicted)
         worst[name] = max(tic[T.OUTPUTS.index(o)] for o in check.counted)
     return worst
 

@@ -226,3 +226,27 @@ def test_a_full_disk_loses_only_new_lines_and_every_line_before_stays_whole(smal
     assert len(data) + writer.lost_lines == k  # every row written or counted as lost
     raw = writer.path(book.flight).read_bytes()
     assert raw.endswith(b"\n")
+
+
+def test_a_record_that_cannot_be_formatted_is_kept_and_counted(tmp_path):
+    # Bad input: a library's log call whose arguments do not fit its format string.
+    import json
+    import logging
+
+    from agent.logs import JsonLinesHandler
+
+    writer = LogWriter(tmp_path)
+    handler = JsonLinesHandler(writer, writer.open("0001_exec_x.jsonl"))
+    logger = logging.getLogger("test.unformattable")
+    logger.addHandler(handler)
+    logger.propagate = False
+    try:
+        logger.warning("two values %d %d", 1)  # raises inside getMessage
+        logger.warning("fine %d", 2)
+    finally:
+        logger.removeHandler(handler)
+        writer.close()
+    lines = [json.loads(x) for x in (tmp_path / "0001_exec_x.jsonl").read_text().splitlines()]
+    assert [e["message"] for e in lines] == [
+        "unformattable log record: two values %d %d", "fine 2"]  # fmt: skip
+    assert handler.unformattable == 1

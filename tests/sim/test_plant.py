@@ -88,3 +88,16 @@ def test_jsbsims_banner_stays_off_stdout():
                           timeout=120, check=True)  # fmt: skip
     assert done.stdout == '{"ok": 1}\n'
     assert "JSBSim" in done.stderr  # moved, not lost
+
+
+def test_sim_json_on_an_aircraft_jsbsim_does_not_have_is_one_error_object():
+    # Bad input: `sysid sim --aircraft no-such-aircraft --json`; stdout is still one object.
+    import json
+    import subprocess
+    import sys
+
+    command = [sys.executable, "-m", "agent", "sim", "--aircraft", "no-such-aircraft", "--json"]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 2
+    assert done.stdout.count("\n") == 1  # one line: JSBSim's banner and errors went to stderr
+    assert json.loads(done.stdout) == {"error": "JSBSim has no aircraft 'no-such-aircraft'"}
