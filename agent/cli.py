@@ -70,8 +70,10 @@ def _identification_options(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--method",
-        choices=("time", "frequency"),
-        help="OKID in the time domain (default) or from averaged spectra (thesis §4.3.1)",
+        choices=("auto", "time", "frequency", "aircraft"),
+        help="auto (default: aircraft for both axes' outputs, else time), OKID in the time "
+        "domain, OKID from averaged spectra (thesis §4.3.1), or aircraft: decoupled "
+        "longitudinal and lateral models fitted in the frequency domain",
     )
     parser.add_argument(
         "--period",

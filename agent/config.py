@@ -123,9 +123,12 @@ class Identification(_Section):
     of continuously varying signals (e.g. surface potentiometers)."""
     smoothing_s: float | None = Field(None, gt=0.0)
     """Savitzky–Golay smoothing window in seconds (cubic), on inputs and outputs; unset: none."""
-    method: Literal["time", "frequency"] = "time"
-    """OKID from the time-domain regression, or from averaged spectra and the frequency
-    response over whole excitation periods (thesis §4.3.1)."""
+    method: Literal["auto", "time", "frequency", "aircraft"] = "auto"
+    """"auto": "aircraft" when the outputs are both axes' eight (axes = "full"), else "time";
+    "time": OKID from the time-domain regression; "frequency": OKID from averaged spectra and
+    the frequency response over whole excitation periods (thesis §4.3.1); "aircraft":
+    decoupled longitudinal and lateral models, every state measured, fitted in the frequency
+    domain (equation error, then output error; agent.ident.aircraft)."""
     period_s: float | None = Field(None, gt=0.0)
     """Excitation period for the frequency method; unset: detected from the inputs."""
     noise_model: Literal["auto", "output", "innovation"] = "auto"

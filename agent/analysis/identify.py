@@ -125,6 +125,7 @@ def run(request: Request, config: IdentConfig, settings: Settings) -> Outcome:
         input_names=request.inputs,
         output_names=request.outputs,
         output_roles=roles,
+        input_roles=[config.channels.role_of(n) for n in request.inputs],
         settings=settings,
     )
     return Outcome(result=result, trim=trim, records=len(experiments), samples=samples)

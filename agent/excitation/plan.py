@@ -337,12 +337,36 @@ MULTISINE_PERIODS = 2.0
 THROTTLE_LEVELS = (1.0, 1.0, -1.0)  # thesis figure 4.4: two counts up, one count down
 THROTTLE_COUNT_S = 2.0
 PRESETS = ("lateral", "longitudinal", "full")
+# The full preset: one period of FULL_PERIOD_S of multisines on all four controls at once, on
+# odd harmonics only and each control on its own (orthogonal multisines, Morelli, J. Aircraft
+# 40(2), 2003), the throttle below FULL_THROTTLE_TOP_HZ (the phugoid's band), the surfaces
+# interleaved up to FULL_TOP_HZ. Why (measured on JSBSim's Cub, Cessna 182 and PA-28,
+# docs/identification.md): a phugoid of 20–30 s needs a record of several periods and power at
+# its frequency; and the lateral excitation drags the aircraft through sideslip (drag ∝ β²),
+# an even-order effect that drives the phugoid. Even-order products of odd harmonics fall on
+# even harmonics, and a multisine playing through the whole window turns their mean into a
+# constant (DC) forcing, so neither biases the fit; the thesis's 2 × 20 s multisines followed
+# by throttle steps switched that forcing on and off inside the record and gave a phugoid
+# 30 % off on the Cessna even in calm air.
+FULL_PERIOD_S = 80.0
+FULL_THROTTLE_TOP_HZ = 0.12
+FULL_TOP_HZ = 2.0
+
+
+def full_harmonics() -> dict[str, tuple[int, ...]]:
+    """Odd harmonics of 1/FULL_PERIOD_S per control for the full preset (disjoint)."""
+    odd = range(1, round(FULL_TOP_HZ * FULL_PERIOD_S) + 1, 2)
+    low = [k for k in odd if k / FULL_PERIOD_S < FULL_THROTTLE_TOP_HZ]
+    rest = [k for k in odd if k / FULL_PERIOD_S >= FULL_THROTTLE_TOP_HZ]
+    return {"throttle": tuple(low), "elevator": tuple(rest[0::3]),
+            "aileron": tuple(rest[1::3]), "rudder": tuple(rest[2::3])}  # fmt: skip
 
 
 def preset(name: str, amplitude: Mapping[str, float] | None = None, plan_id: str | None = None):
     """The thesis's plans: lateral (aileron then rudder doublet), longitudinal (elevator
-    doublet then throttle steps), full (multisines on aileron, rudder, elevator, then the
-    throttle steps, as in figure 6.12)."""
+    doublet then throttle steps); and full: an 80 s odd-harmonic multisine on all four
+    controls at once (see FULL_PERIOD_S; the thesis's figure 6.12 played multisines on the
+    surfaces, then throttle steps)."""
     amp = {**PRESET_AMPLITUDE, **(amplitude or {})}
 
     def doublet(c: str) -> dict:
@@ -357,8 +381,9 @@ def preset(name: str, amplitude: Mapping[str, float] | None = None, plan_id: str
         segments = [Segment(signals=doublet("elevator"), free_s=3.0),
                     Segment(signals=throttle, free_s=10.0)]  # fmt: skip
     elif name == "full":
-        sines = {c: _thesis_multisine(c, amp[c]) for c in ("aileron", "rudder", "elevator")}
-        segments = [Segment(signals=sines), Segment(signals=throttle, free_s=10.0)]
+        segments = [Segment(signals={c: Multisine(harmonics=h, period_s=FULL_PERIOD_S,
+                                                  periods=1, amplitude=amp[c])
+                                     for c, h in full_harmonics().items()})]  # fmt: skip
     else:
         raise ValueError(f"unknown preset {name!r}; presets are {', '.join(PRESETS)}")
     return Plan(id=plan_id or name, axes=name, segments=tuple(segments))

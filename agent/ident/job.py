@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from agent.channels import AXIS_SETS
 from agent.ident import Experiment, Settings, identify
 from agent.ident.convert import StateSpace
 from agent.ident.errors import DataError, IdentificationFailed
@@ -94,6 +95,7 @@ def run(job: Job) -> dict:
         experiments = [Experiment(u, y) for u, y in data]
         result = identify(experiments, job.record_dt, input_names=job.inputs,
                           output_names=job.outputs, output_roles=job.roles,
+                          input_roles=AXIS_SETS[job.axes][0] if job.axes in AXIS_SETS else None,
                           settings=job.settings)  # fmt: skip
     except (DataError, IdentificationFailed, np.linalg.LinAlgError, ValueError) as exc:
         return {**extra, "ok": False, "model_id": job.model_id, "reason": str(exc)}

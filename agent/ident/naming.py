@@ -12,7 +12,9 @@ Rules (thesis §4.1.3; Klein & Morelli, *Aircraft System Identification*, 2006, 
    split in two, and counts as one real mode at its natural frequency.
 3. Longitudinal: of two or more complex pairs the fastest is the short period and the slowest
    the phugoid; a single pair is the short period when α and q dominate its shape, the phugoid
-   when V and θ do. Real longitudinal modes (relaxed stability) get no standard name.
+   when V and θ do. With a single pair that is the phugoid, the two fastest real modes, when
+   α and q dominate both, are an overdamped short period (both named so). Other real
+   longitudinal modes (relaxed stability) get no standard name.
 4. Only modes that could be rigid-body aircraft modes are named: MSV ≥ `MIN_MSV` (they carry
    a real share of the response), EMAC ≥ `MIN_EMAC` when known (temporally consistent, not
    noise), and natural frequency ≤ `MAX_FREQUENCY` (small-aircraft rigid-body modes lie well
@@ -121,3 +123,13 @@ def _name_longitudinal(
             names[pairs[0]] = "short period"
         elif long_ > short:
             names[pairs[0]] = "phugoid"
+            # An overdamped short period: the two fastest real modes, faster than the
+            # phugoid and mostly α and q (JSBSim's J-3 Cub: −6.4 and −10.1 1/s).
+            reals = sorted((i for i in lon if not modes[i].pair
+                            and modes[i].frequency > mode.frequency),
+                           key=lambda i: -modes[i].frequency)  # fmt: skip
+            fast = [i for i in reals[:2] if _energy(modes[i], roles, ("alpha", "q"))
+                    > _energy(modes[i], roles, ("airspeed", "theta"))]  # fmt: skip
+            if len(fast) == 2:
+                for i in fast:
+                    names[i] = "short period"

@@ -11,16 +11,18 @@ analysis) goes through `identify`.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from agent.ident import frequency, okid
+from agent.ident import aircraft, frequency, okid
 from agent.ident.candidates import Candidate, MarkovChoice, choose_markov, run_candidate
 from agent.ident.convert import (
     StateSpace,
     discretize,
+    discretize_hold,
     output_coordinates_transform,
     to_continuous,
 )
@@ -70,6 +72,7 @@ class Identification:
     warnings: tuple[str, ...]
     method: str = "time"
     frequency_data: frequency.FrequencyData | None = None  # spectra and FRF for "frequency"
+    aircraft: dict | None = None  # for "aircraft": band, axes, engine lag, coupling found
 
     @property
     def order(self) -> int:
@@ -112,14 +115,31 @@ def identify(
     output_names: Sequence[str] | None = None,
     output_roles: Sequence[str | None] | None = None,
     settings: Settings | None = None,
+    input_roles: Sequence[str | None] | None = None,
 ) -> Identification:
-    """Identify one model from a batch of experiments sampled every `dt` seconds."""
+    """Identify one model from a batch of experiments sampled every `dt` seconds.
+
+    `method` "auto" (the default) is "aircraft" when the roles name both axes' four outputs
+    with their inputs (`--axes full`), and "time" otherwise."""
     settings = settings or Settings()
     raw = okid.as_experiments(experiments)
     if dt <= 0:
         raise DataError(f"sample time must be positive, got {dt}")
     inputs, outputs = _names(raw, input_names, output_names)
     check_channels(raw, inputs, outputs)
+    in_roles = tuple(input_roles) if input_roles is not None else inputs
+    out_roles = tuple(output_roles) if output_roles is not None else ()
+    present = aircraft.axes_present(in_roles, out_roles)
+    if settings.method == "auto":
+        settings = replace(settings, method="aircraft" if len(present) == 2 else "time")
+    if settings.method == "aircraft":
+        if not present:
+            raise DataError(
+                "method 'aircraft' needs the four outputs of an axis (airspeed, alpha, q, "
+                "theta or beta, p, r, phi) and its inputs, named by their roles"
+            )
+        return _identify_aircraft(raw, dt, inputs, outputs, in_roles, out_roles, present,
+                                  settings)  # fmt: skip
     batch, prep = preprocess(
         raw,
         dt,
@@ -136,7 +156,9 @@ def identify(
         freq = frequency.analyse(batch, period)
         warnings.extend(freq.warnings)
     elif settings.method != "time":
-        raise DataError(f"method must be 'time' or 'frequency', not {settings.method!r}")
+        raise DataError(
+            f"method must be 'auto', 'time', 'frequency' or 'aircraft', not {settings.method!r}"
+        )
     if settings.markov is None:
         candidate, choice = choose_markov(batch, settings, dt, prep.band_hz, freq)
     else:
@@ -374,3 +396,145 @@ def _reported_model(
     if T is None:
         return model, factors, G, "era"
     return model.transformed(T), factors.transformed(T), T @ G, "outputs"
+
+
+def _identify_aircraft(
+    raw: Sequence[okid.Experiment],
+    dt: float,
+    inputs: tuple[str, ...],
+    outputs: tuple[str, ...],
+    input_roles: Sequence[str | None],
+    output_roles: Sequence[str | None],
+    present: dict[str, tuple[list[int], list[int]]],
+    settings: Settings,
+) -> Identification:
+    """Decoupled longitudinal and lateral models in the frequency domain (agent.ident.aircraft),
+    assembled into one model whose first states are the outputs and whose last ones are the
+    engine's lag states; an eight-state coupled model when the data show coupling."""
+    # The transforms leave out DC, so trim errors do not matter to the fit; the time-domain
+    # simulation (TIC) starts from the records' own trim, as the other methods'.
+    batch = list(raw)
+    sp = aircraft.spectra(batch, dt, settings.band_hz, settings.held_inputs)
+    E = len(batch)
+    throttle = [j for j, role in enumerate(input_roles) if role == "throttle"]
+    fits, report = [], {"band_hz": list(sp.band_hz), "bins": int(sp.s.size), "coupling": {}}
+    for axis, (states, ins) in present.items():
+        fits.append(aircraft.fit_axis(sp, axis, states, ins, [j for j in ins if j in throttle],
+                                      E))  # fmt: skip
+    if len(fits) == 2:
+        augmented = aircraft.Spectra(sp.s, sp.Y, np.hstack([sp.U, sp.Y]), sp.record, sp.band_hz)
+        r = sp.U.shape[1]
+        coupled_states = False
+        for k, fitted in enumerate(fits):
+            other = fits[1 - k]
+            by_inputs = aircraft.coupling(sp, fitted, other.inputs, E)
+            by_states = aircraft.coupling(augmented, fitted, [r + i for i in other.states], E)
+            report["coupling"][fitted.name] = {"by_inputs": by_inputs, "by_states": by_states}
+            coupled_states |= by_states > aircraft.COUPLED_STATES
+            if by_inputs > aircraft.COUPLED:  # the other axis's controls act on this one
+                ins = (*fitted.inputs, *other.inputs)
+                fits[k] = aircraft.fit_axis(sp, fitted.name, fitted.states, ins,
+                                            tuple(fitted.lags), E)  # fmt: skip
+        if coupled_states:
+            states = tuple(range(len(outputs)))
+            ins = tuple(range(len(inputs)))
+            fits = [aircraft.fit_axis(sp, "coupled", states, ins, throttle, E)]
+        report["model"] = "coupled" if coupled_states else "decoupled"
+    else:
+        report["model"] = fits[0].name
+    model, covariance, _lag_times = _assemble(fits, len(inputs), len(outputs))
+    report["engine_lag_s"] = {f.name: {inputs[j]: tau for j, tau in f.lags.items()}
+                              for f in fits if f.lags}  # fmt: skip
+    report["axes"] = [
+        {"name": f.name, "outputs": [outputs[i] for i in f.states],
+         "inputs": [inputs[j] for j in f.inputs], "iterations": f.iterations,
+         "converged": f.converged}
+        for f in fits
+    ]  # fmt: skip
+    hold = "zoh" if settings.held_inputs else "foh"
+    discrete = discretize_hold(model.A, model.B, model.C, model.D, dt, hold)
+    fitted = fit(discrete, batch)
+    warnings: list[str] = []
+    if not all(f.converged for f in fits):
+        warnings.append("the output-error fit stopped at its iteration limit")
+    residuals = np.vstack([e.y - p for e, p in zip(batch, fitted.predictions, strict=True)])
+    refinement = Refinement(
+        gain=None, continuous=model, discrete=discrete, dt=dt, hold=hold,
+        initial_states=fitted.initial_states, noise_std=residuals.std(axis=0),
+        covariance=covariance, cost_initial=sum(f.cost_start for f in fits),
+        cost=sum(f.cost for f in fits), iterations=sum(f.iterations for f in fits),
+        passes=1, converged=all(f.converged for f in fits),
+    )  # fmt: skip
+    n = model.A.shape[0]
+    era = EraResult(discrete.A, discrete.B, discrete.C, discrete.D, np.zeros(0), n, 0, 0,
+                    np.zeros((0, n)), np.zeros((n, 0)))  # fmt: skip
+    # Modes of the aircraft states alone (the lag states are the engine's, two equal poles
+    # with no modal decomposition), with each lagged input at its steady gain.
+    m = len(outputs)
+    Bm = model.B[:m].copy()
+    for f in fits:
+        for c, j in enumerate(f.inputs):
+            Bm[list(f.states), j] = f.B[:, c]
+    states_only = StateSpace(model.A[:m, :m], Bm, np.eye(m), np.zeros((m, len(inputs))))
+    index = np.arange(n * n).reshape(n, n)[:m, :m].ravel()
+    for_modes = replace(refinement, continuous=states_only,
+                        covariance=covariance[np.ix_(index, index)])  # fmt: skip
+    Am, Bmd = _zoh(states_only, dt)
+    input_rms, output_rms = okid.channel_rms(batch)
+    modes = modal_analysis(Am, Bmd, states_only.C, dt, input_scale=input_rms,
+                           output_scale=output_rms)  # fmt: skip
+    modes = _with_uncertainty(modes, for_modes)
+    if any(role is not None for role in output_roles):
+        modes = name_modes(modes, output_roles)
+    if any(not mode.stable for mode in modes):
+        warnings.append("the identified model has unstable modes")
+    if fitted.tic_avg >= TIC_DECENT:
+        warnings.append(f"average TIC {fitted.tic_avg:.3f} is not below {TIC_DECENT}")
+    prep = Preprocessing(record_dt=dt, dt=dt, factor=1, band_hz=sp.band_hz[1],
+                         held_inputs=settings.held_inputs, smoothing_s=None,
+                         dropped_samples=0)  # fmt: skip
+    return Identification(
+        dt=dt, preprocessing=prep, input_names=inputs, output_names=outputs, markov=0,
+        markov_choice=None, era=era, discrete=discrete, continuous=model,
+        coordinates="outputs", observer_gain=np.zeros((n, len(outputs))), modes=tuple(modes),
+        fit=fitted, refinement=refinement, okid_fit=fitted, warnings=tuple(warnings),
+        method="aircraft", aircraft=report,
+    )  # fmt: skip
+
+
+def _assemble(fits: Sequence[aircraft.AxisFit], r: int, m: int):
+    """One continuous model (states: the m outputs, then two lag states per lagged input of
+    each axis) and the covariance of [vec Ac, vec Bc, vec C, vec D] (zero where fixed)."""
+    lagged = [(f, j) for f in fits for j in f.lags]
+    n = m + aircraft.THROTTLE_LAGS * len(lagged)
+    A, B = np.zeros((n, n)), np.zeros((n, r))
+    index_a = np.arange(n * n).reshape(n, n)
+    index_b = n * n + np.arange(n * r).reshape(n, r)
+    size = n * n + n * r + m * n + m * r
+    cov = np.zeros((size, size))
+    lag_times = {}
+    extra = m
+    for f in fits:
+        st = list(f.states)
+        A[np.ix_(st, st)] = f.A
+        where_b = np.empty((len(st), len(f.inputs)), dtype=int)  # where each B entry went
+        for c, j in enumerate(f.inputs):
+            if j in f.lags:  # u → lag → lag → the axis: B's column acts on the last lag state
+                tau = f.lags[j]
+                chain = list(range(extra, extra + aircraft.THROTTLE_LAGS))
+                B[chain[0], j] = 1.0 / tau
+                for a, b in itertools.pairwise(chain):
+                    A[b, a] = 1.0 / tau
+                for k in chain:
+                    A[k, k] = -1.0 / tau
+                A[st, chain[-1]] = f.B[:, c]
+                where_b[:, c] = index_a[st, chain[-1]]
+                lag_times[j] = tau
+                extra += aircraft.THROTTLE_LAGS
+            else:
+                B[st, j] = f.B[:, c]
+                where_b[:, c] = index_b[st, j]
+        pos = np.concatenate([index_a[np.ix_(st, st)].ravel(), where_b.ravel()])
+        cov[np.ix_(pos, pos)] = f.covariance
+    C = np.hstack([np.eye(m), np.zeros((m, n - m))])
+    return StateSpace(A, B, C, np.zeros((m, r))), cov, lag_times

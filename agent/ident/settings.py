@@ -21,6 +21,9 @@ class Settings:
     held_inputs: bool = True  # inputs held between samples (commands, zero-order hold)
     smoothing_s: float | None = None  # Savitzky–Golay window; None: no smoothing
     refine: bool = True  # output-error refinement of the OKID/ERA model
-    method: str = "time"  # "time": OKID regression; "frequency": spectra → FRF (thesis §4.3.1)
+    # "auto": "aircraft" when both axes' outputs are named, else "time"; "time": OKID
+    # regression; "frequency": spectra → FRF (thesis §4.3.1); "aircraft": decoupled axes,
+    # states measured, fitted in the frequency domain (agent.ident.aircraft)
+    method: str = "auto"
     period_s: float | None = None  # excitation period for "frequency"; None: detected
     noise_model: str = "auto"  # refinement: "output" error, "innovation" (PEM), or "auto"

@@ -74,6 +74,7 @@ def to_dict(result: Identification, trim: list[dict[str, float]] | None = None) 
         "trim": trim or [],
         "preprocessing": _preprocessing(result),
         "method": result.method,
+        "aircraft": result.aircraft,
         "frequency": _frequency(result),
         "refinement": _refinement(result),
         "warnings": list(result.warnings),

@@ -9,6 +9,8 @@ from pydantic import ValidationError
 from agent.config import Config, Envelope, Surface
 from agent.excitation import servo
 from agent.excitation.plan import (
+    FULL_PERIOD_S,
+    FULL_THROTTLE_TOP_HZ,
     PRESETS,
     Doublet,
     Multisine,
@@ -17,6 +19,7 @@ from agent.excitation.plan import (
     Segment,
     Sweep,
     check,
+    full_harmonics,
     preset,
     render,
     summary,
@@ -26,21 +29,35 @@ CONFIG = Config().excitation
 SURFACES, ENVELOPE = CONFIG.surfaces, CONFIG.envelope
 
 
-def test_full_preset_is_orthogonal_with_low_rpf_per_surface():
+def test_full_preset_is_orthogonal_odd_and_plays_all_four_controls_at_once():
     timeline = check(preset("full"), 50.0, SURFACES, ENVELOPE)
     report = summary(timeline, SURFACES)
     assert report["max_cross_correlation"] < 1e-9
+    for name in ("aileron", "rudder", "elevator", "throttle"):
+        assert report["controls"][name]["rpf"] <= 1.3
+    # The throttle holds the phugoid's band, the surfaces 0.12–2 Hz; one 80 s period each.
+    assert report["controls"]["throttle"]["band_hz"][1] < FULL_THROTTLE_TOP_HZ
     for name in ("aileron", "rudder", "elevator"):
-        assert report["controls"][name]["rpf"] <= 1.10
-    # The multisines carry the thesis's harmonics of a 20 s period: aileron 0.15–0.6 Hz.
-    assert report["controls"]["aileron"]["band_hz"] == pytest.approx([0.15, 0.6])
-    assert report["controls"]["elevator"]["band_hz"] == pytest.approx([0.35, 1.4])
+        low, high = report["controls"][name]["band_hz"]
+        assert low >= FULL_THROTTLE_TOP_HZ
+        assert high <= 2.0
     assert report["warnings"] == []
-    # Each multisine starts at a zero crossing and plays whole periods: no jump off trim.
-    for name in ("aileron", "rudder", "elevator"):
+    harmonics = full_harmonics()
+    every = [k for h in harmonics.values() for k in h]
+    assert len(every) == len(set(every))
+    assert all(k % 2 == 1 for k in every)
+    # Each control's spectrum holds its own odd harmonics of 1/80 s and nothing else.
+    for name, wanted in harmonics.items():
         played = timeline.values[name][timeline.active[name]]
+        assert played.size == round(FULL_PERIOD_S * 50.0)
+        power = np.abs(np.fft.rfft(played)) ** 2
+        lines = set(np.flatnonzero(power > 1e-6 * power.max()))
+        assert lines == set(wanted)
+        # Starts at a zero crossing: no jump off trim.
         assert abs(played[0]) < 1e-9
-        assert abs(played[-1]) <= np.max(np.abs(np.diff(played)))  # back to trim in one step
+    # All four play together over the whole excitation.
+    active = np.array([timeline.active[c] for c in harmonics])
+    assert np.all(active.all(axis=0) == active.any(axis=0))
 
 
 def test_presets_follow_the_thesis_sequences():
@@ -54,9 +71,6 @@ def test_presets_follow_the_thesis_sequences():
     # Throttle: two counts up, one count down (figure 4.4).
     steps = t[longitudinal.active["throttle"]]
     assert np.count_nonzero(steps > 0) == 2 * np.count_nonzero(steps < 0)
-    full = render(preset("full"), 50.0)
-    sines_end = np.flatnonzero(full.active["elevator"])[-1]
-    assert sines_end < np.flatnonzero(full.active["throttle"])[0]
 
 
 @pytest.mark.parametrize("name", PRESETS)
@@ -72,7 +86,7 @@ def test_every_run_starts_and_ends_at_trim(name):
 def test_plans_survive_the_radio_encoding(name):
     plan = preset(name, amplitude={"aileron": 2.5})
     data = plan.to_bytes()
-    assert len(data) < 512  # two XBee payloads at most
+    assert len(data) < 768  # three XBee payloads at most (the full preset's 80 harmonics)
     assert Plan.from_bytes(data) == plan
 
 
