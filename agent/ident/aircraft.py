@@ -141,7 +141,7 @@ def _input_band(batch: Sequence, dt: float) -> float:
     """BAND_MARGIN × the highest frequency where an input puts at least INPUT_LEVEL of its
     largest bin's power (a multisine's top line, a doublet's main lobe; measured positions'
     noise floor lies far below)."""
-    tops = [float(np.fft.rfftfreq(2, dt)[1]) * 0]
+    tops = [0.0]
     for exp in batch:
         u = exp.u - exp.u.mean(axis=0)
         power = np.abs(np.fft.rfft(u, axis=0)) ** 2
