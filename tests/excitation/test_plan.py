@@ -34,7 +34,7 @@ def test_full_preset_is_orthogonal_odd_and_plays_all_four_controls_at_once():
     report = summary(timeline, SURFACES)
     assert report["max_cross_correlation"] < 1e-9
     for name in ("aileron", "rudder", "elevator", "throttle"):
-        assert report["controls"][name]["rpf"] <= 1.3
+        assert report["controls"][name]["rpf"] <= 1.12
     # The throttle holds the phugoid's band, the surfaces 0.12–2 Hz; one 80 s period each.
     assert report["controls"]["throttle"]["band_hz"][1] < FULL_THROTTLE_TOP_HZ
     for name in ("aileron", "rudder", "elevator"):
