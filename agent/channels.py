@@ -15,6 +15,9 @@ INPUT_ROLES = ("throttle", "elevator", "aileron", "rudder")
 LONGITUDINAL_OUTPUTS = ("airspeed", "alpha", "q", "theta")
 LATERAL_OUTPUTS = ("beta", "p", "r", "phi")
 OUTPUT_ROLES = LONGITUDINAL_OUTPUTS + LATERAL_OUTPUTS
+# The INS's heading and velocity over the ground: with the attitude they give the still-air
+# V, α, β, so the whole-aircraft method measures the wind (agent.ident.aircraft.prepare).
+NAVIGATION_ROLES = ("psi", "vn", "ve", "vd")
 
 UNITS = {
     "throttle": "µs",
@@ -29,6 +32,10 @@ UNITS = {
     "p": "rad/s",
     "r": "rad/s",
     "phi": "rad",
+    "psi": "rad",
+    "vn": "m/s",
+    "ve": "m/s",
+    "vd": "m/s",
 }
 
 # Axis set → (input roles, output roles), thesis eq. 4.6–4.7 and A.2–A.4.

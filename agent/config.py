@@ -20,7 +20,7 @@ from pydantic import (
     model_validator,
 )
 
-from agent.channels import AXIS_SETS, INPUT_ROLES, OUTPUT_ROLES
+from agent.channels import AXIS_SETS, INPUT_ROLES, NAVIGATION_ROLES, OUTPUT_ROLES
 
 
 class _Section(BaseModel):
@@ -64,10 +64,18 @@ class Channels(_Section):
     """Body yaw rate r, rad/s."""
     phi: Name = "phi"
     """Bank angle φ, rad."""
+    psi: Name = "psi"
+    """Heading ψ from the INS, rad (with vn, ve, vd: the wind, for the aircraft method)."""
+    vn: Name = "vn"
+    """INS velocity north, m/s."""
+    ve: Name = "ve"
+    """INS velocity east, m/s."""
+    vd: Name = "vd"
+    """INS velocity down, m/s."""
 
     @model_validator(mode="after")
     def _distinct(self) -> Channels:
-        names = [getattr(self, role) for role in INPUT_ROLES + OUTPUT_ROLES]
+        names = [getattr(self, role) for role in INPUT_ROLES + OUTPUT_ROLES + NAVIGATION_ROLES]
         repeated = sorted({n for n in names if names.count(n) > 1})
         if repeated:
             raise ValueError(f"each channel needs its own name; repeated: {', '.join(repeated)}")
@@ -77,6 +85,10 @@ class Channels(_Section):
         """(input names, output names) of an axis set: lateral, longitudinal or full."""
         inputs, outputs = AXIS_SETS[axes]
         return tuple(getattr(self, r) for r in inputs), tuple(getattr(self, r) for r in outputs)
+
+    def navigation(self) -> tuple[str, ...]:
+        """The names of the INS heading and velocity channels (NAVIGATION_ROLES order)."""
+        return tuple(getattr(self, role) for role in NAVIGATION_ROLES)
 
     def role_of(self, name: str) -> str | None:
         """The role a column name carries, or None."""

@@ -453,13 +453,15 @@ class Agent:
         roles = AXIS_SETS[axes][1]
         self._model_number += 1
         model_id = f"{axes[:3]}-{self._model_number}"
-        needed = {*inputs, *outputs}
+        navigation = self.config.identification.channels.navigation()
+        needed = {*inputs, *outputs, *navigation}
         columns = {c: rows[:, 1 + k] for k, c in enumerate(self.recorder.channels) if c in needed}
         dt = 1.0 / self.config.recorder.rate_hz
         batch = self._batch.setdefault(axes, []) if self.ident.batch else []
         settings = _settings(self.config, self.ident)
         job = jobs.Job(model_id, axes, dt, inputs, outputs, roles, tuple(batch), settings,
-                       window=columns, trim_s=self.config.identification.trim_seconds)  # fmt: skip
+                       window=columns, trim_s=self.config.identification.trim_seconds,
+                       navigation=navigation)  # fmt: skip
         outcome = await loop.run_in_executor(pool, jobs.run, job)
         if not outcome["ok"]:
             return self._failed(model_id, axes, outcome["reason"])

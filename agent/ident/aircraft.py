@@ -92,6 +92,7 @@ class Spectra:
     U: np.ndarray  # (F, r)
     record: np.ndarray  # (F,) which experiment each bin comes from
     band_hz: tuple[float, float]
+    K: np.ndarray | None = None  # (F, m) known forcing of each output's equation (kinematics)
 
 
 @dataclass(frozen=True)
@@ -113,9 +114,11 @@ class AxisFit:
     converged: bool
 
 
-def spectra(batch: Sequence, dt: float, band_hz: float | None, held_inputs: bool) -> Spectra:
-    """Transforms of every experiment (X = Δt · DFT) at the bins in the analysis band."""
-    top = band_hz or _input_band(batch, dt)
+def spectra(batch: Sequence, dt: float, band_hz: float | None, held_inputs: bool,
+            known: Sequence[np.ndarray] | None = None) -> Spectra:  # fmt: skip
+    """Transforms of every experiment (X = Δt · DFT) at the bins in the analysis band;
+    `known`: per experiment, a known forcing of each output's equation (samples × outputs)."""
+    top = band_hz or input_band(batch, dt)
     top = min(top, 0.25 / dt)
     parts = []
     for index, exp in enumerate(batch):
@@ -127,17 +130,18 @@ def spectra(batch: Sequence, dt: float, band_hz: float | None, held_inputs: bool
         s = 2j * np.pi * f[keep]
         U = np.fft.rfft(exp.u, axis=0)[keep] * dt
         Y = np.fft.rfft(exp.y, axis=0)[keep] * dt
+        K = np.zeros_like(Y) if known is None else np.fft.rfft(known[index], axis=0)[keep] * dt
         if held_inputs:  # a zero-order hold: half a sample late, and its sinc
             w = np.abs(s) * dt / 2
             U = U * (np.exp(-s * dt / 2) * np.sinc(w / np.pi))[:, None]
-        parts.append((s, Y, U, np.full(s.size, index)))
+        parts.append((s, Y, U, np.full(s.size, index), K))
     if not parts:
         raise DataError("the records are too short for a single frequency bin in the band")
-    s, Y, U, record = (np.concatenate(p) for p in zip(*parts, strict=True))
-    return Spectra(s, Y, U, record, (float(np.abs(s).min() / 2 / np.pi), float(top)))
+    s, Y, U, record, K = (np.concatenate(p) for p in zip(*parts, strict=True))
+    return Spectra(s, Y, U, record, (float(np.abs(s).min() / 2 / np.pi), float(top)), K)
 
 
-def _input_band(batch: Sequence, dt: float) -> float:
+def input_band(batch: Sequence, dt: float) -> float:
     """BAND_MARGIN × the highest frequency where an input puts at least INPUT_LEVEL of its
     largest bin's power (a multisine's top line, a doublet's main lobe; measured positions'
     noise floor lies far below)."""
@@ -159,6 +163,7 @@ class _Problem:
         self.s = sp.s
         self.Y = sp.Y[:, list(states)]
         self.U = sp.U[:, list(inputs)]
+        self.K = 0.0 if sp.K is None else sp.K[:, list(states)]
         self.record = sp.record
         self.n, self.r = len(states), len(inputs)
         self.lagged = [list(inputs).index(j) for j in lagged]  # positions among inputs
@@ -192,7 +197,7 @@ class _Problem:
         n = self.n
         S = np.linalg.inv(self.s[:, None, None] * np.eye(n) - A)
         Ue = self.effective_inputs(taus)
-        forcing = Ue @ B.T - d[self.record]
+        forcing = Ue @ B.T + self.K - d[self.record]
         X = np.einsum("fij,fj->fi", S, forcing)
         if not jacobian:
             return X, None
@@ -226,8 +231,9 @@ def equation_error(problem: _Problem) -> np.ndarray:
     A = np.zeros((n, n))
     B = np.zeros((n, problem.r))
     d = np.zeros((E, n), dtype=complex)
+    known = np.broadcast_to(problem.K, Y.shape)
     for i in range(n):
-        lhs = s * Y[:, i]
+        lhs = s * Y[:, i] - known[:, i]
         coef, *_ = np.linalg.lstsq(real, np.concatenate([lhs.real, lhs.imag]), rcond=None)
         A[i], B[i] = coef[:n], coef[n : n + problem.r]
         d[:, i] = coef[n + problem.r : n + problem.r + E] + 1j * coef[n + problem.r + E :]
@@ -368,3 +374,132 @@ def axes_present(input_roles, output_roles) -> dict[str, tuple[list[int], list[i
         if states is not None and inputs:
             present[axis] = (states, inputs)
     return present
+
+
+# Rigid-body kinematics and gravity, known exactly (no aerodynamic parameter), for the eight
+# states in this order. Their linear part about the trim is what A holds; what is left (the
+# remainder) is a known forcing of each state's equation (`kinematic_remainder`).
+KINEMATIC_STATES = ("airspeed", "alpha", "q", "theta", "beta", "p", "r", "phi")
+GRAVITY = 9.80665
+
+
+def kinematics(x: np.ndarray) -> np.ndarray:
+    """ẋ without aerodynamic and thrust forces and moments: the body velocity's rotation and
+    gravity in V̇, α̇ and β̇, the Euler angles' rates in θ̇ and φ̇ (Stevens & Lewis, *Aircraft
+    Control and Simulation*, §2.4), and nothing in ṗ, q̇, ṙ (their moments are all unknown).
+    x: (..., 8) in KINEMATIC_STATES order, absolute values, SI units."""
+    V, alpha, q, theta, beta, p, r, phi = np.moveaxis(x, -1, 0)
+    u = V * np.cos(alpha) * np.cos(beta)
+    v = V * np.sin(beta)
+    w = V * np.sin(alpha) * np.cos(beta)
+    u_dot = r * v - q * w - GRAVITY * np.sin(theta)
+    v_dot = p * w - r * u + GRAVITY * np.sin(phi) * np.cos(theta)
+    w_dot = q * u - p * v + GRAVITY * np.cos(phi) * np.cos(theta)
+    V_dot = (u * u_dot + v * v_dot + w * w_dot) / V
+    alpha_dot = (u * w_dot - w * u_dot) / (u * u + w * w)
+    beta_dot = (V * v_dot - v * V_dot) / (V * V * np.cos(beta))
+    theta_dot = q * np.cos(phi) - r * np.sin(phi)
+    phi_dot = p + np.tan(theta) * (q * np.sin(phi) + r * np.cos(phi))
+    zero = np.zeros_like(V)
+    return np.stack([V_dot, alpha_dot, zero, theta_dot, beta_dot, zero, zero, phi_dot], axis=-1)
+
+
+def kinematic_remainder(x: np.ndarray, trim: np.ndarray) -> np.ndarray:
+    """kinematics(x) less its first-order expansion about `trim`: the part a linear model's
+    A cannot hold. (N, 8) → (N, 8). A trim a little off changes the remainder only by terms
+    linear in x, which A absorbs."""
+    step = 1e-6 * np.maximum(np.abs(trim), 1.0)
+    jacobian = np.empty((8, 8))
+    for j in range(8):
+        up, down = trim.copy(), trim.copy()
+        up[j] += step[j]
+        down[j] -= step[j]
+        jacobian[:, j] = (kinematics(up) - kinematics(down)) / (2 * step[j])
+    return kinematics(x) - kinematics(trim) - (x - trim) @ jacobian.T
+
+
+def inertial_air_data(x: np.ndarray, navigation: np.ndarray) -> np.ndarray:
+    """The airspeed, α and β the aircraft would have in still air: the INS's velocity over the
+    ground (north, east, down) turned into body axes by the Euler angles. `x`: (N, 8) absolute
+    states in KINEMATIC_STATES order (θ and φ used); `navigation`: (N, 4) ψ, v_N, v_E, v_D.
+    Returns (N, 3): V (m/s), α, β (rad)."""
+    theta, phi = x[:, 3], x[:, 7]
+    psi, vn, ve, vd = navigation.T
+    cps, sps, cth, sth, cph, sph = (np.cos(psi), np.sin(psi), np.cos(theta), np.sin(theta),
+                                    np.cos(phi), np.sin(phi))  # fmt: skip
+    u = cth * cps * vn + cth * sps * ve - sth * vd
+    v = (sph * sth * cps - cph * sps) * vn + (sph * sth * sps + cph * cps) * ve + sph * cth * vd
+    w = (cph * sth * cps + sph * sps) * vn + (cph * sth * sps - sph * cps) * ve + cph * cth * vd
+    speed = np.sqrt(u * u + v * v + w * w)
+    return np.column_stack([speed, np.arctan2(w, u), np.arcsin(v / np.maximum(speed, 1e-9))])
+
+
+# The measured wind's components, the output they correct and the axis they act on.
+GUSTS = (("airspeed", "longitudinal"), ("alpha", "longitudinal"), ("beta", "lateral"))
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A batch made ready for the fit: outputs on their inertial footing where the wind is
+    measured, the measured gusts appended to the inputs, and the kinematic forcing."""
+
+    batch: list  # objects with u (controls, then gusts) and y
+    known: list[np.ndarray] | None  # kinematic remainder per experiment, or None
+    gusts: tuple[str, ...]  # the gust columns' outputs ("airspeed", "alpha", "beta")
+    gust_axes: dict[int, str]  # gust column (index in u) → the axis it acts on
+    gust_rms: dict[str, float]
+
+
+@dataclass(frozen=True)
+class _Exp:
+    u: np.ndarray
+    y: np.ndarray
+
+
+def prepare(batch: Sequence, output_roles: Sequence[str | None], trim_samples: int = 1,
+            kinematics: bool = True) -> Prepared:  # fmt: skip
+    """Use the operating point and the INS's velocities when every experiment carries them.
+
+    With the operating point, the exact kinematics' nonlinear remainder is a known forcing
+    (`kinematic_remainder`). With the INS's velocities too, the wind is measured: the gust g is
+    the still-air V, α, β (`inertial_air_data`) less the air data's. The forces depend on the
+    air-relative states x − g but the states move as the inertial ones, ẋ_i = A(x_i − g) + B u,
+    so the model is fitted on the inertial outputs with the gusts as known inputs of their
+    own (free) gains: the vanes' reading of the gust stops being noise that biases the fit
+    and becomes excitation. Its A is the still-air aircraft's."""
+    index = {role: k for k, role in enumerate(output_roles) if role is not None}
+    r = batch[0].u.shape[1]
+    if "airspeed" not in index or any(e.operating_point is None for e in batch):
+        return Prepared([_Exp(e.u, e.y) for e in batch], None, (), {}, {})
+    measured = "theta" in index and all(e.navigation is not None for e in batch)
+    gusts = tuple(role for role, _ in GUSTS if role in index) if measured else ()
+    out, known, squares, count = [], [], dict.fromkeys(gusts, 0.0), 0
+    for e in batch:
+        x = np.zeros((e.y.shape[0], len(KINEMATIC_STATES)))
+        for k, role in enumerate(KINEMATIC_STATES):
+            if role in index:
+                x[:, k] = e.y[:, index[role]] + e.operating_point[index[role]]
+        u, y = e.u, e.y.copy()
+        if gusts:
+            still = inertial_air_data(x, e.navigation)
+            columns = []
+            for role in gusts:
+                k = KINEMATIC_STATES.index(role)
+                inertial = still[:, ("airspeed", "alpha", "beta").index(role)]
+                gust = inertial - x[:, k]
+                columns.append(gust)
+                squares[role] += float(np.sum((gust - gust.mean()) ** 2))
+                x[:, k] = inertial
+                y[:, index[role]] = inertial - e.operating_point[index[role]]
+            u = np.hstack([u, np.column_stack(columns)])
+        count += y.shape[0]
+        remainder = kinematic_remainder(x, x[:trim_samples].mean(axis=0))
+        forcing = np.zeros_like(y)
+        for k, role in enumerate(KINEMATIC_STATES):
+            if role in index:
+                forcing[:, index[role]] = remainder[:, k]
+        out.append(_Exp(u, y))
+        known.append(forcing if kinematics else np.zeros_like(y))
+    axes = dict(GUSTS)
+    return Prepared(out, known, gusts, {r + k: axes[role] for k, role in enumerate(gusts)},
+                    {role: float(np.sqrt(v / count)) for role, v in squares.items()})  # fmt: skip

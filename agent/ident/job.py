@@ -39,6 +39,9 @@ class Job:
     worker (bridging, edge cut, trim): numpy on the loop thread while a log is being written
     made the GIL change hands at every call and stalled the loop by 50–300 ms."""
     trim_s: float = 0.5
+    navigation: tuple[str, ...] = ()
+    """The INS heading and velocity channels in the window (NAVIGATION_ROLES order): the
+    aircraft method measures the wind with them. A window without them is identified without."""
 
 
 def window_and_trim(values: dict[str, np.ndarray], inputs, outputs, dt: float, trim_s: float):
@@ -63,6 +66,17 @@ def _window(values, inputs, outputs, dt: float, trim_s: float):
     y = np.column_stack([_bridge(values[n][keep], dt, n) for n in outputs])
     count = max(1, round(trim_s / dt))
     return (u, y), (u[:count].mean(axis=0), y[:count].mean(axis=0))
+
+
+def _navigation(values, names, inputs, outputs, length: int) -> np.ndarray | None:
+    """The navigation columns over the rows the window kept, or None when one is missing or
+    has a gap (the identification then goes on without the measured wind)."""
+    if len(names) != 4 or not all(n in values for n in names):
+        return None
+    every = np.column_stack([values[n] for n in [*inputs, *outputs]])
+    complete = np.flatnonzero(np.isfinite(every).all(axis=1))
+    nav = np.column_stack([values[n] for n in names])[complete[0] : complete[0] + length]
+    return nav if nav.shape[0] == length and np.isfinite(nav).all() else None
 
 
 def _bridge(x: np.ndarray, dt: float, name: str) -> np.ndarray:
@@ -93,6 +107,10 @@ def run(job: Job) -> dict:
         extra = {"experiment": (u, y), "trim": trim}
     try:
         experiments = [Experiment(u, y) for u, y in data]
+        if job.window is not None:  # the new window: absolute trim and navigation, if whole
+            op = np.array([trim["outputs"][n] for n in job.outputs])
+            nav = _navigation(job.window, job.navigation, job.inputs, job.outputs, u.shape[0])
+            experiments[-1] = Experiment(u, y, operating_point=op, navigation=nav)
         result = identify(experiments, job.record_dt, input_names=job.inputs,
                           output_names=job.outputs, output_roles=job.roles,
                           input_roles=AXIS_SETS[job.axes][0] if job.axes in AXIS_SETS else None,

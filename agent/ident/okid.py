@@ -42,14 +42,38 @@ RCOND = 1e-10
 
 @dataclass(frozen=True)
 class Experiment:
-    """One contiguous record: inputs u (l × r) and outputs y (l × m), trim already removed."""
+    """One contiguous record: inputs u (l × r) and outputs y (l × m), trim already removed.
+
+    Optional, for the whole-aircraft method (agent.ident.aircraft): `operating_point`, the
+    outputs' trim values that were removed (m,), and `navigation`, the INS's heading and
+    north, east and down velocities (l × 4, absolute, rad and m/s) that the wind is measured
+    from."""
 
     u: np.ndarray
     y: np.ndarray
+    operating_point: np.ndarray | None = None
+    navigation: np.ndarray | None = None
 
     @property
     def length(self) -> int:
         return int(self.u.shape[0])
+
+
+def _optional(exp, index: int, length: int, outputs: int):
+    """The experiment's operating point and navigation, checked (None when absent)."""
+    op = getattr(exp, "operating_point", None)
+    nav = getattr(exp, "navigation", None)
+    if op is not None:
+        op = np.asarray(op, dtype=float).ravel()
+        if op.shape != (outputs,) or not np.isfinite(op).all():
+            raise DataError(f"experiment {index}: the operating point needs {outputs} finite "
+                            "values, one per output")  # fmt: skip
+    if nav is not None:
+        nav = np.asarray(nav, dtype=float)
+        if nav.shape != (length, 4) or not np.isfinite(nav).all():
+            raise DataError(f"experiment {index}: navigation needs {length} finite rows of "
+                            "heading, north, east and down velocity")  # fmt: skip
+    return op, nav
 
 
 def as_experiments(experiments: Sequence[Experiment] | Experiment) -> list[Experiment]:
@@ -70,7 +94,8 @@ def as_experiments(experiments: Sequence[Experiment] | Experiment) -> list[Exper
             )
         if not (np.isfinite(u).all() and np.isfinite(y).all()):
             raise DataError(f"experiment {index}: inputs or outputs contain NaN or infinity")
-        clean.append(Experiment(u=u, y=y))
+        op, nav = _optional(exp, index, u.shape[0], y.shape[1])
+        clean.append(Experiment(u=u, y=y, operating_point=op, navigation=nav))
     r, m = clean[0].u.shape[1], clean[0].y.shape[1]
     for index, exp in enumerate(clean):
         if exp.u.shape[1] != r or exp.y.shape[1] != m:

@@ -48,6 +48,9 @@ from agent.ident.settings import Settings
 
 # A decent fit has TIC below this (thesis §5.3, ref. [67]).
 TIC_DECENT = 0.3
+# The kinematic forcing is the kinematics less their expansion about the trim, taken as the
+# record's first TRIM_S (the job removes the same stretch's mean as the operating point).
+TRIM_S = 0.5
 
 
 @dataclass(frozen=True)
@@ -414,30 +417,45 @@ def _identify_aircraft(
     # The transforms leave out DC, so trim errors do not matter to the fit; the time-domain
     # simulation (TIC) starts from the records' own trim, as the other methods'.
     batch = list(raw)
-    sp = aircraft.spectra(batch, dt, settings.band_hz, settings.held_inputs)
+    r = len(inputs)
+    ready = aircraft.prepare(batch, output_roles, max(1, round(TRIM_S / dt)))
+    band = settings.band_hz or aircraft.input_band(batch, dt)
+    sp = aircraft.spectra(ready.batch, dt, band, settings.held_inputs, ready.known)
     E = len(batch)
     throttle = [j for j, role in enumerate(input_roles) if role == "throttle"]
-    fits, report = [], {"band_hz": list(sp.band_hz), "bins": int(sp.s.size), "coupling": {}}
+    gusts = {axis: [j for j, a in ready.gust_axes.items() if a == axis] for axis in aircraft.AXES}
+    names = [*inputs, *(f"gust {role}" for role in ready.gusts)]
+    wind = {"measured": bool(ready.gusts), "gust_rms": ready.gust_rms}
+    fits, report = [], {"band_hz": list(sp.band_hz), "bins": int(sp.s.size), "coupling": {},
+                        "kinematics": ready.known is not None, "wind": wind}  # fmt: skip
     for axis, (states, ins) in present.items():
-        fits.append(aircraft.fit_axis(sp, axis, states, ins, [j for j in ins if j in throttle],
-                                      E))  # fmt: skip
+        fits.append(aircraft.fit_axis(sp, axis, states, [*ins, *gusts[axis]],
+                                      [j for j in ins if j in throttle], E))  # fmt: skip
     if len(fits) == 2:
-        augmented = aircraft.Spectra(sp.s, sp.Y, np.hstack([sp.U, sp.Y]), sp.record, sp.band_hz)
-        r = sp.U.shape[1]
+        augmented = aircraft.Spectra(sp.s, sp.Y, np.hstack([sp.U, sp.Y]), sp.record, sp.band_hz,
+                                     sp.K)  # fmt: skip
+        width = sp.U.shape[1]
         coupled_states = False
+        own = [[j for j in f.inputs if j < r] for f in fits]  # each axis's own controls
         for k, fitted in enumerate(fits):
-            other = fits[1 - k]
-            by_inputs = aircraft.coupling(sp, fitted, other.inputs, E)
-            by_states = aircraft.coupling(augmented, fitted, [r + i for i in other.states], E)
+            other = own[1 - k]
+            by_inputs = aircraft.coupling(sp, fitted, other, E)
+            others = [width + i for i in fits[1 - k].states]
+            by_states = aircraft.coupling(augmented, fitted, others, E)
             report["coupling"][fitted.name] = {"by_inputs": by_inputs, "by_states": by_states}
             coupled_states |= by_states > aircraft.COUPLED_STATES
-            if by_inputs > aircraft.COUPLED:  # the other axis's controls act on this one
-                ins = (*fitted.inputs, *other.inputs)
+            # The longitudinal forces and moments are even in the lateral variables (the
+            # airframe's symmetry), so lateral controls never join the longitudinal axis: what
+            # they explain there is even-order (sideslip drag), which a linear term only mimics
+            # (on JSBSim's Cub it moved the short period by 4 %). The propeller's torque and
+            # slipstream do act linearly on the lateral axis.
+            if by_inputs > aircraft.COUPLED and fitted.name == "lateral":
+                ins = (*fitted.inputs, *other)
                 fits[k] = aircraft.fit_axis(sp, fitted.name, fitted.states, ins,
                                             tuple(fitted.lags), E)  # fmt: skip
         if coupled_states:
             states = tuple(range(len(outputs)))
-            ins = tuple(range(len(inputs)))
+            ins = tuple(range(width))
             fits = [aircraft.fit_axis(sp, "coupled", states, ins, throttle, E)]
         report["model"] = "coupled" if coupled_states else "decoupled"
     else:
@@ -447,7 +465,7 @@ def _identify_aircraft(
                               for f in fits if f.lags}  # fmt: skip
     report["axes"] = [
         {"name": f.name, "outputs": [outputs[i] for i in f.states],
-         "inputs": [inputs[j] for j in f.inputs], "iterations": f.iterations,
+         "inputs": [names[j] for j in f.inputs], "iterations": f.iterations,
          "converged": f.converged}
         for f in fits
     ]  # fmt: skip
@@ -474,7 +492,8 @@ def _identify_aircraft(
     Bm = model.B[:m].copy()
     for f in fits:
         for c, j in enumerate(f.inputs):
-            Bm[list(f.states), j] = f.B[:, c]
+            if j < r:  # a control (the gusts are not the model's inputs)
+                Bm[list(f.states), j] = f.B[:, c]
     states_only = StateSpace(model.A[:m, :m], Bm, np.eye(m), np.zeros((m, len(inputs))))
     index = np.arange(n * n).reshape(n, n)[:m, :m].ravel()
     for_modes = replace(refinement, continuous=states_only,
@@ -517,8 +536,10 @@ def _assemble(fits: Sequence[aircraft.AxisFit], r: int, m: int):
     for f in fits:
         st = list(f.states)
         A[np.ix_(st, st)] = f.A
-        where_b = np.empty((len(st), len(f.inputs)), dtype=int)  # where each B entry went
+        where_b = np.full((len(st), len(f.inputs)), -1)  # where each B entry went
         for c, j in enumerate(f.inputs):
+            if j >= r:  # a measured gust: it drove the fit, it is not an input of the model
+                continue
             if j in f.lags:  # u → lag → lag → the axis: B's column acts on the last lag state
                 tau = f.lags[j]
                 chain = list(range(extra, extra + aircraft.THROTTLE_LAGS))
@@ -535,6 +556,7 @@ def _assemble(fits: Sequence[aircraft.AxisFit], r: int, m: int):
                 B[st, j] = f.B[:, c]
                 where_b[:, c] = index_b[st, j]
         pos = np.concatenate([index_a[np.ix_(st, st)].ravel(), where_b.ravel()])
-        cov[np.ix_(pos, pos)] = f.covariance
+        kept = pos >= 0
+        cov[np.ix_(pos[kept], pos[kept])] = f.covariance[np.ix_(kept, kept)]
     C = np.hstack([np.eye(m), np.zeros((m, n - m))])
     return StateSpace(A, B, C, np.zeros((m, r))), cov, lag_times

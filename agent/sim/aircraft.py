@@ -38,7 +38,7 @@ NOISE = {
     "phi": 0.05 * DEG, "theta": 0.05 * DEG, "psi": 0.1 * DEG, "p": 0.02 * DEG,
     "q": 0.02 * DEG, "r": 0.02 * DEG, "ax": 0.01, "ay": 0.01, "az": 0.01, "Vt": 0.1,
     "alpha": 0.2 * DEG, "beta": 0.2 * DEG, "aileron_left": 0.1, "aileron_right": 0.1,
-    "elevator": 0.1, "rudder": 0.1,
+    "elevator": 0.1, "rudder": 0.1, "vn": 0.05, "ve": 0.05, "vd": 0.05,
 }  # fmt: skip
 
 

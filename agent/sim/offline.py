@@ -27,6 +27,9 @@ INPUT_CHANNELS = ("throttle", "elevator", "aileron", "rudder")
 CHANNEL = {"aileron": 1, "elevator": 2, "throttle": 3, "rudder": 4}
 OUTPUT_NOISE = {"Vt": "Vt", "alpha": "alpha", "q": "q", "theta": "theta", "beta": "beta",
                 "p": "p", "r": "r", "phi": "phi"}  # fmt: skip
+# The INS's heading and velocity (north, east, down): with the attitude they give the inertial
+# velocity the wind is measured from (agent.ident.wind).
+INS_CHANNELS = ("psi", "vn", "ve", "vd")
 
 
 @dataclass(frozen=True)
@@ -36,6 +39,7 @@ class Record:
     u: np.ndarray
     y: np.ndarray
     dt: float
+    ins: np.ndarray  # INS_CHANNELS
     inputs: tuple[str, ...] = INPUT_CHANNELS
     outputs: tuple[str, ...] = OUTPUTS
 
@@ -71,6 +75,7 @@ def fly(
     rng = np.random.default_rng(seed + 1000)
     u = np.empty((total, len(INPUT_CHANNELS)))
     y = np.empty((total, len(OUTPUTS)))
+    ins = np.empty((total, len(INS_CHANNELS)))
     per_command = round(timeline.dt / tick)
     for k in range(total):
         j = (k - lead) // per_command
@@ -86,9 +91,11 @@ def fly(
         s = plant.state()
         u[k] = [pwm["throttle"], s["elevator"], s["aileron"], s["rudder"]]
         y[k] = [s[name] for name in OUTPUTS]
+        ins[k] = [s[name] for name in INS_CHANNELS]
         if noise:
             u[k, 1:] += rng.normal(size=3) * [NOISE["elevator"], np.sqrt(0.5) * NOISE[
                 "aileron_left"], NOISE["rudder"]]  # fmt: skip
             y[k] += rng.normal(size=len(OUTPUTS)) * [NOISE[OUTPUT_NOISE[n]] for n in OUTPUTS]
+            ins[k] += rng.normal(size=len(INS_CHANNELS)) * [NOISE[n] for n in INS_CHANNELS]
     keep = round(settle_s / tick)
-    return Record(u[keep:], y[keep:], tick)
+    return Record(u[keep:], y[keep:], tick, ins[keep:])
