@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from functools import lru_cache
 
 import numpy as np
+from scipy.optimize import minimize
 
 # The thesis's table 6.4 allocation: harmonics of the base period per surface, mutually
 # exclusive so the surfaces are orthogonal over a whole period.
@@ -79,8 +80,6 @@ def _clipped(k: np.ndarray, phases: np.ndarray) -> np.ndarray:
 def _polished(k: np.ndarray, phases: np.ndarray) -> np.ndarray:
     """Minimise (mean u^p)^(1/p) over the phases, p = _P_NORMS in turn (L-BFGS, analytic
     gradient: ∂u/∂φ_k = −sin(2πkτ + φ_k), summed against u^(p−1) by one FFT)."""
-    from scipy.optimize import minimize
-
     n = _GRID_PER_CYCLE * int(k.max())
     scale = np.sqrt(k.size / 2)  # the rms, so u^p stays in range
     for p in _P_NORMS:

@@ -37,10 +37,20 @@ record's length: only the bins up to the band's top are used.
    estimated (u_eff = u / Π(1 + jωτ)). Held inputs (commands recorded at the sample) carry
    the zero-order hold's half-sample delay and sinc; sampled ones are taken at face value.
 
+Kinematics and wind (`prepare`), used when the record carries them: with the trim
+(`operating_point`), the rigid body's exact kinematics and gravity less their linear part about
+the trim are a known forcing K of each state's equation, X = (sI − A)⁻¹(B U + K − d), so the
+bank and sideslip of a lateral manoeuvre stop biasing the phugoid (with the lateral inputs
+playing, the r sin φ of θ̇ = q cos φ − r sin φ can be larger than q itself). With the INS's
+heading and velocities too, the wind is measured and its gusts become known inputs (see
+`prepare`).
+
 Coupling, reported either way (`coupling`): each axis model is fitted again with the other
 axis's inputs added, and again with the other axis's measured states added as known inputs;
-the fraction of its weighted cost each explains is reported. Inputs that explain more than
-COUPLED join the axis's inputs (the axes' dynamics stay separate). States that explain more
+the fraction of its weighted cost each explains is reported. The longitudinal controls join
+the lateral axis's inputs when they explain more than COUPLED (the propeller's torque and
+slipstream; the axes' dynamics stay separate); lateral controls never join the longitudinal
+axis, whose forces are even in the lateral variables. States that explain more
 than COUPLED_STATES mean the axes cannot be separated: one eight-state model with every input
 (still C = I) is fitted and reported instead.
 """
@@ -53,6 +63,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agent.ident.errors import DataError, IdentificationFailed
+from agent.ident.okid import Experiment
 
 LONGITUDINAL = (("airspeed", "alpha", "q", "theta"), ("elevator", "throttle"))
 LATERAL = (("beta", "p", "r", "phi"), ("aileron", "rudder"))
@@ -443,21 +454,15 @@ class Prepared:
     """A batch made ready for the fit: outputs on their inertial footing where the wind is
     measured, the measured gusts appended to the inputs, and the kinematic forcing."""
 
-    batch: list  # objects with u (controls, then gusts) and y
+    batch: list[Experiment]  # u: the controls, then the gusts
     known: list[np.ndarray] | None  # kinematic remainder per experiment, or None
     gusts: tuple[str, ...]  # the gust columns' outputs ("airspeed", "alpha", "beta")
     gust_axes: dict[int, str]  # gust column (index in u) → the axis it acts on
     gust_rms: dict[str, float]
 
 
-@dataclass(frozen=True)
-class _Exp:
-    u: np.ndarray
-    y: np.ndarray
-
-
-def prepare(batch: Sequence, output_roles: Sequence[str | None], trim_samples: int = 1,
-            kinematics: bool = True) -> Prepared:  # fmt: skip
+def prepare(batch: Sequence[Experiment], output_roles: Sequence[str | None],
+            trim_samples: int = 1) -> Prepared:  # fmt: skip
     """Use the operating point and the INS's velocities when every experiment carries them.
 
     With the operating point, the exact kinematics' nonlinear remainder is a known forcing
@@ -470,7 +475,7 @@ def prepare(batch: Sequence, output_roles: Sequence[str | None], trim_samples: i
     index = {role: k for k, role in enumerate(output_roles) if role is not None}
     r = batch[0].u.shape[1]
     if "airspeed" not in index or any(e.operating_point is None for e in batch):
-        return Prepared([_Exp(e.u, e.y) for e in batch], None, (), {}, {})
+        return Prepared([Experiment(e.u, e.y) for e in batch], None, (), {}, {})
     measured = "theta" in index and all(e.navigation is not None for e in batch)
     gusts = tuple(role for role, _ in GUSTS if role in index) if measured else ()
     out, known, squares, count = [], [], dict.fromkeys(gusts, 0.0), 0
@@ -498,8 +503,8 @@ def prepare(batch: Sequence, output_roles: Sequence[str | None], trim_samples: i
         for k, role in enumerate(KINEMATIC_STATES):
             if role in index:
                 forcing[:, index[role]] = remainder[:, k]
-        out.append(_Exp(u, y))
-        known.append(forcing if kinematics else np.zeros_like(y))
+        out.append(Experiment(u, y))
+        known.append(forcing)
     axes = dict(GUSTS)
     return Prepared(out, known, gusts, {r + k: axes[role] for k, role in enumerate(gusts)},
                     {role: float(np.sqrt(v / count)) for role, v in squares.items()})  # fmt: skip

@@ -55,28 +55,30 @@ def window_and_trim(values: dict[str, np.ndarray], inputs, outputs, dt: float, t
 
 
 def _window(values, inputs, outputs, dt: float, trim_s: float):
-    names = [*inputs, *outputs]
-    every = np.column_stack([values[n] for n in names])
-    # Rows at the window's edges where a channel has no data yet (or no longer) are cut.
-    complete = np.flatnonzero(np.isfinite(every).all(axis=1))
-    if complete.size < 2:
-        raise DataError("the window holds no complete row of the channels to identify")
-    keep = slice(complete[0], complete[-1] + 1)
+    keep = _complete(values, inputs, outputs)
     u = np.column_stack([_bridge(values[n][keep], dt, n) for n in inputs])
     y = np.column_stack([_bridge(values[n][keep], dt, n) for n in outputs])
     count = max(1, round(trim_s / dt))
     return (u, y), (u[:count].mean(axis=0), y[:count].mean(axis=0))
 
 
-def _navigation(values, names, inputs, outputs, length: int) -> np.ndarray | None:
-    """The navigation columns over the rows the window kept, or None when one is missing or
-    has a gap (the identification then goes on without the measured wind)."""
-    if len(names) != 4 or not all(n in values for n in names):
-        return None
+def _complete(values, inputs, outputs) -> slice:
+    """The window's rows from the first to the last where every channel to identify has data
+    (at the edges a channel may have none yet, or no longer)."""
     every = np.column_stack([values[n] for n in [*inputs, *outputs]])
     complete = np.flatnonzero(np.isfinite(every).all(axis=1))
-    nav = np.column_stack([values[n] for n in names])[complete[0] : complete[0] + length]
-    return nav if nav.shape[0] == length and np.isfinite(nav).all() else None
+    if complete.size < 2:
+        raise DataError("the window holds no complete row of the channels to identify")
+    return slice(complete[0], complete[-1] + 1)
+
+
+def _navigation(values, names, keep: slice) -> np.ndarray | None:
+    """The navigation columns over the rows the window kept, or None when one is missing or
+    has a gap (an INS dropout: the identification goes on without the measured wind)."""
+    if len(names) != 4 or not all(n in values for n in names):
+        return None
+    nav = np.column_stack([values[n][keep] for n in names])
+    return nav if np.isfinite(nav).all() else None
 
 
 def _bridge(x: np.ndarray, dt: float, name: str) -> np.ndarray:
@@ -96,21 +98,20 @@ def _bridge(x: np.ndarray, dt: float, name: str) -> np.ndarray:
 def run(job: Job) -> dict:
     """Identify; never raises for bad data: {"ok": False, "reason": …} instead. With a
     `window`, the outcome also carries the experiment made of it and the trim removed."""
-    data, extra = list(job.experiments), {}
+    experiments, extra = [Experiment(u, y) for u, y in job.experiments], {}
     if job.window is not None:
         try:
             (u, y), trim = window_and_trim(job.window, job.inputs, job.outputs, job.record_dt,
                                            job.trim_s)  # fmt: skip
         except (DataError, KeyError) as exc:
             return {"ok": False, "model_id": job.model_id, "reason": f"window unusable: {exc}"}
-        data.append((u, y))
         extra = {"experiment": (u, y), "trim": trim}
+        # Its absolute trim and navigation, for the aircraft method's kinematics and wind.
+        op = np.array([trim["outputs"][n] for n in job.outputs])
+        nav = _navigation(job.window, job.navigation, _complete(job.window, job.inputs,
+                                                                job.outputs))  # fmt: skip
+        experiments.append(Experiment(u, y, operating_point=op, navigation=nav))
     try:
-        experiments = [Experiment(u, y) for u, y in data]
-        if job.window is not None:  # the new window: absolute trim and navigation, if whole
-            op = np.array([trim["outputs"][n] for n in job.outputs])
-            nav = _navigation(job.window, job.navigation, job.inputs, job.outputs, u.shape[0])
-            experiments[-1] = Experiment(u, y, operating_point=op, navigation=nav)
         result = identify(experiments, job.record_dt, input_names=job.inputs,
                           output_names=job.outputs, output_roles=job.roles,
                           input_roles=AXIS_SETS[job.axes][0] if job.axes in AXIS_SETS else None,

@@ -28,7 +28,7 @@ CHANNEL = {"aileron": 1, "elevator": 2, "throttle": 3, "rudder": 4}
 OUTPUT_NOISE = {"Vt": "Vt", "alpha": "alpha", "q": "q", "theta": "theta", "beta": "beta",
                 "p": "p", "r": "r", "phi": "phi"}  # fmt: skip
 # The INS's heading and velocity (north, east, down): with the attitude they give the inertial
-# velocity the wind is measured from (agent.ident.wind).
+# velocity the wind is measured from (agent.ident.aircraft.prepare).
 INS_CHANNELS = ("psi", "vn", "ve", "vd")
 
 
