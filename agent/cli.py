@@ -210,7 +210,10 @@ def build_parser() -> argparse.ArgumentParser:
     aircraft.add_argument("--speed-kts", type=float, default=60.0)
     aircraft.add_argument("--altitude-ft", type=float, default=1000.0)
     aircraft.add_argument(
-        "--turbulence", type=float, default=0.0, help="Dryden severity: 0 none, 1 light, 2 moderate"
+        "--turbulence",
+        type=float,
+        default=0.0,
+        help="Dryden intensity: 0 none, 1 light (W20 = 5 ft/s), 5 ≈ MIL-F-8785C light (15 kt)",
     )
     aircraft.add_argument("--seed", type=int, default=0)
     aircraft.add_argument(
@@ -265,7 +268,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sim.add_argument("--aircraft", default="J3Cub")
     sim.add_argument("--speed-kts", type=float, default=60.0)
-    sim.add_argument("--turbulence", type=float, default=0.0, help="Dryden severity (1 = light)")
+    sim.add_argument(
+        "--turbulence", type=float, default=0.0, help="Dryden intensity: 1 = light (W20 = 5 ft/s)"
+    )
     sim.add_argument("--seed", type=int, default=0)
     sim.add_argument("--preset", choices=PRESETS, default="full")
     sim.add_argument(

@@ -22,6 +22,16 @@ final state the record has, so no periodicity and no steady state are needed, an
 offset (a trim error) lives only at DC, which is not fitted. The cost is independent of the
 record's length: only the bins up to the band's top are used.
 
+Each axis is fitted on its excited bins only (`excited`): those where one of its own
+controls puts at least EXCITED_LEVEL of its largest bin's power, as Morelli's `fdoe` fits the
+excited frequencies. Everything else in the band carries no information about the axis
+and is where the nonlinear distortion goes. The full preset plays odd harmonics, each
+control on its own. A lateral manoeuvre reaches the longitudinal axis through even functions
+of β, p, r: sideslip drag ∝ |β| explains all of the Cub's nonlinear airspeed residual and
+half its pitch-acceleration residual. Those functions of odd-harmonic signals sit on even
+harmonics, away from the elevator's lines. On JSBSim's Cub in calm air this took the short
+period from 31 % to 2.6 % off.
+
 1. Equation error: each state's row, jωX_i = A_i X + B_i U − d_i, by linear least squares
    over the bins: the start.
 2. Output error: J = Σ_k Σ_i w_i² |Y_i(ω_k) − X_i(ω_k; θ)|², Levenberg–Marquardt with the
@@ -37,28 +47,35 @@ record's length: only the bins up to the band's top are used.
    estimated (u_eff = u / Π(1 + jωτ)). Held inputs (commands recorded at the sample) carry
    the zero-order hold's half-sample delay and sinc; sampled ones are taken at face value.
 
-Kinematics and wind (`prepare`), used when the record carries them: with the trim
-(`operating_point`), the rigid body's exact kinematics and gravity less their linear part about
-the trim are a known forcing K of each state's equation, X = (sI − A)⁻¹(B U + K − d), so the
-bank and sideslip of a lateral manoeuvre stop biasing the phugoid (with the lateral inputs
-playing, the r sin φ of θ̇ = q cos φ − r sin φ can be larger than q itself). With the INS's
+Kinematics and wind (`prepare`), used when the record carries them. With the trim
+(`operating_point`), the equations of θ and φ are pure kinematics (θ̇ = q cos φ − r sin φ,
+φ̇ = p + tan θ (q sin φ + r cos φ)). Their rows of A and the θ, φ columns of the other rows
+(gravity's: no force depends on the attitude) are fixed at the kinematics' linear part at
+the trim (_Problem). Their nonlinear rest is a known forcing K, X = (sI − A)⁻¹(B U + K − d),
+so the bank of a lateral manoeuvre stops biasing the phugoid: with the lateral inputs
+playing, the r sin φ of θ̇ can be larger than q itself. The V̇, α̇ and β̇ equations get no such
+forcing. Their kinematic nonlinearities share factors such as 1/(V cos β) with the unknown
+aerodynamic force, so half of a nonlinear equation is not nearer the truth than none. On
+the Cub, α̇'s kinematic remainder alone moved the short period by 30 %. With the INS's
 heading and velocities too, the wind is measured and its gusts become known inputs (see
 `prepare`).
 
 Coupling, reported either way (`coupling`): each axis model is fitted again with the other
-axis's inputs added, and again with the other axis's measured states added as known inputs;
-the fraction of its weighted cost each explains is reported. The longitudinal controls join
-the lateral axis's inputs when they explain more than COUPLED (the propeller's torque and
-slipstream; the axes' dynamics stay separate); lateral controls never join the longitudinal
-axis, whose forces are even in the lateral variables. States that explain more
-than COUPLED_STATES mean the axes cannot be separated: one eight-state model with every input
-(still C = I) is fitted and reported instead.
+axis's controls added, and again with the other axis's measured states (θ and φ aside, which
+the kinematics already carry) added as known inputs. The fraction of its weighted cost each
+explains is reported, and how much they change its outputs. The longitudinal controls join
+the lateral axis's inputs when they change them by more than COUPLED (the propeller's torque
+and slipstream). Lateral controls never join the longitudinal axis, whose forces are even in
+the lateral variables. The other axis's states join an axis's inputs by the same rule. Their
+gains are then
+the coupling blocks of the assembled A (Klein & Morelli, ch. 9: the other axis's measured
+states as inputs), so the modes are the coupled aircraft's.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -78,20 +95,21 @@ LAG_START_S = 0.3
 # has INPUT_LEVEL of its largest bin's power, at most a quarter of the sample rate.
 BAND_MARGIN = 1.5
 INPUT_LEVEL = 0.01
+# Excited bins (`excited`): a control's bins with at least this share of its largest bin's power.
+EXCITED_LEVEL = 0.01
 # Output error: passes of noise re-weighting, iterations per pass, and their stopping rules.
 PASSES = 4
 ITERATIONS = 40
 RELATIVE_DECREASE = 1e-9
 NOISE_TOLERANCE = 0.02
-# Coupling tests (see the module docstring): the other axis's controls join an axis's inputs
-# when they explain more than COUPLED of its weighted cost (the propeller's torque and
-# slipstream make the throttle yaw and roll a single-engine aircraft: 16–46 % of the lateral
-# cost on JSBSim's three). The axes are fitted as one coupled model only when the other axis's
-# measured states explain more than COUPLED_STATES: on JSBSim's aircraft they explain 10–38 %
-# (even-order effects such as the drag of sideslip, which a linear coupling term only mimics)
-# while the decoupled models are right to within 5 % in calm air and the coupled one is worse.
-COUPLED = 0.1
-COUPLED_STATES = 0.5
+# Coupling tests (see the module docstring): the other axis's controls or states join an
+# axis's inputs when, added, they change its outputs by more than COUPLED of their rms
+# (weighted by the noise). The share of the cost they explain cannot tell: on a perfect fit it
+# is a share of the last digits (10 % of a 10⁻⁸ residual on a linear aircraft, while the
+# outputs change by 10⁻⁴). On JSBSim's three the lateral axis changes by 1.6–7 % with the
+# throttle (the propeller's torque and slipstream), and each axis by 1.3–7.6 % with the other's
+# states, mostly through the propeller's gyroscopic moments (the Cub's q̇ = … − 0.52 r).
+COUPLED = 0.01
 
 
 @dataclass(frozen=True)
@@ -104,6 +122,10 @@ class Spectra:
     record: np.ndarray  # (F,) which experiment each bin comes from
     band_hz: tuple[float, float]
     K: np.ndarray | None = None  # (F, m) known forcing of each output's equation (kinematics)
+    # The kinematics' linear part at the trim in output columns (m × m; zero where only forces
+    # act), and the output columns of θ and φ, whose rows and columns it fixes (see _Problem).
+    kinematics: np.ndarray | None = None
+    attitude: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -123,12 +145,15 @@ class AxisFit:
     cost: float
     iterations: int
     converged: bool
+    controls: tuple[int, ...] = ()  # the inputs whose excited bins the fit used (`excited`)
 
 
 def spectra(batch: Sequence, dt: float, band_hz: float | None, held_inputs: bool,
-            known: Sequence[np.ndarray] | None = None) -> Spectra:  # fmt: skip
+            known: Sequence[np.ndarray] | None = None, kinematics: np.ndarray | None = None,
+            attitude: Sequence[int] = ()) -> Spectra:  # fmt: skip
     """Transforms of every experiment (X = Δt · DFT) at the bins in the analysis band;
-    `known`: per experiment, a known forcing of each output's equation (samples × outputs)."""
+    `known`: per experiment, a known forcing of each output's equation (samples × outputs);
+    `kinematics` and `attitude`: see Spectra."""
     top = band_hz or input_band(batch, dt)
     top = min(top, 0.25 / dt)
     parts = []
@@ -149,7 +174,20 @@ def spectra(batch: Sequence, dt: float, band_hz: float | None, held_inputs: bool
     if not parts:
         raise DataError("the records are too short for a single frequency bin in the band")
     s, Y, U, record, K = (np.concatenate(p) for p in zip(*parts, strict=True))
-    return Spectra(s, Y, U, record, (float(np.abs(s).min() / 2 / np.pi), float(top)), K)
+    return Spectra(s, Y, U, record, (float(np.abs(s).min() / 2 / np.pi), float(top)), K,
+                   kinematics, tuple(attitude))  # fmt: skip
+
+
+def excited(sp: Spectra, controls: Sequence[int]) -> Spectra:
+    """The bins where one of `controls` puts at least EXCITED_LEVEL of its largest bin's
+    power, in each record."""
+    keep = np.zeros(sp.s.size, dtype=bool)
+    for e in np.unique(sp.record):
+        mine = sp.record == e
+        power = np.abs(sp.U[mine][:, list(controls)]) ** 2
+        keep[mine] = np.any(power >= EXCITED_LEVEL * power.max(axis=0), axis=1)
+    K = None if sp.K is None else sp.K[keep]
+    return replace(sp, s=sp.s[keep], Y=sp.Y[keep], U=sp.U[keep], record=sp.record[keep], K=K)
 
 
 def input_band(batch: Sequence, dt: float) -> float:
@@ -168,19 +206,47 @@ def input_band(batch: Sequence, dt: float) -> float:
 
 
 class _Problem:
-    """The output-error problem of one model: parameters θ = [vec A, vec B, τ, Re d, Im d]."""
+    """The output-error problem of one model: parameters θ = [vec A, vec B, τ, Re d, Im d].
 
-    def __init__(self, sp: Spectra, states, inputs, lagged: Sequence[int], experiments: int):
+    Where the kinematics are known (Spectra.kinematics), what holds no aerodynamic parameter is
+    fixed rather than fitted: the rows of θ and φ (pure kinematics: θ̇ = q cos φ − r sin φ,
+    φ̇ = p + tan θ (q sin φ + r cos φ); their inputs' gains are zero) and the columns of θ and
+    φ (no force depends on the attitude; gravity does, through the kinematics). Left free,
+    output error used them to absorb what it could not model: on JSBSim's Cub it fitted
+    θ̇ = 1.37 q and an airspeed equation with 11 q in it. The kinematics' linear terms in
+    the other axis's states join the known forcing."""
+
+    def __init__(self, sp: Spectra, states, inputs, lagged: Sequence[int], experiments: int,
+                 controls: Sequence[int] = ()):  # fmt: skip
+        states, inputs = list(states), list(inputs)
+        if controls:
+            sp = excited(sp, controls)
         self.s = sp.s
-        self.Y = sp.Y[:, list(states)]
-        self.U = sp.U[:, list(inputs)]
-        self.K = 0.0 if sp.K is None else sp.K[:, list(states)]
+        self.Y = sp.Y[:, states]
+        self.U = sp.U[:, inputs]
+        self.K = 0.0 if sp.K is None else sp.K[:, states]
         self.record = sp.record
         self.n, self.r = len(states), len(inputs)
-        self.lagged = [list(inputs).index(j) for j in lagged]  # positions among inputs
+        self.lagged = [inputs.index(j) for j in lagged]  # positions among inputs
         self.nlag = len(self.lagged)
         self.experiments = experiments
         self.size = self.n * self.n + self.n * self.r + self.nlag + 2 * self.n * experiments
+        n, r = self.n, self.r
+        self.fixed_A = np.zeros((n, n), dtype=bool)
+        self.fixed_B = np.zeros((n, r), dtype=bool)
+        self.A0 = np.zeros((n, n))
+        if sp.kinematics is not None:
+            J = sp.kinematics
+            local = [i for i, c in enumerate(states) if c in sp.attitude]
+            self.fixed_A[local, :] = True
+            self.fixed_A[:, local] = True
+            self.fixed_B[local, :] = True
+            self.A0 = J[np.ix_(states, states)] * self.fixed_A
+            others = [c for c in range(sp.Y.shape[1]) if c not in states]
+            if others:  # the other axis's states through the kinematics' linear terms
+                self.K = self.K + sp.Y[:, others] @ J[np.ix_(states, others)].T
+        self.free = np.concatenate([~self.fixed_A.ravel(), ~self.fixed_B.ravel(),
+                                    np.ones(self.size - n * n - n * r, dtype=bool)])  # fmt: skip
 
     def unpack(self, theta: np.ndarray):
         n, r = self.n, self.r
@@ -232,22 +298,29 @@ class _Problem:
 
 
 def equation_error(problem: _Problem) -> np.ndarray:
-    """Starting parameters: each row jωX_i = A_i X + B_i U − d_i by least squares."""
-    s, Y, U, n = problem.s, problem.Y, problem.U, problem.n
+    """Starting parameters: each row jωX_i = A_i X + B_i U − d_i by least squares, over the
+    row's free entries (the fixed ones' terms move to the left-hand side)."""
+    s, Y, U, n, r = problem.s, problem.Y, problem.U, problem.n, problem.r
     E = problem.experiments
     onehot = (problem.record[:, None] == np.arange(E)[None, :]).astype(float)
     reg = np.hstack([Y, U])
-    real = np.vstack([np.hstack([reg.real, -onehot, 0 * onehot]),
-                      np.hstack([reg.imag, 0 * onehot, -onehot])])  # fmt: skip
-    A = np.zeros((n, n))
-    B = np.zeros((n, problem.r))
+    A = problem.A0.copy()
+    B = np.zeros((n, r))
     d = np.zeros((E, n), dtype=complex)
     known = np.broadcast_to(problem.K, Y.shape)
     for i in range(n):
-        lhs = s * Y[:, i] - known[:, i]
+        free = np.concatenate([~problem.fixed_A[i], ~problem.fixed_B[i]])
+        lhs = s * Y[:, i] - known[:, i] - Y @ A[i]
+        sub = reg[:, free]
+        real = np.vstack([np.hstack([sub.real, -onehot, 0 * onehot]),
+                          np.hstack([sub.imag, 0 * onehot, -onehot])])  # fmt: skip
         coef, *_ = np.linalg.lstsq(real, np.concatenate([lhs.real, lhs.imag]), rcond=None)
-        A[i], B[i] = coef[:n], coef[n : n + problem.r]
-        d[:, i] = coef[n + problem.r : n + problem.r + E] + 1j * coef[n + problem.r + E :]
+        k = int(free.sum())
+        row = np.zeros(n + r)
+        row[free] = coef[:k]
+        A[i] += row[:n] * ~problem.fixed_A[i]
+        B[i] = row[n:]
+        d[:, i] = coef[k : k + E] + 1j * coef[k + E :]
     taus = np.full(len(problem.lagged), LAG_START_S)
     return problem.pack(A, B, taus, d)
 
@@ -286,11 +359,12 @@ def _stack(J: np.ndarray) -> np.ndarray:
 
 def _minimise(problem: _Problem, theta: np.ndarray, sigma: np.ndarray):
     lam = 1e-3
+    free = problem.free
     X, J = problem.response(theta, jacobian=True)
     cost = _cost(problem.Y - X, sigma)
     for iteration in range(1, ITERATIONS + 1):
         e = (problem.Y - X) / sigma
-        Jw = _stack(-J / sigma[None, :, None])
+        Jw = _stack(-J[:, :, free] / sigma[None, :, None])
         er = np.concatenate([e.ravel().real, e.ravel().imag])
         g, H = Jw.T @ er, Jw.T @ Jw
         scale = np.sqrt(np.maximum(np.diag(H), 1e-300))
@@ -298,11 +372,12 @@ def _minimise(problem: _Problem, theta: np.ndarray, sigma: np.ndarray):
         gs = g / scale
         while True:
             try:
-                step = -np.linalg.solve(Hs + lam * np.eye(theta.size), gs) / scale
+                step = -np.linalg.solve(Hs + lam * np.eye(gs.size), gs) / scale
             except np.linalg.LinAlgError:
                 step = None
             if step is not None and np.all(np.isfinite(step)):
-                trial = theta + step
+                trial = theta.copy()
+                trial[free] += step
                 Xt, _ = problem.response(trial)
                 new = _cost(problem.Y - Xt, sigma) if np.all(np.isfinite(Xt)) else np.inf
                 if new < cost:
@@ -322,16 +397,20 @@ def covariance(problem: _Problem, theta: np.ndarray, sigma: np.ndarray) -> np.nd
     """Sandwich covariance of θ from the bin-wise gradients of the weighted cost."""
     X, J = problem.response(theta, jacobian=True)
     e = (problem.Y - X) / sigma
-    Jw = -J / sigma[None, :, None]
+    free = problem.free
+    Jw = -J[:, :, free] / sigma[None, :, None]
     H = _stack(Jw).T @ _stack(Jw)
     # Per bin k: g_k = Re(J_kᴴ e_k), the bin's share of the gradient (outputs together).
     g = np.einsum("fip,fi->fp", Jw.conj(), e).real
     Hinv = np.linalg.pinv(H, rcond=1e-12)
-    return Hinv @ (g.T @ g) @ Hinv
+    out = np.zeros((theta.size, theta.size))
+    out[np.ix_(free, free)] = Hinv @ (g.T @ g) @ Hinv  # the fixed entries are exact
+    return out
 
 
-def fit_axis(sp: Spectra, name: str, states, inputs, lagged, experiments: int) -> AxisFit:
-    problem = _Problem(sp, states, inputs, lagged, experiments)
+def fit_axis(sp: Spectra, name: str, states, inputs, lagged, experiments: int,
+             controls: Sequence[int] = ()) -> AxisFit:  # fmt: skip
+    problem = _Problem(sp, states, inputs, lagged, experiments, controls)
     if problem.s.size * problem.n < problem.size:
         raise IdentificationFailed(
             f"{name}: {problem.s.size} frequency bins cannot determine {problem.size} "
@@ -347,23 +426,31 @@ def fit_axis(sp: Spectra, name: str, states, inputs, lagged, experiments: int) -
     lags = {list(inputs)[j]: float(abs(taus[i])) for i, j in enumerate(problem.lagged)}
     X, _ = problem.response(theta)
     return AxisFit(name, tuple(states), tuple(inputs), A, B, lags, d, cov[:k, :k], sigma,
-                   start, _cost(problem.Y - X, sigma), iterations, converged)  # fmt: skip
+                   start, _cost(problem.Y - X, sigma), iterations, converged,
+                   tuple(controls))  # fmt: skip
 
 
-def coupling(sp: Spectra, fitted: AxisFit, other_inputs, experiments: int) -> float:
-    """Fraction of an axis's weighted cost that the other axis's inputs explain, from the
-    decoupled fit with their columns added (started at zero) and fitted again."""
+def coupling(sp: Spectra, fitted: AxisFit, other_inputs, experiments: int) -> tuple[float, float]:
+    """What the other axis's inputs explain of an axis, from the decoupled fit with their
+    columns added (started at zero) and fitted again: the fraction of its weighted cost, and
+    the rms of the outputs' change as a fraction of the outputs' rms (weighted alike). The
+    second tells a coupling the outputs show from the last digits of a perfect fit."""
     if not other_inputs:
-        return 0.0
+        return 0.0, 0.0
     problem = _Problem(sp, fitted.states, (*fitted.inputs, *other_inputs), tuple(fitted.lags),
-                       experiments)  # fmt: skip
+                       experiments, fitted.controls)  # fmt: skip
     B = np.hstack([fitted.B, np.zeros((fitted.B.shape[0], len(other_inputs)))])
     taus = np.array([fitted.lags[j] for j in fitted.lags])
     theta = problem.pack(fitted.A, B, taus, fitted.transients)
-    before = _cost(problem.Y - problem.response(theta)[0], fitted.noise_std)
+    X0 = problem.response(theta)[0]
+    before = _cost(problem.Y - X0, fitted.noise_std)
     theta, _, _ = _minimise(problem, theta, fitted.noise_std)
-    after = _cost(problem.Y - problem.response(theta)[0], fitted.noise_std)
-    return max(0.0, 1.0 - after / before) if before > 0 else 0.0
+    X1 = problem.response(theta)[0]
+    after = _cost(problem.Y - X1, fitted.noise_std)
+    signal = _cost(problem.Y, fitted.noise_std)
+    fraction = max(0.0, 1.0 - after / before) if before > 0 else 0.0
+    change = float(np.sqrt(_cost(X1 - X0, fitted.noise_std) / signal)) if signal > 0 else 0.0
+    return fraction, change
 
 
 def columns(names: Sequence[str | None], roles: Sequence[str]) -> list[int] | None:
@@ -394,18 +481,20 @@ KINEMATIC_STATES = ("airspeed", "alpha", "q", "theta", "beta", "p", "r", "phi")
 GRAVITY = 9.80665
 
 
-def kinematics(x: np.ndarray) -> np.ndarray:
-    """ẋ without aerodynamic and thrust forces and moments: the body velocity's rotation and
-    gravity in V̇, α̇ and β̇, the Euler angles' rates in θ̇ and φ̇ (Stevens & Lewis, *Aircraft
-    Control and Simulation*, §2.4), and nothing in ṗ, q̇, ṙ (their moments are all unknown).
-    x: (..., 8) in KINEMATIC_STATES order, absolute values, SI units."""
+def kinematics(x: np.ndarray, force: np.ndarray | None = None) -> np.ndarray:
+    """ẋ without the aerodynamic and thrust forces' changes and without any moment: the body
+    velocity's rotation, gravity and a constant body-axis specific force `force` (m/s²; see
+    `trim_force`) in V̇, α̇ and β̇; the Euler angles' rates in θ̇ and φ̇ (Stevens & Lewis,
+    *Aircraft Control and Simulation*, §2.4); nothing in ṗ, q̇, ṙ (their moments are all
+    unknown). x: (..., 8) in KINEMATIC_STATES order, absolute values, SI units."""
+    fx, fy, fz = (0.0, 0.0, 0.0) if force is None else force
     V, alpha, q, theta, beta, p, r, phi = np.moveaxis(x, -1, 0)
     u = V * np.cos(alpha) * np.cos(beta)
     v = V * np.sin(beta)
     w = V * np.sin(alpha) * np.cos(beta)
-    u_dot = r * v - q * w - GRAVITY * np.sin(theta)
-    v_dot = p * w - r * u + GRAVITY * np.sin(phi) * np.cos(theta)
-    w_dot = q * u - p * v + GRAVITY * np.cos(phi) * np.cos(theta)
+    u_dot = r * v - q * w - GRAVITY * np.sin(theta) + fx
+    v_dot = p * w - r * u + GRAVITY * np.sin(phi) * np.cos(theta) + fy
+    w_dot = q * u - p * v + GRAVITY * np.cos(phi) * np.cos(theta) + fz
     V_dot = (u * u_dot + v * v_dot + w * w_dot) / V
     alpha_dot = (u * w_dot - w * u_dot) / (u * u + w * w)
     beta_dot = (V * v_dot - v * V_dot) / (V * V * np.cos(beta))
@@ -415,18 +504,36 @@ def kinematics(x: np.ndarray) -> np.ndarray:
     return np.stack([V_dot, alpha_dot, zero, theta_dot, beta_dot, zero, zero, phi_dot], axis=-1)
 
 
-def kinematic_remainder(x: np.ndarray, trim: np.ndarray) -> np.ndarray:
-    """kinematics(x) less its first-order expansion about `trim`: the part a linear model's
-    A cannot hold. (N, 8) → (N, 8). A trim a little off changes the remainder only by terms
-    linear in x, which A absorbs."""
+def trim_force(trim: np.ndarray) -> np.ndarray:
+    """The body-axis specific force (m/s²) of the aerodynamics and thrust that holds the trim
+    steady (u̇ = v̇ = ẇ = 0): minus the rotation and gravity terms there."""
+    V, alpha, q, theta, beta, p, r, phi = trim
+    u = V * np.cos(alpha) * np.cos(beta)
+    v = V * np.sin(beta)
+    w = V * np.sin(alpha) * np.cos(beta)
+    return -np.array([r * v - q * w - GRAVITY * np.sin(theta),
+                      p * w - r * u + GRAVITY * np.sin(phi) * np.cos(theta),
+                      q * u - p * v + GRAVITY * np.cos(phi) * np.cos(theta)])  # fmt: skip
+
+
+def kinematic_jacobian(trim: np.ndarray, force: np.ndarray | None = None) -> np.ndarray:
+    """∂kinematics/∂x at `trim` (8 × 8, central differences)."""
     step = 1e-6 * np.maximum(np.abs(trim), 1.0)
     jacobian = np.empty((8, 8))
     for j in range(8):
         up, down = trim.copy(), trim.copy()
         up[j] += step[j]
         down[j] -= step[j]
-        jacobian[:, j] = (kinematics(up) - kinematics(down)) / (2 * step[j])
-    return kinematics(x) - kinematics(trim) - (x - trim) @ jacobian.T
+        jacobian[:, j] = (kinematics(up, force) - kinematics(down, force)) / (2 * step[j])
+    return jacobian
+
+
+def kinematic_remainder(x: np.ndarray, trim: np.ndarray) -> np.ndarray:
+    """kinematics(x) less its first-order expansion about `trim`: the part a linear model's
+    A cannot hold. (N, 8) → (N, 8)."""
+    force = trim_force(trim) if TRIM_FORCE else None
+    return (kinematics(x, force) - kinematics(trim, force)
+            - (x - trim) @ kinematic_jacobian(trim, force).T)  # fmt: skip
 
 
 def inertial_air_data(x: np.ndarray, navigation: np.ndarray) -> np.ndarray:
@@ -447,6 +554,12 @@ def inertial_air_data(x: np.ndarray, navigation: np.ndarray) -> np.ndarray:
 
 # The measured wind's components, the output they correct and the axis they act on.
 GUSTS = (("airspeed", "longitudinal"), ("alpha", "longitudinal"), ("beta", "lateral"))
+# The states whose equations are kinematics alone (no aerodynamic parameter): their rows of A
+# and their columns elsewhere are fixed (_Problem) and the nonlinear rest of their kinematics
+# is a known forcing (`prepare`).
+ATTITUDE = ("theta", "phi")
+REMAINDER_ROWS = ATTITUDE
+TRIM_FORCE = False
 
 
 @dataclass(frozen=True)
@@ -454,11 +567,14 @@ class Prepared:
     """A batch made ready for the fit: outputs on their inertial footing where the wind is
     measured, the measured gusts appended to the inputs, and the kinematic forcing."""
 
-    batch: list[Experiment]  # u: the controls, then the gusts
+    batch: list[Experiment]  # u: the controls, then the known inputs
     known: list[np.ndarray] | None  # kinematic remainder per experiment, or None
     gusts: tuple[str, ...]  # the gust columns' outputs ("airspeed", "alpha", "beta")
-    gust_axes: dict[int, str]  # gust column (index in u) → the axis it acts on
+    extra_names: tuple[str, ...]  # the known inputs' names ("gust alpha", "beta²", ...)
+    extra_axes: dict[int, str]  # known input column (index in u) → the axis it acts on
     gust_rms: dict[str, float]
+    kinematics: np.ndarray | None = None  # see Spectra.kinematics (mean over experiments)
+    attitude: tuple[int, ...] = ()  # output columns of θ and φ
 
 
 def prepare(batch: Sequence[Experiment], output_roles: Sequence[str | None],
@@ -475,10 +591,10 @@ def prepare(batch: Sequence[Experiment], output_roles: Sequence[str | None],
     index = {role: k for k, role in enumerate(output_roles) if role is not None}
     r = batch[0].u.shape[1]
     if "airspeed" not in index or any(e.operating_point is None for e in batch):
-        return Prepared([Experiment(e.u, e.y) for e in batch], None, (), {}, {})
+        return Prepared([Experiment(e.u, e.y) for e in batch], None, (), (), {}, {})
     measured = "theta" in index and all(e.navigation is not None for e in batch)
     gusts = tuple(role for role, _ in GUSTS if role in index) if measured else ()
-    out, known, squares, count = [], [], dict.fromkeys(gusts, 0.0), 0
+    out, known, jacobians, squares, count = [], [], [], dict.fromkeys(gusts, 0.0), 0
     for e in batch:
         x = np.zeros((e.y.shape[0], len(KINEMATIC_STATES)))
         for k, role in enumerate(KINEMATIC_STATES):
@@ -498,13 +614,26 @@ def prepare(batch: Sequence[Experiment], output_roles: Sequence[str | None],
                 y[:, index[role]] = inertial - e.operating_point[index[role]]
             u = np.hstack([u, np.column_stack(columns)])
         count += y.shape[0]
-        remainder = kinematic_remainder(x, x[:trim_samples].mean(axis=0))
+        trim = x[:trim_samples].mean(axis=0)
+        jacobians.append(kinematic_jacobian(trim))
+        remainder = kinematic_remainder(x, trim)
         forcing = np.zeros_like(y)
-        for k, role in enumerate(KINEMATIC_STATES):
+        for role in REMAINDER_ROWS:
             if role in index:
-                forcing[:, index[role]] = remainder[:, k]
+                forcing[:, index[role]] = remainder[:, KINEMATIC_STATES.index(role)]
         out.append(Experiment(u, y))
         known.append(forcing)
     axes = dict(GUSTS)
-    return Prepared(out, known, gusts, {r + k: axes[role] for k, role in enumerate(gusts)},
-                    {role: float(np.sqrt(v / count)) for role, v in squares.items()})  # fmt: skip
+    names = tuple(f"gust {role}" for role in gusts)
+    where = [axes[role] for role in gusts]
+    m = batch[0].y.shape[1]
+    J = np.zeros((m, m))
+    mean = np.mean(jacobians, axis=0)
+    present = [(k, index[role]) for k, role in enumerate(KINEMATIC_STATES) if role in index]
+    for a, ca in present:
+        for b, cb in present:
+            J[ca, cb] = mean[a, b]
+    attitude = tuple(index[role] for role in ATTITUDE if role in index)
+    return Prepared(out, known, gusts, names, {r + k: a for k, a in enumerate(where)},
+                    {role: float(np.sqrt(v / count)) for role, v in squares.items()}, J,
+                    attitude)  # fmt: skip

@@ -68,15 +68,21 @@ def _axis(mode: Mode, roles: Sequence[str | None]) -> str | None:
     return "lon" if share <= 1 - AXIS_SHARE else None
 
 
-def _plausible(mode: Mode) -> bool:
+def _plausible(mode: Mode, min_msv: float) -> bool:
     consistent = mode.emac is None or mode.emac >= MIN_EMAC
-    return mode.msv >= MIN_MSV and consistent and mode.frequency <= MAX_FREQUENCY
+    return mode.msv >= min_msv and consistent and mode.frequency <= MAX_FREQUENCY
 
 
-def name_modes(modes: Sequence[Mode], output_roles: Sequence[str | None]) -> list[Mode]:
-    """The modes with `name` set where the rules above identify an aircraft mode."""
+def name_modes(modes: Sequence[Mode], output_roles: Sequence[str | None],
+               min_msv: float = MIN_MSV) -> list[Mode]:  # fmt: skip
+    """The modes with `name` set where the rules above identify an aircraft mode.
+    `min_msv` 0 names modes whatever their share of the response: for a model whose every
+    state is a measured aircraft state (the aircraft method), where no mode is noise. There
+    the MSV misleads too: two real poles nearly coinciding (the Cub's overdamped short
+    period) have large residues that cancel, and beside them the phugoid's MSV fell to
+    0.4 %."""
     names: dict[int, str] = {}
-    candidates = [i for i, mode in enumerate(modes) if _plausible(mode)]
+    candidates = [i for i, mode in enumerate(modes) if _plausible(mode, min_msv)]
     axis = {i: _axis(modes[i], output_roles) for i in candidates}
     lat = [i for i in candidates if axis[i] == "lat"]
     lon = [i for i in candidates if axis[i] == "lon"]

@@ -413,59 +413,69 @@ def _identify_aircraft(
 ) -> Identification:
     """Decoupled longitudinal and lateral models in the frequency domain (agent.ident.aircraft),
     assembled into one model whose first states are the outputs and whose last ones are the
-    engine's lag states; an eight-state coupled model when the data show coupling."""
+    engine's lag states; where the data show coupling, the other axis's states join an
+    axis's inputs and their gains fill A's coupling blocks."""
     # The transforms leave out DC, so trim errors do not matter to the fit; the time-domain
     # simulation (TIC) starts from the records' own trim, as the other methods'.
     batch = list(raw)
     r = len(inputs)
     ready = aircraft.prepare(batch, output_roles, max(1, round(TRIM_S / dt)))
     band = settings.band_hz or aircraft.input_band(batch, dt)
-    sp = aircraft.spectra(ready.batch, dt, band, settings.held_inputs, ready.known)
+    sp = aircraft.spectra(ready.batch, dt, band, settings.held_inputs, ready.known,
+                          ready.kinematics, ready.attitude)  # fmt: skip
     E = len(batch)
     throttle = [j for j, role in enumerate(input_roles) if role == "throttle"]
-    gusts = {axis: [j for j, a in ready.gust_axes.items() if a == axis] for axis in aircraft.AXES}
-    names = [*inputs, *(f"gust {role}" for role in ready.gusts)]
+    known = {axis: [j for j, a in ready.extra_axes.items() if a == axis] for axis in aircraft.AXES}
+    names = [*inputs, *ready.extra_names]
     wind = {"measured": bool(ready.gusts), "gust_rms": ready.gust_rms}
     fits, report = [], {"band_hz": list(sp.band_hz), "bins": int(sp.s.size), "coupling": {},
                         "kinematics": ready.known is not None, "wind": wind}  # fmt: skip
     for axis, (states, ins) in present.items():
-        fits.append(aircraft.fit_axis(sp, axis, states, [*ins, *gusts[axis]],
-                                      [j for j in ins if j in throttle], E))  # fmt: skip
+        fits.append(aircraft.fit_axis(sp, axis, states, [*ins, *known[axis]],
+                                      [j for j in ins if j in throttle], E, ins))  # fmt: skip
+    width = sp.U.shape[1]
     if len(fits) == 2:
-        augmented = aircraft.Spectra(sp.s, sp.Y, np.hstack([sp.U, sp.Y]), sp.record, sp.band_hz,
-                                     sp.K)  # fmt: skip
-        width = sp.U.shape[1]
-        coupled_states = False
+        # The other axis's measured states as known inputs: their gains are the coupling
+        # blocks of A (Klein & Morelli, ch. 9). The propeller's gyroscopic moments couple
+        # pitch and yaw rates (q̇ = … − 0.52 r on JSBSim's Cub) however symmetric the airframe.
+        augmented = replace(sp, U=np.hstack([sp.U, sp.Y]))
         own = [[j for j in f.inputs if j < r] for f in fits]  # each axis's own controls
         for k, fitted in enumerate(fits):
             other = own[1 - k]
-            by_inputs = aircraft.coupling(sp, fitted, other, E)
-            others = [width + i for i in fits[1 - k].states]
-            by_states = aircraft.coupling(augmented, fitted, others, E)
-            report["coupling"][fitted.name] = {"by_inputs": by_inputs, "by_states": by_states}
-            coupled_states |= by_states > aircraft.COUPLED_STATES
+            cross = [width + c for c in fits[1 - k].states if c not in ready.attitude]
+            by_inputs, moved_inputs = aircraft.coupling(sp, fitted, other, E)
+            by_states, moved_states = aircraft.coupling(augmented, fitted, cross, E)
+            report["coupling"][fitted.name] = {
+                "by_inputs": by_inputs, "by_states": by_states,
+                "response_by_inputs": moved_inputs, "response_by_states": moved_states,
+            }  # fmt: skip
+            ins, controls = list(fitted.inputs), list(fitted.controls)
             # The longitudinal forces and moments are even in the lateral variables (the
             # airframe's symmetry), so lateral controls never join the longitudinal axis: what
-            # they explain there is even-order (sideslip drag), which a linear term only mimics
-            # (on JSBSim's Cub it moved the short period by 4 %). The propeller's torque and
-            # slipstream do act linearly on the lateral axis.
-            if by_inputs > aircraft.COUPLED and fitted.name == "lateral":
-                ins = (*fitted.inputs, *other)
-                fits[k] = aircraft.fit_axis(sp, fitted.name, fitted.states, ins,
-                                            tuple(fitted.lags), E)  # fmt: skip
-        if coupled_states:
-            states = tuple(range(len(outputs)))
-            ins = tuple(range(width))
-            fits = [aircraft.fit_axis(sp, "coupled", states, ins, throttle, E)]
-        report["model"] = "coupled" if coupled_states else "decoupled"
+            # they explain there is even-order (sideslip drag), which a linear term only mimics.
+            # The propeller's torque and slipstream do act linearly on the lateral axis.
+            if moved_inputs > aircraft.COUPLED and fitted.name == "lateral":
+                ins += other
+                controls += other
+            if moved_states > aircraft.COUPLED:
+                ins += cross
+            if ins != list(fitted.inputs):
+                fits[k] = aircraft.fit_axis(augmented, fitted.name, fitted.states, ins,
+                                            tuple(fitted.lags), E, controls)  # fmt: skip
+        coupled = [f.name for f in fits if any(j >= width for j in f.inputs)]
+        report["model"] = "decoupled" + (f", {' and '.join(coupled)} coupled by the other "
+                                         "axis's states" if coupled else "")  # fmt: skip
     else:
         report["model"] = fits[0].name
-    model, covariance, _lag_times = _assemble(fits, len(inputs), len(outputs))
+    model, covariance, _lag_times = _assemble(
+        fits, len(inputs), len(outputs), {width + c: c for c in range(len(outputs))}
+    )
     report["engine_lag_s"] = {f.name: {inputs[j]: tau for j, tau in f.lags.items()}
                               for f in fits if f.lags}  # fmt: skip
     report["axes"] = [
         {"name": f.name, "outputs": [outputs[i] for i in f.states],
-         "inputs": [names[j] for j in f.inputs], "iterations": f.iterations,
+         "inputs": [names[j] if j < width else outputs[j - width] for j in f.inputs],
+         "iterations": f.iterations,
          "converged": f.converged}
         for f in fits
     ]  # fmt: skip
@@ -504,7 +514,7 @@ def _identify_aircraft(
                            output_scale=output_rms)  # fmt: skip
     modes = _with_uncertainty(modes, for_modes)
     if any(role is not None for role in output_roles):
-        modes = name_modes(modes, output_roles)
+        modes = name_modes(modes, output_roles, min_msv=0.0)
     if any(not mode.stable for mode in modes):
         warnings.append("the identified model has unstable modes")
     if fitted.tic_avg >= TIC_DECENT:
@@ -521,7 +531,7 @@ def _identify_aircraft(
     )  # fmt: skip
 
 
-def _assemble(fits: Sequence[aircraft.AxisFit], r: int, m: int):
+def _assemble(fits: Sequence[aircraft.AxisFit], r: int, m: int, states_of: dict | None = None):
     """One continuous model (states: the m outputs, then two lag states per lagged input of
     each axis) and the covariance of [vec Ac, vec Bc, vec C, vec D] (zero where fixed)."""
     lagged = [(f, j) for f in fits for j in f.lags]
@@ -538,6 +548,10 @@ def _assemble(fits: Sequence[aircraft.AxisFit], r: int, m: int):
         A[np.ix_(st, st)] = f.A
         where_b = np.full((len(st), len(f.inputs)), -1)  # where each B entry went
         for c, j in enumerate(f.inputs):
+            if j >= r and j in (states_of or {}):  # another axis's state: a coupling of A
+                A[st, states_of[j]] = f.B[:, c]
+                where_b[:, c] = index_a[st, states_of[j]]
+                continue
             if j >= r:  # a measured gust: it drove the fit, it is not an input of the model
                 continue
             if j in f.lags:  # u → lag → lag → the axis: B's column acts on the last lag state

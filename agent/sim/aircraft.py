@@ -166,7 +166,7 @@ class SimAircraft:
             t = start + sample * h
             if sample % self.per_tick == 0:
                 commands = self.autopilot.tick(t, self.truth)
-                self.plant.set_normalised(commands)
+                self.plant.set_normalised(commands, steps * self.per_tick)
                 self.ticks += 1
             for _ in range(steps):
                 self.plant.step()

@@ -85,7 +85,7 @@ def fly(
             value = trim_pwm[c] + surfaces[c].direction * surfaces[c].us_per_unit * delta
             pwm[c] = round(float(np.clip(value, surfaces[c].min_us, surfaces[c].max_us)))
         plant.set_normalised({c: servos[c].step(pwm_to_normalised(CHANNEL[c], pwm[c]))
-                              for c in INPUT_CHANNELS})  # fmt: skip
+                              for c in INPUT_CHANNELS}, steps)  # fmt: skip
         for _ in range(steps):
             plant.step()
         s = plant.state()

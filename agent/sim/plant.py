@@ -9,9 +9,13 @@ fleet. Commands are JSBSim's normalised ones
 trim routine. Outputs follow agent.channels in SI units: airspeed Vt (m/s), α, β, θ, φ (rad),
 p, q, r (rad/s).
 
-Turbulence is JSBSim's MIL-F-8785C Dryden model (turb-type 3), "light" being severity 1 with
-the 20 ft wind that goes with it (15 kt, MIL-HDBK-1797), seeded through
-`simulation/randomseed` so runs repeat.
+Turbulence is JSBSim's MIL-F-8785C Dryden model (turb-type 3), seeded through
+`simulation/randomseed` so runs repeat. `turbulence` is an intensity in units of light
+turbulence as issue 19 defines it: a wind of 5 ft/s at 20 ft (W20), so `turbulence=1` is
+W20 = 5 ft/s and σ_w = 0.1·W20 = 0.5 ft/s at low altitude. Below 1000 ft above the ground
+(where the sim flies) the Dryden intensities depend on W20 alone; JSBSim's severity index,
+which only acts above 1000 ft, is set to light (1) up to `turbulence=1` and grows with it.
+MIL-F-8785C's own "light" category is W20 = 15 kt (25.3 ft/s): `turbulence≈5`.
 """
 
 from __future__ import annotations
@@ -57,7 +61,16 @@ LINEAR_STATES = {
     "phi": "Phi",
 }
 LINEAR_INPUTS = {"throttle": "ThtlCmd", "elevator": "DeCmd", "aileron": "DaCmd", "rudder": "DrCmd"}
-LIGHT_TURBULENCE_WIND_FPS = 15 * KT / FT
+# JSBSim integrates the body rates and the attitude by rectangular Euler by default (1), which
+# makes the sampled attitude lag the sampled rates by half a step. On the J-3 Cub that
+# is 2.5 ms at 200 Hz, and the state-derivative regression of the truth read it as
+# θ̇ = 1.018 q + 0.060 α instead of θ̇ = q. A real aircraft has no such lag. The second-order
+# Adams–Bashforth methods (3) are what JSBSim already uses for the translational rates.
+INTEGRATORS = {
+    "simulation/integrator/rate/rotational": 3,
+    "simulation/integrator/position/rotational": 3,
+}
+LIGHT_TURBULENCE_WIND_FPS = 5.0  # issue 19's light turbulence: W20 = 5 ft/s
 
 
 @contextlib.contextmanager
@@ -119,6 +132,8 @@ class Plant:
             if not self.fdm.load_model(aircraft):
                 raise PlantError(f"JSBSim has no aircraft {aircraft!r}")
         self.fdm.set_dt(1.0 / integration_hz)
+        for prop, method in INTEGRATORS.items():
+            self.fdm[prop] = method
         self.fdm["simulation/randomseed"] = seed
         self.fdm["atmosphere/randomseed"] = seed
         self.fdm["ic/h-sl-ft"] = altitude_ft
@@ -136,14 +151,20 @@ class Plant:
                 f"JSBSim could not trim {aircraft} at {airspeed_kts} kt: {exc}"
             ) from exc
         self.trim = {name: float(self.fdm[prop]) for name, prop in COMMAND_PROPERTY.items()}
+        # Each command's ramp (from, to) over _ramp_steps steps, _ramp_done of them flown
+        # (set_normalised); _settled: the surfaces are where the ramps have them now.
+        self._ramp = {name: (value, value) for name, value in self.trim.items()}
+        self._ramp_steps, self._ramp_done, self._settled = 1, 1, True
         # FGLinearization at the trim (slow on some aircraft: ten seconds for the PA-28);
         # agent.sim.truth explains why it is not the truth identified models are judged by.
         self.linearisation = self._linearise() if linearise else None
         if turbulence > 0:
             self.fdm["atmosphere/turb-type"] = 3
-            self.fdm["atmosphere/turbulence/milspec/severity"] = turbulence
+            self.fdm["atmosphere/turbulence/milspec/severity"] = int(
+                np.clip(np.ceil(turbulence), 1, 7)
+            )
             self.fdm["atmosphere/turbulence/milspec/windspeed_at_20ft_AGL-fps"] = (
-                LIGHT_TURBULENCE_WIND_FPS
+                LIGHT_TURBULENCE_WIND_FPS * turbulence
             )
 
     def _linearise(self) -> Linearisation:
@@ -164,20 +185,64 @@ class Plant:
         return float(self.fdm.get_sim_time())
 
     def command(self, deltas: Mapping[str, float]) -> None:
-        """Set each command to trim + delta (normalised units), clipped to JSBSim's range."""
+        """Set each command to trim + delta (normalised units), clipped to JSBSim's range, at
+        once (held over the following steps)."""
         for name, delta in deltas.items():
-            low = 0.0 if name == "throttle" else -1.0
-            self.fdm[COMMAND_PROPERTY[name]] = float(np.clip(self.trim[name] + delta, low, 1.0))
+            value = self._clip(name, self.trim[name] + delta)
+            self._ramp[name] = (value, value)
+            self.fdm[COMMAND_PROPERTY[name]] = value
 
-    def set_normalised(self, commands: Mapping[str, float]) -> None:
-        """Set commands to absolute normalised values (servo outputs), clipped to range."""
+    def set_normalised(self, commands: Mapping[str, float], steps: int = 1) -> None:
+        """Move commands to absolute normalised values (servo outputs), clipped to range,
+        over the next `steps` integration steps.
+
+        A servo moves its surface continuously, not in a jump at the autopilot's tick, and
+        a potentiometer samples where the surface is. So each command ramps from where it is
+        to its new value. Every step holds the ramp's value at the step's middle: a
+        staircase centred on the ramp, which the surface follows to second order. `state()`
+        reads the surfaces where the ramp has them at that instant. Held over the tick
+        instead, with the position read at its end, the surfaces would act half a tick
+        (5 ms) before the record says. Identification takes sampled positions at face value,
+        and on the J-3 Cub, whose short period is two real poles close together, that moved
+        them by 30 %."""
+        if steps < 1:
+            raise PlantError(f"a ramp takes at least one step, not {steps}")
+        now = self._fraction()
         for name, value in commands.items():
-            low = 0.0 if name == "throttle" else -1.0
-            self.fdm[COMMAND_PROPERTY[name]] = float(np.clip(value, low, 1.0))
+            self._ramp[name] = (self._value(name, now), self._clip(name, value))
+        self._ramp_steps, self._ramp_done, self._settled = steps, 0, False
+
+    @staticmethod
+    def _clip(name: str, value: float) -> float:
+        return float(np.clip(value, 0.0 if name == "throttle" else -1.0, 1.0))
+
+    def _fraction(self) -> float:
+        return min(self._ramp_done / self._ramp_steps, 1.0)
+
+    def _value(self, name: str, fraction: float) -> float:
+        start, end = self._ramp[name]
+        return start + (end - start) * min(fraction, 1.0)
+
+    def _settle(self) -> None:
+        """Put the surfaces where the ramps have them now: JSBSim's flight controls evaluated
+        at the commands' present values without integrating (time and states stay)."""
+        if self._settled:
+            return
+        now = self._fraction()
+        for name in self._ramp:
+            self.fdm[COMMAND_PROPERTY[name]] = self._value(name, now)
+        self.fdm.suspend_integration()
+        try:
+            if not self.fdm.run():
+                raise PlantError("JSBSim stopped")
+        finally:
+            self.fdm.resume_integration()
+        self._settled = True
 
     def state(self) -> dict[str, float]:
         """The truth the sensors measure: attitude, rates, air data, position, velocity,
         body accelerations (m/s², specific force), surface positions (deg), engine RPM."""
+        self._settle()
         f = self.fdm
         values = {name: float(f[prop]) * scale for name, (prop, scale) in OUTPUT_PROPERTY.items()}
         values.update(
@@ -203,6 +268,11 @@ class Plant:
         return values
 
     def step(self) -> None:
+        middle = (self._ramp_done + 0.5) / self._ramp_steps
+        for name in self._ramp:
+            self.fdm[COMMAND_PROPERTY[name]] = self._value(name, middle)
+        self._ramp_done += 1
+        self._settled = middle >= 1.0  # the step held the ramp's end: the surfaces are there
         if not self.fdm.run():
             raise PlantError("JSBSim stopped")
 

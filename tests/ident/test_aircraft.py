@@ -8,7 +8,7 @@ import pytest
 
 from agent.excitation.plan import preset, render
 from agent.ident import Experiment, Settings, identify
-from agent.ident.aircraft import COUPLED, kinematic_remainder
+from agent.ident.aircraft import COUPLED, kinematic_jacobian, kinematic_remainder
 from agent.ident.convert import discretize_foh
 from agent.ident.errors import DataError
 from agent.ident.fit import simulate
@@ -54,8 +54,8 @@ def test_noise_free_aircraft_is_recovered_with_its_engine_lag_and_no_coupling():
     # The lag shows only in the throttle's band (< 0.12 Hz, ωτ < 0.3): 0.45 % with these phases.
     assert report["engine_lag_s"]["longitudinal"]["throttle"] == pytest.approx(TAU, rel=1e-2)
     for axis in ("longitudinal", "lateral"):  # the last digits of a perfect fit: no coupling
-        assert report["coupling"][axis]["by_inputs"] < COUPLED
-        assert report["coupling"][axis]["by_states"] < COUPLED
+        assert report["coupling"][axis]["response_by_inputs"] < COUPLED
+        assert report["coupling"][axis]["response_by_states"] < COUPLED
     found = np.sort_complex(np.linalg.eigvals(result.continuous.A[:8, :8]))
     true = np.sort_complex(np.linalg.eigvals(A[:8, :8]))
     # The transforms of samples stand in for continuous ones: (ωΔt)²/12 ≈ 0.3 % at 3 Hz.
@@ -93,6 +93,8 @@ def test_the_aircraft_method_without_an_axis_is_refused_clearly():
 
 TRIM = {"airspeed": 30.0, "alpha": 0.06, "theta": 0.06}  # the operating point, SI
 GUSTS = (0, 1, 4)  # the states a gust moves: airspeed, alpha, beta
+ATTITUDE = (3, 7)  # θ and φ: kinematics alone
+ATTITUDE_ROWS = np.isin(np.arange(8), ATTITUDE)
 
 
 def gusty_record(seed: int):
@@ -100,8 +102,16 @@ def gusty_record(seed: int):
     0.03° rms), the controls at 0.15 % of the full preset (A.2's responses are large): the
     forces see the air-relative state, ẋ_i = A(x_i − g) + B u, the vanes and the
     pitot read x_i − g, and the INS reads the inertial velocity, turned into north, east, down
-    by the attitude. Returns the record with its operating point and navigation."""
+    by the attitude. Returns the record with its operating point and navigation.
+
+    A.2's models came from flight data and do not keep θ̇ = q: their θ and φ rows and
+    columns are replaced by the kinematics at the operating point, as a real aircraft has
+    them (the method fixes those entries)."""
     A, B, C = aircraft_with_engine_lag()
+    op = np.array([TRIM.get(name, 0.0) for name in OUTPUTS])
+    J = kinematic_jacobian(op)
+    for k in ATTITUDE:
+        A[:8, k], A[k, :8], B[k] = J[:, k], J[k], 0.0
     timeline = render(preset("full"), 1 / DT)
     u = np.column_stack([timeline.values[c] for c in INPUTS])
     u[:, 0] *= 10.0
@@ -116,15 +126,16 @@ def gusty_record(seed: int):
     E = np.zeros((A.shape[0], 3))
     E[:, :] = -A[:, GUSTS]
     model = discretize_foh(A, np.hstack([B, E]), C, np.zeros((8, 7)), DT)
-    op = np.array([TRIM.get(name, 0.0) for name in OUTPUTS])
-    # The rigid body's kinematics beyond their linear part (what A holds) act too, as they do
-    # on a real aircraft (Euler steps: they are second order in the motion).
+    # The attitude's kinematics beyond their linear part (what A holds) act too, as they do
+    # on a real aircraft (Euler steps: they are second order in the motion). The other rows
+    # stay linear: their kinematic nonlinearities share factors with the aerodynamic force's,
+    # which this linear aircraft does not have (agent.ident.aircraft's docstring).
     w = np.hstack([u, g])
     state = np.zeros(A.shape[0])
     inertial = np.empty((len(u), 8))
     for k in range(len(u)):
         inertial[k] = model.C @ state + model.D @ w[k]
-        remainder = kinematic_remainder((inertial[k] + op)[None], op)[0]
+        remainder = kinematic_remainder((inertial[k] + op)[None], op)[0] * ATTITUDE_ROWS
         state = model.A @ state + model.B @ w[k] + DT * np.concatenate([remainder, [0, 0]])
     air = inertial.copy()
     air[:, GUSTS] -= g
@@ -150,14 +161,14 @@ def _body_to_ned(phi: float, theta: float, psi: float) -> np.ndarray:
 def test_the_measured_wind_turns_the_gust_from_bias_into_excitation():
     # The vanes and the pitot read the gust: without the INS's velocities it is an input the
     # fit does not know, and it biases the modes; with them the wind is measured and the
-    # same record gives the aircraft back (measured: worst eigenvalue 96 % off blind, 0.08 %
+    # same record gives the aircraft back (measured: worst eigenvalue 0.99 off blind, 0.0002
     # with the wind).
     u, air, op, navigation, A = gusty_record(seed=5)
     true = np.linalg.eigvals(A[:8, :8])
 
-    def worst(result):
+    def worst(result):  # relative error; absolute (1/s) for the pole at the origin
         found = np.linalg.eigvals(result.continuous.A[:8, :8])
-        return max(np.min(np.abs(found - t)) / abs(t) for t in true)
+        return max(np.min(np.abs(found - t)) / max(abs(t), 1.0) for t in true)
 
     common = dict(input_names=INPUTS, output_names=OUTPUTS, output_roles=OUTPUTS,
                   settings=Settings(held_inputs=False))  # fmt: skip

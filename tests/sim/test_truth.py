@@ -14,9 +14,6 @@ from agent.sim.plant import PlantError
 from agent.sim.truth import CHECK_TIC, check, linear_truth
 
 BENCHMARK = [("J3Cub", 60.0), ("c182", 90.0), ("pa28", 90.0)]
-# The one check the truth does not yet pass: the J-3 Cub's throttle step (q TIC 0.11). Its
-# surface doublets and the other aircraft's throttle steps pass; the gap is open work.
-KNOWN_GAP = {("J3Cub", "throttle")}
 # The outputs each test is mainly for.
 PRIMARY = {"throttle": ("Vt", "theta"), "elevator": ("alpha", "q"), "aileron": ("p", "phi"),
            "rudder": ("beta", "r")}  # fmt: skip
@@ -29,9 +26,7 @@ def truth(request):
 
 
 @pytest.mark.parametrize("test", ["throttle", "elevator", "aileron", "rudder"])
-def test_the_truth_reproduces_jsbsims_own_small_response(truth, test, request):
-    if (truth.aircraft, test) in KNOWN_GAP:
-        request.applymarker(pytest.mark.xfail(strict=True, reason="known gap: see KNOWN_GAP"))
+def test_the_truth_reproduces_jsbsims_own_small_response(truth, test):
     (result,) = [c for c in check(truth) if c.test == test]
     assert set(PRIMARY[test]) <= set(result.counted), result  # what the test is for counts
     assert result.worst <= CHECK_TIC, {o: round(result.tic[o], 3) for o in result.counted}
