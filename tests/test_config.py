@@ -143,9 +143,14 @@ def test_the_simulators_agent_config_file_loads_back_to_the_same_config(tmp_path
     # the benchmarks fly with.
     from agent.sim.flight import _config, _config_toml
 
-    for priority in (None, 10):
-        config = _config(tmp_path, tmp_path / "ports", ("127.0.0.1", 14555), "lateral", priority)
+    for priority, speed in ((None, 60.0), (10, 90.0)):
+        config = _config(tmp_path, tmp_path / "ports", ("127.0.0.1", 14555), "lateral", priority,
+                         speed)  # fmt: skip
         path = tmp_path / "agent.toml"
         path.write_text(_config_toml(config))
         assert load_config(path) == config
         assert load_config(path).runtime.realtime_priority == priority
+        # The envelope fits the simulated aircraft: a 90 kt PA-28's trim (46.3 m/s) is inside
+        # it, where the default (35 m/s at most) refused every plan.
+        envelope = config.excitation.envelope
+        assert envelope.min_airspeed < speed * 0.514444 < envelope.max_airspeed

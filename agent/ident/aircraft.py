@@ -78,6 +78,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+import scipy.ndimage
 
 from agent.ident.errors import DataError, IdentificationFailed
 from agent.ident.okid import Experiment
@@ -97,6 +98,9 @@ BAND_MARGIN = 1.5
 INPUT_LEVEL = 0.01
 # Excited bins (`excited`): a control's bins with at least this share of its largest bin's power.
 EXCITED_LEVEL = 0.01
+# Output error's weights: σ per bin from the residuals of this many bins on either side.
+SMOOTH_BINS = 8
+SMOOTH_FLOOR = 0.3
 # Output error: passes of noise re-weighting, iterations per pass, and their stopping rules.
 PASSES = 4
 ITERATIONS = 40
@@ -140,7 +144,8 @@ class AxisFit:
     lags: dict[int, float]  # input column → the time constant of its THROTTLE_LAGS lags, s
     transients: np.ndarray  # d per experiment (E, n), complex
     covariance: np.ndarray  # of [vec A, vec B] (row-major)
-    noise_std: np.ndarray  # σ_i of the frequency-domain residuals, per state
+    noise_std: np.ndarray  # σ_i of the frequency-domain residuals, per state (rms over bins)
+    bin_std: np.ndarray  # σ per fitted bin and state, the fit's weights (`_sigma`)
     cost_start: float
     cost: float
     iterations: int
@@ -300,7 +305,9 @@ class _Problem:
 def equation_error(problem: _Problem) -> np.ndarray:
     """Starting parameters: each row jωX_i = A_i X + B_i U − d_i by least squares, over the
     row's free entries (the fixed ones' terms move to the left-hand side)."""
-    s, Y, U, n, r = problem.s, problem.Y, problem.U, problem.n, problem.r
+    taus = np.full(problem.nlag, LAG_START_S)
+    s, Y, n, r = problem.s, problem.Y, problem.n, problem.r
+    U = problem.effective_inputs(taus)
     E = problem.experiments
     onehot = (problem.record[:, None] == np.arange(E)[None, :]).astype(float)
     reg = np.hstack([Y, U])
@@ -321,21 +328,20 @@ def equation_error(problem: _Problem) -> np.ndarray:
         A[i] += row[:n] * ~problem.fixed_A[i]
         B[i] = row[n:]
         d[:, i] = coef[k : k + E] + 1j * coef[k + E :]
-    taus = np.full(len(problem.lagged), LAG_START_S)
     return problem.pack(A, B, taus, d)
 
 
 def output_error(problem: _Problem, theta: np.ndarray):
     """Levenberg–Marquardt on the weighted residuals, re-weighting between passes."""
     X, _ = problem.response(theta)
-    sigma = _sigma(problem.Y - X)
+    sigma = _sigma(problem.Y - X, problem.s)
     cost_start = _cost(problem.Y - X, sigma)
     iterations, converged = 0, False
     for _ in range(PASSES):
         theta, its, converged = _minimise(problem, theta, sigma)
         iterations += its
         X, _ = problem.response(theta)
-        new = _sigma(problem.Y - X)
+        new = _sigma(problem.Y - X, problem.s)
         settled = np.all(np.abs(new - sigma) <= NOISE_TOLERANCE * sigma)
         sigma = new
         if settled:
@@ -343,8 +349,25 @@ def output_error(problem: _Problem, theta: np.ndarray):
     return theta, sigma, cost_start, iterations, converged
 
 
-def _sigma(residual: np.ndarray) -> np.ndarray:
-    sigma = np.sqrt(np.mean(np.abs(residual) ** 2, axis=0))
+def _sigma(residual: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """σ per bin and output (F, n): the residual's rms over the SMOOTH_BINS nearest bins in
+    frequency on either side. Turbulence's response is coloured, strong at the phugoid's
+    frequencies and weak at the short period's. Weighting each bin by its own neighbourhood's
+    level is the frequency-domain form of the filter-error method's noise model (Jategaonkar,
+    ch. 5): an output's quiet bands then count for what they carry. A single σ per output
+    would let its noisiest band set the weight of all of them."""
+    power = np.abs(residual) ** 2
+    if SMOOTH_BINS > 0 and power.shape[0] > 2 * SMOOTH_BINS + 1:
+        order = np.argsort(np.abs(s), kind="stable")
+        smooth = np.empty_like(power)
+        smooth[order] = scipy.ndimage.uniform_filter1d(power[order], 2 * SMOOTH_BINS + 1,
+                                                       axis=0, mode="nearest")  # fmt: skip
+    else:
+        smooth = np.broadcast_to(power.mean(axis=0), power.shape)
+    # No band's weight beyond (1/SMOOTH_FLOOR)² times the output's average: a band the model
+    # happens to fit to the last digits (noise-free data) must not take over the fit.
+    floor = SMOOTH_FLOOR * np.sqrt(power.mean(axis=0))
+    sigma = np.maximum(np.sqrt(smooth), floor)
     return np.maximum(sigma, 1e-12 * max(float(sigma.max()), 1e-300))
 
 
@@ -364,7 +387,7 @@ def _minimise(problem: _Problem, theta: np.ndarray, sigma: np.ndarray):
     cost = _cost(problem.Y - X, sigma)
     for iteration in range(1, ITERATIONS + 1):
         e = (problem.Y - X) / sigma
-        Jw = _stack(-J[:, :, free] / sigma[None, :, None])
+        Jw = _stack(-J[:, :, free] / sigma[:, :, None])
         er = np.concatenate([e.ravel().real, e.ravel().imag])
         g, H = Jw.T @ er, Jw.T @ Jw
         scale = np.sqrt(np.maximum(np.diag(H), 1e-300))
@@ -398,7 +421,7 @@ def covariance(problem: _Problem, theta: np.ndarray, sigma: np.ndarray) -> np.nd
     X, J = problem.response(theta, jacobian=True)
     e = (problem.Y - X) / sigma
     free = problem.free
-    Jw = -J[:, :, free] / sigma[None, :, None]
+    Jw = -J[:, :, free] / sigma[:, :, None]
     H = _stack(Jw).T @ _stack(Jw)
     # Per bin k: g_k = Re(J_kᴴ e_k), the bin's share of the gradient (outputs together).
     g = np.einsum("fip,fi->fp", Jw.conj(), e).real
@@ -425,7 +448,8 @@ def fit_axis(sp: Spectra, name: str, states, inputs, lagged, experiments: int,
     k = problem.n * problem.n + problem.n * problem.r
     lags = {list(inputs)[j]: float(abs(taus[i])) for i, j in enumerate(problem.lagged)}
     X, _ = problem.response(theta)
-    return AxisFit(name, tuple(states), tuple(inputs), A, B, lags, d, cov[:k, :k], sigma,
+    noise = np.sqrt(np.mean(sigma**2, axis=0))
+    return AxisFit(name, tuple(states), tuple(inputs), A, B, lags, d, cov[:k, :k], noise, sigma,
                    start, _cost(problem.Y - X, sigma), iterations, converged,
                    tuple(controls))  # fmt: skip
 
@@ -443,13 +467,13 @@ def coupling(sp: Spectra, fitted: AxisFit, other_inputs, experiments: int) -> tu
     taus = np.array([fitted.lags[j] for j in fitted.lags])
     theta = problem.pack(fitted.A, B, taus, fitted.transients)
     X0 = problem.response(theta)[0]
-    before = _cost(problem.Y - X0, fitted.noise_std)
-    theta, _, _ = _minimise(problem, theta, fitted.noise_std)
+    before = _cost(problem.Y - X0, fitted.bin_std)
+    theta, _, _ = _minimise(problem, theta, fitted.bin_std)
     X1 = problem.response(theta)[0]
-    after = _cost(problem.Y - X1, fitted.noise_std)
-    signal = _cost(problem.Y, fitted.noise_std)
+    after = _cost(problem.Y - X1, fitted.bin_std)
+    signal = _cost(problem.Y, fitted.bin_std)
     fraction = max(0.0, 1.0 - after / before) if before > 0 else 0.0
-    change = float(np.sqrt(_cost(X1 - X0, fitted.noise_std) / signal)) if signal > 0 else 0.0
+    change = float(np.sqrt(_cost(X1 - X0, fitted.bin_std) / signal)) if signal > 0 else 0.0
     return fraction, change
 
 
@@ -481,20 +505,18 @@ KINEMATIC_STATES = ("airspeed", "alpha", "q", "theta", "beta", "p", "r", "phi")
 GRAVITY = 9.80665
 
 
-def kinematics(x: np.ndarray, force: np.ndarray | None = None) -> np.ndarray:
-    """ẋ without the aerodynamic and thrust forces' changes and without any moment: the body
-    velocity's rotation, gravity and a constant body-axis specific force `force` (m/s²; see
-    `trim_force`) in V̇, α̇ and β̇; the Euler angles' rates in θ̇ and φ̇ (Stevens & Lewis,
-    *Aircraft Control and Simulation*, §2.4); nothing in ṗ, q̇, ṙ (their moments are all
-    unknown). x: (..., 8) in KINEMATIC_STATES order, absolute values, SI units."""
-    fx, fy, fz = (0.0, 0.0, 0.0) if force is None else force
+def kinematics(x: np.ndarray) -> np.ndarray:
+    """ẋ without aerodynamic and thrust forces and moments: the body velocity's rotation and
+    gravity in V̇, α̇ and β̇, the Euler angles' rates in θ̇ and φ̇ (Stevens & Lewis, *Aircraft
+    Control and Simulation*, §2.4), and nothing in ṗ, q̇, ṙ (their moments are all unknown).
+    x: (..., 8) in KINEMATIC_STATES order, absolute values, SI units."""
     V, alpha, q, theta, beta, p, r, phi = np.moveaxis(x, -1, 0)
     u = V * np.cos(alpha) * np.cos(beta)
     v = V * np.sin(beta)
     w = V * np.sin(alpha) * np.cos(beta)
-    u_dot = r * v - q * w - GRAVITY * np.sin(theta) + fx
-    v_dot = p * w - r * u + GRAVITY * np.sin(phi) * np.cos(theta) + fy
-    w_dot = q * u - p * v + GRAVITY * np.cos(phi) * np.cos(theta) + fz
+    u_dot = r * v - q * w - GRAVITY * np.sin(theta)
+    v_dot = p * w - r * u + GRAVITY * np.sin(phi) * np.cos(theta)
+    w_dot = q * u - p * v + GRAVITY * np.cos(phi) * np.cos(theta)
     V_dot = (u * u_dot + v * v_dot + w * w_dot) / V
     alpha_dot = (u * w_dot - w * u_dot) / (u * u + w * w)
     beta_dot = (V * v_dot - v * V_dot) / (V * V * np.cos(beta))
@@ -504,19 +526,7 @@ def kinematics(x: np.ndarray, force: np.ndarray | None = None) -> np.ndarray:
     return np.stack([V_dot, alpha_dot, zero, theta_dot, beta_dot, zero, zero, phi_dot], axis=-1)
 
 
-def trim_force(trim: np.ndarray) -> np.ndarray:
-    """The body-axis specific force (m/s²) of the aerodynamics and thrust that holds the trim
-    steady (u̇ = v̇ = ẇ = 0): minus the rotation and gravity terms there."""
-    V, alpha, q, theta, beta, p, r, phi = trim
-    u = V * np.cos(alpha) * np.cos(beta)
-    v = V * np.sin(beta)
-    w = V * np.sin(alpha) * np.cos(beta)
-    return -np.array([r * v - q * w - GRAVITY * np.sin(theta),
-                      p * w - r * u + GRAVITY * np.sin(phi) * np.cos(theta),
-                      q * u - p * v + GRAVITY * np.cos(phi) * np.cos(theta)])  # fmt: skip
-
-
-def kinematic_jacobian(trim: np.ndarray, force: np.ndarray | None = None) -> np.ndarray:
+def kinematic_jacobian(trim: np.ndarray) -> np.ndarray:
     """∂kinematics/∂x at `trim` (8 × 8, central differences)."""
     step = 1e-6 * np.maximum(np.abs(trim), 1.0)
     jacobian = np.empty((8, 8))
@@ -524,16 +534,14 @@ def kinematic_jacobian(trim: np.ndarray, force: np.ndarray | None = None) -> np.
         up, down = trim.copy(), trim.copy()
         up[j] += step[j]
         down[j] -= step[j]
-        jacobian[:, j] = (kinematics(up, force) - kinematics(down, force)) / (2 * step[j])
+        jacobian[:, j] = (kinematics(up) - kinematics(down)) / (2 * step[j])
     return jacobian
 
 
 def kinematic_remainder(x: np.ndarray, trim: np.ndarray) -> np.ndarray:
     """kinematics(x) less its first-order expansion about `trim`: the part a linear model's
     A cannot hold. (N, 8) → (N, 8)."""
-    force = trim_force(trim) if TRIM_FORCE else None
-    return (kinematics(x, force) - kinematics(trim, force)
-            - (x - trim) @ kinematic_jacobian(trim, force).T)  # fmt: skip
+    return kinematics(x) - kinematics(trim) - (x - trim) @ kinematic_jacobian(trim).T
 
 
 def inertial_air_data(x: np.ndarray, navigation: np.ndarray) -> np.ndarray:
@@ -558,8 +566,6 @@ GUSTS = (("airspeed", "longitudinal"), ("alpha", "longitudinal"), ("beta", "late
 # and their columns elsewhere are fixed (_Problem) and the nonlinear rest of their kinematics
 # is a known forcing (`prepare`).
 ATTITUDE = ("theta", "phi")
-REMAINDER_ROWS = ATTITUDE
-TRIM_FORCE = False
 
 
 @dataclass(frozen=True)
@@ -618,7 +624,7 @@ def prepare(batch: Sequence[Experiment], output_roles: Sequence[str | None],
         jacobians.append(kinematic_jacobian(trim))
         remainder = kinematic_remainder(x, trim)
         forcing = np.zeros_like(y)
-        for role in REMAINDER_ROWS:
+        for role in ATTITUDE:
             if role in index:
                 forcing[:, index[role]] = remainder[:, KINEMATIC_STATES.index(role)]
         out.append(Experiment(u, y))

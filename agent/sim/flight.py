@@ -25,6 +25,8 @@ from agent.config import (
     AirDataPort,
     Autopilot,
     Config,
+    Envelope,
+    Excitation,
     Identification,
     Link,
     Recorder,
@@ -40,6 +42,7 @@ from agent.link.session import LinkSession
 from agent.runtime import Agent
 from agent.sim.aircraft import AircraftOptions, SimAircraft
 from agent.sim.ardupilot import Params
+from agent.sim.plant import KT
 from agent.sim.radio import EmulatedXBee, RfChannel, module_pair
 from agent.sim.truth import linear_truth
 from drivers.xbee.driver import RadioError, XBeeRadio
@@ -115,10 +118,26 @@ async def _until(predicate, timeout: float) -> bool:
     return True
 
 
+# The simulated aircraft's envelope around its trim, as an operator would set it for that
+# aircraft: the default (12–35 m/s and 40 m of height, a small UAV's) refused every plan on a
+# 90 kt PA-28, then aborted the full preset when its phugoid had lost 40 m. The height limit
+# is this many seconds of the trim airspeed (93 m on the Cub, 139 m on the PA-28).
+ENVELOPE_SPEED = (0.6, 1.3)
+ENVELOPE_HEIGHT_S = 3.0
+
+
 def _config(tmp: Path, ports: Path, mavlink: tuple[str, int], axes: str,
-            realtime_priority: int | None = None) -> Config:  # fmt: skip
+            realtime_priority: int | None = None, speed_kts: float = 60.0) -> Config:  # fmt: skip
+    trim = speed_kts * KT
     return Config(
         runtime=Runtime(realtime_priority=realtime_priority),
+        excitation=Excitation(
+            envelope=Envelope(
+                min_airspeed=ENVELOPE_SPEED[0] * trim,
+                max_airspeed=ENVELOPE_SPEED[1] * trim,
+                max_altitude_loss_m=max(40.0, ENVELOPE_HEIGHT_S * trim),
+            )
+        ),
         identification=Identification(axes=axes),
         sensors=Sensors(
             vn200=VectorNav(port=str(ports / "vn200")),
@@ -143,6 +162,10 @@ def _config_toml(config: Config) -> str:
     s, link = config.sensors, config.link
     return "\n".join([
         "[identification]", f'axes = "{config.identification.axes}"',
+        "[excitation.envelope]",
+        f"min_airspeed = {config.excitation.envelope.min_airspeed!r}",
+        f"max_airspeed = {config.excitation.envelope.max_airspeed!r}",
+        f"max_altitude_loss_m = {config.excitation.envelope.max_altitude_loss_m!r}",
         "[sensors.vn200]", f'port = "{s.vn200.port}"',
         "[sensors.airdata]", f'port = "{s.airdata.port}"',
         "[sensors.surfaces]", f'port = "{s.surfaces.port}"',
@@ -286,7 +309,8 @@ async def _parts(options: SimOptions, tmp: Path, params: Params, say, operator: 
         ):
             raise SimError("the simulated aircraft did not start")
         axes = preset(options.preset).axes
-        config = _config(tmp, ports, aircraft.mavlink_address, axes, options.realtime_priority)
+        config = _config(tmp, ports, aircraft.mavlink_address, axes, options.realtime_priority,
+                         options.speed_kts)  # fmt: skip
         if agent_process:
             agent = AgentProcess(tmp, config)
             agent.start()
