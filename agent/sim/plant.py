@@ -121,6 +121,7 @@ class Plant:
         altitude_ft: float = 1000.0,
         turbulence: float = 0.0,
         seed: int = 0,
+        heading_deg: float = 0.0,
         integration_hz: float = 200.0,
         linearise: bool = True,
     ):
@@ -139,6 +140,7 @@ class Plant:
         self.fdm["ic/h-sl-ft"] = altitude_ft
         self.fdm["ic/vc-kts"] = airspeed_kts
         self.fdm["ic/gamma-deg"] = 0.0
+        self.fdm["ic/psi-true-deg"] = heading_deg
         if not self.fdm.run_ic():
             raise PlantError("JSBSim rejected the initial conditions")
         self.fdm["propulsion/set-running"] = -1
@@ -166,6 +168,10 @@ class Plant:
             self.fdm["atmosphere/turbulence/milspec/windspeed_at_20ft_AGL-fps"] = (
                 LIGHT_TURBULENCE_WIND_FPS * turbulence
             )
+            # A mean wind too small to matter, so that JSBSim keeps the turbulence axes' azimuth
+            # (with none it resets it to north) and `step` can align them with the aircraft.
+            self.fdm["atmosphere/wind-mag-fps"] = 1e-6
+        self.turbulence = turbulence
 
     def _linearise(self) -> Linearisation:
         import jsbsim
@@ -268,6 +274,16 @@ class Plant:
         return values
 
     def step(self) -> None:
+        if self.turbulence > 0:
+            # MIL-F-8785C's Dryden gusts are defined along and across the flight path, and its
+            # rotational gusts about the body axes: q_g from the vertical gust's gradient along
+            # the path, p_g (independent) across it. JSBSim generates them in the mean wind's
+            # axes, north without wind, and turns p_g, q_g as a north/east vector into body
+            # axes. An aircraft heading 59° then felt 86 % of the random roll gust as a pitch
+            # gust (body q_g: 18 % explained by s·α_g/(1 + τs), 99 % with the axes aligned). So
+            # the axes follow the heading: −ψ in JSBSim's sign for this angle, which puts the
+            # u gust along the body's x.
+            self.fdm["atmosphere/psiw-rad"] = float(-self.fdm["attitude/psi-rad"]) % (2 * np.pi)
         middle = (self._ramp_done + 0.5) / self._ramp_steps
         for name in self._ramp:
             self.fdm[COMMAND_PROPERTY[name]] = self._value(name, middle)
