@@ -202,11 +202,16 @@ class Fit:
         return float(np.mean(self.tic))
 
 
-def fit(model: StateSpace, experiments: Sequence[Experiment]) -> Fit:
-    """Simulate `model` on every experiment (own x0 each) and score it with TIC per output."""
+def fit(model: StateSpace, experiments: Sequence[Experiment],
+        initial_states: Sequence[np.ndarray] | None = None) -> Fit:  # fmt: skip
+    """Simulate `model` on every experiment (own x0 each: estimated, or `initial_states`
+    when given) and score it with TIC per output."""
     predictions, states = [], []
-    for exp in experiments:
-        x0 = estimate_initial_state(model, exp.u, exp.y)
+    for k, exp in enumerate(experiments):
+        if initial_states is None:
+            x0 = estimate_initial_state(model, exp.u, exp.y)
+        else:
+            x0 = np.asarray(initial_states[k], dtype=float)
         states.append(x0)
         with np.errstate(over="ignore", invalid="ignore"):
             predictions.append(simulate(model, exp.u, x0))

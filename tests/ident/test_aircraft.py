@@ -62,6 +62,11 @@ def test_noise_free_aircraft_is_recovered_with_its_engine_lag_and_no_coupling():
     # The transforms of samples stand in for continuous ones: (ωΔt)²/12 ≈ 0.3 % at 3 Hz.
     assert np.max(np.abs(found - true) / np.abs(true)) < 5e-3
     assert result.fit.tic_avg < 0.01
+    # The simulation starts where the outputs start, the engine's lag states at rest (estimated
+    # by least squares they took values of ±1000 on a JSBSim record).
+    x0 = result.fit.initial_states[0]
+    assert np.all(x0[8:] == 0)
+    assert np.allclose(x0[:8], record.y[:5].mean(axis=0))
     # Every mode carries its standard error; the named ones are the aircraft's.
     assert all(mode.uncertainty is not None for mode in result.modes)
     assert {"Dutch roll", "roll"} <= {mode.name for mode in result.modes}
