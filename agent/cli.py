@@ -808,8 +808,22 @@ def cmd_config_check(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the `sysid` console script."""
+    """Entry point of the `sysid` console script. Under `--json` an unexpected error (a bug)
+    still leaves exactly one JSON object on stdout; its traceback goes to stderr."""
     args = build_parser().parse_args(argv)
+    try:
+        return _dispatch(args)
+    except Exception as exc:
+        if not getattr(args, "json", False):
+            raise
+        import traceback
+
+        traceback.print_exc()
+        print(json.dumps({"error": f"internal error: {type(exc).__name__}: {exc}"}))
+        return EXIT_FAILED
+
+
+def _dispatch(args: argparse.Namespace) -> int:
     if args.command == "identify":
         return cmd_identify(args)
     if args.command == "analyze":

@@ -101,3 +101,20 @@ def test_bad_input_is_a_clear_error(tmp_path, capsys, args, message):
     err = capsys.readouterr().err
     assert "sysid excite: error:" in err
     assert message in err
+
+
+def test_an_internal_error_still_leaves_one_json_object(monkeypatch, capsys):
+    # Bad input tried: none the code foresaw. A bug inside a command (here the plan's summary
+    # raising) must not leave `--json` with a traceback and an empty stdout.
+    import agent.cli
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("a bug")
+
+    monkeypatch.setattr(agent.cli, "summary", broken)
+    assert main(["excite", "--preset", "lateral", "--json"]) == 1
+    out, err = capsys.readouterr()
+    assert json.loads(out) == {"error": "internal error: RuntimeError: a bug"}
+    assert "Traceback" in err
+    with pytest.raises(RuntimeError):  # without --json the traceback is the report
+        main(["excite", "--preset", "lateral"])
