@@ -136,7 +136,7 @@ class Spectra:
 class AxisFit:
     """One fitted model: ẋ = A x + B u_eff with the states the outputs `states` (C = I)."""
 
-    name: str  # "longitudinal", "lateral" or "coupled"
+    name: str  # "longitudinal" or "lateral"
     states: tuple[int, ...]  # output columns
     inputs: tuple[int, ...]  # input columns
     A: np.ndarray

@@ -202,3 +202,21 @@ def test_navigation_of_the_wrong_shape_is_refused_clearly():
     with pytest.raises(DataError, match="operating point needs 8"):
         identify(Experiment(u, air, operating_point=op[:7]), DT,
                  input_names=INPUTS, output_names=OUTPUTS, output_roles=OUTPUTS)  # fmt: skip
+
+
+def test_a_propellers_gyroscopic_coupling_is_found_as_a_coupling_block_of_a():
+    # q̇ = … − 0.5 r (JSBSim's Cub has −0.52): the lateral states join the longitudinal axis
+    # as inputs, their gains fill A's block, and the coupled aircraft's modes come back.
+    A, B, C = aircraft_with_engine_lag()
+    A[2, 6] = -0.5
+    record = full_preset_record(A, B, C)
+    result = identify(record, DT, input_names=INPUTS, output_names=OUTPUTS,
+                      output_roles=OUTPUTS, settings=Settings(held_inputs=False))  # fmt: skip
+    report = result.aircraft
+    assert "longitudinal" in report["model"]
+    assert "coupled" in report["model"]
+    assert report["coupling"]["longitudinal"]["response_by_states"] > COUPLED
+    assert result.continuous.A[2, 6] == pytest.approx(-0.5, rel=0.02)
+    found = np.sort_complex(np.linalg.eigvals(result.continuous.A[:8, :8]))
+    true = np.sort_complex(np.linalg.eigvals(A[:8, :8]))
+    assert np.max(np.abs(found - true) / np.abs(true)) < 5e-3
