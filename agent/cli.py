@@ -343,6 +343,7 @@ def _identification_request(args: argparse.Namespace, command: str, paths):
         start=args.start,
         end=args.end,
         trim_seconds=trim,
+        navigation=config.channels.navigation(),
     )
     settings = identify_cmd.settings_from(
         config,
@@ -391,8 +392,10 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         _error("analyze", "--cross needs one model per excitation: drop --batch")
         return EXIT_BAD_INPUT
     roles = [config.channels.role_of(n) for n in request.outputs]
+    input_roles = [config.channels.role_of(n) for n in request.inputs]
     try:
-        cases, _ = an.build_cases(request, roles, settings, batch=args.batch, sweep=sweep)
+        cases, _ = an.build_cases(request, roles, settings, batch=args.batch, sweep=sweep,
+                                  input_roles=input_roles)  # fmt: skip
     except an.AnalyzeError as exc:
         _error("analyze", str(exc))
         return EXIT_BAD_INPUT
@@ -440,8 +443,10 @@ def cmd_report(args: argparse.Namespace) -> int:
             _error("report", f"{args.nominal}: not a model store file ({exc})")
             return EXIT_BAD_INPUT
     roles = [config.channels.role_of(n) for n in request.outputs]
+    input_roles = [config.channels.role_of(n) for n in request.inputs]
     try:
-        cases, _ = an.build_cases(request, roles, settings, batch=False, sweep=None)
+        cases, _ = an.build_cases(request, roles, settings, batch=False, sweep=None,
+                                  input_roles=input_roles)  # fmt: skip
     except an.AnalyzeError as exc:
         _error("report", str(exc))
         return EXIT_BAD_INPUT

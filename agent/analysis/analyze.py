@@ -20,7 +20,7 @@ import numpy as np
 
 from agent.analysis.identify import Request, load_experiments
 from agent.analysis.records import RecordError
-from agent.ident import Settings
+from agent.ident import Experiment, Settings
 from agent.ident import job as jobs
 from agent.ident.errors import DataError
 from agent.logs import read_log
@@ -119,12 +119,15 @@ def build_cases(
     *,
     batch: bool,
     sweep: tuple[str, list[int]] | None,
+    input_roles: Sequence[str | None] = (),
 ) -> tuple[list[Case], float]:
-    """Every identification the analysis needs, and the records' sample time."""
-    data, rates, ours = [], [], []
+    """Every identification the analysis needs, and the records' sample time. `roles` and
+    `input_roles`: the outputs' and inputs' roles (None where a channel has none)."""
+    data, contexts, rates, ours = [], [], [], []
     for path in request.paths:
-        u, y, dt, own = _experiment(Path(path), request)
-        data.append((u, y))
+        exp, dt, own = _experiment(Path(path), request)
+        data.append((exp.u, exp.y))
+        contexts.append((exp.operating_point, exp.navigation))
         rates.append(dt)
         ours.append(own)
     if any(ours):  # as onboard: the surface pots sample moving surfaces, not held commands
@@ -132,24 +135,32 @@ def build_cases(
     dt = rates[0]
     if any(abs(r - dt) > 0.01 * dt for r in rates):
         raise AnalyzeError(f"the logs are sampled at different rates ({sorted(set(rates))} s)")
-    groups = [("batch", tuple(data))] if batch else [(str(k + 1), (d,)) for k, d in enumerate(data)]
+    pairs = list(zip(data, contexts, strict=True))
+    if batch:
+        groups = [("batch", tuple(data), tuple(contexts))]
+    else:
+        groups = [(str(k + 1), (d,), (c,)) for k, (d, c) in enumerate(pairs)]
     keys: list[tuple[tuple[str, int], ...]] = [()]
     if sweep is not None:
         keys = [((sweep[0], v),) for v in sweep[1]]
     cases = []
     for key in keys:
         case_settings = replace(settings, **dict(key))
-        for label, group in groups:
+        for label, group, context in groups:
             job = jobs.Job(label, "analysis", dt, tuple(request.inputs), tuple(request.outputs),
-                           tuple(r or "" for r in roles), group, case_settings)  # fmt: skip
+                           tuple(r or "" for r in roles), group, case_settings,
+                           contexts=context,
+                           input_roles=tuple(r or "" for r in input_roles))  # fmt: skip
             cases.append(Case(label, key, job))
     return cases, dt
 
 
-def _experiment(path: Path, request: Request) -> tuple[np.ndarray, np.ndarray, float, bool]:
-    """(u, y, dt, whether it is the agent's log) of one log. The agent's own logs go through
-    the agent's window code (edge rows without data cut, gaps up to 0.1 s bridged, trim
-    removed), as onboard; any other record through `sysid identify`'s strict reader."""
+def _experiment(path: Path, request: Request) -> tuple[Experiment, float, bool]:
+    """(experiment, dt, whether it is the agent's log) of one log. The agent's own logs go
+    through the agent's window code (edge rows without data cut, gaps up to 0.1 s bridged,
+    trim removed), as onboard; any other record through `sysid identify`'s strict reader.
+    Either way the experiment carries its operating point and, where the log has the INS's
+    heading and velocities (`Request.navigation`), its navigation, as onboard."""
     with path.open(encoding="utf-8", errors="replace") as handle:
         ours = handle.readline().startswith("# suas-sysid")
     if not ours:
@@ -158,7 +169,7 @@ def _experiment(path: Path, request: Request) -> tuple[np.ndarray, np.ndarray, f
             experiments, dt, _, _ = load_experiments(single)
         except RecordError as exc:
             raise AnalyzeError(str(exc)) from exc
-        return experiments[0].u, experiments[0].y, dt, False
+        return experiments[0], dt, False
     try:
         columns, rows = read_log(path)
     except (OSError, ValueError, IndexError) as exc:
@@ -178,16 +189,21 @@ def _experiment(path: Path, request: Request) -> tuple[np.ndarray, np.ndarray, f
     # the µs-rounded times); logs written before the header named it: the median step.
     rate = _header(path, r"recorded at (\S+) Hz")
     dt = 1.0 / float(rate) if rate else float(np.median(np.diff(time)))
-    values = {n: rows[keep, columns.index(n)] for n in (*request.inputs, *request.outputs)}
+    navigation = [n for n in request.navigation if n in columns]
+    values = {n: rows[keep, columns.index(n)]
+              for n in (*request.inputs, *request.outputs, *navigation)}  # fmt: skip
     try:
         (u, y), trim = jobs.window_and_trim(values, request.inputs, request.outputs, dt,
                                             max(request.trim_seconds, dt))  # fmt: skip
     except (DataError, KeyError) as exc:
         raise AnalyzeError(f"{path}: {exc}") from exc
+    operating_point = np.array(list(trim["outputs"].values()))
     if request.trim_seconds <= 0:  # --trim none: the data as recorded
         u = u + np.array(list(trim["inputs"].values()))
-        y = y + np.array(list(trim["outputs"].values()))
-    return u, y, dt, True
+        y = y + operating_point
+        operating_point = np.zeros_like(operating_point)
+    nav = jobs.window_navigation(values, request.inputs, request.outputs, request.navigation)
+    return Experiment(u, y, operating_point=operating_point, navigation=nav), dt, True
 
 
 def run_cases(cases: Sequence[Case], *, workers: int = 1, scheduler: str | None = None,

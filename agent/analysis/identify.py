@@ -6,6 +6,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from agent.analysis.records import Record, RecordError, read_record, select, trim_values
 from agent.config import Identification as IdentConfig
 from agent.ident import Experiment, Identification, Settings, identify
@@ -24,6 +26,9 @@ class Request:
     start: float | None = None
     end: float | None = None
     trim_seconds: float = 0.5  # 0: no trim removal
+    # The INS heading and velocity columns (NAVIGATION_ROLES order), used where a record has
+    # them all: the aircraft method measures the wind with them, as onboard.
+    navigation: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -52,14 +57,17 @@ def parse_trim(text: str) -> float:
 def load_experiments(
     request: Request,
 ) -> tuple[list[Experiment], float, list[dict[str, float]], int]:
-    """Read, select and de-trim every record; all must share one sample time."""
+    """Read, select and de-trim every record; all must share one sample time. Each experiment
+    carries the trim removed from its outputs (its operating point) and, where the record has
+    every `navigation` column, the navigation: the aircraft method's kinematics and wind."""
     overlap = set(request.inputs) & set(request.outputs)
     if overlap:
         raise RecordError(f"column(s) {', '.join(sorted(overlap))} are both input and output")
     names = list(request.inputs) + list(request.outputs)
     records: list[Record] = []
     for path in request.paths:
-        records.append(select(read_record(path, names), request.start, request.end))
+        record = read_record(path, names, optional=request.navigation)
+        records.append(select(record, request.start, request.end))
     dt = records[0].dt
     for rec in records[1:]:
         if abs(rec.dt - dt) > DT_TOLERANCE * dt:
@@ -76,8 +84,13 @@ def load_experiments(
         )
         trim.append(offsets)
         u = rec.matrix(request.inputs) - [offsets[n] for n in request.inputs]
-        y = rec.matrix(request.outputs) - [offsets[n] for n in request.outputs]
-        experiments.append(Experiment(u=u, y=y))
+        operating_point = np.array([offsets[n] for n in request.outputs])
+        y = rec.matrix(request.outputs) - operating_point
+        navigation = None
+        if request.navigation and all(n in rec.columns for n in request.navigation):
+            navigation = rec.matrix(request.navigation)
+        experiments.append(Experiment(u=u, y=y, operating_point=operating_point,
+                                      navigation=navigation))  # fmt: skip
     return experiments, dt, trim, sum(r.time.size for r in records)
 
 

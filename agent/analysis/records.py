@@ -41,8 +41,10 @@ class Record:
         return np.column_stack([self.columns[n] for n in names])
 
 
-def read_record(path: str | Path, names: Sequence[str]) -> Record:
-    """Read `time` and the named columns; check they are finite and uniformly sampled."""
+def read_record(path: str | Path, names: Sequence[str], optional: Sequence[str] = ()) -> Record:
+    """Read `time` and the named columns; check they are finite and uniformly sampled. The
+    `optional` columns are read too where the header has them and every cell is a finite
+    number; otherwise they are left out of the record."""
     path = Path(path)
     try:
         with path.open(newline="", encoding="utf-8") as handle:
@@ -56,13 +58,20 @@ def read_record(path: str | Path, names: Sequence[str]) -> Record:
                 raise RecordError(f"{path}: the file is empty; expected a header row")
             header = [h.strip() for h in header]
             index = _column_index(path, header, ["time", *names])
-            values = _read_rows(path, reader, len(header), index, ["time", *names], 2 + comments)
+            extra = [n for n in dict.fromkeys(optional)
+                     if n not in names and n != "time" and header.count(n) == 1]  # fmt: skip
+            index += [header.index(n) for n in extra]
+            values = _read_rows(path, reader, len(header), index, ["time", *names, *extra],
+                                2 + comments, lenient=len(extra))  # fmt: skip
     except OSError as exc:
         raise RecordError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
     except UnicodeDecodeError as exc:
         raise RecordError(f"{path}: not a text CSV file ({exc.reason})") from exc
     time = values[:, 0]
-    columns = {name: values[:, j + 1] for j, name in enumerate(names)}
+    columns = {name: values[:, j + 1] for j, name in enumerate([*names, *extra])}
+    for name in extra:
+        if not np.isfinite(columns[name]).all():
+            del columns[name]
     return Record(path=path, time=time, columns=columns, dt=_sample_time(path, time))
 
 
@@ -80,8 +89,16 @@ def _column_index(path: Path, header: list[str], wanted: list[str]) -> list[int]
 
 
 def _read_rows(
-    path: Path, reader: csv.reader, width: int, index: list[int], names: list[str], first: int
+    path: Path,
+    reader: csv.reader,
+    width: int,
+    index: list[int],
+    names: list[str],
+    first: int,
+    lenient: int = 0,
 ) -> np.ndarray:
+    """The named columns as floats; the last `lenient` of them take NaN for a bad cell."""
+    strict = len(names) - lenient
     rows: list[list[float]] = []
     for line_no, row in enumerate(reader, start=first):
         if not row or all(not cell.strip() for cell in row):
@@ -91,8 +108,14 @@ def _read_rows(
         if len(rows) >= MAX_ROWS:
             raise RecordError(f"{path}: more than {MAX_ROWS} rows; split the record")
         parsed = []
-        for j, name in zip(index, names, strict=True):
+        for k, (j, name) in enumerate(zip(index, names, strict=True)):
             cell = row[j].strip()
+            if k >= strict:
+                try:
+                    parsed.append(float(cell))
+                except ValueError:
+                    parsed.append(np.nan)
+                continue
             try:
                 value = float(cell)
             except ValueError:

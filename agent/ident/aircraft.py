@@ -367,7 +367,7 @@ def _sigma(residual: np.ndarray, s: np.ndarray) -> np.ndarray:
     # No band's weight beyond (1/SMOOTH_FLOOR)² times the output's average: a band the model
     # happens to fit to the last digits (noise-free data) must not take over the fit.
     floor = SMOOTH_FLOOR * np.sqrt(power.mean(axis=0))
-    sigma = np.maximum(np.sqrt(smooth), floor)
+    sigma = np.maximum(np.sqrt(np.maximum(smooth, 0.0)), floor)  # the filter rounds to −0
     return np.maximum(sigma, 1e-12 * max(float(sigma.max()), 1e-300))
 
 

@@ -42,12 +42,18 @@ class Job:
     navigation: tuple[str, ...] = ()
     """The INS heading and velocity channels in the window (NAVIGATION_ROLES order): the
     aircraft method measures the wind with them. A window without them is identified without."""
+    contexts: tuple[tuple[np.ndarray | None, np.ndarray | None], ...] = ()
+    """Per experiment, its operating point and navigation (`Experiment`) where they are known
+    (a replayed log), for the aircraft method's kinematics and wind; empty: none."""
+    input_roles: tuple[str, ...] = ()
+    """The inputs' roles ("" for none); empty: those of `axes`' axis set."""
 
 
 def window_and_trim(values: dict[str, np.ndarray], inputs, outputs, dt: float, trim_s: float):
     """(u, y) from recorded columns — short gaps bridged, trim (the mean of the first trim_s)
     removed — and that trim by channel, the model's operating point:
-    {"inputs": {name: value}, "outputs": {name: value}}."""
+    {"inputs": {name: value}, "outputs": {name: value}}. `window_navigation` gives the
+    navigation over the same rows."""
     (u, y), (u0, y0) = _window(values, inputs, outputs, dt, trim_s)
     trim = {"inputs": dict(zip(inputs, map(float, u0), strict=True)),
             "outputs": dict(zip(outputs, map(float, y0), strict=True))}  # fmt: skip
@@ -70,6 +76,12 @@ def _complete(values, inputs, outputs) -> slice:
     if complete.size < 2:
         raise DataError("the window holds no complete row of the channels to identify")
     return slice(complete[0], complete[-1] + 1)
+
+
+def window_navigation(values, inputs, outputs, names) -> np.ndarray | None:
+    """The navigation columns `names` over the rows `window_and_trim` keeps, or None (see
+    `_navigation`)."""
+    return _navigation(values, names, _complete(values, inputs, outputs))
 
 
 def _navigation(values, names, keep: slice) -> np.ndarray | None:
@@ -98,7 +110,12 @@ def _bridge(x: np.ndarray, dt: float, name: str) -> np.ndarray:
 def run(job: Job) -> dict:
     """Identify; never raises for bad data: {"ok": False, "reason": …} instead. With a
     `window`, the outcome also carries the experiment made of it and the trim removed."""
-    experiments, extra = [Experiment(u, y) for u, y in job.experiments], {}
+    contexts = job.contexts or ((None, None),) * len(job.experiments)
+    pairs = zip(job.experiments, contexts, strict=True)
+    experiments = [
+        Experiment(u, y, operating_point=op, navigation=nav) for (u, y), (op, nav) in pairs
+    ]
+    extra: dict = {}
     if job.window is not None:
         try:
             (u, y), trim = window_and_trim(job.window, job.inputs, job.outputs, job.record_dt,
@@ -108,13 +125,12 @@ def run(job: Job) -> dict:
         extra = {"experiment": (u, y), "trim": trim}
         # Its absolute trim and navigation, for the aircraft method's kinematics and wind.
         op = np.array([trim["outputs"][n] for n in job.outputs])
-        nav = _navigation(job.window, job.navigation, _complete(job.window, job.inputs,
-                                                                job.outputs))  # fmt: skip
+        nav = window_navigation(job.window, job.inputs, job.outputs, job.navigation)
         experiments.append(Experiment(u, y, operating_point=op, navigation=nav))
     try:
         result = identify(experiments, job.record_dt, input_names=job.inputs,
                           output_names=job.outputs, output_roles=job.roles,
-                          input_roles=AXIS_SETS[job.axes][0] if job.axes in AXIS_SETS else None,
+                          input_roles=_input_roles(job),
                           settings=job.settings)  # fmt: skip
     except (DataError, IdentificationFailed, np.linalg.LinAlgError, ValueError) as exc:
         return {**extra, "ok": False, "model_id": job.model_id, "reason": str(exc)}
@@ -132,6 +148,12 @@ def run(job: Job) -> dict:
             "smoothing_s": prep.smoothing_s,
         },
     }
+
+
+def _input_roles(job: Job) -> tuple[str | None, ...] | None:
+    if job.input_roles:
+        return tuple(r or None for r in job.input_roles)
+    return AXIS_SETS[job.axes][0] if job.axes in AXIS_SETS else None
 
 
 def cross_tic(result: dict, preprocessing: dict, record_dt: float,

@@ -8,7 +8,16 @@ import pytest
 
 from agent.excitation.plan import preset, render
 from agent.ident import Experiment, Settings, identify
-from agent.ident.aircraft import COUPLED, kinematic_jacobian, kinematic_remainder
+from agent.ident.aircraft import (
+    COUPLED,
+    SMOOTH_BINS,
+    SMOOTH_FLOOR,
+    Spectra,
+    _sigma,
+    excited,
+    kinematic_jacobian,
+    kinematic_remainder,
+)
 from agent.ident.convert import discretize_foh
 from agent.ident.errors import DataError
 from agent.ident.fit import simulate
@@ -220,3 +229,55 @@ def test_a_propellers_gyroscopic_coupling_is_found_as_a_coupling_block_of_a():
     found = np.sort_complex(np.linalg.eigvals(result.continuous.A[:8, :8]))
     true = np.sort_complex(np.linalg.eigvals(A[:8, :8]))
     assert np.max(np.abs(found - true) / np.abs(true)) < 5e-3
+
+
+def _spectra(U: np.ndarray, record: np.ndarray, Y: np.ndarray | None = None) -> Spectra:
+    counts = [int(np.sum(record == e)) for e in np.unique(record)]
+    s = 2j * np.pi * np.concatenate([np.arange(1, c + 1) / 10.0 for c in counts])
+    Y = np.zeros((s.size, 1), dtype=complex) if Y is None else Y
+    return Spectra(s, Y, U.astype(complex), record, (0.1, 1.0))
+
+
+def test_excited_keeps_each_records_bins_where_a_chosen_control_has_power():
+    """Per record and per control, a bin counts when that control puts EXCITED_LEVEL of its
+    own largest bin's power there: a weak control's lines count as fully as a strong one's,
+    a line below the level does not, and the other controls' lines are left out."""
+    record = np.repeat([0, 1], 12)
+    U = np.zeros((24, 3))
+    U[[2, 8], 0] = [1.0, 0.2]  # control 0: its second line at 4 % of its power
+    U[5, 1], U[7, 1] = 1e-3, 0.5e-4  # control 1: weak, and a line at 0.25 % of its power
+    U[3, 2] = 5.0  # control 2: not chosen
+    U[12 + 4, 0] = 0.01  # record 1: control 0's only line, far below record 0's
+    U[12 + 6, 1] = 2.0
+    kept = excited(_spectra(U, record), [0, 1])
+    harmonics = np.round(kept.s.imag / (2 * np.pi) * 10).astype(int)
+    assert list(zip(kept.record.tolist(), harmonics.tolist(), strict=True)) == [
+        (0, 3),
+        (0, 6),
+        (0, 9),
+        (1, 5),
+        (1, 7),
+    ]
+    assert kept.Y.shape == (5, 1)
+    assert kept.U.shape == (5, 3)
+
+
+def test_each_bins_weight_follows_its_neighbourhoods_residual_level():
+    """_sigma: the residual's rms over the SMOOTH_BINS nearest bins, so a band 10 times
+    noisier gets a σ 3 times larger (a single σ per output would weight both alike); a band
+    fitted exactly is held at SMOOTH_FLOOR of the output's rms, not at zero. (The floor also
+    caps the contrast: a band 10 times quieter than the rest would sit on it.)"""
+    rng = np.random.default_rng(3)
+    F = 400
+    s = 2j * np.pi * np.arange(1, F + 1) / 80.0
+    level = np.where(np.arange(F) < F // 2, 3.0, 1.0)
+    noise = level * (rng.standard_normal(F) + 1j * rng.standard_normal(F)) / np.sqrt(2)
+    exact = np.where(np.arange(F) < F // 2, noise, 0.0)
+    sigma = _sigma(np.column_stack([noise, exact]), s)
+    margin = 4 * SMOOTH_BINS  # away from the step between the bands
+    deep = slice(margin, F // 2 - margin), slice(F // 2 + margin, F - margin)
+    ratio = np.median(sigma[deep[0], 0]) / np.median(sigma[deep[1], 0])
+    assert 2.5 < ratio < 3.5
+    rms = np.sqrt(np.mean(np.abs(exact) ** 2))
+    assert np.allclose(sigma[deep[1], 1], SMOOTH_FLOOR * rms)
+    assert np.all(sigma[deep[0], 1] > 2 * SMOOTH_FLOOR * rms)

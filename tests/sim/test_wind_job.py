@@ -2,17 +2,25 @@
 JSBSim flight of the full preset in light turbulence (agent.sim.offline), handed to
 `agent.ident.job.run` as the agent hands it a recorded window.
 
-Bad input tried: an INS dropout (NaN in v_N for a second) and a window with no navigation
-channel at all. Each is identified without the wind, and the result says so; neither fails the
-job.
+The same flight replayed offline, as a CSV record through `sysid identify` and as the agent's
+excitation log through `sysid analyze`, is identified with the trim and the wind, as onboard.
+
+Bad input tried: an INS dropout (NaN in v_N for a second), a window with no navigation
+channel at all, and in a CSV record an empty v_E cell and a v_D cell that is not a number.
+Each is identified without the wind, and the result says so; none fails.
 """
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
-from agent.config import Channels
+from agent.analysis import analyze as an
+from agent.analysis.identify import Request, settings_from
+from agent.cli import main
+from agent.config import Channels, Config
 from agent.excitation.plan import preset
 from agent.ident import Settings
 from agent.ident.job import Job, run
@@ -21,6 +29,10 @@ from agent.sim.offline import INS_CHANNELS, fly
 CHANNELS = Channels()
 INPUTS, OUTPUTS = CHANNELS.axis_set("full")
 ROLES = ("airspeed", "alpha", "q", "theta", "beta", "p", "r", "phi")
+CHANNELS_ROLES = tuple(CHANNELS.role_of(n) for n in INPUTS)
+
+
+DT = 0.01
 
 
 @pytest.fixture(scope="module")
@@ -60,3 +72,69 @@ def test_an_ins_dropout_or_no_ins_channels_identify_without_the_wind(window):
     assert report["kinematics"]  # the trim is still known
     without = {k: v for k, v in window.items() if k not in CHANNELS.navigation()}
     assert not _job(without)["wind"]["measured"]
+
+
+def _csv(path, values: dict[str, np.ndarray], header: str = "") -> None:
+    names = list(values)
+    table = np.column_stack([np.arange(len(values[names[0]])) * DT, *values.values()])
+    rows = "\n".join(",".join(f"{v:.10g}" for v in row) for row in table)
+    path.write_text(header + ",".join(["time", *names]) + "\n" + rows + "\n")
+
+
+def _identify(capsys, path) -> dict:
+    code = main(["identify", str(path), "--axes", "full", "--json"])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    return json.loads(out)["aircraft"]
+
+
+def test_sysid_identify_on_a_csv_record_uses_the_trim_and_the_wind(tmp_path, capsys, window):
+    _csv(tmp_path / "full.csv", window)
+    report = _identify(capsys, tmp_path / "full.csv")
+    onboard = _job(window)
+    assert report["kinematics"]
+    assert report["wind"]["measured"]
+    assert report["wind"]["gust_rms"] == pytest.approx(onboard["wind"]["gust_rms"], rel=1e-6)
+    # Without the INS columns the same record is identified without the wind, not refused.
+    _csv(tmp_path / "no_ins.csv", {k: v for k, v in window.items()
+                                   if k not in CHANNELS.navigation()})  # fmt: skip
+    report = _identify(capsys, tmp_path / "no_ins.csv")
+    assert report["kinematics"]
+    assert not report["wind"]["measured"]
+
+
+def test_a_damaged_ins_column_in_a_csv_record_leaves_out_the_wind(tmp_path, capsys, window):
+    path = tmp_path / "damaged.csv"
+    _csv(path, window)
+    lines = path.read_text().splitlines()
+    header = lines[0].split(",")
+    for row, (name, cell) in ((500, ("ve", "")), (900, ("vd", "n/a"))):
+        cells = lines[row].split(",")
+        cells[header.index(name)] = cell
+        lines[row] = ",".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+    report = _identify(capsys, path)
+    assert report["kinematics"]
+    assert not report["wind"]["measured"]
+
+
+def test_sysid_analyze_replays_an_agent_log_with_the_trim_and_the_wind(tmp_path, window):
+    path = tmp_path / "0003_full_single_20261124.csv"
+    _csv(
+        path,
+        window,
+        header="# suas-sysid full log, created 2026-11-24\n"
+        "# excitation plan full-1, finished, recorded at 100 Hz\n",
+    )
+    config = Config().identification
+    request = Request((path,), INPUTS, OUTPUTS, navigation=config.channels.navigation())
+    settings = settings_from(config, None, None)
+    cases, dt = an.build_cases(request, ROLES, settings, batch=False, sweep=None,
+                               input_roles=CHANNELS_ROLES)  # fmt: skip
+    assert dt == pytest.approx(DT)
+    (outcome,) = an.run_cases(cases)
+    assert outcome["ok"], outcome.get("reason")
+    report = outcome["result"]["aircraft"]
+    assert report["kinematics"]
+    assert report["wind"]["measured"]
+    assert report["wind"]["gust_rms"] == pytest.approx(_job(window)["wind"]["gust_rms"], rel=1e-6)
