@@ -47,7 +47,8 @@ test: $(STAMP) chromium
 bench: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/bench_identify.py
 
-# Issue 3 case (b): the J-3 Cub in JSBSim, 20 seeds (about 6 minutes here).
+# JSBSim's J-3 Cub, Cessna 182 and PA-28, calm and in light turbulence, 10 seeds each, with the
+# peers (about 5 minutes here).
 bench-jsbsim: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/bench_jsbsim.py
 

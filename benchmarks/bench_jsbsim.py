@@ -1,7 +1,7 @@
 """Issue 19's benchmark: JSBSim's three aircraft, calm and in light turbulence, identified
 through the full preset by suas-sysid and by the peers, in one process.
 
-    make bench-jsbsim                                            # 3 × 2 × 10 seeds (~15 min)
+    make bench-jsbsim                                            # 3 × 2 × 10 seeds (~5 min)
     .venv/bin/python benchmarks/bench_jsbsim.py --seeds 2 --no-peers          # a quick look
     .venv/bin/python benchmarks/bench_jsbsim.py --aircraft pa28 --turbulence 1
 

@@ -422,7 +422,7 @@ def _identify_aircraft(
     # simulation (TIC) starts from the records' own trim, as the other methods'.
     batch = list(raw)
     r = len(inputs)
-    ready = aircraft.prepare(batch, output_roles, max(1, round(TRIM_S / dt)))
+    ready = aircraft.prepare(batch, output_roles, max(1, round(TRIM_S / dt)), dt)
     band = settings.band_hz or aircraft.input_band(batch, dt)
     sp = aircraft.spectra(ready.batch, dt, band, settings.held_inputs, ready.known,
                           ready.kinematics, ready.attitude)  # fmt: skip
@@ -434,8 +434,10 @@ def _identify_aircraft(
     fits, report = [], {"band_hz": list(sp.band_hz), "bins": int(sp.s.size), "coupling": {},
                         "kinematics": ready.known is not None, "wind": wind}  # fmt: skip
     for axis, (states, ins) in present.items():
+        rated = [j for j in known[axis] if j in ready.rates]  # gust rates: one lag each
         fits.append(aircraft.fit_axis(sp, axis, states, [*ins, *known[axis]],
-                                      [j for j in ins if j in throttle], E, ins))  # fmt: skip
+                                      [j for j in ins if j in throttle] + rated, E, ins,
+                                      dict.fromkeys(rated, aircraft.GUST_RATE_LAGS)))  # fmt: skip
     width = sp.U.shape[1]
     if len(fits) == 2:
         # The other axis's measured states as known inputs: their gains are the coupling
@@ -464,7 +466,8 @@ def _identify_aircraft(
                 ins += cross
             if ins != list(fitted.inputs):
                 fits[k] = aircraft.fit_axis(augmented, fitted.name, fitted.states, ins,
-                                            tuple(fitted.lags), E, controls)  # fmt: skip
+                                            tuple(fitted.lags), E, controls,
+                                            fitted.lag_powers)  # fmt: skip
         coupled = [f.name for f in fits if any(j >= width for j in f.inputs)]
         report["model"] = "decoupled" + (f", {' and '.join(coupled)} coupled by the other "
                                          "axis's states" if coupled else "")  # fmt: skip
@@ -473,7 +476,7 @@ def _identify_aircraft(
     model, covariance, _lag_times = _assemble(
         fits, len(inputs), len(outputs), {width + c: c for c in range(len(outputs))}
     )
-    report["engine_lag_s"] = {f.name: {inputs[j]: tau for j, tau in f.lags.items()}
+    report["engine_lag_s"] = {f.name: {inputs[j]: tau for j, tau in f.lags.items() if j < r}
                               for f in fits if f.lags}  # fmt: skip
     report["axes"] = [
         {"name": f.name, "outputs": [outputs[i] for i in f.states],
@@ -545,7 +548,7 @@ def _identify_aircraft(
 def _assemble(fits: Sequence[aircraft.AxisFit], r: int, m: int, states_of: dict | None = None):
     """One continuous model (states: the m outputs, then two lag states per lagged input of
     each axis) and the covariance of [vec Ac, vec Bc, vec C, vec D] (zero where fixed)."""
-    lagged = [(f, j) for f in fits for j in f.lags]
+    lagged = [(f, j) for f in fits for j in f.lags if j < r]  # the gust rates' are no state
     n = m + aircraft.THROTTLE_LAGS * len(lagged)
     A, B = np.zeros((n, n)), np.zeros((n, r))
     index_a = np.arange(n * n).reshape(n, n)

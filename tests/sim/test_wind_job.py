@@ -57,8 +57,10 @@ def test_the_job_measures_the_wind_from_the_ins_channels_in_its_window(window):
     report = _job(window)
     assert report["kinematics"]
     assert report["wind"]["measured"]
-    # Light Dryden turbulence at 1000 ft: gusts of a fraction of a metre per second.
-    assert 0.2 < report["wind"]["gust_rms"]["airspeed"] < 2.0
+    # Light Dryden turbulence at 1000 ft (MIL-F-8785C's low-altitude model, W20 = 5 ft/s):
+    # σ_u = 0.1 W20 / (0.177 + 0.000823 h)^0.4 = 0.15 m/s; the measured gust is the gust
+    # without the sensors' noise (agent.ident.aircraft.measured_gust).
+    assert 0.1 < report["wind"]["gust_rms"]["airspeed"] < 0.3
     lateral = next(axis for axis in report["axes"] if axis["name"] == "lateral")
     assert "gust beta" in lateral["inputs"]
 
