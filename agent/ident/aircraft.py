@@ -66,7 +66,9 @@ the kinematics already carry) added as known inputs. The fraction of its weighte
 explains is reported, and how much they change its outputs. The longitudinal controls join
 the lateral axis's inputs when they change them by more than COUPLED (the propeller's torque
 and slipstream). Lateral controls never join the longitudinal axis, whose forces are even in
-the lateral variables. The other axis's states join an axis's inputs by the same rule. Their
+the lateral variables. The other axis's states join an axis's inputs by the same rule, but
+never together with its controls: at the other axis's lines its states are its controls'
+response, so only the one that explains more of the cost joins. Their
 gains are then
 the coupling blocks of the assembled A (Klein & Morelli, ch. 9: the other axis's measured
 states as inputs), so the modes are the coupled aircraft's.
