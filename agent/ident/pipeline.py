@@ -464,14 +464,14 @@ def _identify_aircraft(
             # together are nearly collinear there. Only the one that explains more joins. On
             # JSBSim's Cessna 182 in light turbulence both together biased the spiral (within
             # 3σ of the truth on 8 of 10 seeds, z up to 4.5); either alone, 10 of 10.
-            by_controls = moved_inputs > aircraft.COUPLED and fitted.name == "lateral"
-            by_others = moved_states > aircraft.COUPLED
-            if by_controls and by_others:
-                by_controls, by_others = by_inputs > by_states, by_inputs <= by_states
-            if by_controls:
+            join_controls = moved_inputs > aircraft.COUPLED and fitted.name == "lateral"
+            join_states = moved_states > aircraft.COUPLED
+            if join_controls and join_states:
+                join_controls, join_states = by_inputs > by_states, by_inputs <= by_states
+            if join_controls:
                 ins += other
                 controls += other
-            if by_others:
+            if join_states:
                 ins += cross
             if ins != list(fitted.inputs):
                 fits[k] = aircraft.fit_axis(augmented, fitted.name, fitted.states, ins,
