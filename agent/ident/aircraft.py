@@ -68,8 +68,7 @@ the lateral axis's inputs when they change them by more than COUPLED (the propel
 and slipstream). Lateral controls never join the longitudinal axis, whose forces are even in
 the lateral variables. The other axis's states join an axis's inputs by the same rule, but
 never together with its controls: at the other axis's lines its states are its controls'
-response, so only the one that explains more of the cost joins. Their
-gains are then
+response, so only the one that explains more of the cost joins. The states' gains are then
 the coupling blocks of the assembled A (Klein & Morelli, ch. 9: the other axis's measured
 states as inputs), so the modes are the coupled aircraft's.
 """
@@ -153,8 +152,8 @@ class AxisFit:
     iterations: int
     converged: bool
     controls: tuple[int, ...] = ()  # the inputs whose excited bins the fit used (`excited`)
-    lag_powers: dict[int, int] = field(default_factory=dict)  # lagged input → lags, if not
-    # THROTTLE_LAGS (a gust rate's one)
+    # Lagged input → its number of lags where it is not THROTTLE_LAGS (a gust rate's one).
+    lag_powers: dict[int, int] = field(default_factory=dict)
 
 
 def spectra(batch: Sequence, dt: float, band_hz: float | None, held_inputs: bool,

@@ -266,9 +266,9 @@ def test_the_other_axis_joins_by_its_controls_or_its_states_not_both():
     """The propeller's torque (the thrust state → roll and yaw) couples the throttle into the
     lateral axis: the longitudinal controls and the longitudinal states both explain it (at
     the throttle's lines the states are the controls' response), so only the one that
-    explains more joins, here the controls (83 % of the lateral cost against 7 %). Both
-    joined before. (Open: the throttle joins the lateral axis without its engine lag, and the
-    modes come back 19 % off either way.)"""
+    explains more joins, here the controls (83 % of the lateral cost against 7 %). The modes
+    are not checked: the throttle joins the lateral axis without its engine lag (an open
+    defect, README), and they come back 19 % off."""
     A, B, C = aircraft_with_engine_lag()
     A[5:7, 9] = [0.04, -0.02]  # thrust state → ṗ, ṙ
     record = full_preset_record(A, B, C)
