@@ -475,8 +475,10 @@ def _case_summary(outcome: dict) -> dict:
         return {"ok": False, "reason": outcome["reason"]}
     r = outcome["result"]
     modes = [{"name": m["name"], "eigenvalue": m["eigenvalue"]} for m in r["modes"]]
+    refinement = r.get("refinement")
     return {"ok": True, "markov": r["markov"], "order": r["order"], "tic_avg": r["tic_avg"],
-            "modes": modes}  # fmt: skip
+            "modes": modes, "converged": refinement["converged"] if refinement else None,
+            "warnings": list(r.get("warnings", ()))}  # fmt: skip
 
 
 def _progress(total: int, quiet: bool):

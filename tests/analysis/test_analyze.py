@@ -113,6 +113,7 @@ def test_command_line_with_a_dask_cluster(tmp_path):
     report = json.loads(done.stdout)
     assert [Path(p).name[:4] for p in report["logs"]] == ["0002", "0004"]
     assert len(report["cases"]) == 4
+    assert all(c["converged"] is None for c in report["cases"])  # --no-refine: no refinement
     assert report["recommended"]["setting"]["markov"] in (1, 2)
 
 

@@ -42,8 +42,8 @@ async def test_two_lateral_runs_end_to_end(tmp_path):
     post_flight(tmp_path, report)
 
 
-# How far the replay's TIC_avg may be from the aircraft's own (see post_flight).
-REPLAY_TIC_REL = 0.1
+# How far a converged replay's TIC_avg may be from the aircraft's own (see post_flight).
+REPLAY_TIC_REL = 1e-6
 
 
 def post_flight(directory, report) -> None:
@@ -78,17 +78,24 @@ def post_flight(directory, report) -> None:
     results = next(logs.glob("*_results_*.jsonl"))
     # The replay runs the aircraft's own job on the very numbers it had (the excitation log
     # holds them to 17 digits, and the recorder's rate): the same p and order, the flown modes
-    # under the same names, a fit as good. Not yet the same numbers: the replay's TIC_avg has
-    # differed from the aircraft's by up to 2.7 %, an open defect (README, *Replaying the
-    # logs*): the same identification repeats bit for bit across processes on the bundled
-    # record, so something still differs between the worker's job and the replay.
+    # under the same names. Where the flight's refinement converged, the same numbers too.
+    # Where it stopped at its iteration limit (an over-parameterised model sliding along a
+    # long valley of the cost), where it stopped depends on the last bits of arithmetic that
+    # differ between processes (memory alignment in BLAS kernels), so the numbers may differ:
+    # both then carry the warning that says so.
     onboard = [json.loads(line)["result"] for line in results.read_text().splitlines()]
     for case, flown in zip(analysed["cases"], onboard, strict=True):
         assert (case["markov"], case["order"]) == (flown["markov"], flown["order"])
-        assert case["tic_avg"] == pytest.approx(flown["tic_avg"], rel=REPLAY_TIC_REL)
         replayed = {m["name"] for m in case["modes"] if m["name"]}
         original = {m["name"] for m in flown["modes"] if m["name"]}
         assert {"Dutch roll", "roll"} <= replayed & original, (replayed, original)
+        if flown["refinement"]["converged"]:
+            assert case["converged"], case["warnings"]
+            assert case["tic_avg"] == pytest.approx(flown["tic_avg"], rel=REPLAY_TIC_REL)
+        else:
+            assert any("iteration limit" in w for w in flown["warnings"]), flown["warnings"]
+            assert case["converged"] is False, case["warnings"]
+            assert any("iteration limit" in w for w in case["warnings"]), case["warnings"]
     sysid("export", results, "--out", directory / "flight.mat")
     mat = loadmat(directory / "flight.mat", simplify_cells=True)
     assert len(mat["model_ids"]) == 2
