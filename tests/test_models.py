@@ -36,6 +36,24 @@ def test_first_candidate_steps_and_the_slow_spiral_is_not_judged():
     assert s.steps[3] == "4–7 no nominal model yet"
 
 
+def test_a_divergence_the_record_cannot_resolve_is_reported_not_judged():
+    """A spiral at +0.094 1/s (doubles in 7.4 s) from a 15 s record: |λ|·15/2 = 0.7 < 1, so
+    the record does not resolve it, and its sign is not determined; from a 60 s record it is,
+    and it fails the stability step."""
+    modes = [
+        {"name": "Dutch roll", "eigenvalue": [-0.65, 2.2], "emac": 95.0},
+        {"name": "roll", "eigenvalue": [-12.0, 0.0], "emac": 90.0},
+        {"name": "spiral", "eigenvalue": [0.094, 0.0], "emac": 60.0},
+    ]
+    short = suggest(candidate("a", modes=modes, record_s=15.0), None, None, None)
+    assert short.update
+    assert short.steps[0].startswith("1 stability: divergent (doubles in 7.4 s)")
+    assert "not judged" in short.steps[0]
+    long = suggest(candidate("a", modes=modes, record_s=60.0), None, None, None)
+    assert not long.update
+    assert long.steps[0] == "1 stability: UNSTABLE (doubles in 7.4 s)"
+
+
 @pytest.mark.parametrize(
     ("change", "step", "text"),
     [
