@@ -9,12 +9,26 @@ import numpy as np
 import pytest
 
 from agent.ident import Experiment, reference
+from tests import waiting
 
 # The last-resort watchdog: a test hung after pytest-timeout gave up on it still ends the run.
 pytest_plugins = ["tests.watchdog"]
 
 DT = 0.02  # 50 Hz, as the thesis's appendix models are used in the known-answer tests
 LEAD_IN = 1.0
+
+
+@pytest.fixture(autouse=True)
+def wait_budget(request):
+    """Every `tests.waiting.until` in the test is bounded by the test's own pytest-timeout."""
+    marker = request.node.get_closest_marker("timeout")
+    if marker is not None:
+        timeout = marker.args[0] if marker.args else marker.kwargs.get("timeout")
+    else:
+        timeout = float(request.config.getini("timeout") or 0)
+    waiting.budget(timeout)
+    yield
+    waiting.budget(None)
 
 
 @pytest.fixture(autouse=True)

@@ -19,6 +19,7 @@ import asyncio
 import contextlib
 import logging
 import os
+import threading
 from collections import Counter, deque
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -39,8 +40,11 @@ log = logging.getLogger(__name__)
 STATUS_TIMEOUT_S = 5.0
 # Received frames allowed to wait for the loop; more are dropped and counted.
 INBOX = 256
-# Opening a module takes milliseconds; a missing or wedged one must not hang us.
-OPEN_TIMEOUT_S = 10.0
+# Opening a module takes milliseconds, and a module that does not answer fails digi-xbee's
+# own per-command timeout (4 s); this only ends an open that is wedged. It is generous: on a
+# machine with both cores busy an open that answers took over 10 s (test_console.py's rig),
+# and each failed open starts the next from the beginning.
+OPEN_TIMEOUT_S = 30.0
 # How often `watch` looks at the port, and the longest wait between attempts to reopen it.
 WATCH_S = 1.0
 REOPEN_MAX_S = 8.0
@@ -77,6 +81,9 @@ class XBeeRadio:
         self._device = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._executor = ThreadPoolExecutor(1, thread_name_prefix="xbee-open")
+        # Set when the open under way is given up (its timeout, or close()): the opening thread
+        # then closes what it opened itself, even after the loop is gone.
+        self._abandoned = threading.Event()
         self._writer = ThreadPoolExecutor(1, thread_name_prefix="xbee-tx")
         self._pending: dict[int, asyncio.Future] = {}
         self._next_id = 0
@@ -91,14 +98,17 @@ class XBeeRadio:
     async def open(self) -> None:
         """Open the module (digi-xbee reads its parameters), read NP and our address."""
         self._loop = loop = asyncio.get_running_loop()
-        opening = loop.run_in_executor(self._executor, self._open_blocking)
+        self._abandoned = abandoned = threading.Event()
+        opening = loop.run_in_executor(self._executor, self._open_blocking, abandoned)
         try:
             async with asyncio.timeout(OPEN_TIMEOUT_S):
                 device = await asyncio.shield(opening)
         except TimeoutError as exc:
             # The blocking open goes on in its thread; should it still succeed, that device is
             # closed, never left reading the port beside the next attempt's (two readers on one
-            # port split its frames between them).
+            # port split its frames between them): by the thread itself, or, if it had already
+            # looked, here once it is done.
+            abandoned.set()
             opening.add_done_callback(self._close_late)
             raise RadioError(
                 f"{self.port}: the XBee did not answer in {OPEN_TIMEOUT_S:g} s"
@@ -114,17 +124,21 @@ class XBeeRadio:
         self.counters["late_opens_closed"] += 1
         self._loop.run_in_executor(self._executor, opening.result().close)
 
-    def _open_blocking(self):
-
+    def _open_blocking(self, abandoned: threading.Event):
         device = DigiMeshDevice(self.port, self.baud)
         try:
             device.open()
-            self.max_payload = int.from_bytes(device.get_parameter("NP"), "big")
-            self.address = bytes(device.get_64bit_addr().address)
+            max_payload = int.from_bytes(device.get_parameter("NP"), "big")
+            address = bytes(device.get_64bit_addr().address)
         except (XBeeException, OSError) as exc:
             with contextlib.suppress(Exception):  # closing a half-open device may fail too
                 device.close()
             raise RadioError(f"{self.port}: cannot open the XBee: {exc}") from exc
+        if abandoned.is_set():  # given up meanwhile: never leave its reader on the port
+            with contextlib.suppress(Exception):
+                device.close()
+            raise RadioError(f"{self.port}: the open was given up")
+        self.max_payload, self.address = max_payload, address
         return device
 
     def healthy(self) -> bool:
@@ -193,11 +207,18 @@ class XBeeRadio:
         return -int.from_bytes(value, "big") if value else None
 
     async def close(self) -> None:
+        self._abandoned.set()  # an open still under way closes its device itself
         device, self._device = self._device, None
         if device is not None and self._loop is not None:
             await self._loop.run_in_executor(self._executor, device.close)
         for future in self._pending.values():
             future.cancel()
+        # The threads' queues drained first, awaited (an open may still be in digi-xbee's
+        # timeouts): the shutdowns then join idle threads and never hold the loop.
+        if self._loop is not None:
+            for pool in (self._writer, self._executor):
+                with contextlib.suppress(RuntimeError):  # already shut down
+                    await self._loop.run_in_executor(pool, _nothing)
         self._writer.shutdown(wait=True)
         self._executor.shutdown(wait=True)
 
@@ -274,3 +295,7 @@ class XBeeRadio:
             if self._next_id not in self._pending:
                 return self._next_id
         raise RadioError("255 frames are waiting for a transmit status")
+
+
+def _nothing() -> None:
+    """A no-op for an executor: awaited, it returns once the work queued before it is done."""

@@ -9,7 +9,6 @@ settings with a non-numeric p (not sent), the radio link going silent (shown as 
 
 from __future__ import annotations
 
-import asyncio
 import json
 
 import pytest
@@ -19,17 +18,15 @@ from agent.ground.app import Console
 from agent.ground.splane import SPlane
 from agent.ground.station import GroundStation
 from agent.link import messages
+from tests import waiting
 from tests.ground.aircraft import result, rig
 
 pytestmark = [pytest.mark.usefixtures("no_leaked_tasks"), pytest.mark.timeout(60)]
 
 
-async def until(pilot, predicate, timeout: float = 10.0, what: str = "") -> None:
-    loop = asyncio.get_running_loop()
-    end = loop.time() + timeout
-    while not predicate():
-        assert loop.time() < end, f"timed out: {what}"
-        await pilot.pause(0.05)
+async def until(pilot, predicate, what: str) -> None:
+    """Until predicate() holds, the app running meanwhile (tests.waiting)."""
+    await waiting.until(predicate, what, pilot.pause)
 
 
 def text_of(app, selector: str) -> str:
@@ -47,13 +44,13 @@ async def console(tmp_path):
         station = GroundStation(r.config, LoopClock(), base=tmp_path)
         app = Console(station)
         async with app.run_test(size=(110, 36)) as pilot:
-            await until(pilot, lambda: station.link_up, what="link up")
+            await until(pilot, lambda: station.link_up, "link up")
             yield app, pilot, r, station
 
 
 async def test_status_renders_and_stale_sensors_show(console):
     app, pilot, r, _ = console
-    await until(pilot, lambda: "22.0 m/s" in text_of(app, "#flight"), what="status")
+    await until(pilot, lambda: "22.0 m/s" in text_of(app, "#flight"), "status")
     assert "LINK UP" in text_of(app, "#top")
     assert "MANUAL" in text_of(app, "#top")
     flight = text_of(app, "#flight")
@@ -63,10 +60,10 @@ async def test_status_renders_and_stale_sensors_show(console):
     assert sensors.row_count == 2
     assert [str(c) for c in sensors.get_row_at(1)][:2] == ["airdata", "waiting"]
     r.aircraft.airspeed = 25.5
-    await until(pilot, lambda: "25.5 m/s" in text_of(app, "#flight"), what="a status update")
+    await until(pilot, lambda: "25.5 m/s" in text_of(app, "#flight"), "a status update")
     # The ground module's RSSI (AT DB) of the last frame heard.
     r.channel.rssi_dbm = -71
-    await until(pilot, lambda: "-71 dBm" in text_of(app, "#top"), timeout=5, what="RSSI")
+    await until(pilot, lambda: "-71 dBm" in text_of(app, "#top"), "RSSI")
 
 
 async def test_a_preset_is_armed_and_acknowledged_and_a_refusal_shows_its_reason(console):
@@ -76,14 +73,14 @@ async def test_a_preset_is_armed_and_acknowledged_and_a_refusal_shows_its_reason
     assert "RPF" in text_of(app, "#preview")
     assert "lateral" in text_of(app, "#preview")
     await pilot.press("f2")
-    await until(pilot, lambda: "arm lateral: acknowledged" in log_text(app), what="ack")
+    await until(pilot, lambda: "arm lateral: acknowledged" in log_text(app), "ack")
     armed = [m for m in r.aircraft.inbox if isinstance(m, messages.Arm)]
     assert armed[0].plan.id == "lateral"
-    await until(pilot, lambda: "│ armed" in text_of(app, "#top"), what="armed status")
+    await until(pilot, lambda: "│ armed" in text_of(app, "#top"), "armed status")
     # The aircraft refuses the next one: the reason is in the log, in red.
     r.aircraft.refuse["arm"] = "plan 'lateral' refused: aileron: 12 deg exceeds max_amplitude"
     await pilot.press("f2")
-    await until(pilot, lambda: "REFUSED" in log_text(app), what="refusal")
+    await until(pilot, lambda: "REFUSED" in log_text(app), "refusal")
     assert "exceeds max_amplitude" in log_text(app)
     # A plan that does not parse is not sent.
     app.query_one("#plan").text = '{"id": "x", "axes": "lateral", "segments": ['
@@ -105,7 +102,7 @@ async def test_a_result_renders_and_accept_reject_revert_round_trip(console, tmp
     app, pilot, r, _ = console
     await pilot.press("4")
     r.aircraft.session.send_reliable(result("lat-1"))
-    await until(pilot, lambda: "lat-1" in text_of(app, "#summary"), what="result")
+    await until(pilot, lambda: "lat-1" in text_of(app, "#summary"), "result")
     assert app.query_one("#modes").row_count == 3
     assert "UPDATE" in text_of(app, "#summary")
     splane = app.query_one("#splane", SPlane)
@@ -114,11 +111,11 @@ async def test_a_result_renders_and_accept_reject_revert_round_trip(console, tmp
     # Accept, confirmed: the aircraft gets the decision; its status then names the nominal.
     await pilot.press("y")
     await pilot.press("y")
-    await until(pilot, lambda: "accept lat-1: acknowledged" in log_text(app), what="accept")
-    await until(pilot, lambda: "nominal lat-1" in text_of(app, "#top"), what="nominal")
+    await until(pilot, lambda: "accept lat-1: acknowledged" in log_text(app), "accept")
+    await until(pilot, lambda: "nominal lat-1" in text_of(app, "#top"), "nominal")
     # A second result: shown beside the nominal, which is highlighted in the s-plane.
     r.aircraft.session.send_reliable(result("lat-2", shift=0.3, update=False))
-    await until(pilot, lambda: "lat-2" in text_of(app, "#summary"), what="second result")
+    await until(pilot, lambda: "lat-2" in text_of(app, "#summary"), "second result")
     assert "nominal lat-1" in text_of(app, "#nominal-title")
     assert app.query_one("#nominal-modes").row_count == 3
     assert "●" in text_of(app, "#splane")
@@ -129,11 +126,11 @@ async def test_a_result_renders_and_accept_reject_revert_round_trip(console, tmp
     assert not any(isinstance(m, messages.Decision) and not m.accept for m in r.aircraft.inbox)
     await pilot.press("n")
     await pilot.press("y")
-    await until(pilot, lambda: "reject lat-2: acknowledged" in log_text(app), what="reject")
+    await until(pilot, lambda: "reject lat-2: acknowledged" in log_text(app), "reject")
     # Revert with no previous nominal: refused, with the aircraft's reason.
     await pilot.press("r")
     await pilot.press("y")
-    await until(pilot, lambda: "REFUSED — no previous lateral" in log_text(app), what="revert")
+    await until(pilot, lambda: "REFUSED — no previous lateral" in log_text(app), "revert")
     decisions = [(m.model_id, m.accept) for m in r.aircraft.inbox
                  if isinstance(m, messages.Decision)]  # fmt: skip
     assert decisions == [("lat-1", True), ("lat-2", False)]
@@ -157,19 +154,19 @@ async def test_settings_are_sent_and_bad_ones_are_not(console):
     app.query_one("#period").value = "30"
     app.query_one("#batch").value = True
     await pilot.click("#send-settings")
-    await until(pilot, lambda: "settings lateral: acknowledged" in log_text(app), what="ack")
+    await until(pilot, lambda: "settings lateral: acknowledged" in log_text(app), "ack")
     settings = [m for m in r.aircraft.inbox if isinstance(m, messages.IdentSettings)][-1]
     assert (settings.markov, settings.order, settings.batch, settings.update_period_s) == (
         12, "auto", True, 30.0)  # fmt: skip
-    await until(pilot, lambda: "p 12" in text_of(app, "#settings-now"), what="in effect")
+    await until(pilot, lambda: "p 12" in text_of(app, "#settings-now"), "in effect")
     assert "every 30 s" in text_of(app, "#settings-now")
 
 
 async def test_a_silent_link_is_shown_as_lost_and_status_as_stale(console):
     app, pilot, r, _ = console
-    await until(pilot, lambda: "LINK UP" in text_of(app, "#top"), what="link up")
+    await until(pilot, lambda: "LINK UP" in text_of(app, "#top"), "link up")
     r.channel.outage = True
-    await until(pilot, lambda: "LINK LOST" in text_of(app, "#top"), timeout=8, what="lost")
-    await until(pilot, lambda: "STALE" in text_of(app, "#flight"), timeout=8, what="stale")
+    await until(pilot, lambda: "LINK LOST" in text_of(app, "#top"), "lost")
+    await until(pilot, lambda: "STALE" in text_of(app, "#flight"), "stale")
     r.channel.outage = False
-    await until(pilot, lambda: "LINK UP" in text_of(app, "#top"), timeout=8, what="back")
+    await until(pilot, lambda: "LINK UP" in text_of(app, "#top"), "back")

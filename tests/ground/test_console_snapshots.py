@@ -46,7 +46,7 @@ async def test_screen(tmp_path, tab, size):
         station = GroundStation(config, VirtualClock(1000.0), base=tmp_path)
         app = Console(station)
         async with app.run_test(size=size) as pilot:
-            await until(pilot, lambda: station.heard.status is not None, what="status")
+            await until(pilot, lambda: station.heard.status is not None, "status")
             send = r.aircraft.session.send_reliable
             send(
                 messages.ExcitationEvent(
@@ -59,8 +59,8 @@ async def test_screen(tmp_path, tab, size):
             send(messages.ExcitationEvent(event="finished", plan_id="lateral-1", time=1004.0))
             send(result("lat-1"))
             send(result("lat-2", shift=0.3, update=False))
-            await until(pilot, lambda: len(station.heard.results) == 2, what="results")
-            await until(pilot, lambda: station.rssi_dbm is not None, what="RSSI")
+            await until(pilot, lambda: len(station.heard.results) == 2, "results")
+            await until(pilot, lambda: station.rssi_dbm is not None, "RSSI")
             await pilot.press(tab)
             await pilot.pause(0.3)
             matches(f"console-{app.query_one('#tabs').active}-{size[0]}x{size[1]}",

@@ -12,6 +12,7 @@ from agent.link.codec import AIRCRAFT, GROUND, CounterStore, LinkCodec
 from agent.link.session import LinkSession
 from agent.sim.radio import EmulatedXBee, RfChannel
 from drivers.xbee.driver import XBeeRadio
+from tests import waiting
 
 KEY = bytes(range(32))
 AIR_ADDR = bytes.fromhex("0013A20040000001")
@@ -78,11 +79,11 @@ async def link_pair(tmp_path: Path, *, escaped: bool = False, channel: RfChannel
         await asyncio.gather(*tasks[:2], return_exceptions=True)
 
 
-async def wait_for(predicate, timeout: float) -> bool:
-    loop = asyncio.get_running_loop()
-    end = loop.time() + timeout
-    while loop.time() < end:
-        if predicate():
-            return True
-        await asyncio.sleep(0.02)
-    return predicate()
+async def wait_for(predicate) -> bool:
+    """Whether predicate() came to hold within the test's budget (tests.waiting): a wait for
+    an event, never a wall-clock margin."""
+    try:
+        await waiting.until(predicate, "the link")
+    except AssertionError:
+        return bool(predicate())
+    return True

@@ -25,16 +25,16 @@ async def test_operator_flies_the_lateral_preset_from_the_console(tmp_path):
     flight = console_flight(SimOptions(preset="lateral", directory=tmp_path))
     async with flight as (sim, app), app.run_test(size=(120, 40)) as pilot:
         station = app.station
-        await until(pilot, lambda: station.link_up, 20, "link up")
-        await until(pilot, lambda: "m/s" in text_of(app, "#flight"), 10, "status")
+        await until(pilot, lambda: station.link_up, "link up")
+        await until(pilot, lambda: "m/s" in text_of(app, "#flight"), "status")
         if save:
             Path(save).mkdir(parents=True, exist_ok=True)
             app.save_screenshot("console-status.svg", path=save)
         await pilot.press("2")
         await pilot.press("f2")
-        await until(pilot, lambda: "arm lateral: acknowledged" in log_text(app), 10, "ack")
-        await until(pilot, lambda: "lateral started" in log_text(app), 15, "start")
-        await until(pilot, lambda: station.heard.results, 90, "the result")
+        await until(pilot, lambda: "arm lateral: acknowledged" in log_text(app), "ack")
+        await until(pilot, lambda: "lateral started" in log_text(app), "start")
+        await until(pilot, lambda: station.heard.results, "the result")
         await pilot.press("4")
         await pilot.pause(0.5)
         model_id = next(iter(station.heard.results))
@@ -44,9 +44,9 @@ async def test_operator_flies_the_lateral_preset_from_the_console(tmp_path):
             app.save_screenshot("console-results.svg", path=save)
         await pilot.press("y")
         await pilot.press("y")
-        await until(pilot, lambda: f"accept {model_id}: acknowledged" in log_text(app), 10,
+        await until(pilot, lambda: f"accept {model_id}: acknowledged" in log_text(app),
                     "accept")  # fmt: skip
-        await until(pilot, lambda: f"nominal {model_id}" in text_of(app, "#top"), 5, "nominal")
+        await until(pilot, lambda: f"nominal {model_id}" in text_of(app, "#top"), "nominal")
     assert sim.agent.models.nominal_id("lateral") == model_id
     assert not sim.aircraft.pilot.switch_high  # the pilot took the switch back after the run
     ground_logs = list((tmp_path / "ground-logs").glob("*_ground_*.jsonl"))

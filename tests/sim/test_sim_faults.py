@@ -27,6 +27,7 @@ from agent.logs import read_log
 from agent.sim.ardupilot import RELEASE_LOW, Params
 from agent.sim.flight import SimFlight, SimOptions, simulated
 from drivers.autopilot.driver import RELEASE_REPEATS
+from tests import waiting
 
 pytestmark = [pytest.mark.usefixtures("no_leaked_tasks"), pytest.mark.timeout(180)]
 
@@ -35,13 +36,7 @@ pytestmark = [pytest.mark.usefixtures("no_leaked_tasks"), pytest.mark.timeout(18
 DELIVERY_S = 0.010
 
 
-async def until(predicate, timeout: float, what: str):
-    loop = asyncio.get_running_loop()
-    end = loop.time() + timeout
-    while not (found := predicate()):
-        assert loop.time() < end, f"timed out waiting for {what}"
-        await asyncio.sleep(0.02)
-    return found
+until = waiting.until
 
 
 def received(sim: SimFlight, kind, since: int = 0, **fields) -> list:
@@ -58,17 +53,15 @@ async def start_run(sim: SimFlight, plan_id: str, axes: str = "lateral") -> int:
     ack = await sim.ground.command(messages.Arm(plan=preset(axes, plan_id=plan_id)))
     assert ack.ok, ack.reason
     sim.aircraft.pilot.set_switch(True)
-    await until(
-        lambda: received(sim, messages.ExcitationEvent, seen, event="started"), 10, "the start"
-    )
+    await until(lambda: received(sim, messages.ExcitationEvent, seen, event="started"), "the start")
     return seen
 
 
-async def answer(sim: SimFlight, since: int, timeout: float = 90.0):
+async def answer(sim: SimFlight, since: int):
     def found():
         return received(sim, messages.Result, since) or received(sim, messages.Failure, since)
 
-    return (await until(found, timeout, "an identification answer"))[0]
+    return (await until(found, "an identification answer"))[0]
 
 
 async def test_switch_dropped_mid_run_trims_within_one_period_then_releases(tmp_path):
@@ -83,7 +76,7 @@ async def test_switch_dropped_mid_run_trims_within_one_period_then_releases(tmp_
         dropped = sim.clock.now()
         sim.aircraft.pilot.set_switch(False)
         aborted = await until(
-            lambda: received(sim, messages.ExcitationEvent, seen, event="aborted"), 5, "abort"
+            lambda: received(sim, messages.ExcitationEvent, seen, event="aborted"), "abort"
         )
         await asyncio.sleep(0.5)  # anything the agent still sends after the release
         wire = list(ap.wire)
@@ -124,25 +117,25 @@ async def test_autopilot_link_lost_mid_run_aborts_and_recovers(tmp_path):
         cut = sim.clock.now()
         ap.link_up = False  # both directions, as a broken cable
         aborted = await until(
-            lambda: received(sim, messages.ExcitationEvent, seen, event="aborted"), 5, "abort"
+            lambda: received(sim, messages.ExcitationEvent, seen, event="aborted"), "abort"
         )
         # Whichever notices first names it: the scheduler's staleness check on the switch
         # reports, or the link watchdog (both at link_timeout_s = 0.5 s).
         detail = aborted[0].detail
         assert "autopilot link lost" in detail or "stale RC switch data" in detail, detail
-        await until(lambda: not agent.autopilot.connected, 2, "the watchdog's report")
+        await until(lambda: not agent.autopilot.connected, "the watchdog's report")
         # Told within the link timeout, the watchdog's look and one command period.
         cfg = agent.config
         assert aborted[0].time - cut <= cfg.autopilot.link_timeout_s + 0.25
-        await until(lambda: received(sim, messages.Notice, seen), 5, "the not-identified notice")
+        await until(lambda: received(sim, messages.Notice, seen), "the not-identified notice")
         assert "not identified" in received(sim, messages.Notice, seen)[0].text
         assert agent.scheduler.status == "idle"
         # The overrides the ArduPlane still held lapse after RC_OVERRIDE_TIME: the pilot's.
-        await until(lambda: ap.counters["override_timeouts"] > 0, 5, "override timeout")
+        await until(lambda: ap.counters["override_timeouts"] > 0, "override timeout")
         sim.aircraft.pilot.set_switch(False)
         frames_cut = agent.recorder.counters["frames"]
         ap.link_up = True
-        await until(lambda: agent.autopilot.connected, 15, "the autopilot link back")
+        await until(lambda: agent.autopilot.connected, "the autopilot link back")
         # Recording never depended on the autopilot link.
         assert agent.recorder.counters["frames"] > frames_cut
         ack = await sim.ground.command(messages.Arm(plan=preset("lateral", plan_id="again")))
@@ -158,18 +151,16 @@ async def test_sensor_replugged_and_result_delivered_after_radio_outage(tmp_path
         port.unplug()  # the µADC's USB cable out for 1.5 s in trimmed flight
         await asyncio.sleep(1.5)
         port.plug()
-        await until(lambda: airdata.link.stats.opens > opens, 10, "the µADC reopened")
-        await until(lambda: airdata.health().rate_hz > 90, 5, "the µADC streaming")
+        await until(lambda: airdata.link.stats.opens > opens, "the µADC reopened")
+        await until(lambda: airdata.health().rate_hz > 90, "the µADC streaming")
         gaps = airdata.health().gaps
         assert gaps >= 1
         assert airdata.link.stats.disconnects >= 1
 
         seen = await start_run(sim, "outage")
-        await until(
-            lambda: received(sim, messages.ExcitationEvent, seen, event="finished"), 30, "end"
-        )
+        await until(lambda: received(sim, messages.ExcitationEvent, seen, event="finished"), "end")
         sim.channel.outage = True  # the radio is out while the worker identifies
-        await until(lambda: agent.results, 60, "the identification")
+        await until(lambda: agent.results, "the identification")
         await asyncio.sleep(2.0)
         assert not received(sim, messages.Result, seen)  # nothing got through
         sim.channel.outage = False

@@ -101,13 +101,13 @@ def assert_trimmed_then_released(sim: SimFlight, started: messages.ExcitationEve
     assert ap._overrides == {}
 
 
-async def finished_or_aborted(sim: SimFlight, seen: int, timeout: float = 40.0):
+async def finished_or_aborted(sim: SimFlight, seen: int):
     def ended():
         return received(sim, messages.ExcitationEvent, seen, event="finished") or received(
             sim, messages.ExcitationEvent, seen, event="aborted"
         )
 
-    return (await until(ended, timeout, "the end of the excitation"))[0]
+    return (await until(ended, "the end of the excitation"))[0]
 
 
 # -- the radio: a hostile transmitter and half the frames lost ------------------------------
@@ -152,7 +152,7 @@ async def test_a_hostile_transmitter_and_half_the_frames_lost_change_nothing(tmp
             await asyncio.sleep(0.1)
         end = await finished_or_aborted(sim, seen)
         assert end.event == "finished", end.detail  # the forged abort did nothing
-        result = await answer(sim, seen, timeout=120)
+        result = await answer(sim, seen)
         assert isinstance(result, messages.Result), result
         delivered = intruder.counters["delivered"]
         dropped = sum(codec.counters.values()) - codec.counters["frames"] - codec.counters[
@@ -182,7 +182,7 @@ async def test_the_worker_killed_while_identifying_gives_a_failure_and_a_new_wor
     async with simulated(SimOptions(preset="lateral", directory=tmp_path)) as sim:
         agent = sim.agent
         seen = await start_run(sim, "killed")
-        await until(lambda: agent.identifying, 60, "the identification")
+        await until(lambda: agent.identifying, "the identification")
         (pid,) = agent._pool._processes  # the one worker process
         os.kill(pid, signal.SIGKILL)
         failure = await answer(sim, seen)
@@ -220,7 +220,7 @@ async def test_a_full_log_disk_is_reported_and_the_flight_and_identification_go_
         def notices(text: str) -> list:
             return [m for m in received(sim, messages.Notice, seen) if text in m.text]
 
-        notice = await until(lambda: notices("logs not written"), 10, "the disk notice")
+        notice = await until(lambda: notices("logs not written"), "the disk notice")
         assert "No space left on device" in notice[0].text
         end = await finished_or_aborted(sim, seen)
         assert end.event == "finished", end.detail  # a full disk is no reason to abort
@@ -229,7 +229,7 @@ async def test_a_full_log_disk_is_reported_and_the_flight_and_identification_go_
         lost = agent.writer.lost_lines
         assert lost > 0
         filler.unlink()  # space again
-        await until(lambda: notices("logs written again"), 10, "writing resumed")
+        await until(lambda: notices("logs written again"), "writing resumed")
         await asyncio.sleep(1.5)
         sim.aircraft.pilot.set_switch(False)
     after = assert_logs_whole(tmp_path)  # every line whole, before and after the fault
@@ -268,18 +268,18 @@ async def test_kill_9_mid_run_lets_the_pilot_back_and_loses_no_logged_byte(tmp_p
         # Nothing of ours can act now: ArduPilot's RC_OVERRIDE_TIME hands every channel back
         # to the pilot.
         timeout = ap.params.rc_override_time_s
-        await until(lambda: not ap._overrides, timeout + 1.0, "the overrides lapsing")
+        await until(lambda: not ap._overrides, "the overrides lapsing")
         lapsed = sim.clock.now() - killed
         # The worker died with the agent (PR_SET_PDEATHSIG), not left running orphaned.
-        await until(lambda: _dead(worker), 5, "the worker to die")
+        await until(lambda: _dead(worker), "the worker to die")
         rc, pilot = ap.rc_inputs(sim.clock.now()), sim.aircraft.pilot(sim.clock.now())
         sim.aircraft.pilot.set_switch(False)
         logged = assert_logs_whole(tmp_path)  # read while the agent is dead
         # A restart: the same config, on the same directory.
         mark = len(sim.ground.inbox)
         agent.start()
-        await until(lambda: received(sim, messages.Status, mark), 30, "the restarted agent")
-        await until(lambda: sim.ground.flight_mode() is not None, 30, "the autopilot again")
+        await until(lambda: received(sim, messages.Status, mark), "the restarted agent")
+        await until(lambda: sim.ground.flight_mode() is not None, "the autopilot again")
         # The restarted agent takes the ground's next commands (its session starts counting
         # where the ground's stands). No second run: the interrupted doublet left the aircraft
         # out of the envelope for a while, which the envelope check rightly refuses.
@@ -313,7 +313,7 @@ async def test_an_ins_dropout_and_a_corrupted_stream_during_an_excitation(tmp_pa
         sim.aircraft.ports["vn200"].unplug()
         await asyncio.sleep(0.5)
         sim.aircraft.ports["vn200"].plug()
-        await until(lambda: vn200.health().state == "open", 10, "the INS back")
+        await until(lambda: vn200.health().state == "open", "the INS back")
         end = await finished_or_aborted(sim, seen)
         outcome = await answer(sim, seen)
         surfaces._corrupt = 0.0
@@ -350,9 +350,9 @@ async def test_an_autopilot_reboot_mid_run_aborts_to_trim_and_the_agent_reconnec
         await ap.reboot(silent_s=2.0)
         end = await finished_or_aborted(sim, seen)
         assert end.event == "aborted"
-        await until(lambda: agent.autopilot.connected, 20, "the link to the rebooted autopilot")
+        await until(lambda: agent.autopilot.connected, "the link to the rebooted autopilot")
         # The agent asked the rebooted ArduPlane for its streams again.
-        await until(lambda: ap.intervals != ap.default_intervals, 10, "the stream rates again")
+        await until(lambda: ap.intervals != ap.default_intervals, "the stream rates again")
         sim.aircraft.pilot.set_switch(False)
         await asyncio.sleep(0.5)
         ack = await sim.ground.command(messages.Arm(plan=preset("lateral", plan_id="again")))
