@@ -273,6 +273,48 @@ def test_bad_data_is_a_clear_error_with_exit_2(tmp_path, capsys, name, edit, ext
     assert message in doc["error"]["message"]
 
 
+HEADER = "time,aileron,rudder,beta,p,r,phi\n"
+RAW = [
+    ("nul.csv", b"\x00" * 4096, "NUL bytes in the header: a binary file"),
+    ("nonewline.csv", b"0," * (1 << 20), "a line longer than 1048576 characters"),
+    ("cell.csv", (HEADER + "0,1,2,3,4,5," + "7" * 200_000 + "\n0.02,1,2,3,4,5,6\n").encode(),
+     "line 2: not a readable CSV line (field larger than field limit"),
+    ("semicolon.csv", (HEADER.replace(",", ";") + "0;1;2;3;4;5;6\n").encode(),
+     "the fields are separated by ';'"),
+    ("latin1.csv", HEADER.encode() + "0,1,2,3,4,5,6 \xb0\n".encode("latin-1"),
+     "not a text CSV file"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("name", "content", "message"), RAW, ids=[r[0] for r in RAW])
+def test_files_that_are_not_csv_records_are_a_clear_error(tmp_path, capsys, name, content,
+                                                          message):  # fmt: skip
+    """Bad input tried: a file of NUL bytes, one with no newline (as /dev/zero), a 200 KB cell
+    (beyond the csv module's field limit), a spreadsheet's ';'-separated export, a Latin-1
+    byte: exit 2 with the reason, no traceback, with and without --json."""
+    path = tmp_path / name
+    path.write_bytes(content)
+    assert main(["identify", str(path), *LAT]) == 2
+    err = capsys.readouterr().err
+    assert message in err, err
+    assert "Traceback" not in err
+    assert main(["identify", str(path), *LAT, "--json"]) == 2
+    assert message in json.loads(capsys.readouterr().out)["error"]["message"]
+
+
+def test_a_utf8_byte_order_mark_is_read(tmp_path, capsys):
+    """Excel's "CSV UTF-8" starts the file with a byte-order mark: the record reads as without
+    it, to the same model."""
+    plain = write(tmp_path / "plain.csv", reference.make_record(reference.LATERAL).columns())
+    marked = tmp_path / "marked.csv"
+    marked.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())
+    assert main(["identify", str(plain), *LAT, "--json"]) == 0
+    expected = json.loads(capsys.readouterr().out)
+    assert main(["identify", str(marked), *LAT, "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["tic_avg"] == expected["tic_avg"]
+
+
 def test_files_at_different_rates_cannot_be_batched(tmp_path, capsys):
     a = write(tmp_path / "a.csv", reference.make_record(reference.LATERAL).columns())
     b = write(tmp_path / "b.csv", reference.make_record(reference.LATERAL, dt=0.01).columns())

@@ -8,7 +8,6 @@ and the column, so a bad file is fixed rather than debugged.
 from __future__ import annotations
 
 import csv
-import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,35 +43,136 @@ class Record:
 def read_record(path: str | Path, names: Sequence[str], optional: Sequence[str] = ()) -> Record:
     """Read `time` and the named columns; check they are finite and uniformly sampled. The
     `optional` columns are read too where the header has them and every cell is a finite
-    number; otherwise they are left out of the record."""
+    number; otherwise they are left out of the record.
+
+    A UTF-8 byte-order mark (Excel's "CSV UTF-8") is skipped. The data rows go through numpy's
+    C reader (`np.loadtxt`) into one float array, about 8 bytes a cell; a file it refuses is
+    read again row by row to say which line and cell is wrong."""
     path = Path(path)
     try:
-        with path.open(newline="", encoding="utf-8") as handle:
+        with path.open(newline="", encoding="utf-8-sig") as handle:
             # Our flight and excitation logs start with "# " comment lines (units, config hash).
             comments = 0
-            while (line := handle.readline()).startswith("#"):
+            while (line := _line(path, handle)).startswith("#"):
                 comments += 1
-            reader = csv.reader(itertools.chain([line] if line else [], handle))
-            header = next(reader, None)
-            if header is None:
+            if not line.strip():
                 raise RecordError(f"{path}: the file is empty; expected a header row")
-            header = [h.strip() for h in header]
+            header = [h.strip() for h in next(csv.reader([line]))]
+            _check_header(path, header)
             index = _column_index(path, header, ["time", *names])
             extra = [n for n in dict.fromkeys(optional)
                      if n not in names and n != "time" and header.count(n) == 1]  # fmt: skip
             index += [header.index(n) for n in extra]
-            values = _read_rows(path, reader, len(header), index, ["time", *names, *extra],
-                                2 + comments, lenient=len(extra))  # fmt: skip
+            wanted = ["time", *names, *extra]
+            start = handle.tell()
+            values = None
+            if _widths_agree(path, comments + 1, len(header)):
+                values = _fast_rows(handle, len(header), index)
+            # Non-finite cells: the row-by-row reader names them, or leaves an optional out.
+            if values is None or not np.isfinite(values).all():
+                handle.seek(start)
+                reader = csv.reader(_lines(path, handle))
+                values = _read_rows(path, reader, len(header), index, wanted, 2 + comments,
+                                    lenient=len(extra))  # fmt: skip
     except OSError as exc:
         raise RecordError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
     except UnicodeDecodeError as exc:
         raise RecordError(f"{path}: not a text CSV file ({exc.reason})") from exc
+    except csv.Error as exc:
+        raise RecordError(f"{path}: not a readable CSV file ({exc})") from exc
     time = values[:, 0]
     columns = {name: values[:, j + 1] for j, name in enumerate([*names, *extra])}
     for name in extra:
         if not np.isfinite(columns[name]).all():
             del columns[name]
     return Record(path=path, time=time, columns=columns, dt=_sample_time(path, time))
+
+
+# The longest line a record may have: a flight record's row is a few hundred characters; a
+# file without newlines (a binary file, /dev/zero) is refused at this length, not read whole.
+MAX_LINE = 1 << 20
+
+
+def _line(path: Path, handle) -> str:
+    line = handle.readline(MAX_LINE + 1)
+    if len(line) > MAX_LINE:
+        raise RecordError(f"{path}: a line longer than {MAX_LINE} characters; not a CSV record")
+    return line
+
+
+def _lines(path: Path, handle):
+    while line := _line(path, handle):
+        yield line
+
+
+def _check_header(path: Path, header: list[str]) -> None:
+    if any("\x00" in h for h in header):
+        raise RecordError(f"{path}: NUL bytes in the header: a binary file, not a CSV record")
+    if len(header) == 1 and header[0].count(";") >= 1:
+        raise RecordError(
+            f"{path}: the header has one column, {header[0][:80]!r}: the fields are separated "
+            "by ';' (a spreadsheet's regional setting); save it with ',' separators"
+        )
+
+
+# The bytes `_widths_agree` looks at in one piece.
+WIDTH_CHUNK = 1 << 24
+
+
+def _widths_agree(path: Path, skip: int, width: int) -> bool:
+    """Whether every data line (after the `skip` comment and header lines) has `width` fields,
+    counted as commas, vectorised: numpy's reader reads only the wanted columns and would not
+    notice a row with a field too many. False also for a quoted field (a comma may be inside
+    it): the row-by-row reader then checks."""
+    with path.open("rb") as raw:
+        for _ in range(skip):
+            raw.readline(MAX_LINE + 1)
+        rest = b""
+        while True:
+            chunk = raw.read(WIDTH_CHUNK)
+            data = rest + chunk
+            if not chunk:
+                cut = len(data)
+            else:
+                cut = data.rfind(b"\n") + 1
+                if cut == 0:
+                    if len(data) > MAX_LINE:
+                        return False
+                    rest = data
+                    continue
+            body, rest = np.frombuffer(data[:cut], dtype=np.uint8), data[cut:]
+            if body.size:
+                if (body == ord('"')).any():
+                    return False
+                ends = np.flatnonzero(body == ord("\n"))
+                if not chunk and (ends.size == 0 or ends[-1] != body.size - 1):
+                    ends = np.append(ends, body.size)  # the last line without its newline
+                commas = np.concatenate([[0], np.cumsum(body == ord(","))])
+                starts = np.concatenate([[0], ends[:-1] + 1])
+                per_line = commas[ends] - commas[starts]
+                lengths = ends - starts
+                # Blank lines (length 0, or a lone carriage return) are skipped by both readers.
+                blank = (lengths == 0) | (
+                    (lengths == 1) & (body[np.minimum(starts, body.size - 1)] == ord("\r"))
+                )
+                if np.any(per_line[~blank] != width - 1):
+                    return False
+            if not chunk:
+                return True
+
+
+def _fast_rows(handle, width: int, index: list[int]) -> np.ndarray | None:
+    """The columns `index` of every data row, parsed by numpy's C reader; None when it refuses
+    the file (a bad cell, a short row, a blank row of commas, an over-long line): the
+    row-by-row reader then says where."""
+    try:
+        values = np.loadtxt(handle, delimiter=",", usecols=index, ndmin=2,
+                            max_rows=MAX_ROWS + 1, comments=None)  # fmt: skip
+    except (ValueError, OverflowError):
+        return None
+    if not MAX_ROWS >= values.shape[0] >= 2:
+        return None  # the row-by-row reader gives the reason
+    return values
 
 
 def _column_index(path: Path, header: list[str], wanted: list[str]) -> list[int]:
@@ -100,7 +200,8 @@ def _read_rows(
     """The named columns as floats; the last `lenient` of them take NaN for a bad cell."""
     strict = len(names) - lenient
     rows: list[list[float]] = []
-    for line_no, row in enumerate(reader, start=first):
+    line_no = first
+    for line_no, row in _numbered(path, reader, first):
         if not row or all(not cell.strip() for cell in row):
             continue
         if len(row) != width:
@@ -132,6 +233,21 @@ def _read_rows(
     if len(rows) < 2:
         raise RecordError(f"{path}: {len(rows)} data row(s); a record needs at least 2")
     return np.asarray(rows)
+
+
+def _numbered(path: Path, reader, first: int):
+    """(line number, row) from the reader; a malformed line (a cell over the csv module's
+    field limit, NUL bytes) is a RecordError naming it."""
+    line_no = first
+    while True:
+        try:
+            row = next(reader)
+        except StopIteration:
+            return
+        except csv.Error as exc:
+            raise RecordError(f"{path} line {line_no}: not a readable CSV line ({exc})") from exc
+        yield line_no, row
+        line_no += 1
 
 
 def _sample_time(path: Path, time: np.ndarray) -> float:
