@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -104,7 +105,7 @@ def _replay_options(parser: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="sysid", description=__doc__)
+    parser = _Parser(prog="sysid", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
 
     ident = sub.add_parser(
@@ -310,8 +311,48 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class UsageError(Exception):
+    """A command line argparse refuses: the parser that refused it, and why."""
+
+    def __init__(self, parser: argparse.ArgumentParser, message: str):
+        super().__init__(message)
+        self.parser = parser
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser (its subcommands' too), raising UsageError instead of exiting, so that
+    under --json a usage error is one JSON object on stdout like every other error."""
+
+    def error(self, message: str):  # type: ignore[override]
+        raise UsageError(self, message)
+
+
 def _error(command: str, message: str) -> None:
     print(f"sysid {command}: error: {message}", file=sys.stderr)
+    _json_state["error"] = message
+
+
+# Under --json: whether the command printed its object, and its last error message (main()
+# prints the error object of a command that failed without printing one).
+_json_state: dict = {"printed": False, "error": None}
+
+
+def _print_json(document) -> None:
+    """One JSON object on stdout, non-finite numbers as null (JSON has no NaN)."""
+    print(json.dumps(_finite(document), allow_nan=False))
+    _json_state["printed"] = True
+
+
+def _finite(value):
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    if hasattr(value, "tolist"):  # numpy scalars and arrays
+        return _finite(value.tolist())
+    return value
 
 
 def _load_optional_config(path: Path | None) -> Config:
@@ -369,7 +410,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     except IdentificationFailed as exc:
         return _fail(args, "identification failed", str(exc), EXIT_FAILED)
     if args.json:
-        print(json.dumps(to_dict(outcome.result, outcome.trim)))
+        _print_json(to_dict(outcome.result, outcome.trim))
     else:
         print(format_text(outcome.result, outcome.records, outcome.samples))
     return EXIT_OK
@@ -418,7 +459,10 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         report["recommended"] = an.recommend(table, excitations)
     if args.cross:
         report["cross_tic"] = an.cross_validation(cases, outcomes)
-    print(json.dumps(report) if args.json else _analysis_text(report, paths))
+    if args.json:
+        _print_json(report)
+    else:
+        print(_analysis_text(report, paths))
     return EXIT_OK if any(o["ok"] for o in outcomes) else EXIT_FAILED
 
 
@@ -466,7 +510,11 @@ def cmd_report(args: argparse.Namespace) -> int:
     except OSError as exc:
         _error("report", f"{args.out}: cannot be written ({exc.strerror or exc})")
         return EXIT_FAILED
-    print(f"{page}: {sum(o['ok'] for o in outcomes)} of {len(outcomes)} excitation(s) identified")
+    identified = sum(o["ok"] for o in outcomes)
+    if args.json:
+        _print_json({"page": str(page), "identified": identified, "excitations": len(outcomes)})
+    else:
+        print(f"{page}: {identified} of {len(outcomes)} excitation(s) identified")
     return EXIT_OK if any(o["ok"] for o in outcomes) else EXIT_FAILED
 
 
@@ -536,7 +584,7 @@ def _analysis_text(report: dict, paths) -> str:
 def _fail(args: argparse.Namespace, kind: str, message: str, code: int) -> int:
     _error("identify", f"{kind}: {message}")
     if args.json:
-        print(json.dumps({"error": {"kind": kind, "message": message, "exit": code}}))
+        _print_json({"error": {"kind": kind, "message": message, "exit": code}})
     return code
 
 
@@ -565,7 +613,7 @@ def cmd_excite(args: argparse.Namespace) -> int:
             _error("excite", str(exc))
             return EXIT_BAD_INPUT
     if args.json:
-        print(json.dumps(report))
+        _print_json(report)
     elif args.csv or args.plot is None:
         sys.stdout.write(csv_text(timeline, columns))
     return EXIT_OK
@@ -579,11 +627,11 @@ def cmd_decode(args: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     messages, stats = decode_file(args.device, args.file)
     try:
-        for message in messages:
-            print(json.dumps(as_json(message)) if args.json else as_text(message))
-        if args.json:
-            print(json.dumps({"stats": stats.as_dict()}))
+        if args.json:  # one object: the messages and the stream's statistics
+            _print_json({"messages": [as_json(m) for m in messages], "stats": stats.as_dict()})
         else:
+            for message in messages:
+                print(as_text(message))
             print("stats: " + ", ".join(f"{k} {v}" for k, v in stats.as_dict().items()))
     except BrokenPipeError:  # the reader (head, less) went away: nothing more to say
         sys.stdout = None
@@ -763,10 +811,11 @@ def cmd_sim(args: argparse.Namespace) -> int:
         report = asyncio.run(fly(options))
     except (PlantError, SimError) as exc:
         _error("sim", str(exc))
-        if args.json:  # stdout holds exactly one JSON object, on this path too
-            print(json.dumps({"error": str(exc)}))
         return EXIT_BAD_INPUT if isinstance(exc, PlantError) else EXIT_FAILED
-    print(json.dumps(report) if args.json else format_report(report))
+    if args.json:
+        _print_json(report)
+    else:
+        print(format_report(report))
     return EXIT_OK if not report["failure"] else EXIT_FAILED
 
 
@@ -817,16 +866,32 @@ def cmd_config_check(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `sysid` console script. Under `--json` an unexpected error (a bug)
     still leaves exactly one JSON object on stdout; its traceback goes to stderr."""
-    args = build_parser().parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
     try:
-        return _dispatch(args)
+        args = build_parser().parse_args(argv)
+    except UsageError as exc:
+        exc.parser.print_usage(sys.stderr)
+        _error(exc.parser.prog.removeprefix("sysid "), str(exc))
+        if "--json" in argv:
+            _print_json({"error": {"kind": "usage", "message": str(exc), "exit": EXIT_BAD_INPUT}})
+        return EXIT_BAD_INPUT
+    _json_state.update(printed=False, error=None)
+    try:
+        code = _dispatch(args)
+        if getattr(args, "json", False) and not _json_state["printed"]:
+            # A command that ended without its object: its error (every error path says one).
+            message = _json_state["error"] or f"exit {code}"
+            _print_json({"error": {"kind": "error" if code else "none", "message": message,
+                                   "exit": code}})  # fmt: skip
+        return code
     except Exception as exc:
         if not getattr(args, "json", False):
             raise
         import traceback
 
         traceback.print_exc()
-        print(json.dumps({"error": f"internal error: {type(exc).__name__}: {exc}"}))
+        message = f"internal error: {type(exc).__name__}: {exc}"
+        _print_json({"error": {"kind": "internal", "message": message, "exit": EXIT_FAILED}})
         return EXIT_FAILED
 
 

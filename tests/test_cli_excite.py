@@ -114,7 +114,9 @@ def test_an_internal_error_still_leaves_one_json_object(monkeypatch, capsys):
     monkeypatch.setattr(agent.cli, "summary", broken)
     assert main(["excite", "--preset", "lateral", "--json"]) == 1
     out, err = capsys.readouterr()
-    assert json.loads(out) == {"error": "internal error: RuntimeError: a bug"}
+    assert json.loads(out) == {
+        "error": {"kind": "internal", "exit": 1, "message": "internal error: RuntimeError: a bug"}
+    }
     assert "Traceback" in err
     with pytest.raises(RuntimeError):  # without --json the traceback is the report
         main(["excite", "--preset", "lateral"])

@@ -336,11 +336,10 @@ def test_bad_usage_exit_2(capsys, lateral_csv, args, message):
     assert message in capsys.readouterr().err
 
 
-def test_bad_option_values_are_usage_errors(lateral_csv):
+def test_bad_option_values_are_usage_errors(lateral_csv, capsys):
     for bad in (["--markov", "0"], ["--trim", "last:3"], ["--order", "x"]):
-        with pytest.raises(SystemExit) as caught:
-            main(["identify", str(lateral_csv), *LAT, *bad])
-        assert caught.value.code == 2
+        assert main(["identify", str(lateral_csv), *LAT, *bad]) == 2
+        assert "usage: sysid identify" in capsys.readouterr().err
 
 
 def test_identification_failure_is_exit_1(tmp_path, capsys):
@@ -411,3 +410,27 @@ def test_short_record_in_a_batch_is_named_not_dropped(tmp_path, capsys):
     short = write(tmp_path / "short.csv", {k: v[100:104] for k, v in cols.items()})
     assert main(["identify", str(long_), str(short), *LAT, "--markov", "5", "--trim", "none"]) == 2
     assert "experiment 1 has 4 samples, too few for 5 Markov" in capsys.readouterr().err
+
+
+USAGE = [
+    ["identify", "--json", "--order", "x", "a.csv"],
+    ["identify", "--json"],
+    ["analyze", "--json", "--bogus", "logs"],
+    ["report", "--json", "logs"],
+    ["excite", "--json", "--preset", "sideways"],
+    ["sim", "--json", "--speed-kts", "fast"],
+]
+
+
+@pytest.mark.parametrize("argv", USAGE, ids=[" ".join(a) for a in USAGE])
+def test_a_usage_error_under_json_is_one_json_object(capsys, argv):
+    """Bad input tried: a non-numeric --order, a missing file argument, an unknown option, a
+    missing --out, an unknown preset, a non-numeric speed: argparse's refusal is exit 2 and, under
+    --json, exactly one JSON object on stdout (its usage still on stderr)."""
+    assert main(argv) == 2
+    out, err = capsys.readouterr()
+    doc = json.loads(out)  # exactly one object: anything more fails to parse
+    assert doc["error"]["kind"] == "usage"
+    assert doc["error"]["exit"] == 2
+    assert doc["error"]["message"] in err
+    assert "usage:" in err

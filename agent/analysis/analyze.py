@@ -177,7 +177,14 @@ def _experiment(path: Path, request: Request) -> tuple[Experiment, float, bool]:
     missing = [n for n in ("time", *request.inputs, *request.outputs) if n not in columns]
     if missing:
         raise AnalyzeError(f"{path}: no column {', '.join(missing)}")
-    time = rows[:, columns.index("time")] - rows[0, columns.index("time")]
+    if rows.shape[0] < 3:
+        raise AnalyzeError(
+            f"{path}: {rows.shape[0]} data row(s) after the header: the log was cut short "
+            "(a power cut or a full disk while it was written)"
+        )
+    time = rows[:, columns.index("time")]
+    _check_time(path, time)
+    time = time - time[0]
     keep = np.ones(time.size, bool)
     if request.start is not None:
         keep &= time >= request.start
@@ -204,6 +211,19 @@ def _experiment(path: Path, request: Request) -> tuple[Experiment, float, bool]:
         operating_point = np.zeros_like(operating_point)
     nav = jobs.window_navigation(values, request.inputs, request.outputs, request.navigation)
     return Experiment(u, y, operating_point=operating_point, navigation=nav), dt, True
+
+
+def _check_time(path: Path, time: np.ndarray) -> None:
+    """The log's time column has a value in every row and increases, as `sysid identify`
+    requires of a record: an empty cell or a repeated time is named, not identified across."""
+    missing = np.flatnonzero(~np.isfinite(time))
+    if missing.size:
+        raise AnalyzeError(f"{path}: data row {missing[0] + 1} has no time")
+    steps = np.diff(time)
+    if np.any(steps <= 0):
+        k = int(np.argmax(steps <= 0))
+        raise AnalyzeError(f"{path}: time does not increase at data row {k + 2} "
+                           f"({time[k]:.6f} s → {time[k + 1]:.6f} s)")  # fmt: skip
 
 
 def run_cases(cases: Sequence[Case], *, workers: int = 1, scheduler: str | None = None,

@@ -143,3 +143,47 @@ def test_sweep_parsing():
     assert an.parse_sweep("markov=1,5") == ("markov", [1, 5])
     with pytest.raises(an.AnalyzeError, match="≥ 1"):
         an.parse_sweep("markov=0:2")
+
+
+def _cut_after_header(lines):
+    return [line for line in lines if line.startswith("#") or line.startswith("time")]
+
+
+def _empty_time_cell(lines):
+    data = [k for k, line in enumerate(lines) if line[:1].isdigit() or line[:1] == "-"]
+    lines[data[9]] = "," + lines[data[9]].split(",", 1)[1]
+    return lines
+
+
+def _repeated_time(lines):
+    data = [k for k, line in enumerate(lines) if line[:1].isdigit() or line[:1] == "-"]
+    lines.insert(data[20], lines[data[20]])
+    return lines
+
+
+DAMAGED = [
+    ("cut", _cut_after_header, "0 data row(s) after the header: the log was cut short"),
+    ("empty-time", _empty_time_cell, "data row 10 has no time"),
+    ("repeated-time", _repeated_time, "time does not increase at data row 22"),
+]
+
+
+@pytest.mark.parametrize(("name", "damage", "message"), DAMAGED, ids=[d[0] for d in DAMAGED])
+@pytest.mark.parametrize("command", ["analyze", "report"])
+def test_a_damaged_agent_log_is_a_clear_error(tmp_path, capsys, name, damage, message, command):
+    """Bad input tried: an agent log cut right after its header (a power cut), one with an
+    empty time cell, one with a row written twice: exit 2 with the reason, no traceback, and
+    under --json one JSON object (the row-twice log used to be identified across the repeat,
+    and the other two ended in an IndexError)."""
+    from agent.cli import main
+
+    (path,) = excitation_logs(tmp_path, count=1)
+    path.write_text("\n".join(damage(path.read_text().splitlines())) + "\n")
+    extra = ["--out", str(tmp_path / "report")] if command == "report" else []
+    assert main([command, str(path), "--axes", "lateral", *extra]) == 2
+    err = capsys.readouterr().err
+    assert message in err, err
+    assert main([command, str(path), "--axes", "lateral", *extra, "--json"]) == 2
+    error = json.loads(capsys.readouterr().out)["error"]
+    assert message in error["message"]
+    assert error["exit"] == 2
