@@ -219,7 +219,7 @@ def build_parser() -> argparse.ArgumentParser:
     aircraft.add_argument("--seed", type=int, default=0)
     aircraft.add_argument(
         "--mavlink-port",
-        type=int,
+        type=_port,
         default=14555,
         help="UDP port the emulated autopilot listens on (0: any)",
     )
@@ -309,6 +309,17 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("file", nargs="?", type=Path, default=DEFAULT_CONFIG)
     check.add_argument("--ground", action="store_true", help="the file is a ground console config")
     return parser
+
+
+def _port(text: str) -> int:
+    """A UDP port number for argparse: 0 (any) to 65535."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a port number") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{port} is not a UDP port: give 0 (any) to 65535")
+    return port
 
 
 class UsageError(Exception):
@@ -609,7 +620,7 @@ def cmd_excite(args: argparse.Namespace) -> int:
     if args.plot is not None:
         try:
             plot(timeline, report, columns, args.plot)
-        except PreviewError as exc:
+        except ValueError as exc:  # PreviewError, or matplotlib's unknown file format
             _error("excite", str(exc))
             return EXIT_BAD_INPUT
     if args.json:
@@ -648,6 +659,9 @@ def cmd_import(args: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     if not 1.0 <= args.rate <= 1000.0:
         _error("import", f"--rate {args.rate:g}: give 1 to 1000 Hz")
+        return EXIT_BAD_INPUT
+    if args.out.exists() and args.out.resolve() == args.file.resolve():
+        _error("import", f"{args.out}: that is the log being imported; give another --out")
         return EXIT_BAD_INPUT
     try:
         imported = import_log(args.file, config.excitation.surfaces, args.rate)

@@ -120,3 +120,11 @@ def test_an_internal_error_still_leaves_one_json_object(monkeypatch, capsys):
     assert "Traceback" in err
     with pytest.raises(RuntimeError):  # without --json the traceback is the report
         main(["excite", "--preset", "lateral"])
+
+
+def test_a_plot_format_matplotlib_does_not_know_is_a_clear_error(tmp_path, capsys):
+    """Bad input tried: --plot x.xyz (matplotlib's ValueError used to be a traceback)."""
+    assert main(["excite", "--preset", "lateral", "--plot", str(tmp_path / "x.xyz")]) == 2
+    err = capsys.readouterr().err
+    assert "Format 'xyz' is not supported" in err
+    assert "Traceback" not in err

@@ -49,6 +49,14 @@ class Doublet(_Signal):
     def samples(self, dt: float) -> np.ndarray:
         return signals.doublet(dt, self.pulse_s, self.amplitude)
 
+    @property
+    def duration_s(self) -> float:
+        return 2 * self.pulse_s
+
+    @property
+    def shortest_s(self) -> float:
+        return self.pulse_s
+
 
 class ThreeTwoOneOne(_Signal):
     """3-2-1-1 with unit pulse `pulse_s` (7 units in all)."""
@@ -58,6 +66,14 @@ class ThreeTwoOneOne(_Signal):
 
     def samples(self, dt: float) -> np.ndarray:
         return signals.three_two_one_one(dt, self.pulse_s, self.amplitude)
+
+    @property
+    def duration_s(self) -> float:
+        return 7 * self.pulse_s
+
+    @property
+    def shortest_s(self) -> float:
+        return self.pulse_s
 
 
 class Sweep(_Signal):
@@ -80,6 +96,11 @@ class Sweep(_Signal):
     @property
     def top_hz(self) -> float:
         return max(self.f0_hz, self.f1_hz)
+
+    @property
+    def played_s(self) -> float:
+        """The dwell at f0_hz, then the sweep."""
+        return self.dwell_cycles / self.f0_hz + self.duration_s
 
 
 class Multisine(_Signal):
@@ -115,6 +136,10 @@ class Multisine(_Signal):
     def top_hz(self) -> float:
         return max(self.harmonics) / self.period_s
 
+    @property
+    def duration_s(self) -> float:
+        return self.periods * self.period_s
+
 
 class Steps(_Signal):
     """Step-like sequence: each level × amplitude held for hold_s (levels within ±1)."""
@@ -132,6 +157,14 @@ class Steps(_Signal):
 
     def samples(self, dt: float) -> np.ndarray:
         return signals.steps(dt, self.hold_s, self.amplitude, self.levels)
+
+    @property
+    def duration_s(self) -> float:
+        return len(self.levels) * self.hold_s
+
+    @property
+    def shortest_s(self) -> float:
+        return self.hold_s
 
 
 Signal = Annotated[
@@ -239,7 +272,19 @@ class PlanRefused(ValueError):
 
 def refusals(plan: Plan, rate_hz: float, surfaces: Mapping[str, Surface], envelope: Envelope):
     """Every reason this plan may not fly with this configuration (empty: it may)."""
-    reasons = []
+    reasons = _cheap_refusals(plan, rate_hz, envelope)
+    if reasons:  # refused before rendering: a typo must not cost a render of its size
+        for segment in plan.segments:  # with every other reason, from the parameters
+            for name, sig in segment.signals.items():
+                if name not in surfaces:
+                    reasons.append(f"{name} is not a configured control ([excitation.surfaces])")
+                elif abs(sig.amplitude) > surfaces[name].max_amplitude + 1e-9:
+                    unit = _unit(surfaces[name])
+                    reasons.append(
+                        f"{name}: {abs(sig.amplitude):.3g} {unit} from trim exceeds its "
+                        f"max_amplitude of {surfaces[name].max_amplitude:g} {unit}"
+                    )
+        return list(dict.fromkeys(reasons))
     timeline = render(plan, rate_hz)
     if timeline.duration > envelope.max_duration_s:
         reasons.append(
@@ -256,7 +301,30 @@ def refusals(plan: Plan, rate_hz: float, surfaces: Mapping[str, Surface], envelo
                 f"{name}: {peak:.3g} {_unit(surface)} from trim exceeds its max_amplitude of "
                 f"{surface.max_amplitude:g} {_unit(surface)}"
             )
-    nyquist = rate_hz / 2
+    return reasons
+
+
+def played_s(sig) -> float:
+    """How long a signal plays (s), from its parameters alone."""
+    return sig.played_s if hasattr(sig, "played_s") else sig.duration_s
+
+
+def planned_s(plan: Plan) -> float:
+    """The plan's length (s) from its parameters alone, without rendering it (to within a
+    command period per signal)."""
+    return plan.lead_s + sum(
+        max(played_s(sig) for sig in segment.signals.values()) + segment.free_s
+        for segment in plan.segments
+    )
+
+
+def _cheap_refusals(plan: Plan, rate_hz: float, envelope: Envelope) -> list[str]:
+    """What can be refused from the plan's parameters alone: frequencies at or above Nyquist,
+    pulses shorter than a command period, a length beyond the envelope. A plan from the
+    radio goes through these before it is rendered, so a typo (a harmonic of 1e6, a sweep
+    from 1e-9 Hz with dwell cycles, a pulse of 1e-4 s) is refused at once."""
+    reasons = []
+    nyquist, period = rate_hz / 2, 1.0 / rate_hz
     for segment in plan.segments:
         for name, sig in segment.signals.items():
             top = getattr(sig, "top_hz", 0.0)
@@ -265,6 +333,18 @@ def refusals(plan: Plan, rate_hz: float, surfaces: Mapping[str, Surface], envelo
                     f"{name}: {sig.kind} reaches {top:g} Hz, not below the "
                     f"{nyquist:g} Hz Nyquist frequency of the {rate_hz:g} Hz command rate"
                 )
+            shortest = getattr(sig, "shortest_s", None)
+            if shortest is not None and shortest < period:
+                reasons.append(
+                    f"{name}: {sig.kind} holds a level for {shortest:g} s, shorter than one "
+                    f"command period ({period:g} s at {rate_hz:g} Hz)"
+                )
+    length = planned_s(plan)
+    if length > envelope.max_duration_s + 2 * period * (1 + len(plan.segments)):
+        reasons.append(
+            f"plan lasts {length:.1f} s, longer than the envelope's "
+            f"max_duration_s = {envelope.max_duration_s:g} s"
+        )
     return reasons
 
 

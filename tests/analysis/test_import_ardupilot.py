@@ -161,3 +161,11 @@ def test_command_line_refusals(tmp_path):
     (tmp_path / "log.txt").write_text("x")
     assert "unknown log type '.txt'" in run("log.txt", "--out", "x.csv").stderr
     assert "give 1 to 1000 Hz" in run("log.txt", "--out", "x.csv", "--rate", "0").stderr
+    # Bad input tried: --out naming the flight log itself (it used to be overwritten by the
+    # CSV), under another spelling of the same path.
+    systemid_log(tmp_path / "c.bin", seconds=2.0)
+    before = (tmp_path / "c.bin").read_bytes()
+    same = run("c.bin", "--out", "./c.bin")
+    assert same.returncode == 2
+    assert "that is the log being imported" in same.stderr
+    assert (tmp_path / "c.bin").read_bytes() == before

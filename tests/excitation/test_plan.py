@@ -17,6 +17,7 @@ from agent.excitation.plan import (
     Plan,
     PlanRefused,
     Segment,
+    Steps,
     Sweep,
     check,
     full_harmonics,
@@ -137,6 +138,36 @@ def test_plans_outside_the_envelope_are_refused_before_start():
     strict = Envelope(max_duration_s=30.0)
     with pytest.raises(PlanRefused, match="max_duration_s = 30"):
         check(preset("full"), 50.0, SURFACES, strict)
+
+
+ABSURD = [
+    (Multisine(harmonics=(1_000_000,), period_s=10.0, amplitude=2.0), "100000 Hz, not below"),
+    (Sweep(f0_hz=1e-9, f1_hz=1.0, duration_s=10.0, dwell_cycles=2.0, amplitude=2.0),
+     "longer than the envelope's max_duration_s"),
+    (Doublet(pulse_s=1e-4, amplitude=2.0), "holds a level for 0.0001 s, shorter than one"),
+    (Steps(levels=(1.0, -1.0), hold_s=0.005, amplitude=2.0), "shorter than one command period"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("signal", "message"), ABSURD, ids=["harmonic", "dwell", "pulse", "hold"])
+def test_absurd_plans_are_refused_from_their_parameters_without_rendering(
+    signal, message, monkeypatch
+):
+    """Bad input tried (an operator's typo, from the console or the radio): a multisine
+    harmonic of 1e6 (it used to hang or take 3 GB in rendering), a sweep from 1e-9 Hz with two
+    dwell cycles (2e9 s), a doublet pulse of 1e-4 s and a step held 5 ms (no command period:
+    a traceback). Refused with the reason before anything is rendered."""
+    import agent.excitation.plan as plan_module
+
+    def no_render(*args):
+        raise AssertionError("rendered")
+
+    monkeypatch.setattr(plan_module, "render", no_render)
+    with pytest.raises(PlanRefused, match=message):
+        check(_one(signal), 50.0, SURFACES, ENVELOPE)
+    bold = signal.model_copy(update={"amplitude": 12.0})  # and every other reason with it
+    with pytest.raises(PlanRefused, match="exceeds its max_amplitude"):
+        check(_one(bold), 50.0, SURFACES, ENVELOPE)
 
 
 SERVO = Surface(channel=1, us_per_unit=20.0, max_amplitude=10.0, rate_limit=150.0, travel=8.0)

@@ -12,6 +12,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -46,3 +48,13 @@ def test_sensor_rate_is_announced_and_checked(tmp_path):
         bad = _run("--duration", "1", "--pty-dir", str(tmp_path), "--sensor-rate", rate)
         assert bad.returncode == 2, (rate, bad.stderr)
         assert f"sensor rate {float(rate):g} Hz: must be 100 Hz divided or multiplied" in bad.stderr
+
+
+@pytest.mark.parametrize("port", ["99999", "-1", "udp"])
+def test_a_port_that_is_not_one_is_a_usage_error(port, capsys):
+    """Bad input tried: --mavlink-port 99999, -1 and a word (99999 used to reach bind() and
+    end in an OverflowError traceback)."""
+    from agent.cli import main
+
+    assert main(["sim-aircraft", "--mavlink-port", port]) == 2
+    assert "argument --mavlink-port" in capsys.readouterr().err
