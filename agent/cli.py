@@ -694,6 +694,11 @@ def cmd_export(args: argparse.Namespace) -> int:
     except ExportError as exc:
         _error("export", str(exc))
         return EXIT_BAD_INPUT
+    if models.skipped:
+        more = " …" if len(models.skipped) > 10 else ""
+        lines = ", ".join(map(str, models.skipped[:10])) + more
+        print(f"sysid export: warning: {args.source}: {len(models.skipped)} line(s) not JSON "
+              f"and not exported (line {lines}); the rest is", file=sys.stderr)  # fmt: skip
     if args.model:
         unknown = sorted(set(args.model) - {m["id"] for m in models})
         if unknown:

@@ -5,8 +5,9 @@ a model store file (`models/<axes>_nominal.json` or `_previous.json`, with the d
 identified from, in the `.npz` beside it), or the ground console's log (`NNNN_ground_DATE.jsonl`:
 the results as they came over the radio — discrete matrices only).
 
-One MATLAB struct per model, named after its id (`lat_3` for `lat-3`), and `model_ids`, a cell
-array of the original ids. The fields (also the JSON keys):
+One MATLAB struct per model, named after its id (`lat_3` for `lat-3`; where two ids give one
+name, the later ones `lat_3_2`, `lat_3_3`…), `model_ids`, a cell array of the original ids, and
+`model_variables`, the struct name of each. The fields (also the JSON keys):
 
 | field | meaning |
 |---|---|
@@ -30,6 +31,7 @@ from __future__ import annotations
 
 import json
 import re
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -41,34 +43,51 @@ class ExportError(ValueError):
     """A source that cannot be exported; the message says which file and why."""
 
 
-def load_models(path: str | Path) -> list[dict]:
+class Models(list):
+    """The models of a source, in its order; `skipped`: the numbers of the lines that were not
+    JSON (a torn last line after a power cut, or damage), which `sysid export` reports."""
+
+    skipped: tuple[int, ...] = ()
+
+
+def load_models(path: str | Path) -> Models:
     """Every model in a result log, a model store file or a ground log, as export dicts."""
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ExportError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
+    except UnicodeDecodeError as exc:
+        raise ExportError(
+            f"{path}: not a UTF-8 text file (byte {exc.start}: {exc.reason}); give a result "
+            "log, a model store file or a ground log"
+        ) from exc
     if path.suffix == ".json":
         try:
-            return [_from_store(path, json.loads(text))]
+            return Models([_from_store(path, json.loads(text))])
         except (ValueError, KeyError, TypeError) as exc:
             raise ExportError(f"{path}: not a model store file ({exc})") from exc
-    models = []
+    models, skipped = Models(), []
     for number, line in enumerate(text.splitlines(), start=1):
+        if not line.strip():
+            continue
         try:
             record = json.loads(line)
         except ValueError:
-            continue  # a torn last line of a log written during a power cut
+            skipped.append(number)  # reported, never silently dropped
+            continue
         try:
             if "result" in record and "model_id" in record:  # the agent's result log
                 models.append(_from_result(record["model_id"], record["axes"],
                                            record["result"], record.get("trim")))  # fmt: skip
             elif record.get("dir") == "rx" and record["message"].get("kind") == "result":
                 models.append(_from_message(record["message"]))
-        except (KeyError, TypeError, ValueError) as exc:
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise ExportError(f"{path}:{number}: not a result record ({exc})") from exc
     if not models:
-        raise ExportError(f"{path}: no identified model in this file")
+        unreadable = f" ({len(skipped)} line(s) not JSON)" if skipped else ""
+        raise ExportError(f"{path}: no identified model in this file{unreadable}")
+    models.skipped = tuple(skipped)
     return models
 
 
@@ -143,9 +162,14 @@ def _from_store(path: Path, meta: dict) -> dict:
                          (meta.get("extra") or {}).get("trim"))  # fmt: skip
     data = path.with_suffix(".npz")
     if data.exists():
-        with np.load(data) as arrays:
-            model["u"] = [arrays[f"u{k}"] for k in range(meta["count"])]
-            model["y"] = [arrays[f"y{k}"] for k in range(meta["count"])]
+        try:
+            with np.load(data, allow_pickle=False) as arrays:
+                model["u"] = [arrays[f"u{k}"] for k in range(meta["count"])]
+                model["y"] = [arrays[f"y{k}"] for k in range(meta["count"])]
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+            raise ExportError(
+                f"{data}: the model's data set is damaged ({type(exc).__name__}: {exc})"
+            ) from exc
     return model
 
 
@@ -155,11 +179,28 @@ def variable_name(model_id: str) -> str:
     return name if name[:1].isalpha() else f"m_{name}"
 
 
+def matlab_names(ids: list[str]) -> list[str]:
+    """A distinct MATLAB identifier per model, in order: `variable_name`, then _2, _3… where
+    two ids map to one name (lat-1 and lat_1; the same id from two boots of the agent)."""
+    names: list[str] = []
+    taken = {"model_ids", "model_variables"}
+    for model_id in ids:
+        base = name = variable_name(model_id)
+        k = 1
+        while name in taken:
+            k += 1
+            name = f"{base}_{k}"
+        taken.add(name)
+        names.append(name)
+    return names
+
+
 def to_mat(models: list[dict], path: str | Path) -> None:
     from scipy.io import savemat
 
     variables: dict[str, object] = {}
-    for model in models:
+    names = matlab_names([m["id"] for m in models])
+    for model, name in zip(models, names, strict=True):
         struct = dict(model)
         for key in ("inputs", "outputs", "mode_names"):
             struct[key] = np.array(struct[key], dtype=object)
@@ -168,8 +209,9 @@ def to_mat(models: list[dict], path: str | Path) -> None:
                 cell = np.empty(len(struct[key]), dtype=object)
                 cell[:] = struct[key]
                 struct[key] = cell
-        variables[variable_name(model["id"])] = struct
+        variables[name] = struct
     variables["model_ids"] = np.array([m["id"] for m in models], dtype=object)
+    variables["model_variables"] = np.array(names, dtype=object)
     savemat(str(path), variables, do_compression=True, oned_as="column")
 
 

@@ -152,3 +152,41 @@ def test_results_heard_by_the_ground_console_export_too(tmp_path):
     assert model["Ac"].size == 0  # the radio carries the discrete model only
     assert list(model["tic"]) == [0.02, 0.03, 0.02, 0.04]
     assert model["mode_names"] == ["Dutch roll", "roll", "spiral"]
+
+
+def test_damaged_sources_are_clear_errors_and_nothing_is_dropped_silently(flight, tmp_path):
+    """Bad input tried: a result log with a Latin-1 byte (a traceback before), a model store
+    whose .npz data set is damaged (a traceback before), a result log with a line of garbage
+    in the middle (silently dropped before), and two models whose ids give one MATLAB name
+    (lat-1 and lat_1: the second overwrote the first in the .mat)."""
+    base, _ = flight
+    log = next((base / "logs").glob("*_results_*.jsonl"))
+    latin = tmp_path / "latin.jsonl"
+    latin.write_bytes(log.read_bytes() + "\xb0\n".encode("latin-1"))
+    with pytest.raises(ExportError, match="not a UTF-8 text file"):
+        load_models(latin)
+    store = base / "models" / "lateral_nominal.json"
+    npz = store.with_suffix(".npz")
+    npz.write_bytes(npz.read_bytes()[: npz.stat().st_size // 2])
+    with pytest.raises(ExportError, match="data set is damaged"):
+        load_models(store)
+    lines = log.read_text().splitlines()
+    torn = tmp_path / "torn.jsonl"
+    torn.write_text("\n".join([lines[0], '{"model_id": "lat-', lines[1]]) + "\n")
+    models = load_models(torn)
+    assert [m["id"] for m in models] == ["lat-1", "lat-2"]
+    assert models.skipped == (2,)
+    done = subprocess.run(
+        [sys.executable, "-m", "agent", "export", str(torn), "--out", str(tmp_path / "t.mat")],
+        capture_output=True, text=True, timeout=60,
+        env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "1 line(s) not JSON and not exported (line 2)" in done.stderr
+    twins = load_models(log)
+    twins[1]["id"] = "lat_1"
+    to_mat(twins, tmp_path / "twins.mat")
+    mat = loadmat(tmp_path / "twins.mat", simplify_cells=True)
+    assert list(mat["model_variables"]) == ["lat_1", "lat_1_2"]
+    assert mat["lat_1"]["id"] == "lat-1"
+    assert mat["lat_1_2"]["id"] == "lat_1"
