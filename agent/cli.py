@@ -78,7 +78,7 @@ def _identification_options(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--period",
-        type=float,
+        type=_positive_seconds,
         metavar="SECONDS",
         help="excitation period for --method frequency (default: detected from the inputs)",
     )
@@ -309,6 +309,17 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("file", nargs="?", type=Path, default=DEFAULT_CONFIG)
     check.add_argument("--ground", action="store_true", help="the file is a ground console config")
     return parser
+
+
+def _positive_seconds(text: str) -> float:
+    """A finite, positive number of seconds for argparse (nan, inf, 0 and negatives refused)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"{text}: give a finite, positive number of seconds")
+    return value
 
 
 def _port(text: str) -> int:

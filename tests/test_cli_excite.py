@@ -128,3 +128,12 @@ def test_a_plot_format_matplotlib_does_not_know_is_a_clear_error(tmp_path, capsy
     err = capsys.readouterr().err
     assert "Format 'xyz' is not supported" in err
     assert "Traceback" not in err
+
+
+def test_an_amplitude_for_a_control_the_preset_does_not_play_is_refused(capsys):
+    """Bad input tried: --amplitude ailron=6 (a typo: the plan used to fly at the default
+    amplitude) and elevator=3 on the lateral preset."""
+    for item in ("ailron=6", "elevator=3"):
+        assert main(["excite", "--preset", "lateral", "--amplitude", item]) == 2
+        err = capsys.readouterr().err
+        assert "the lateral preset plays aileron, rudder; no amplitude for" in err, err

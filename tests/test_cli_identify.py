@@ -144,10 +144,11 @@ def test_frequency_method_from_the_command_line(capsys, tmp_path):
     assert code == 0  # a wrong period is not an error: it leaks, and says so
     assert any("leakage" in w or "period" in w for w in doc["warnings"])
     # Bad input tried: a negative period and one longer than the record.
-    for period in ("-3", "500"):
+    for period, message in (("-3", "give a finite, positive number of seconds"),
+                            ("500", "excitation period")):  # fmt: skip
         code, doc = run_json(capsys, str(path), *LAT, "--method", "frequency", "--period", period)
         assert code == 2
-        assert "excitation period" in doc["error"]["message"]
+        assert message in doc["error"]["message"]
 
 
 def test_text_output_has_the_mode_table(capsys, lateral_csv):
@@ -434,3 +435,23 @@ def test_a_usage_error_under_json_is_one_json_object(capsys, argv):
     assert doc["error"]["exit"] == 2
     assert doc["error"]["message"] in err
     assert "usage:" in err
+
+
+def test_odd_settings_and_values_get_one_clear_reason(tmp_path, capsys):
+    """Bad input tried: --period nan (a ValueError traceback before), --order 1000 (its
+    reason used to be repeated for each of 13 p), a record scaled by 1e200 (called "nothing
+    moved" before: its squares overflow)."""
+    path = write(tmp_path / "lat.csv", reference.make_record(reference.LATERAL).columns())
+    assert main(["identify", str(path), *LAT, "--method", "frequency", "--period", "nan"]) == 2
+    assert "--period: nan: give a finite, positive number of seconds" in capsys.readouterr().err
+    assert main(["identify", str(path), *LAT, "--order", "1000"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("order 1000 is outside") == 1, err
+    assert "p = 1, 2, 3" in err
+    columns = reference.make_record(reference.LATERAL).columns()
+    huge = {k: (v if k == "time" else v * 1e200) for k, v in columns.items()}
+    big = write(tmp_path / "big.csv", huge)
+    assert main(["identify", str(big), *LAT]) == 2
+    err = capsys.readouterr().err
+    assert "overflow" in err
+    assert "nothing moved" not in err

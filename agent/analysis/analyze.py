@@ -45,6 +45,10 @@ class Case:
     job: jobs.Job
 
 
+# The most settings one sweep runs (each an identification per excitation).
+MAX_SWEEP = 200
+
+
 def parse_sweep(text: str) -> tuple[str, list[int]]:
     """`markov=1:20`, `order=2:12:2` or `markov=1,2,5` → (name, values)."""
     name, sep, spec = text.partition("=")
@@ -57,13 +61,22 @@ def parse_sweep(text: str) -> tuple[str, list[int]]:
             if len(parts) not in (2, 3):
                 raise ValueError(spec)
             start, stop, step = parts if len(parts) == 3 else (*parts, 1)
-            values = list(range(start, stop + 1, step))
+            if step == 0:
+                raise AnalyzeError(f"--sweep {text!r}: the step must not be 0")
+            # Both ends included, counting up or down (markov=5:1:-1 is 5, 4, 3, 2, 1).
+            values = list(range(start, stop + (1 if step > 0 else -1), step))
         else:
             values = [int(v) for v in spec.split(",")]
+    except AnalyzeError:
+        raise
     except ValueError:
         raise AnalyzeError(f"--sweep {text!r}: values must be integers") from None
-    if not values or min(values) < 1:
+    if not values:
+        raise AnalyzeError(f"--sweep {text!r}: names no value (the step runs away from the end)")
+    if min(values) < 1:
         raise AnalyzeError(f"--sweep {text!r}: values must be ≥ 1")
+    if len(values) > MAX_SWEEP:
+        raise AnalyzeError(f"--sweep {text!r}: {len(values)} values; at most {MAX_SWEEP}")
     return name, values
 
 

@@ -449,12 +449,27 @@ def full_harmonics() -> dict[str, tuple[int, ...]]:
 FULL_AMPLITUDE = {**PRESET_AMPLITUDE, "elevator": 4.5}
 
 
+# The controls each preset plays, the only ones it takes an amplitude for.
+PRESET_CONTROLS = {
+    "lateral": ("aileron", "rudder"),
+    "longitudinal": ("elevator", "throttle"),
+    "full": ("throttle", "elevator", "aileron", "rudder"),
+}
+
+
 def preset(name: str, amplitude: Mapping[str, float] | None = None, plan_id: str | None = None):
     """The thesis's plans: lateral (aileron then rudder doublet), longitudinal (elevator
     doublet then throttle steps); and full: an 80 s odd-harmonic multisine on all four
     controls at once (see FULL_PERIOD_S; the thesis's figure 6.12 played multisines on the
     surfaces, then throttle steps)."""
     amp = {**(FULL_AMPLITUDE if name == "full" else PRESET_AMPLITUDE), **(amplitude or {})}
+    plays = PRESET_CONTROLS.get(name, ())
+    stray = [c for c in amplitude or {} if c not in plays]
+    if plays and stray:  # a typo (ailron) must not leave the plan at its default amplitude
+        raise ValueError(
+            f"the {name} preset plays {', '.join(plays)}; no amplitude for "
+            f"{', '.join(map(repr, stray))}"
+        )
 
     def doublet(c: str) -> dict:
         return {c: Doublet(pulse_s=DOUBLET_PULSE_S[c], amplitude=amp[c])}

@@ -147,6 +147,14 @@ def supported_modes(
     )
 
 
+def _grouped(failed: Sequence[tuple[int, str]]) -> str:
+    """Each distinct reason once, with the p it stopped: "p = 1, 2, 3: <reason>; p = 5: …"."""
+    by_reason: dict[str, list[int]] = {}
+    for p, why in failed:
+        by_reason.setdefault(why, []).append(p)
+    return "; ".join(f"p = {', '.join(map(str, ps))}: {why}" for why, ps in by_reason.items())
+
+
 def choose_markov(
     batch: Sequence[okid.Experiment],
     settings: Settings,
@@ -195,8 +203,9 @@ def choose_markov(
         if stalled >= STALL:
             break
     if not candidates:
-        reasons = "; ".join(f"p = {p}: {why}" for p, why in failed)
-        raise IdentificationFailed(f"no number of Markov parameters gave a model ({reasons})")
+        raise IdentificationFailed(
+            f"no number of Markov parameters gave a model ({_grouped(failed)})"
+        )
     best = min(c.tic_avg for c in candidates)
     good = [c for c in candidates if c.tic_avg <= best * (1 + PARSIMONY) + 1e-12]
     chosen = min(good, key=lambda c: (c.era.order, c.markov))

@@ -93,12 +93,26 @@ class Identification:
         return self.era.singular_values
 
 
+# No measurement is this large in any unit; beyond it the regression's products overflow.
+MAX_MAGNITUDE = 1e100
+
+
 def check_channels(
     batch: Sequence[okid.Experiment], input_names: Sequence[str], output_names: Sequence[str]
 ) -> None:
-    """Reject channels that never move over the whole batch: they cannot be identified."""
+    """Reject channels that never move over the whole batch (they cannot be identified), and
+    values so large that their products overflow float64."""
     u = np.vstack([e.u for e in batch])
     y = np.vstack([e.y for e in batch])
+    for values, names, kind in ((u, input_names, "input"), (y, output_names, "output")):
+        peaks = np.max(np.abs(values), axis=0) if values.size else np.zeros(len(names))
+        for j, name in enumerate(names):
+            if peaks[j] > MAX_MAGNITUDE:
+                raise DataError(
+                    f"{kind} '{name}' reaches {peaks[j]:.3g}: beyond {MAX_MAGNITUDE:g}, its "
+                    "squares and products overflow float64 (overflow); rescale the record "
+                    "(check its units)"
+                )
     for j, name in enumerate(input_names):
         if np.ptp(u[:, j]) == 0:
             raise ConstantChannelError(

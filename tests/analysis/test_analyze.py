@@ -143,6 +143,15 @@ def test_sweep_parsing():
     assert an.parse_sweep("markov=1,5") == ("markov", [1, 5])
     with pytest.raises(an.AnalyzeError, match="≥ 1"):
         an.parse_sweep("markov=0:2")
+    # Bad input tried: a downward range (it used to run 5, 4, 3 and skip 2 and 1), a zero
+    # step, a range pointing away from its end, a sweep of 1e5 settings.
+    assert an.parse_sweep("markov=5:1:-1") == ("markov", [5, 4, 3, 2, 1])
+    with pytest.raises(an.AnalyzeError, match="the step must not be 0"):
+        an.parse_sweep("markov=1:5:0")
+    with pytest.raises(an.AnalyzeError, match="names no value"):
+        an.parse_sweep("markov=5:1")
+    with pytest.raises(an.AnalyzeError, match="100000 values; at most 200"):
+        an.parse_sweep("markov=1:100000")
 
 
 def _cut_after_header(lines):

@@ -11,6 +11,7 @@ from agent.excitation import servo
 from agent.excitation.plan import (
     FULL_PERIOD_S,
     FULL_THROTTLE_TOP_HZ,
+    PRESET_CONTROLS,
     PRESETS,
     Doublet,
     Multisine,
@@ -85,7 +86,7 @@ def test_every_run_starts_and_ends_at_trim(name):
 
 @pytest.mark.parametrize("name", PRESETS)
 def test_plans_survive_the_radio_encoding(name):
-    plan = preset(name, amplitude={"aileron": 2.5})
+    plan = preset(name, amplitude={c: 2.5 for c in PRESET_CONTROLS[name][:1]})
     data = plan.to_bytes()
     assert len(data) < 768  # three XBee payloads at most (the full preset's 80 harmonics)
     assert Plan.from_bytes(data) == plan
