@@ -24,7 +24,12 @@ from agent.channels import AXIS_SETS, INPUT_ROLES, NAVIGATION_ROLES, OUTPUT_ROLE
 
 
 class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, use_attribute_docstrings=True)
+    model_config = ConfigDict(
+        extra="forbid",
+        frozen=True,
+        use_attribute_docstrings=True,
+        allow_inf_nan=False,
+    )
 
 
 def _auto_or_count(value: object) -> object:
@@ -128,8 +133,9 @@ class Identification(_Section):
     decimation: AutoOrCount = "auto"
     """Decimation factor after the anti-alias filter; "auto" brings the rate down to 25 × the
     band of interest; 1 keeps the record rate."""
-    band_hz: float | None = Field(None, gt=0.0)
-    """Band of interest in Hz; unset: where 99 % of every input's power lies (≥ 0.5 Hz)."""
+    band_hz: float | None = Field(None, ge=0.01, le=500.0)
+    """Band of interest in Hz, 0.01–500 (an aircraft's slowest named mode, the phugoid, is
+    above 0.01 Hz); unset: where 99 % of every input's power lies (≥ 0.5 Hz)."""
     held_inputs: bool = True
     """Inputs are held between samples (commands; a zero-order hold). false: they are samples
     of continuously varying signals (e.g. surface potentiometers)."""

@@ -60,7 +60,11 @@ AIL = (
         ("[identification]\naxes = 'yaw'\n", "identification.axes", "lateral"),
         ('[identification.channels]\np = "r"\n', "identification.channels", "repeated: r"),
         ("[identification]\ndecimation = 0\n", "identification.decimation", "integer ≥ 1"),
-        ("[identification]\nband_hz = -1\n", "identification.band_hz", "greater than 0"),
+        (
+            "[identification]\nband_hz = -1\n",
+            "identification.band_hz",
+            "greater than or equal to 0.01",
+        ),
         ("[identification]\nrefine = 'maybe'\n", "identification.refine", "valid boolean"),
         ("[identification]\nmethod = 'fourier'\n", "identification.method", "'time'"),
         ("[identification]\nnoise_model = 'kalman'\n", "identification.noise_model", "'auto'"),
@@ -99,6 +103,18 @@ AIL = (
         ("[recorder]\nrate_hz = 0\n", "recorder.rate_hz", "greater than or equal to 1"),
         ('[link]\npeer = "0013A2004"\n', "link.peer", "16 hex digits"),
         ('[link]\npeer = "0013A20040A1B2CZ"\n', "link.peer", "16 hex digits"),
+        # Absurd and non-finite values (identify used to hang on band_hz = 1e-9).
+        ("[identification]\nband_hz = 1e-9\n", "identification.band_hz", "greater than or"),
+        (
+            "[excitation.envelope]\nmax_airspeed = inf\n",
+            "excitation.envelope.max_airspeed",
+            "finite number",
+        ),
+        (
+            "[excitation.envelope]\nmax_duration_s = nan\n",
+            "excitation.envelope.max_duration_s",
+            "finite number",
+        ),
     ],
 )
 def test_bad_config_names_key_and_reason(tmp_path, capsys, text, key, reason):
@@ -154,3 +170,14 @@ def test_the_simulators_agent_config_file_loads_back_to_the_same_config(tmp_path
         # it, where the default (35 m/s at most) refused every plan.
         envelope = config.excitation.envelope
         assert envelope.min_airspeed < speed * 0.514444 < envelope.max_airspeed
+
+
+@pytest.mark.parametrize("period", [float("inf"), float("nan"), 1e-9, 1e6])
+def test_an_update_period_from_the_radio_is_range_checked(period):
+    """Bad input tried (identification settings from the ground): an infinite period (it
+    stopped the periodic loop), NaN, 1e-9 s (it spun it) and 1e6 s."""
+    from agent.link import messages
+
+    with pytest.raises(ValidationError):
+        messages.IdentSettings(axes="lateral", update_period_s=period)
+    assert messages.IdentSettings(axes="lateral", update_period_s=20.0).update_period_s == 20.0

@@ -56,7 +56,8 @@ class IdentSettings(_Message):
     markov: int | Literal["auto"] = "auto"
     order: int | Literal["auto"] = "auto"
     batch: bool = False
-    update_period_s: float | None = Field(None, gt=0.0)
+    # Periodic identification every 5 s to 1 h: inf stopped the periodic loop, 1e-9 spun it.
+    update_period_s: float | None = Field(None, ge=5.0, le=3600.0, allow_inf_nan=False)
 
 
 class Decision(_Message):
