@@ -469,6 +469,9 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     except (OSError, ValueError, TimeoutError) as exc:  # a scheduler that cannot be reached
         _error("analyze", f"cannot run the jobs: {exc}")
         return EXIT_FAILED
+    except ImportError as exc:  # --scheduler without Dask installed
+        _error("analyze", f"--scheduler needs Dask ({exc}): pip install '.[cluster]'")
+        return EXIT_BAD_INPUT
     finally:
         bar(None, None)
     report = {"logs": [str(p) for p in paths], "cases": [
@@ -523,6 +526,9 @@ def cmd_report(args: argparse.Namespace) -> int:
     except (OSError, ValueError, TimeoutError) as exc:  # a scheduler that cannot be reached
         _error("report", f"cannot run the jobs: {exc}")
         return EXIT_FAILED
+    except ImportError as exc:  # --scheduler without Dask installed
+        _error("report", f"--scheduler needs Dask ({exc}): pip install '.[cluster]'")
+        return EXIT_BAD_INPUT
     finally:
         bar(None, None)
     from agent.analysis.report import write
