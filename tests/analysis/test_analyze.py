@@ -196,3 +196,16 @@ def test_a_damaged_agent_log_is_a_clear_error(tmp_path, capsys, name, damage, me
     error = json.loads(capsys.readouterr().out)["error"]
     assert message in error["message"]
     assert error["exit"] == 2
+
+
+def test_an_unreachable_scheduler_is_a_clear_error(tmp_path, capsys):
+    """Bad input tried: --scheduler with an address Dask cannot use: exit 1 with the reason,
+    and under --json one JSON object."""
+    from agent.cli import main
+
+    excitation_logs(tmp_path, count=1)
+    argv = ["analyze", str(tmp_path), "--axes", "lateral", "--scheduler", "nonsense", "--json"]
+    assert main(argv) == 1
+    out, err = capsys.readouterr()
+    assert "cannot run the jobs: missing port number in address 'nonsense'" in err
+    assert "missing port number" in json.loads(out)["error"]["message"]
