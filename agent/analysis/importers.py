@@ -110,12 +110,21 @@ def _dataflash(path: Path, surfaces: Mapping[str, Surface], rate_hz: float) -> I
     series: dict[str, tuple[list[float], list[float]]] = {}
     notes: list[str] = []
     channels = {name: s.channel for name, s in surfaces.items()}
+    damaged = 0
     while True:
+        before = reader.offset
+        # Message by message, not recv_match(type=…): that jumps through pymavlink's index
+        # of message offsets, which ends at the first unknown message type (one flipped byte),
+        # so everything after it was silently lost. _parse_next resyncs past damage.
         try:
-            m = reader.recv_match(type=list(wanted))
-        except Exception as exc:  # a torn last message: keep what was read before it
-            notes.append(f"stopped reading at a damaged message ({exc})")
-            break
+            m = reader.recv_msg()
+            if m is not None and m.get_type() not in wanted:
+                continue
+        except Exception:  # a damaged message: skip it and read on (pymavlink resyncs)
+            damaged += 1
+            if reader.offset <= before:  # never stuck on one spot
+                reader.offset, reader.remaining = before + 1, reader.remaining - 1
+            continue
         if m is None:
             break
         kind, t = m.get_type(), m.TimeUS * 1e-6
@@ -131,6 +140,8 @@ def _dataflash(path: Path, surfaces: Mapping[str, Surface], rate_hz: float) -> I
         for message, name, column, scale, instance in DATAFLASH:
             if message == kind and (instance is None or getattr(m, instance) == 0):
                 _append(series, column, t, float(getattr(m, name)) * scale)
+    if damaged:
+        notes.append(f"{damaged} damaged message(s) skipped; reading went on past each")
     for control, surface in surfaces.items():
         pwm = series.get(f"{control}_pwm")
         if pwm is not None:
@@ -192,14 +203,74 @@ def _append(series, column: str, t: float, value: float) -> None:
     values.append(value)
 
 
+# A timestamp this far (s) from both its neighbours, one way and back, is damage (a flipped
+# bit), not time: the sample is dropped. A real gap this long (logging paused) is not
+# interpolated across: the record is the longest stretch without one.
+JUMP_S = 1.0
+# The most rows an import writes (the record reader's own limit).
+MAX_ROWS = 5_000_000
+
+
+def _clean(column: str, t: np.ndarray, v: np.ndarray, skipped: dict[str, int]):
+    """The samples of one channel with non-finite values and damaged timestamps removed."""
+    good = np.isfinite(t) & np.isfinite(v)
+    if t.size >= 3:
+        into, out = np.diff(t, prepend=t[0]), np.diff(t, append=t[-1])
+        spike = ((into > JUMP_S) & (out < -JUMP_S)) | ((into < -JUMP_S) & (out > JUMP_S))
+        good &= ~spike
+    if (~good).any():
+        skipped[column] = int((~good).sum())
+    return t[good], v[good]
+
+
+def _stretch(core: dict, start: float, end: float) -> tuple[float, float, list[tuple]]:
+    """The longest time span within [start, end] where no channel has a gap over JUMP_S, and
+    the gaps (channel, from, to) that bound it."""
+    gaps = []
+    for column, (t, _) in core.items():
+        ts = np.sort(t)
+        k = np.flatnonzero(np.diff(ts) > JUMP_S)
+        gaps += [(column, float(ts[i]), float(ts[i + 1])) for i in k]
+    best, span, covered = (start, end), -1.0, start
+    for a, b in sorted([(a, b) for _, a, b in gaps] + [(end, end)]):
+        lo, hi = max(covered, start), min(a, end)  # free from the last gap's end to this one
+        if hi - lo > span:
+            best, span = (lo, hi), hi - lo
+        covered = max(covered, b)
+    return best[0], best[1], gaps
+
+
 def _resample(path: Path, kind: str, series, rate_hz: float, notes: list[str]) -> Imported:
-    core = {c: s for c, s in series.items() if not c.startswith("sid_")}
+    skipped: dict[str, int] = {}
+    series = {c: _clean(c, np.asarray(t, float), np.asarray(v, float), skipped)
+              for c, (t, v) in series.items()}  # fmt: skip
+    if skipped:
+        listed = ", ".join(f"{c} {n}" for c, n in skipped.items())
+        notes.append(f"samples dropped (a non-finite value or a timestamp jumping away and back "
+                     f"by over {JUMP_S:g} s): {listed}")  # fmt: skip
+    core = {c: s for c, s in series.items() if not c.startswith("sid_") and s[0].size}
     if not core:
         raise LogImportError(f"{path}: none of the mapped messages are in this log")
-    start = max(min(s[0]) for s in core.values())
-    end = min(max(s[0]) for s in core.values())
+    start = max(float(np.min(s[0])) for s in core.values())
+    end = min(float(np.max(s[0])) for s in core.values())
+    if end - start >= 2.0 / rate_hz:
+        lo, hi, gaps = _stretch(core, start, end)
+        if (lo, hi) != (start, end):
+            notes.append(
+                f"kept {lo - start:.3f}–{hi - start:.3f} s of {end - start:.3f} s: the longest "
+                f"stretch without a gap over {JUMP_S:g} s (gaps: "
+                + ", ".join(f"{c} {a - start:.3f}–{b - start:.3f} s" for c, a, b in gaps[:5])
+                + (" …" if len(gaps) > 5 else "")
+                + ")"
+            )
+            start, end = lo, hi
     if end - start < 2.0 / rate_hz:
         raise LogImportError(f"{path}: the mapped channels overlap for less than two samples")
+    if (end - start) * rate_hz > MAX_ROWS:
+        raise LogImportError(
+            f"{path}: {end - start:.0f} s at {rate_hz:g} Hz is over {MAX_ROWS} rows; "
+            "import at a lower --rate or split the log"
+        )
     time = np.arange(start, end, 1.0 / rate_hz)
     columns = {}
     for column, (t, v) in series.items():

@@ -99,3 +99,46 @@ def test_imported_px4_record_through_the_post_flight_tools(tmp_path):
     sysid("report", "flight.csv", "--inputs", "aileron", "--outputs", "p", "--order", "1",
           "--out", "report")  # fmt: skip
     assert (tmp_path / "report" / "excitation_1_time.png").exists()
+
+
+def test_a_corrupted_timestamp_is_dropped_not_gridded(tmp_path):
+    """Bad input tried: one vehicle_attitude timestamp 102 h off (a flipped bit) in a 20 s
+    log: it used to stretch the grid to 18.5 million rows (6 GB). The sample is dropped and
+    named; the record keeps its 20 s."""
+    path = tmp_path / "flight.ulg"
+    px4_log(path, seconds=20.0)
+    data = bytearray(path.read_bytes())
+    # The 500th attitude sample's timestamp (uint64 little-endian after the msg_id).
+    stamp = (1_000_000 + int(499 * 0.01 * 1e6)).to_bytes(8, "little")
+    at = data.find(stamp)
+    assert at > 0
+    data[at : at + 8] = (1_000_000 + 102 * 3600 * 10**6).to_bytes(8, "little")
+    path.write_bytes(bytes(data))
+    imported = import_log(path, SURFACES, 50.0)
+    assert imported.time[-1] == pytest.approx(19.98, abs=0.05)
+    assert any("samples dropped" in n and "phi 1" in n for n in imported.notes), imported.notes
+
+
+def test_a_gap_in_the_log_is_not_interpolated_across(tmp_path):
+    """Bad input tried: logging paused for 5 s mid-flight (every topic): the record is the
+    longer stretch, and the note says what was cut."""
+    path = tmp_path / "gap.ulg"
+    _, phi, p = px4_log(tmp_path / "whole.ulg", seconds=20.0)  # the flight, then without 6–11 s
+    n, dt = 2000, 0.01
+    times = np.arange(n) * dt
+    aileron = np.zeros(n)
+    with ULogWriter(path) as writer:
+        for k in range(n):
+            if 6.0 <= times[k] < 11.0:
+                continue
+            us = 1_000_000 + int(times[k] * 1e6)
+            writer.write("vehicle_attitude", timestamp=us, q=quaternion(phi[k], 0.05, 1.0))
+            writer.write("vehicle_angular_velocity", timestamp=us + 100, xyz=[p[k], 0.0, 0.0])
+            writer.write("vehicle_acceleration", timestamp=us + 100, xyz=[0.0, 0.0, -9.81])
+            writer.write("airspeed_validated", timestamp=us + 200, true_airspeed_m_s=21.5)
+            writer.write("airflow_aoa", timestamp=us + 300, aoa_rad=0.06, valid=True)
+            outputs = [1500.0 + 20.0 * aileron[k]] + [1500.0] * 15
+            writer.write("actuator_outputs", timestamp=us + 400, noutputs=8, output=outputs)
+    imported = import_log(path, SURFACES, 50.0)
+    assert imported.time[-1] == pytest.approx(9.0 - 0.0004, abs=0.05)  # 11–20 s: the longer
+    assert any("the longest stretch without a gap" in n for n in imported.notes), imported.notes
