@@ -70,7 +70,7 @@ def _stream(name: str) -> Callable[[bytes], None]:
 
 def _link_unsigned(data: bytes) -> None:
     """Frames as a hostile transmitter sends them: no key. Nothing may get through."""
-    ground = LinkCodec(KEY, GROUND, {AIR_ADDR}, counter=CounterStore(None))
+    ground = LinkCodec(KEY, GROUND, {AIR_ADDR}, counter=CounterStore(None), address=GROUND_ADDR)
     source = AIR_ADDR if data[:1] != b"\x00" else b"X" * 8
     for k in range(1, len(data), 64):
         assert ground.decode(source, data[k : k + 64], float(k)) is None
@@ -79,14 +79,14 @@ def _link_unsigned(data: bytes) -> None:
 def _link_signed(data: bytes) -> None:
     """Frames signed with the key around fuzzed headers and bodies (a sender with the key and a
     bug, or a stolen key): reassembly, MessagePack and the message validator."""
-    ground = LinkCodec(KEY, GROUND, {AIR_ADDR}, counter=CounterStore(None))
+    ground = LinkCodec(KEY, GROUND, {AIR_ADDR}, counter=CounterStore(None), address=GROUND_ADDR)
     now = 0.0
     for k in range(0, len(data), 80):
         piece = data[k : k + 80]
         if len(piece) < HEADER.size:
             break
         body = bytes([VERSION]) + piece[1:]
-        frame = body + ground._tag(body)
+        frame = body + ground._tag(AIR_ADDR, GROUND_ADDR, body)
         now += piece[0] / 10
         out = ground.decode(AIR_ADDR, frame, now)
         if out is not None:
@@ -197,7 +197,14 @@ def seeds(name: str) -> list[bytes]:
         }[name]()  # fmt: skip
         return [bytes([7]) + b"".join(frames), bytes([0]) + frames[0]]
     if name in ("link", "link-signed"):
-        air = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(None), max_payload=64)
+        air = LinkCodec(
+            KEY,
+            AIRCRAFT,
+            {GROUND_ADDR},
+            counter=CounterStore(None),
+            address=AIR_ADDR,
+            max_payload=64,
+        )
         frames = air.encode(messages.to_dict(messages.Notice(text="seed " * 10)))
         if name == "link":
             return [b"\x01" + b"".join(f.ljust(64, b"\x00") for f in frames)]

@@ -156,7 +156,7 @@ PLAIN = st.recursive(
 
 def _ground() -> LinkCodec:
     # Counters from the clock: a counter file is fsynced at creation, 300 times per property.
-    return LinkCodec(KEY, GROUND, {AIR_ADDR}, counter=CounterStore(None))
+    return LinkCodec(KEY, GROUND, {AIR_ADDR}, counter=CounterStore(None), address=GROUND_ADDR)
 
 
 @PROPERTY
@@ -182,7 +182,7 @@ def test_frames_signed_around_arbitrary_bodies_never_raise(data):
                              data.draw(st.integers(0, 3)), data.draw(st.integers(0, 4)),
                              data.draw(st.integers(0, 4)))  # fmt: skip
         body = header + data.draw(st.binary(max_size=200))
-        frame = body + ground._tag(body)
+        frame = body + ground._tag(AIR_ADDR, GROUND_ADDR, body)
         out = ground.decode(AIR_ADDR, frame, float(counter))
         assert out is None or isinstance(out, (dict, list, str, int, float, bytes, bool))
         if out is not None:  # the application's validator then refuses it clearly or takes it
@@ -196,7 +196,7 @@ def test_frames_signed_around_arbitrary_bodies_never_raise(data):
 def test_any_message_survives_fragmentation_and_reordering(message, payload, seed):
     """Any message, any radio payload size, frames reordered by up to the replay window (64
     frames: a frame older than that is refused as stale, so deeper reordering loses it)."""
-    air = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(None),
+    air = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(None), address=AIR_ADDR,
                     max_payload=payload)  # fmt: skip
     ground = _ground()
     body = msgpack.packb(message, use_bin_type=True)

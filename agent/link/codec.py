@@ -4,14 +4,19 @@ authentication, and replay protection.
 Frame (each at most the radio's payload, NP):
 
     offset  size  field
-    0       1     version (1)
+    0       1     version (2)
     1       1     sender role: 0 ground, 1 aircraft (a frame is only accepted from the other role)
     2       8     counter, uint64 big-endian, +1 per frame sent, never reused under a key
     10      2     message number, uint16 (groups the fragments of one message)
     12      1     fragment index
     13      1     fragment count
     14      …     chunk of the MessagePack-encoded message
-    end−12  12    tag: HMAC-SHA-256(key, every byte before it), first 12 bytes
+    end−12  12    tag: HMAC-SHA-256(key, source address ‖ destination address ‖ every byte
+                  before it), first 12 bytes
+
+The tag covers the two radios' 64-bit addresses, which travel in the XBee frame, not in ours:
+with one key on two aircraft (a fleet, a cloned card), a frame for one fails the other's tag,
+whatever source it claims. Still: one key per aircraft–ground pair.
 
 Receiving, in order, each failure dropped and counted before anything is decoded: source
 address not in the allow-list (`wrong_source`), too short or another version (`malformed`),
@@ -34,7 +39,7 @@ from pathlib import Path
 
 import msgpack
 
-VERSION = 1
+VERSION = 2
 GROUND, AIRCRAFT = 0, 1
 HEADER = struct.Struct(">BBQHBB")
 TAG = 12
@@ -117,10 +122,13 @@ class LinkCodec:
     """One end of the link: frames our messages, checks and reassembles the other end's."""
 
     def __init__(self, key: bytes, role: int, allow: set[bytes], *, counter: CounterStore,
-                 max_payload: int = 256, seen: Path | None = None):  # fmt: skip
+                 max_payload: int = 256, seen: Path | None = None,
+                 address: bytes = b""):  # fmt: skip
         if len(key) < 16:
             raise ValueError("the link key must be at least 16 bytes (32 random bytes advised)")
         self._key, self.role, self.allow = key, role, set(allow)
+        # Our radio's 64-bit address, in every tag (the endpoint sets it when the radio opens).
+        self.address = address
         self._counter = counter
         self.max_payload = max_payload
         self._message_number = 0
@@ -135,8 +143,13 @@ class LinkCodec:
 
     # -- sending ----------------------------------------------------------------------------
 
-    def encode(self, message: dict) -> list[bytes]:
-        """The frames carrying one message (a dict of plain values)."""
+    def encode(self, message: dict, destination: bytes | None = None) -> list[bytes]:
+        """The frames carrying one message (a dict of plain values) to `destination` (default:
+        the one allowed peer)."""
+        if destination is None:
+            if len(self.allow) != 1:
+                raise ValueError("give the destination: more than one peer is allowed")
+            (destination,) = self.allow
         body = msgpack.packb(message, use_bin_type=True, use_single_float=False)
         chunk = self.max_payload - OVERHEAD
         count = max(1, -(-len(body) // chunk))
@@ -148,11 +161,14 @@ class LinkCodec:
             header = HEADER.pack(VERSION, self.role, self._counter.next(), self._message_number,
                                  index, count)  # fmt: skip
             data = header + body[index * chunk : (index + 1) * chunk]
-            frames.append(data + self._tag(data))
+            frames.append(data + self._tag(self.address, destination, data))
         return frames
 
-    def _tag(self, data: bytes) -> bytes:
-        return hmac.new(self._key, data, hashlib.sha256).digest()[:TAG]
+    def _tag(self, source: bytes, destination: bytes, data: bytes) -> bytes:
+        mac = hmac.new(self._key, source.rjust(8, b"\0"), hashlib.sha256)
+        mac.update(destination.rjust(8, b"\0"))
+        mac.update(data)
+        return mac.digest()[:TAG]
 
     # -- receiving --------------------------------------------------------------------------
 
@@ -163,7 +179,7 @@ class LinkCodec:
         if len(frame) < OVERHEAD or frame[0] != VERSION:
             return self._drop("malformed")
         data, tag = frame[:-TAG], frame[-TAG:]
-        if not hmac.compare_digest(tag, self._tag(data)):
+        if not hmac.compare_digest(tag, self._tag(source, self.address, data)):
             return self._drop("bad_tag")
         _, role, counter, number, index, count = HEADER.unpack_from(data)
         if role == self.role:

@@ -35,8 +35,9 @@ def build_endpoint(cfg: Link, role: str, base: Path, clock: Clock,
         if sessions:  # a frame before the session exists is dropped, as noise would be
             sessions[0].receive(source, payload, t)
 
-    def opened(radio: XBeeRadio) -> None:  # the module's NP, read at every open
+    def opened(radio: XBeeRadio) -> None:  # the module's NP and address, read at every open
         codec.max_payload = radio.max_payload
+        codec.address = radio.address
 
     radio = XBeeRadio(cfg.port, cfg.baud, clock, receive, on_open=opened)
     session = LinkSession(codec, radio, peer, clock, on_message,

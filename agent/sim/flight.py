@@ -367,7 +367,8 @@ async def ground_station(module: EmulatedXBee, key: bytes, clock, tasks) -> Grou
             if attempt == OPEN_ATTEMPTS - 1:
                 raise
             log.warning("simulated ground radio: %s; opening again", exc)
-    codec = LinkCodec(key, GROUND, {AIR}, counter=CounterStore(), max_payload=radio.max_payload)
+    codec = LinkCodec(key, GROUND, {AIR}, counter=CounterStore(), max_payload=radio.max_payload,
+                      address=radio.address)  # fmt: skip
     ground = Ground(None, radio)  # type: ignore[arg-type]
     ground.session = LinkSession(codec, radio, AIR, clock, ground.on_message)
     holder.append(ground)

@@ -151,8 +151,9 @@ def test_damaged_logs(tmp_path, damage):
 
 def test_fifty_flipped_bytes_cost_the_damaged_messages_not_the_rest(tmp_path):
     """Bad input tried: 50 bytes flipped at random through a 10 s DataFlash log: it used to be
-    cut silently (1.9 s of 10 s here, exit 0; another seed made the grid 1.1e6 s long). pymavlink resyncs past
-    each damaged message; the import keeps reading, and what it skipped or dropped is noted."""
+    cut silently (1.9 s of 10 s here, exit 0; another seed made the grid 1.1e6 s long).
+    pymavlink resyncs past each damaged message; the import keeps reading, and what it
+    skipped or dropped is noted."""
     path = tmp_path / "flipped.bin"
     systemid_log(path, seconds=10.0)
     data = bytearray(path.read_bytes())

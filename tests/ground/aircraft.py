@@ -117,6 +117,7 @@ async def rig(tmp_path: Path, status_every: float = 0.2):
                       lambda s, p, t: holder[0].receive(s, p, t))  # fmt: skip
     await radio.open()
     codec.max_payload = radio.max_payload
+    codec.address = radio.address
     aircraft.session = LinkSession(codec, radio, GROUND, clock, aircraft.on_message)
     holder.append(aircraft.session)
     tasks.append(asyncio.create_task(aircraft.session.run(), name="air-session"))

@@ -59,6 +59,7 @@ async def link_pair(tmp_path: Path, *, escaped: bool = False, channel: RfChannel
                           lambda s, p, t, h=holder: h[0].receive(s, p, t))  # fmt: skip
         await radio.open()
         codec.max_payload = radio.max_payload
+        codec.address = radio.address
         session = LinkSession(codec, radio, peer, clock, lambda m, _seq, box=inbox: box.append(m),
                               deadline_s=deadline_s)  # fmt: skip
         holder.append(session)

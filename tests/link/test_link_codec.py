@@ -27,9 +27,9 @@ AIR, GROUND_ADDR, INTRUDER = b"A" * 8, b"G" * 8, b"X" * 8
 
 def ends(tmp_path, max_payload: int = 256):
     ground = LinkCodec(KEY, GROUND, {AIR}, counter=CounterStore(tmp_path / "g"),
-                       max_payload=max_payload)  # fmt: skip
+                       max_payload=max_payload, address=GROUND_ADDR)  # fmt: skip
     air = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(tmp_path / "a"),
-                    max_payload=max_payload)  # fmt: skip
+                    max_payload=max_payload, address=AIR)  # fmt: skip
     return ground, air
 
 
@@ -71,10 +71,11 @@ def test_attacks_are_counted_and_never_delivered(tmp_path):
         assert ground.decode(AIR, air.encode(message)[0], 0) == message
     assert ground.decode(AIR, old, 0) is None
     assert ground.counters["stale"] == 1
-    # Reflected: the ground's own frame sent back to it as if from the aircraft.
+    # Reflected: the ground's own frame sent back to it as if from the aircraft. Its tag
+    # binds ground → aircraft, so it fails as a forgery before the direction byte is read.
     (own,) = ground.encode(message)
     assert ground.decode(AIR, own, 0) is None
-    assert ground.counters["wrong_direction"] == 1
+    assert ground.counters["bad_tag"] == 4
     assert ground.counters["messages"] == 71
 
 
@@ -123,13 +124,17 @@ def test_short_keys_are_refused(tmp_path):
 
 def test_a_restarted_receiver_still_refuses_old_frames(tmp_path):
     seen = tmp_path / "seen"
-    air = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(tmp_path / "a"))
-    ground = LinkCodec(KEY, GROUND, {AIR}, counter=CounterStore(tmp_path / "g"), seen=seen)
+    air = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(tmp_path / "a"), address=AIR)
+    ground = LinkCodec(
+        KEY, GROUND, {AIR}, counter=CounterStore(tmp_path / "g"), seen=seen, address=GROUND_ADDR
+    )
     frames = [air.encode({"kind": "ping", "v": 1, "n": k})[0] for k in range(3)]
     for frame in frames:
         assert ground.decode(AIR, frame, 0) is not None
     assert ground.save_seen()
-    restarted = LinkCodec(KEY, GROUND, {AIR}, counter=CounterStore(tmp_path / "g"), seen=seen)
+    restarted = LinkCodec(
+        KEY, GROUND, {AIR}, counter=CounterStore(tmp_path / "g"), seen=seen, address=GROUND_ADDR
+    )
     assert all(restarted.decode(AIR, f, 0) is None for f in frames)  # replayed after restart
     assert restarted.counters["replayed"] + restarted.counters["stale"] == 3
     assert restarted.decode(AIR, air.encode({"kind": "ping", "v": 1})[0], 0) is not None
@@ -139,10 +144,12 @@ def test_a_counter_jump_far_past_the_window_is_accepted_without_blowing_up(tmp_p
     """A sender whose counter file was lost falls back to the wall clock in µs (≈ 2**50): the
     receiver, which had seen small counters, must take the jump (hypothesis found the window
     shift asking for petabytes at a jump to 2**64 − 1)."""
-    ground = LinkCodec(KEY, GROUND, {AIR}, counter=CounterStore(tmp_path / "g"))
-    air = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(tmp_path / "a"))
+    ground = LinkCodec(
+        KEY, GROUND, {AIR}, counter=CounterStore(tmp_path / "g"), address=GROUND_ADDR
+    )
+    air = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(tmp_path / "a"), address=AIR)
     assert ground.decode(AIR, air.encode({"kind": "ping", "v": 1})[0], 0) is not None
-    clocked = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(None))
+    clocked = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(None), address=AIR)
     frames = [clocked.encode({"kind": "ping", "v": 1, "n": k})[0] for k in range(3)]
     assert [ground.decode(AIR, f, 0) is not None for f in frames] == [True] * 3
     assert ground.decode(AIR, frames[0], 0) is None  # and the window works after the jump

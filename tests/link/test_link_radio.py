@@ -153,6 +153,7 @@ async def test_a_restarted_receiver_takes_the_senders_next_message(tmp_path):
         inbox: list = []
         codec = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(tmp_path / "a2"))
         codec.max_payload = pair.air.radio.max_payload
+        codec.address = pair.air.radio.address
         session = LinkSession(codec, pair.air.radio, GROUND_ADDR, pair.air.session._clock,
                               lambda m, _seq: inbox.append(m))  # fmt: skip
         pair.air.session = session
