@@ -265,9 +265,13 @@ class Agent:
             return
         # Built, not opened: the radio's watch task opens it beside the drivers, so a module
         # that does not answer at power-up leaves the aircraft recording without a link.
-        self.radio, self.session = build_endpoint(
-            self.config.link, AIRCRAFT, self.base, self.clock, self._on_ground
-        )
+        try:
+            self.radio, self.session = build_endpoint(
+                self.config.link, AIRCRAFT, self.base, self.clock, self._on_ground
+            )
+        except (ValueError, OSError) as exc:  # the link refused, not the agent: it records
+            self.counters["link_refused"] += 1
+            log.error("link refused, flying without it: %s", exc)
 
     # -- events -----------------------------------------------------------------------------
 

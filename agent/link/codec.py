@@ -135,7 +135,15 @@ class LinkCodec:
         self._seen_path = seen
         floors = {}
         if seen is not None and seen.exists():
-            floors = {bytes.fromhex(k): int(v) for k, v in json.loads(seen.read_text()).items()}
+            try:
+                floors = {bytes.fromhex(k): int(v)
+                          for k, v in json.loads(seen.read_text()).items()}  # fmt: skip
+            except (ValueError, AttributeError, TypeError, UnicodeDecodeError) as exc:
+                raise ValueError(
+                    f"{seen}: the replay state is unreadable ({exc}); without it every frame "
+                    "recorded under this key would be accepted again: restore the file or "
+                    "give both ends a new key"
+                ) from exc
         self._windows: dict[bytes, ReplayWindow] = {a: ReplayWindow(f) for a, f in floors.items()}
         self._saved: dict[bytes, int] = dict(floors)
         self._partials: dict[bytes, OrderedDict[int, _Partial]] = {}
@@ -221,7 +229,10 @@ class LinkCodec:
     def write_seen(self, snapshot: dict[bytes, int]) -> None:
         """Write a snapshot (file-system work: the session runs it off the event loop)."""
         tmp = self._seen_path.with_suffix(".tmp")
-        tmp.write_text(json.dumps({a.hex(): h for a, h in snapshot.items()}))
+        with open(tmp, "w") as handle:
+            handle.write(json.dumps({a.hex(): h for a, h in snapshot.items()}))
+            handle.flush()
+            os.fsync(handle.fileno())
         tmp.replace(self._seen_path)
 
     def _drop(self, reason: str) -> None:

@@ -22,12 +22,22 @@ def build_endpoint(cfg: Link, role: str, base: Path, clock: Clock,
     if cfg.peer is None:
         raise ValueError("[link] peer (the other end's 64-bit address) is not set")
     peer = bytes.fromhex(cfg.peer)
+    counter, seen = base / cfg.counter_file, base / cfg.seen_file
+    if counter.exists() and not seen.exists():
+        raise ValueError(
+            f"{seen} is missing while {counter} exists: this end has used the key before, and "
+            "without its replay state every frame recorded under the key would be accepted "
+            "again (a recorded Revert or Arm replayed): restore the file or give both ends a "
+            "new key"
+        )
+    if not seen.exists():  # a first start under this key: the state starts here, saved
+        seen.write_text("{}")
     codec = LinkCodec(
         load_key(base / cfg.key_file),
         role,
         {peer},
-        counter=CounterStore(base / cfg.counter_file),
-        seen=base / cfg.seen_file,
+        counter=CounterStore(counter),
+        seen=seen,
     )
     sessions: list[LinkSession] = []
 

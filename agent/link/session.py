@@ -78,6 +78,9 @@ class LinkSession:
         self._last_sent = -1e9
         self._wake = asyncio.Event()
         self._saved_at = -1e9
+        # Reliable messages (the ground's commands) held until the replay state that covers
+        # them is on disk: a command acted on is never accepted again after a reboot.
+        self._acting: list[tuple[messages._Message, int | None]] = []
         self.counters: Counter[str] = Counter()
 
     # -- application side -----------------------------------------------------------------
@@ -175,13 +178,36 @@ class LinkSession:
             log.warning("link: %s", exc)
             return
         self.counters["delivered"] += 1
-        if not isinstance(message, messages.Ping):
+        if isinstance(message, messages.Ping):
+            return
+        if seq is None:  # status and the like: acted on at once
+            self._on_message(message, seq)
+        else:
+            self._acting.append((message, seq))
+            self._wake.set()
+
+    async def _act(self) -> None:
+        """Save the replay state (fsynced, off the loop), then hand on the held messages."""
+        snapshot = self._codec.seen_snapshot()
+        if snapshot is not None:
+            await asyncio.to_thread(self._codec.write_seen, snapshot)
+        held, self._acting = self._acting, []
+        for message, seq in held:
             self._on_message(message, seq)
 
     # -- sending ----------------------------------------------------------------------------
 
     async def run(self) -> None:
         """Send acks, reliable messages, status and heartbeats until cancelled."""
+        try:
+            await self._serve()
+        finally:  # stopping: the replay state as it stands, whatever the last save was
+            snapshot = self._codec.seen_snapshot()
+            if snapshot is not None:
+                with contextlib.suppress(OSError):
+                    self._codec.write_seen(snapshot)
+
+    async def _serve(self) -> None:
         while True:
             # asyncio.timeout, not wait_for: on Python 3.11 wait_for can swallow a
             # cancellation that lands as the wait completes, and this loop would never stop.
@@ -189,6 +215,8 @@ class LinkSession:
                 async with asyncio.timeout(TICK_S):
                     await self._wake.wait()
             self._wake.clear()
+            if self._acting:
+                await self._act()
             await self._send_due()
             now = self._clock.now()
             if now - self._saved_at >= SAVE_SEEN_S:

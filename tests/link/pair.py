@@ -53,7 +53,8 @@ async def link_pair(tmp_path: Path, *, escaped: bool = False, channel: RfChannel
     for name, role, module, peer in (("air", AIRCRAFT, air_module, GROUND_ADDR),
                                       ("ground", GROUND, ground_module, AIR_ADDR)):  # fmt: skip
         inbox: list = []
-        codec = LinkCodec(KEY, role, {peer}, counter=CounterStore(tmp_path / f"{name}.counter"))
+        codec = LinkCodec(KEY, role, {peer}, counter=CounterStore(tmp_path / f"{name}.counter"),
+                          seen=tmp_path / f"{name}.seen")  # fmt: skip
         holder: list[LinkSession] = []
         radio = XBeeRadio(str(module.path), 115200, clock,
                           lambda s, p, t, h=holder: h[0].receive(s, p, t))  # fmt: skip

@@ -275,3 +275,55 @@ async def test_an_open_given_up_leaves_no_reader_on_the_port(tmp_path, monkeypat
     finally:
         running.cancel()
         await asyncio.gather(running, return_exceptions=True)
+
+
+async def test_a_command_acted_on_is_refused_when_replayed_after_a_reboot(tmp_path):
+    """Bad input tried: the ground's Revert recorded off the air and replayed to the aircraft
+    right after it rebooted. The replay state is written (fsynced) before a command is acted
+    on, so the restarted end refuses every recorded frame; it used to be saved about once a
+    second, so a reboot within that second accepted the Revert again."""
+    from agent.link.codec import AIRCRAFT, CounterStore, LinkCodec
+    from tests.link.pair import AIR_ADDR, GROUND_ADDR, KEY
+
+    async with link_pair(tmp_path) as pair:
+        heard: list[tuple[bytes, bytes]] = []
+        deliver = pair.air.radio._on_frame
+
+        def record(source, payload, t):
+            heard.append((source, payload))
+            deliver(source, payload, t)
+
+        pair.air.radio._on_frame = record
+        pair.ground.session.send_reliable(messages.Revert())
+        assert await wait_for(lambda: any(isinstance(m, messages.Revert) for m in pair.air.inbox))
+        # The reboot, at once: a new end from the files the old one left.
+        rebooted = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(tmp_path / "r"),
+                             seen=tmp_path / "air.seen", address=AIR_ADDR)  # fmt: skip
+        replayed = [rebooted.decode(source, payload, 0.0) for source, payload in heard]
+    assert heard
+    assert replayed == [None] * len(heard)
+    assert rebooted.counters["replayed"] + rebooted.counters["stale"] == len(heard)
+
+
+def test_a_missing_or_damaged_replay_state_refuses_the_link(tmp_path):
+    """Bad input tried: the seen file deleted while the counter file is there (the key was
+    used: every recorded frame would be accepted again), and a seen file of garbage (it used
+    to stop the agent at start-up). build_endpoint refuses with the reason; the agent then
+    flies and records without a link (runtime._build_link)."""
+    from agent.clock import LoopClock
+    from agent.config import Link
+    from agent.link.codec import AIRCRAFT
+    from agent.link.endpoint import build_endpoint
+    from tests.link.pair import GROUND_ADDR, KEY
+
+    (tmp_path / "link.key").write_text(KEY.hex())
+    cfg = Link(port=str(tmp_path / "nowhere"), peer=GROUND_ADDR.hex(), key_file="link.key",
+               counter_file="air.counter", seen_file="air.seen")  # fmt: skip
+    build_endpoint(cfg, AIRCRAFT, tmp_path, LoopClock(), lambda *_: None)  # a first start
+    assert (tmp_path / "air.seen").read_text() == "{}"  # its state starts saved
+    (tmp_path / "air.seen").unlink()
+    with pytest.raises(ValueError, match=r"air\.seen is missing while .*air\.counter exists"):
+        build_endpoint(cfg, AIRCRAFT, tmp_path, LoopClock(), lambda *_: None)
+    (tmp_path / "air.seen").write_text("{not json")
+    with pytest.raises(ValueError, match="the replay state is unreadable"):
+        build_endpoint(cfg, AIRCRAFT, tmp_path, LoopClock(), lambda *_: None)
