@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import json
 import logging
+import os
+import time
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -139,6 +141,27 @@ class ModelStore:
         self._ids: dict[str, str | None] = {}
         """Candidates awaiting the operator's decision, the latest CANDIDATES_KEPT (each
         holds its data set; a long flight must not grow without bound)."""
+
+    def reserve_number(self) -> int:
+        """The next model number, never given twice, across boots too: the file `numbering`
+        holds the last one given, written (fsynced) before it is used. A Decision names a
+        model by its id, so an id from before a reboot (a queued or replayed decision) must
+        never name another model. An unreadable file resumes from the wall clock in seconds,
+        above any number given before."""
+        path = self.directory / "numbering"
+        try:
+            last = int(path.read_text()) if path.exists() else 0
+        except (OSError, ValueError):
+            log.error("%s is unreadable; model numbers resume from the clock", path)
+            last = int(time.time())
+        number = last + 1
+        tmp = path.with_suffix(".tmp")
+        with open(tmp, "w") as handle:
+            handle.write(str(number))
+            handle.flush()
+            os.fsync(handle.fileno())
+        tmp.replace(path)
+        return number
 
     def add(self, candidate: Candidate) -> None:
         self.candidates[candidate.model_id] = candidate

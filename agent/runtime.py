@@ -455,7 +455,8 @@ class Agent:
         axes = self.ident.axes
         inputs, outputs = self.config.identification.channels.axis_set(axes)
         roles = AXIS_SETS[axes][1]
-        self._model_number += 1
+        # Numbered across boots (the model store's file): an id never names two models.
+        self._model_number = await loop.run_in_executor(self._store, self.models.reserve_number)
         model_id = f"{axes[:3]}-{self._model_number}"
         navigation = self.config.identification.channels.navigation()
         needed = {*inputs, *outputs, *navigation}

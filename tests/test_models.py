@@ -149,3 +149,16 @@ def test_the_nominal_id_follows_accept_and_revert(tmp_path):
     store.revert("lateral")
     assert store.nominal_id("lateral") == "a"
     assert ModelStore(tmp_path).nominal_id("lateral") == "a"  # read back after a restart
+
+
+def test_model_numbers_are_never_given_twice_across_boots(tmp_path):
+    """Bad input tried: a Decision for "lat-1" queued or replayed after a reboot. Ids used to
+    restart at lat-1 every boot, so it could make a model the operator never saw nominal; the
+    numbering now goes on from the store's file, and an unreadable file resumes from the
+    clock (above anything given before)."""
+    store = ModelStore(tmp_path)
+    assert [store.reserve_number() for _ in range(3)] == [1, 2, 3]
+    rebooted = ModelStore(tmp_path)
+    assert rebooted.reserve_number() == 4
+    (tmp_path / "numbering").write_text("garbage")
+    assert ModelStore(tmp_path).reserve_number() > 1_700_000_000
