@@ -7,6 +7,7 @@ ignored setting. Loaded once at start-up and passed down; there are no global se
 from __future__ import annotations
 
 import itertools
+import os
 import tomllib
 from pathlib import Path
 from typing import Annotated, Literal
@@ -491,7 +492,7 @@ def load_key(path: str | Path) -> bytes:
     try:
         text = path.read_text().strip()
     except OSError as exc:
-        make = "python -c 'import secrets; print(secrets.token_hex(32))' > " + str(path)
+        make = f"(umask 077; python -c 'import secrets; print(secrets.token_hex(32))' > {path})"
         raise ValueError(
             f"{path}: cannot read the link key ({exc.strerror or exc}); make one with: {make}"
         ) from exc
@@ -501,6 +502,17 @@ def load_key(path: str | Path) -> bytes:
         raise ValueError(f"{path}: the link key must be hex digits") from None
     if len(key) < 16:
         raise ValueError(f"{path}: the link key has {len(key)} bytes; use 32")
+    if len(set(key)) < len(key) // 4:  # 32 random bytes hold ~26 distinct values; 00…00 has 1
+        raise ValueError(
+            f"{path}: the link key has only {len(set(key))} distinct byte values in "
+            f"{len(key)}: not a random key; make one with "
+            "python -c 'import secrets; print(secrets.token_hex(32))'"
+        )
+    if os.name == "posix" and path.stat().st_mode & 0o077:
+        raise ValueError(
+            f"{path}: the link key is readable by other users (mode "
+            f"{path.stat().st_mode & 0o777:03o}); chmod 600 {path}"
+        )
     return key
 
 

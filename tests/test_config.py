@@ -141,7 +141,7 @@ def test_link_key_file_problems_are_explained(tmp_path):
     from agent.config import load_key
 
     # Bad input tried: a missing key file, a key that is not hex, a key that is too short.
-    with pytest.raises(ValueError, match="make one with: python -c"):
+    with pytest.raises(ValueError, match=r"make one with: \(umask 077; python -c"):
         load_key(tmp_path / "none.key")
     (tmp_path / "bad.key").write_text("zz" * 32)
     with pytest.raises(ValueError, match="must be hex digits"):
@@ -149,8 +149,17 @@ def test_link_key_file_problems_are_explained(tmp_path):
     (tmp_path / "short.key").write_text("ab" * 8 + "\n")
     with pytest.raises(ValueError, match="has 8 bytes; use 32"):
         load_key(tmp_path / "short.key")
-    (tmp_path / "good.key").write_text("ab" * 32 + "\n")
-    assert load_key(tmp_path / "good.key") == bytes([0xAB]) * 32
+    (tmp_path / "good.key").write_text(bytes(range(32)).hex() + "\n")
+    (tmp_path / "good.key").chmod(0o600)
+    assert load_key(tmp_path / "good.key") == bytes(range(32))
+    # Bad input tried: a key of one repeated byte, and a good key readable by other users.
+    (tmp_path / "weak.key").write_text("ab" * 32 + "\n")
+    (tmp_path / "weak.key").chmod(0o600)
+    with pytest.raises(ValueError, match="only 1 distinct byte values in 32: not a random key"):
+        load_key(tmp_path / "weak.key")
+    (tmp_path / "good.key").chmod(0o644)
+    with pytest.raises(ValueError, match=r"readable by other users \(mode 644\); chmod 600"):
+        load_key(tmp_path / "good.key")
 
 
 def test_the_simulators_agent_config_file_loads_back_to_the_same_config(tmp_path):

@@ -277,6 +277,7 @@ async def _parts(options: SimOptions, tmp: Path, params: Params, say, operator: 
     ports.mkdir(parents=True, exist_ok=True)
     key = secrets.token_bytes(32)
     (tmp / "link.key").write_text(key.hex())
+    (tmp / "link.key").chmod(0o600)
     aircraft = SimAircraft(
         AircraftOptions(
             aircraft=options.aircraft,

@@ -110,6 +110,7 @@ async def rig(tmp_path: Path, status_every: float = 0.2):
              for m in (air_module, ground_module)]  # fmt: skip
     await asyncio.sleep(0.05)
     (tmp_path / "link.key").write_text(KEY.hex())
+    (tmp_path / "link.key").chmod(0o600)
     aircraft = ScriptedAircraft()
     codec = LinkCodec(KEY, AIRCRAFT, {GROUND}, counter=CounterStore(tmp_path / "air.counter"))
     holder: list[LinkSession] = []

@@ -192,6 +192,7 @@ async def test_an_agent_whose_radio_does_not_answer_at_start_records_and_links_l
     await asyncio.sleep(0.05)
     air.unplug()
     (tmp_path / "link.key").write_text(KEY.hex())
+    (tmp_path / "link.key").chmod(0o600)
     off = {"enabled": False}
     config = Config(
         recorder=Recorder(log_dir=str(tmp_path / "logs"), capacity_s=60.0),
@@ -317,6 +318,8 @@ def test_a_missing_or_damaged_replay_state_refuses_the_link(tmp_path):
     from tests.link.pair import GROUND_ADDR, KEY
 
     (tmp_path / "link.key").write_text(KEY.hex())
+
+    (tmp_path / "link.key").chmod(0o600)
     cfg = Link(port=str(tmp_path / "nowhere"), peer=GROUND_ADDR.hex(), key_file="link.key",
                counter_file="air.counter", seen_file="air.seen")  # fmt: skip
     build_endpoint(cfg, AIRCRAFT, tmp_path, LoopClock(), lambda *_: None)  # a first start
