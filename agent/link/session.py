@@ -90,7 +90,11 @@ class LinkSession:
         seq = self._next_seq
         self._next_seq += 1
         if len(self._outbox) >= OUTBOX:
-            self._outbox.popleft()
+            # The oldest message that is not an Abort goes: an abort queued during an outage
+            # must still reach the aircraft (if all are aborts, the oldest, as they repeat).
+            drop = next((k for k, (_, d) in enumerate(self._outbox) if d.get("kind") != "abort"),
+                        0)  # fmt: skip
+            del self._outbox[drop]
             self.counters["outbox_dropped"] += 1
         self._outbox.append((seq, messages.to_dict(message) | {"e": self._epoch, "s": seq}))
         self._wake.set()

@@ -330,3 +330,21 @@ def test_a_missing_or_damaged_replay_state_refuses_the_link(tmp_path):
     (tmp_path / "air.seen").write_text("{not json")
     with pytest.raises(ValueError, match="the replay state is unreadable"):
         build_endpoint(cfg, AIRCRAFT, tmp_path, LoopClock(), lambda *_: None)
+
+
+async def test_a_queued_abort_survives_a_full_outbox(tmp_path):
+    """Bad input tried: the aircraft's radio unplugged while the ground queues an Abort and
+    then more reliable messages than the outbox holds (64). The outbox used to drop its
+    oldest message, the Abort; it now drops the oldest that is not one."""
+    from agent.link.session import OUTBOX
+
+    async with link_pair(tmp_path) as pair:
+        module = pair.modules[0]  # the aircraft's
+        module.unplug()
+        pair.ground.session.send_reliable(messages.Abort(reason="stop now"))
+        for k in range(OUTBOX + 10):
+            pair.ground.session.send_reliable(messages.Notice(text=f"n{k}"))
+        assert pair.ground.session.counters["outbox_dropped"] > 0
+        module.plug()
+        assert await wait_for(lambda: any(isinstance(m, messages.Abort) for m in pair.air.inbox))
+    assert [m.reason for m in pair.air.inbox if isinstance(m, messages.Abort)] == ["stop now"]
