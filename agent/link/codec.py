@@ -147,6 +147,7 @@ class LinkCodec:
         self._windows: dict[bytes, ReplayWindow] = {a: ReplayWindow(f) for a, f in floors.items()}
         self._saved: dict[bytes, int] = dict(floors)
         self._partials: dict[bytes, OrderedDict[int, _Partial]] = {}
+        self.last_counter = -1
         self.counters: Counter[str] = Counter()
 
     # -- sending ----------------------------------------------------------------------------
@@ -206,6 +207,7 @@ class LinkCodec:
         except (ValueError, msgpack.ExtraData, msgpack.FormatError, msgpack.StackError):
             return self._drop("undecodable")
         self.counters["messages"] += 1
+        self.last_counter = counter  # the frame counter that completed it (the session's epochs)
         return message
 
     def save_seen(self) -> bool:

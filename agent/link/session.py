@@ -70,6 +70,7 @@ class LinkSession:
         self._outbox: deque[tuple[int, dict]] = deque()
         self._flight: dict[int, _InFlight] = {}
         self._peer_epoch: int | None = None
+        self._epoch_counter = -1  # the frame counter at which the peer's epoch began
         self._expected = 1
         self._ahead: dict[int, dict] = {}
         self._acks_due = False
@@ -152,8 +153,17 @@ class LinkSession:
     def _reliable(self, data: dict) -> None:
         epoch, seq = data.get("e"), int(data["s"])
         base = int(data.get("b", 1))
-        if epoch != self._peer_epoch:  # the other end, or this one, (re)started: its numbering
+        counter = self._codec.last_counter
+        if epoch != self._peer_epoch:
+            if counter < self._epoch_counter:
+                # A frame of an older session, reordered behind the new one's: switching back
+                # would deliver that session's messages again. The sender's frame counter never
+                # goes back, across its restarts too, so the newer session has the higher one.
+                self.counters["old_epoch"] += 1
+                return
+            # The other end, or this one, (re)started: its numbering.
             self._peer_epoch, self._expected, self._ahead = epoch, base, {}
+            self._epoch_counter = counter
             self.counters["peer_epochs"] += 1
         elif base > self._expected:
             # Acknowledged below `base` — by this end before a restart (an ack it sent then

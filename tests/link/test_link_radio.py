@@ -348,3 +348,31 @@ async def test_a_queued_abort_survives_a_full_outbox(tmp_path):
         module.plug()
         assert await wait_for(lambda: any(isinstance(m, messages.Abort) for m in pair.air.inbox))
     assert [m.reason for m in pair.air.inbox if isinstance(m, messages.Abort)] == ["stop now"]
+
+
+async def test_a_frame_of_an_older_session_reordered_behind_a_new_one_is_dropped(tmp_path):
+    """Bad input tried: a reliable frame of the ground's previous session (its epoch) arriving
+    after the restarted session's first frame. It used to switch the aircraft's session back
+    to the old epoch and deliver the old session's message; the sender's frame counter never
+    goes back across restarts, so the older epoch is recognised and dropped."""
+    from agent.link.codec import GROUND, CounterStore, LinkCodec
+    from tests.link.pair import AIR_ADDR, GROUND_ADDR, KEY
+
+    # The ground's codec under both of its sessions (a session restarted on the same codec):
+    # consecutive frame counters, so the old frame is inside the replay window.
+    ground = LinkCodec(KEY, GROUND, {AIR_ADDR}, counter=CounterStore(tmp_path / "gc"),
+                       address=GROUND_ADDR)  # fmt: skip
+
+    def reliable(text: str, epoch: int) -> dict:
+        return messages.to_dict(messages.Notice(text=text)) | {"e": epoch, "s": 1, "b": 1}
+
+    (old,) = ground.encode(reliable("from the old session", 111))
+    (new,) = ground.encode(reliable("from the new session", 222))
+    async with link_pair(tmp_path) as pair:
+        session, now = pair.air.session, pair.air.session._clock.now
+        session.receive(GROUND_ADDR, new, now())
+        session.receive(GROUND_ADDR, old, now())  # reordered behind it
+        assert await wait_for(lambda: pair.air.inbox)
+        await asyncio.sleep(0.2)  # anything else that would be delivered
+    assert [m.text for m in pair.air.inbox] == ["from the new session"]
+    assert session.counters["old_epoch"] == 1
