@@ -480,6 +480,10 @@ class Link(_Section):
     seen_file: str = "link.seen"
     """Where this end keeps the highest counter accepted from the peer (replays refused
     across restarts)."""
+    require_encryption: bool = False
+    """Refuse a radio whose AES encryption is off (AT EE = 0): with it off, any node on the
+    network can change the module's settings by Remote AT commands. false: a warning at each
+    open (and the count in the health log)."""
     heartbeat_s: float = Field(1.0, gt=0.0, le=60.0)
     """A heartbeat goes out when nothing else was sent for this long."""
     deadline_s: float = Field(3.0, gt=0.0, le=120.0)

@@ -49,7 +49,8 @@ def build_endpoint(cfg: Link, role: str, base: Path, clock: Clock,
         codec.max_payload = radio.max_payload
         codec.address = radio.address
 
-    radio = XBeeRadio(cfg.port, cfg.baud, clock, receive, on_open=opened)
+    radio = XBeeRadio(cfg.port, cfg.baud, clock, receive, on_open=opened,
+                      require_encryption=cfg.require_encryption)  # fmt: skip
     session = LinkSession(codec, radio, peer, clock, on_message,
                           heartbeat_s=cfg.heartbeat_s, deadline_s=cfg.deadline_s)  # fmt: skip
     sessions.append(session)

@@ -71,6 +71,8 @@ class EmulatedXBee:
         self.network: dict[bytes, EmulatedXBee] = {}
         self.counters: Counter[str] = Counter()
         self._tasks: set[asyncio.Task] = set()
+        self.encryption = False
+        """The module's AES encryption (EE) as configured: off, as a module ships."""
 
     @property
     def path(self) -> Path:
@@ -141,6 +143,7 @@ class EmulatedXBee:
             b"CE": b"\x00", b"NP": self.channel.payload_limit.to_bytes(2, "big"),
             b"MY": b"\xff\xfe", b"BR": b"\x01",
             b"DB": bytes([min(255, max(0, -self.channel.rssi_dbm))]),
+            b"EE": bytes([1 if self.encryption else 0]),
         }  # fmt: skip
         if value and command in answers:  # a write: accepted, value unchanged here
             self._send(api.at_response(frame_id, command, 0))

@@ -75,8 +75,12 @@ class XBeeRadio:
 
     def __init__(self, port: str, baud: int, clock: Clock,
                  on_frame: Callable[[bytes, bytes, float], None],
-                 on_open: Callable[[XBeeRadio], None] | None = None):  # fmt: skip
+                 on_open: Callable[[XBeeRadio], None] | None = None,
+                 require_encryption: bool = False):  # fmt: skip
         self.port, self.baud, self._clock, self._on_frame = port, baud, clock, on_frame
+        self.require_encryption = require_encryption
+        self.encrypted: bool | None = None
+        """The module's AES encryption (AT EE) as read at the last open; None: not known."""
         self._on_open = on_open
         self._device = None
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -115,6 +119,14 @@ class XBeeRadio:
             ) from exc
         device.add_packet_received_callback(self._packet)
         self._device = device
+        if self.encrypted is False:
+            self.counters["unencrypted_opens"] += 1
+            log.warning(
+                "%s: the XBee's AES encryption is off (EE = 0): any node on the network can "
+                "change its settings by Remote AT commands; set EE = 1 and the same KY on both "
+                "modules (or [link] require_encryption to refuse such a module)",
+                self.port,
+            )
         if self._on_open is not None:
             self._on_open(self)
 
@@ -130,6 +142,10 @@ class XBeeRadio:
             device.open()
             max_payload = int.from_bytes(device.get_parameter("NP"), "big")
             address = bytes(device.get_64bit_addr().address)
+            try:
+                encrypted: bool | None = device.get_parameter("EE") == b"\x01"
+            except XBeeException:  # a module without EE: not known
+                encrypted = None
         except (XBeeException, OSError) as exc:
             with contextlib.suppress(Exception):  # closing a half-open device may fail too
                 device.close()
@@ -138,7 +154,12 @@ class XBeeRadio:
             with contextlib.suppress(Exception):
                 device.close()
             raise RadioError(f"{self.port}: the open was given up")
-        self.max_payload, self.address = max_payload, address
+        if encrypted is False and self.require_encryption:
+            with contextlib.suppress(Exception):
+                device.close()
+            raise RadioError(f"{self.port}: the XBee's AES encryption is off (EE = 0) and "
+                             "[link] require_encryption is set: set EE = 1 and KY")  # fmt: skip
+        self.max_payload, self.address, self.encrypted = max_payload, address, encrypted
         return device
 
     def healthy(self) -> bool:

@@ -376,3 +376,39 @@ async def test_a_frame_of_an_older_session_reordered_behind_a_new_one_is_dropped
         await asyncio.sleep(0.2)  # anything else that would be delivered
     assert [m.text for m in pair.air.inbox] == ["from the new session"]
     assert session.counters["old_epoch"] == 1
+
+
+async def test_a_radio_with_its_encryption_off_is_reported_or_refused(tmp_path):
+    """Bad input tried: a module with AES encryption off (EE = 0, as shipped), whose settings
+    any node on the network could change by Remote AT commands: the open reads EE, warns and
+    counts it; with require_encryption the module is refused with the reason; with EE = 1 it
+    opens quietly."""
+    from agent.clock import LoopClock
+    from drivers.xbee.driver import RadioError, XBeeRadio
+    from tests.link.pair import AIR_ADDR
+
+    clock = LoopClock()
+    module = EmulatedXBee("air", AIR_ADDR, tmp_path, RfChannel(), clock)
+    running = asyncio.create_task(module.run(), name="xbee-air")
+    await asyncio.sleep(0.05)
+    try:
+        plain = XBeeRadio(str(module.path), 115200, clock, lambda *_: None)
+        await plain.open()
+        assert plain.encrypted is False
+        assert plain.counters["unencrypted_opens"] == 1
+        await plain.close()
+        strict = XBeeRadio(str(module.path), 115200, clock, lambda *_: None,
+                           require_encryption=True)  # fmt: skip
+        with pytest.raises(RadioError, match=r"encryption is off \(EE = 0\)"):
+            await strict.open()
+        await strict.close()
+        module.encryption = True
+        secured = XBeeRadio(str(module.path), 115200, clock, lambda *_: None,
+                            require_encryption=True)  # fmt: skip
+        await secured.open()
+        assert secured.encrypted is True
+        assert secured.counters["unencrypted_opens"] == 0
+        await secured.close()
+    finally:
+        running.cancel()
+        await asyncio.gather(running, return_exceptions=True)
