@@ -357,7 +357,10 @@ class Agent:
             elif isinstance(message, messages.Abort):
                 self.scheduler.abort(message.reason)
             elif isinstance(message, messages.IdentSettings):
-                self.ident = message
+                reason = _settings_refusal(self.config, message)
+                ok = not reason
+                if ok:
+                    self.ident = message
             elif isinstance(message, messages.Decision):
                 check = await loop.run_in_executor(self._store, self._decide, message)
                 if check is not None:  # a new nominal replacing one: self-check it next run
@@ -795,6 +798,18 @@ def _open_files() -> int | None:
         return len(os.listdir("/proc/self/fd"))
     except OSError:
         return None
+
+
+def _settings_refusal(config: Config, ident: messages.IdentSettings) -> str:
+    """Why settings from the ground may not be used onboard ("" when they may): an explicit p
+    or order beyond the configured markov_max / order_max (the automatic search keeps within
+    them; an explicit value skipped the bounds)."""
+    cfg, reasons = config.identification, []
+    if isinstance(ident.markov, int) and not 1 <= ident.markov <= cfg.markov_max:
+        reasons.append(f"p {ident.markov} is outside 1…{cfg.markov_max} (markov_max)")
+    if isinstance(ident.order, int) and not 1 <= ident.order <= cfg.order_max:
+        reasons.append(f"order {ident.order} is outside 1…{cfg.order_max} (order_max)")
+    return "; ".join(reasons)
 
 
 def _settings(config: Config, ident: messages.IdentSettings) -> Settings:

@@ -48,6 +48,8 @@ async def test_ground_commands_are_acknowledged_with_the_reason(agent):
         messages.Decision(model_id="nope", accept=True),
         messages.Revert(),
         messages.IdentSettings(axes="full", update_period_s=20.0),
+        # Bad input tried: an explicit p and order beyond markov_max / order_max.
+        messages.IdentSettings(axes="lateral", markov=1000, order=500),
     ]
     for seq, command in enumerate(commands, start=1):
         agent._on_ground(command, seq)  # queued for the command task, in order
@@ -65,7 +67,10 @@ async def test_ground_commands_are_acknowledged_with_the_reason(agent):
     assert not acks[5].ok
     assert "no previous" in acks[5].reason
     assert acks[6].ok
-    assert agent.ident.axes == "full"
+    assert not acks[7].ok
+    assert "p 1000 is outside 1…" in acks[7].reason
+    assert "order 500 is outside 1…" in acks[7].reason
+    assert agent.ident.axes == "full"  # the refused settings did not replace the last
 
 
 def test_every_update_period_queues_the_latest_data(agent):
