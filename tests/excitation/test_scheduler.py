@@ -155,11 +155,15 @@ async def test_real_clock_timing_holds_on_this_loop():
     await fly(s, sink, plan)
     start = next(e.time for e in events if isinstance(e, Event) and e.kind == "started")
     times = np.array([t for t, _ in sink.commands()[:-1]])
-    index = np.round((times - start) / DT)
-    # Each command goes out in its own period (late ones skip ahead, never drift).
-    assert np.all((times - start) - index * DT < DT)
+    # The period each command went out in (its deadline at or before it): never two in one,
+    # on the real loop, however late a wake-up (late ones skip ahead). How late a wake-up may
+    # be is the machine's, not a property of the scheduler: it is not asserted here (a loaded
+    # machine woke one command 0.6 periods late, and a nearest-period index then put it in the
+    # next one's). test_no_drift_against_absolute_deadlines_with_late_wakeups injects 10 ms
+    # of lateness per command on a virtual clock: no drift.
+    index = np.floor((times - start) / DT + 1e-9)
     assert np.all(np.diff(index) >= 1)
-    assert times[-1] - (start + 2.0) < DT
+    assert index[-1] <= round(2.0 / DT)
 
 
 async def test_trim_is_captured_and_commands_are_trim_plus_plan():

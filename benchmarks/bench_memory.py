@@ -1,0 +1,88 @@
+"""Peak memory and time of `sysid identify` on long records (issue 20's bound).
+
+Writes a record of N rows — time, aileron, rudder, beta, p, r, phi: the appendix A.2 lateral
+model under a multisine, with sensor noise, at 100 Hz — then runs `sysid identify` on it in
+a child process and reports the child's peak resident memory (getrusage) and wall time; with
+--parse-only the child only reads the record (agent.analysis.records.read_record).
+
+    .venv/bin/python benchmarks/bench_memory.py --rows 300000 1000000 5000000 [--parse-only]
+
+Linux or macOS (ru_maxrss). A 5-million-row record is about 400 MB on disk, written under
+--dir (default: a temporary directory, removed afterwards).
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from agent.ident import reference
+
+ROOT = Path(__file__).resolve().parents[1]
+DT = 0.01
+BLOCK = 200_000
+
+
+def write_record(path: Path, rows: int) -> None:
+    """The A.2 lateral record repeated to `rows` rows (its 60 s, then again), time running on."""
+    noise = {"beta": 1e-3, "p": 1e-3, "r": 1e-3, "phi": 1e-3}
+    record = reference.make_record(reference.LATERAL, dt=DT, duration=60.0, seed=3, noise=noise)
+    columns = record.columns()
+    names = ["aileron", "rudder", "beta", "p", "r", "phi"]
+    table = np.column_stack([columns[n] for n in names])
+    with path.open("w") as handle:
+        handle.write("time," + ",".join(names) + "\n")
+        for start in range(0, rows, BLOCK):
+            count = min(BLOCK, rows - start)
+            index = np.arange(start, start + count)
+            block = np.column_stack([index * DT, table[index % len(table)]])
+            np.savetxt(handle, block, delimiter=",", fmt="%.9g")
+
+
+def child(args: list[str]) -> tuple[int, float, float, str]:
+    """(exit code, wall s, peak RSS MB, last line of stderr) of one child process."""
+    start = time.perf_counter()
+    done = subprocess.run([sys.executable, *args], capture_output=True, text=True,
+                          cwd=ROOT, check=False)  # fmt: skip
+    wall = time.perf_counter() - start
+    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    per_mb = 1024 * 1024 if sys.platform == "darwin" else 1024  # bytes on macOS, KB on Linux
+    tail = (done.stderr.strip().splitlines() or [""])[-1][:120]
+    # ru_maxrss of the children is the largest of any so far: main() runs them ascending.
+    return done.returncode, wall, peak / per_mb, tail
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rows", type=int, nargs="+", default=[300_000])
+    parser.add_argument("--parse-only", action="store_true")
+    parser.add_argument("--dir", type=Path)
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory(dir=args.dir) as tmp:
+        print("rows       MB on disk   exit   wall s   peak RSS MB   last stderr line")
+        for rows in sorted(args.rows):  # ascending: ru_maxrss of children only grows
+            path = Path(tmp) / f"record_{rows}.csv"
+            write_record(path, rows)
+            if args.parse_only:
+                names = ["aileron", "rudder", "beta", "p", "r", "phi"]
+                code = ("from agent.analysis.records import read_record; "
+                        f"read_record({str(path)!r}, {names!r})")  # fmt: skip
+                run = ["-c", code]
+            else:
+                run = ["-m", "agent", "identify", str(path), "--axes", "lateral", "--json"]
+            exit_code, wall, peak, tail = child(run)
+            size = path.stat().st_size / 1e6
+            print(f"{rows:<10d} {size:10.0f}   {exit_code:4d}   {wall:6.1f}   {peak:11.0f}   "
+                  f"{tail}")  # fmt: skip
+            path.unlink()
+
+
+if __name__ == "__main__":
+    main()
