@@ -10,8 +10,9 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
+
+from tests import waiting
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -33,7 +34,13 @@ def _start_agent(tmp_path: Path, extra: str = "") -> subprocess.Popen:
 
 def test_sigterm_shuts_the_agent_down_cleanly(tmp_path):
     proc = _start_agent(tmp_path)
-    time.sleep(4.0)  # started: the worker process warmed up, the autopilot searched for
+
+    def exec_log() -> str:
+        found = list((tmp_path / "logs").glob("*_exec_*")) if (tmp_path / "logs").exists() else []
+        return found[0].read_text() if found else ""
+
+    # Started and the autopilot searched for: waited for in its execution log, not slept on.
+    waiting.until_sync(lambda: "no autopilot on" in exec_log(), "the autopilot search")
     proc.send_signal(signal.SIGTERM)
     out, _ = proc.communicate(timeout=30)
     assert proc.returncode == 0, out
@@ -60,8 +67,20 @@ def test_realtime_priority_puts_only_the_loop_thread_under_sched_fifo(tmp_path):
     here; without the privilege the agent warns and runs normally (also checked: the warning's
     text)."""
     proc = _start_agent(tmp_path, "[runtime]\nrealtime_priority = 10\n")
+
+    def worker_policy() -> int | None:
+        try:
+            for c in Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split():
+                if b"spawn_main" in Path(f"/proc/{c}/cmdline").read_bytes():
+                    return os.sched_getscheduler(int(c))
+        except OSError:  # a process starting or ending under our feet
+            return None
+        return None
+
     try:
-        time.sleep(4.0)
+        # The worker's initializer lowers it to SCHED_BATCH once it has started: waited for,
+        # not slept on (4 s was too short with both cores busy). The threads are there by then.
+        waiting.until_sync(lambda: worker_policy() == os.SCHED_BATCH, "the worker's SCHED_BATCH")
         policies = {}
         for task in Path(f"/proc/{proc.pid}/task").iterdir():
             try:

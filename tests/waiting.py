@@ -36,3 +36,12 @@ async def until(predicate: Callable[[], Any], what: str,
         assert deadline is None or time.monotonic() < deadline, f"timed out waiting for {what}"
         await wait(0.02)
     return found
+
+
+def until_sync(predicate: Callable[[], Any], what: str, pause_s: float = 0.05) -> Any:
+    """`until` for a test without an event loop (a child process watched through /proc)."""
+    while not (found := predicate()):
+        deadline = _deadline[0]
+        assert deadline is None or time.monotonic() < deadline, f"timed out waiting for {what}"
+        time.sleep(pause_s)
+    return found

@@ -9,7 +9,7 @@ ground) with one part made to fail mid-flight.
 - a sensor's port disappears and comes back in trimmed flight, and the radio is out while the
   next run is identified → the driver reconnects, the gap is logged, the result reaches the
   ground after the outage;
-- an identification fails (a Markov parameter count the record cannot support) → a failure
+- an identification fails (an order one Markov parameter cannot hold) → a failure
   result with the reason, and the agent goes on to identify the next run.
 """
 
@@ -181,12 +181,14 @@ async def test_sensor_replugged_and_result_delivered_after_radio_outage(tmp_path
 
 async def test_identification_failure_is_reported_and_the_next_run_identified(tmp_path):
     async with simulated(SimOptions(preset="lateral", directory=tmp_path)) as sim:
-        ack = await sim.ground.command(messages.IdentSettings(axes="lateral", markov=5000))
-        assert ack.ok
+        # Within markov_max and order_max (the agent refuses beyond them), but an order that
+        # one Markov parameter cannot hold: the worker's identification fails.
+        ack = await sim.ground.command(messages.IdentSettings(axes="lateral", markov=1, order=20))
+        assert ack.ok, ack.reason
         seen = await start_run(sim, "bad-settings")
         failure = await answer(sim, seen)
         assert isinstance(failure, messages.Failure), failure
-        assert "too few for 5000 Markov parameters" in failure.reason  # from the worker
+        assert "order 20 requested but the Hankel matrix has rank" in failure.reason  # worker
         assert sim.agent.counters["identification_failures"] == 1
         sim.aircraft.pilot.set_switch(False)
         await asyncio.sleep(0.5)
