@@ -49,7 +49,7 @@ test: $(STAMP) chromium
 RUNS ?= 1
 test-loaded: $(STAMP)
 	@$(PYTHON) -c "while 1: pass" & h1=$$!; $(PYTHON) -c "while 1: pass" & h2=$$!; \
-	  trap 'kill $$h1 $$h2' EXIT; \
+	  trap 'kill $$h1 $$h2 2>/dev/null' EXIT; trap 'exit 130' INT TERM HUP PIPE; \
 	  for k in $$(seq $(RUNS)); do echo "loaded run $$k of $(RUNS)"; $(MAKE) test || exit 1; done
 
 bench: $(BENCH_STAMP)
