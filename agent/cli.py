@@ -311,26 +311,27 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _positive_seconds(text: str) -> float:
-    """A finite, positive number of seconds for argparse (nan, inf, 0 and negatives refused)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"{text}: give a finite, positive number of seconds")
-    return value
+def _checked(convert, accept, noun: str, hint: str):
+    """An argparse type: `convert` the text (else "is not a <noun>"), then `accept` the value
+    (else the hint)."""
+
+    def parse(text: str):
+        try:
+            value = convert(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a {noun}") from None
+        if not accept(value):
+            raise argparse.ArgumentTypeError(f"{text}: {hint}")
+        return value
+
+    return parse
 
 
-def _port(text: str) -> int:
-    """A UDP port number for argparse: 0 (any) to 65535."""
-    try:
-        port = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a port number") from None
-    if not 0 <= port <= 65535:
-        raise argparse.ArgumentTypeError(f"{port} is not a UDP port: give 0 (any) to 65535")
-    return port
+# nan, inf, 0 and negatives refused; a UDP port from 0 (any) to 65535.
+_positive_seconds = _checked(float, lambda v: math.isfinite(v) and v > 0, "number of seconds",
+                             "give a finite, positive number of seconds")  # fmt: skip
+_port = _checked(int, lambda p: 0 <= p <= 65535, "port number",
+                 "not a UDP port: give 0 (any) to 65535")  # fmt: skip
 
 
 class UsageError(Exception):

@@ -27,13 +27,16 @@ def quaternion(phi, theta, psi):
             cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy]  # fmt: skip
 
 
-def px4_log(path, seconds=20.0, rate=100.0):
+def px4_log(path, seconds=20.0, rate=100.0, pause=None):
+    """The known roll model logged as PX4 does; `pause`: (from, to) s with nothing logged."""
     dt, n = 1.0 / rate, int(seconds * rate)
     t = np.arange(n) * dt
     aileron = np.where((t > 2) & (t < 18), 5.0 * np.sign(np.sin(2 * np.pi * 0.4 * t)), 0.0)
     p, phi = roll_response(aileron, dt)
     with ULogWriter(path) as log:
         for k in range(n):
+            if pause is not None and pause[0] <= t[k] < pause[1]:
+                continue
             us = 1_000_000 + int(t[k] * 1e6)
             log.write("vehicle_attitude", timestamp=us, q=quaternion(phi[k], 0.05, 1.0))
             log.write("vehicle_angular_velocity", timestamp=us + 100, xyz=[p[k], 0.0, 0.0])
@@ -123,22 +126,7 @@ def test_a_gap_in_the_log_is_not_interpolated_across(tmp_path):
     """Bad input tried: logging paused for 5 s mid-flight (every topic): the record is the
     longer stretch, and the note says what was cut."""
     path = tmp_path / "gap.ulg"
-    _, phi, p = px4_log(tmp_path / "whole.ulg", seconds=20.0)  # the flight, then without 6–11 s
-    n, dt = 2000, 0.01
-    times = np.arange(n) * dt
-    aileron = np.zeros(n)
-    with ULogWriter(path) as writer:
-        for k in range(n):
-            if 6.0 <= times[k] < 11.0:
-                continue
-            us = 1_000_000 + int(times[k] * 1e6)
-            writer.write("vehicle_attitude", timestamp=us, q=quaternion(phi[k], 0.05, 1.0))
-            writer.write("vehicle_angular_velocity", timestamp=us + 100, xyz=[p[k], 0.0, 0.0])
-            writer.write("vehicle_acceleration", timestamp=us + 100, xyz=[0.0, 0.0, -9.81])
-            writer.write("airspeed_validated", timestamp=us + 200, true_airspeed_m_s=21.5)
-            writer.write("airflow_aoa", timestamp=us + 300, aoa_rad=0.06, valid=True)
-            outputs = [1500.0 + 20.0 * aileron[k]] + [1500.0] * 15
-            writer.write("actuator_outputs", timestamp=us + 400, noutputs=8, output=outputs)
+    px4_log(path, seconds=20.0, pause=(6.0, 11.0))
     imported = import_log(path, SURFACES, 50.0)
     assert imported.time[-1] == pytest.approx(9.0 - 0.0004, abs=0.05)  # 11–20 s: the longer
     assert any("the longest stretch without a gap" in n for n in imported.notes), imported.notes

@@ -412,3 +412,38 @@ async def test_a_radio_with_its_encryption_off_is_reported_or_refused(tmp_path):
     finally:
         running.cancel()
         await asyncio.gather(running, return_exceptions=True)
+
+
+async def test_an_agent_whose_link_is_refused_flies_and_records(tmp_path):
+    """Bad input tried: the agent started with its seen file deleted while its counter file
+    is there. The link is refused with the reason (counted), and the agent flies and records
+    without it; a damaged seen file used to stop the agent at start-up."""
+    from agent.clock import LoopClock
+    from agent.config import Autopilot, Config, Link, Recorder, Sensors
+    from agent.runtime import Agent
+    from tests import waiting
+    from tests.link.pair import GROUND_ADDR, KEY
+
+    (tmp_path / "link.key").write_text(KEY.hex())
+    (tmp_path / "link.key").chmod(0o600)
+    (tmp_path / "air.counter").write_text("65536")  # the key was used; air.seen is gone
+    off = {"enabled": False}
+    config = Config(
+        recorder=Recorder(log_dir=str(tmp_path / "logs"), capacity_s=60.0),
+        sensors=Sensors(vn200=off, airdata=off, surfaces=off),
+        autopilot=Autopilot(url="udpout://127.0.0.1:9", connect_timeout_s=0.5),
+        link=Link(port=str(tmp_path / "nowhere"), peer=GROUND_ADDR.hex(), key_file="link.key",
+                  counter_file="air.counter", seen_file="air.seen"),
+    )  # fmt: skip
+    agent = Agent(config, base=tmp_path, clock=LoopClock())
+    running = asyncio.create_task(agent.run(), name="agent")
+    try:
+        await waiting.until(lambda: agent.counters["link_refused"] == 1, "the link's refusal")
+        frames = agent.recorder.ring.count
+        await waiting.until(lambda: agent.recorder.ring.count > frames, "recording")
+        assert not running.done()  # the agent flies on
+        assert agent.session is None
+    finally:
+        running.cancel()
+        await asyncio.gather(running, return_exceptions=True)
+    assert not (tmp_path / "air.seen").exists()  # nothing written over the missing state
