@@ -20,7 +20,9 @@ per aircraft, condition and method:
 - for suas-sysid, the seeds whose spiral holds the truth within 3 standard errors;
 - the validation TIC: the model simulated on separate records, its own seed each: an elevator
   doublet judged on V, α, q, θ, and an aileron then a rudder doublet judged on β, p, r, φ
-  (the mean of the two means; median / worst over seeds);
+  (the mean of the two means; median / worst over seeds). The doublets are sized to the
+  atmosphere as a flight-test engineer sizes a validation manoeuvre (`validation_scale`);
+
 - the median seconds per identification.
 
 The peers get the same records (inputs and outputs less the trim) and the truth's order
@@ -36,6 +38,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import argparse
+import dataclasses
 import time
 import warnings
 
@@ -48,7 +51,9 @@ from agent.excitation.plan import (
     Doublet,
     Plan,
     Segment,
+    Timeline,
     preset,
+    render,
 )
 from agent.ident import Experiment, Settings, identify
 from agent.ident.convert import StateSpace
@@ -64,6 +69,10 @@ PEER_ORDER = 9
 TEXTBOOK_P = 4
 FIRST_SEED = 2  # JSBSim's seeds 0 and 1 give one turbulence sequence
 VALIDATION_SEED = 1000
+QUIET_SEED = 1500
+SNR_REQUIRED = 3.0
+MAX_VALIDATION_SCALE = 2.0
+COMMAND_HZ = 50.0  # `fly`'s command rate
 
 
 def experiment(rec: Record, wind: bool = True) -> Experiment:
@@ -81,12 +90,12 @@ VALIDATION = {"longitudinal": (("elevator", 8.0),),
 AXIS_OUTPUTS = {"longitudinal": (0, 1, 2, 3), "lateral": (4, 5, 6, 7)}
 
 
-def doublets(axis: str) -> Plan:
-    """An axis's validation manoeuvre: its surfaces' doublets in turn (the presets'
-    amplitudes and pulse widths), each followed by free flight."""
+def doublets(axis: str, scale: float) -> Plan:
+    """An axis's validation manoeuvre: its surfaces' doublets in turn (the presets' pulse
+    widths, `scale` times their amplitudes), each followed by free flight."""
     segments = tuple(
         Segment(
-            signals={c: Doublet(pulse_s=DOUBLET_PULSE_S[c], amplitude=PRESET_AMPLITUDE[c])},
+            signals={c: Doublet(pulse_s=DOUBLET_PULSE_S[c], amplitude=scale * PRESET_AMPLITUDE[c])},
             free_s=free,
         )
         for c, free in VALIDATION[axis]
@@ -94,20 +103,61 @@ def doublets(axis: str) -> Plan:
     return Plan(id=f"{axis[:3]}-doublets", axes=axis, segments=segments)
 
 
-def validation(name: str, turbulence: float, seed: int) -> list[tuple[Experiment, tuple]]:
+def validation(
+    name: str, turbulence: float, seed: int, model: StateSpace
+) -> tuple[list[tuple[Experiment, tuple]], list[float]]:
     """Each axis's doublet record, flown from trim with its own seed (its own turbulence),
-    and the outputs it is judged on. Without sensor noise: a doublet at the presets'
-    amplitude moves the airspeed and α of these aircraft by about their sensors' noise
-    (0.1 m/s, 0.2°), so a noisy record would score the pitot and the vane, not the model (the
-    validated truth scored TIC 0.7 on the airspeed there)."""
-    out = []
+    and the outputs it is judged on, with the scale its doublets were flown at
+    (`validation_scale`). Without sensor noise: a doublet at the presets' amplitude moves the
+    airspeed and α of these aircraft by about their sensors' noise (0.1 m/s, 0.2°), so a noisy
+    record would score the pitot and the vane, not the model (the validated truth scored TIC
+    0.7 on the airspeed there)."""
+    out, scales = [], []
     for k, axis in enumerate(VALIDATION):
-        rec = fly(doublets(axis), aircraft=name, speed_kts=AIRCRAFT[name],
-                  turbulence=turbulence, seed=VALIDATION_SEED + 2 * seed + k,
-                  noise=False)  # fmt: skip
-        exp = experiment(rec, wind=False)
+        flight = dict(aircraft=name, speed_kts=AIRCRAFT[name], turbulence=turbulence, noise=False)
+        seeded = VALIDATION_SEED + 2 * seed + k
+        exp = experiment(fly(doublets(axis, 1.0), seed=seeded, **flight), wind=False)
+        quiet = fly(_still(doublets(axis, 1.0)), seed=QUIET_SEED + 2 * seed + k, **flight)
+        scale = validation_scale(model, exp, experiment(quiet, wind=False), AXIS_OUTPUTS[axis])
+        if scale > 1.0:
+            exp = experiment(fly(doublets(axis, scale), seed=seeded, **flight), wind=False)
+        scales.append(scale)
         out.append((Experiment(exp.u, exp.y), AXIS_OUTPUTS[axis]))
-    return out
+    return out, scales
+
+
+def validation_scale(
+    model: StateSpace, doublet: Experiment, quiet: Experiment, outputs: tuple[int, ...]
+) -> float:
+    """The doublets' scale on the presets' amplitudes: the smallest whose predicted response
+    stands SNR_REQUIRED times above what the aircraft does with no input, capped at
+    MAX_VALIDATION_SCALE (twice the presets' amplitude; beyond it these aircraft are no longer
+    linear on a doublet).
+
+    Chosen before it was run, from what is known in flight: the quiet record (as long as the
+    validation record, trimmed flight with no input, its own turbulence seed) gives each
+    output's RMS σ_w about its trim; the identified model driven by the 1× record's inputs
+    gives each output's response RMS r. The ratio is the median over the axis's outputs of
+    r / σ_w. A perfect linear model whose record carries an unmodelled response w uncorrelated
+    with the doublet's s scores TIC = ‖w‖ / (‖s + w‖ + ‖s‖) ≈ σ_w / (2 σ_s), so a ratio of 3
+    leaves the truth about 0.17, room under the 0.3 turbulence target for the model's own
+    error. In calm air σ_w is the trim's own drift and the scale stays 1."""
+    with np.errstate(all="ignore"):
+        predicted = simulate(model, doublet.u, np.zeros(model.A.shape[0]))
+    if not np.all(np.isfinite(predicted)):
+        return 1.0
+    cols = list(outputs)
+    response = np.sqrt(np.mean(predicted[:, cols] ** 2, axis=0))
+    still = np.sqrt(np.mean(quiet.y[:, cols] ** 2, axis=0))
+    ratio = float(np.median(response / np.maximum(still, 1e-12)))
+    return float(np.clip(SNR_REQUIRED / ratio, 1.0, MAX_VALIDATION_SCALE))
+
+
+def _still(plan: Plan) -> Timeline:
+    """`plan` rendered and then held at trim throughout: the quiet record's timeline."""
+    timeline = render(plan, COMMAND_HZ)
+    values = {c: np.zeros_like(v) for c, v in timeline.values.items()}
+    return dataclasses.replace(timeline, values=values)
 
 
 def mode_errors(found: dict[str, list[complex]], truth: dict[str, list[complex]]) -> list[float]:
@@ -236,15 +286,17 @@ def main() -> None:
         truth = reference.modes()
         for turbulence in args.turbulence:
             rows: dict[str, list] = {}
+            sizes: list[float] = []
             for seed in range(FIRST_SEED, FIRST_SEED + args.seeds):
                 rec = fly(plan, aircraft=name, speed_kts=AIRCRAFT[name], turbulence=turbulence,
                           seed=seed)  # fmt: skip
                 exp = experiment(rec)
-                check = validation(name, turbulence, seed)
+                found, model, seconds, spiral = ours(exp, rec.dt, rec)
+                check, scales = validation(name, turbulence, seed, model)
+                sizes.extend(scales)
                 rows.setdefault("validated truth", []).append(
                     ([0.0] * len(MODES), truth_tic(reference, check, rec.dt), np.nan, None)
                 )
-                found, model, seconds, spiral = ours(exp, rec.dt, rec)
                 inside = _spiral_inside(spiral, truth)
                 rows.setdefault("suas-sysid", []).append(
                     (mode_errors(found, truth), validation_tic(model, check), seconds, inside)
@@ -262,6 +314,11 @@ def main() -> None:
                     rows.setdefault(peer, []).append((errs, tic, seconds, None))
             for method, results in rows.items():
                 _print(name, turbulence, method, results)
+            print(
+                f"{'':8} {'':4} validation doublets: {np.median(sizes):.2f}× the presets' "
+                f"amplitudes (median), {np.max(sizes):.2f}× at most",
+                flush=True,
+            )
 
 
 def _spiral_inside(spiral, truth) -> bool | None:
