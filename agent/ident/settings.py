@@ -21,7 +21,7 @@ class Settings:
     held_inputs: bool = True  # inputs held between samples (commands, zero-order hold)
     smoothing_s: float | None = None  # Savitzky–Golay window; None: no smoothing
     refine: bool = True  # output-error refinement of the OKID/ERA model
-    # "auto": "aircraft" when both axes' outputs are named, else "time"; "time": OKID
+    # "auto": "aircraft" when an axis's four outputs are named, else "time"; "time": OKID
     # regression; "frequency": spectra → FRF (thesis §4.3.1); "aircraft": decoupled axes,
     # states measured, fitted in the frequency domain (agent.ident.aircraft)
     method: str = "auto"
