@@ -72,7 +72,8 @@ def _identification_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--method",
         choices=("auto", "time", "frequency", "aircraft"),
-        help="auto (default: aircraft when an axis's four outputs are named, else time), OKID in the time "
+        help="auto (default: aircraft when an axis's four outputs are named and neither "
+        "--markov nor --order is given, else time), OKID in the time "
         "domain, OKID from averaged spectra (thesis §4.3.1), or aircraft: decoupled "
         "longitudinal and lateral models fitted in the frequency domain",
     )

@@ -143,7 +143,8 @@ class Identification(_Section):
     smoothing_s: float | None = Field(None, gt=0.0)
     """Savitzky–Golay smoothing window in seconds (cubic), on inputs and outputs; unset: none."""
     method: Literal["auto", "time", "frequency", "aircraft"] = "auto"
-    """"auto": "aircraft" when the outputs are an axis's four (any axes set), else "time";
+    """"auto": "aircraft" when the outputs are an axis's four (any axes set) and neither markov
+    nor order is set, else "time";
     "time": OKID from the time-domain regression; "frequency": OKID from averaged spectra and
     the frequency response over whole excitation periods (thesis §4.3.1); "aircraft":
     decoupled longitudinal and lateral models, every state measured, fitted in the frequency

@@ -21,9 +21,10 @@ class Settings:
     held_inputs: bool = True  # inputs held between samples (commands, zero-order hold)
     smoothing_s: float | None = None  # Savitzky–Golay window; None: no smoothing
     refine: bool = True  # output-error refinement of the OKID/ERA model
-    # "auto": "aircraft" when an axis's four outputs are named, else "time"; "time": OKID
-    # regression; "frequency": spectra → FRF (thesis §4.3.1); "aircraft": decoupled axes,
-    # states measured, fitted in the frequency domain (agent.ident.aircraft)
+    # "auto": "aircraft" when an axis's four outputs are named and p, order are None, else
+    # "time"; "time": OKID regression; "frequency": spectra → FRF (thesis §4.3.1);
+    # "aircraft": decoupled axes, states measured, fitted in the frequency domain
+    # (agent.ident.aircraft)
     method: str = "auto"
     period_s: float | None = None  # excitation period for "frequency"; None: detected
     noise_model: str = "auto"  # refinement: "output" error, "innovation" (PEM), or "auto"
