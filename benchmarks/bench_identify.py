@@ -54,6 +54,10 @@ from agent.ident.refine import cramer_rao, eigenvalue_std
 
 DT = 0.02
 MODEL = reference.LATERAL
+# The names `sysid identify --axes lateral` gives the channels: with them `auto` is the
+# aircraft method (`identify`), the default row keeps OKID's.
+ROLES = {"input_names": MODEL.inputs, "output_names": MODEL.outputs,
+         "output_roles": MODEL.outputs}  # fmt: skip
 TRUE_MODES = {"Dutch roll": 0, "roll": 1, "spiral": 2}  # index into _true_modes()
 TEXTBOOK_P = (1, 2, 3, 4, 6, 8, 10, 15, 20)
 
@@ -96,10 +100,12 @@ def _peer(A, B, C, D, seconds: float) -> Outcome:
     return Outcome(np.log(z) / DT, StateSpace(A, B, C, D), seconds, discrete=True)
 
 
-def run_ours(settings: Settings) -> Callable[[Experiment], Outcome]:
+def run_ours(settings: Settings, **names) -> Callable[[Experiment], Outcome]:
+    """suas-sysid with `settings`; `names`: the channels' names and roles, when given."""
+
     def method(exp: Experiment) -> Outcome:
         t0 = time.perf_counter()
-        result = identify(exp, DT, settings=settings)
+        result = identify(exp, DT, settings=settings, **names)
         seconds = time.perf_counter() - t0
         eigs = np.array([m.eigenvalue for m in result.modes])
         return Outcome(eigs, result.continuous, seconds)
@@ -251,6 +257,10 @@ def main() -> None:
         (
             "suas-sysid frequency OKID, no refinement",
             run_ours(Settings(method="frequency", refine=False)),
+        ),
+        (
+            "suas-sysid aircraft (channels named by role)",
+            run_ours(Settings(method="aircraft"), **ROLES),
         ),
         ("python-control markov+ERA", run_python_control),
         ("SIPPY N4SID", run_sippy("N4SID")),

@@ -1,11 +1,11 @@
 """`sysid identify`: the JSON contract, batches, and every kind of bad input.
 
 Bad input tried: NaN and inf rows, a non-numeric cell, a constant input column, a record too
-short for the requested p and one too short even for the automatic p = 1, a column that
-does not exist, a row with too many fields, non-uniform time, time going backwards, an
-empty file, two files at different rates, a missing file, an input also given as output,
-and no --inputs at all. Each gives a clear message and exit 2 (bad input), never a
-traceback.
+short for the requested p, one too short even for the automatic p = 1 and one too short for
+the aircraft method's parameters, a column that does not exist, a row with too many fields,
+non-uniform time, time going backwards, an empty file, two files at different rates, a
+missing file, an input also given as output, and no --inputs at all. Each gives a clear
+message and exit 2 (bad input), never a traceback.
 """
 
 from __future__ import annotations
@@ -82,7 +82,9 @@ def run_json(capsys, *args) -> tuple[int, dict]:
 
 
 def test_json_contract_on_a_noise_free_record(capsys, lateral_csv):
-    code, doc = run_json(capsys, str(lateral_csv), *LAT)
+    # OKID/ERA is exact on the thesis's discrete plant; named by role, `auto` would fit the
+    # aircraft method, whose continuous-time spectra are not (see the next test).
+    code, doc = run_json(capsys, str(lateral_csv), *LAT, "--method", "time")
     assert code == 0
     assert set(doc) >= CONTRACT
     assert doc["dt"] == pytest.approx(0.02)
@@ -101,6 +103,22 @@ def test_json_contract_on_a_noise_free_record(capsys, lateral_csv):
     assert dutch["time_constant_s"] is None
     trim = doc["trim"][0]
     assert trim["beta"] == pytest.approx(reference.LATERAL.trim_outputs[0], rel=1e-9)
+
+
+def test_auto_is_the_aircraft_method_for_an_axis_named_by_role_unless_okid_is_asked_for(
+    capsys, lateral_csv
+):
+    """An axis's four outputs named by role: the aircraft method, whose A is close to the
+    truth without OKID's exactness on a discrete plant (the DFT of samples is not the
+    continuous transform). --markov, --order or --no-refine ask for OKID and get it."""
+    code, doc = run_json(capsys, str(lateral_csv), *LAT)
+    assert code == 0
+    assert doc["method"] == "aircraft"
+    assert np.allclose(doc["Ac"], reference.LATERAL.A, rtol=0.05, atol=0.01)
+    for extra in (["--markov", "3"], ["--order", "4"], ["--no-refine"]):
+        code, doc = run_json(capsys, str(lateral_csv), *LAT, *extra)
+        assert code == 0
+        assert doc["method"] == "time", extra
 
 
 def test_json_reports_cramer_rao_uncertainty_and_preprocessing(capsys, tmp_path):
@@ -174,7 +192,8 @@ def test_batch_of_two_files_and_time_window(capsys, tmp_path):
         write(tmp_path / f"r{s}.csv", reference.make_record(reference.LATERAL, seed=s).columns())
         for s in (1, 2)
     ]
-    code, doc = run_json(capsys, *map(str, files), *LAT, "--start", "0.2", "--end", "25")
+    code, doc = run_json(capsys, *map(str, files), *LAT, "--start", "0.2", "--end", "25",
+                         "--method", "time")  # fmt: skip
     assert code == 0
     assert len(doc["trim"]) == 2
     assert np.allclose(doc["Ac"], reference.LATERAL.A, atol=1e-6)
@@ -249,8 +268,14 @@ BAD = [
     (
         "short_auto.csv",
         lambda h, r: (h, r[100:112]),
-        ["--trim", "none"],
+        ["--trim", "none", "--method", "time"],
         "12 samples give 11 regression rows",
+    ),
+    (
+        "short_aircraft.csv",
+        lambda h, r: (h, r[100:112]),
+        ["--trim", "none"],
+        "frequency bins cannot determine",
     ),
     ("missing.csv", _rename_p, [], "no column(s) 'p'"),
     ("fields.csv", _extra_field, [], "line 12: 8 fields, the header has 7"),

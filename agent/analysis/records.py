@@ -8,6 +8,7 @@ and the column, so a bad file is fixed rather than debugged.
 from __future__ import annotations
 
 import csv
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -166,8 +167,10 @@ def _fast_rows(handle, width: int, index: list[int]) -> np.ndarray | None:
     the file (a bad cell, a short row, a blank row of commas, an over-long line): the
     row-by-row reader then says where."""
     try:
-        values = np.loadtxt(handle, delimiter=",", usecols=index, ndmin=2,
-                            max_rows=MAX_ROWS + 1, comments=None)  # fmt: skip
+        with warnings.catch_warnings():  # an empty file: the row-by-row reader says so
+            warnings.simplefilter("ignore", UserWarning)
+            values = np.loadtxt(handle, delimiter=",", usecols=index, ndmin=2,
+                                max_rows=MAX_ROWS + 1, comments=None)  # fmt: skip
     except (ValueError, OverflowError):
         return None
     if not MAX_ROWS >= values.shape[0] >= 2:

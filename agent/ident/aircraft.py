@@ -445,8 +445,8 @@ def fit_axis(sp: Spectra, name: str, states, inputs, lagged, experiments: int,
     unless `powers` (input column → number) says otherwise."""
     powers = {j: p for j, p in (powers or {}).items() if j in lagged}
     problem = _Problem(sp, states, inputs, lagged, experiments, controls, powers)
-    if problem.s.size * problem.n < problem.size:
-        raise IdentificationFailed(
+    if problem.s.size * problem.n < problem.size:  # a record too short: bad input
+        raise DataError(
             f"{name}: {problem.s.size} frequency bins cannot determine {problem.size} "
             "parameters; record longer or widen the band"
         )

@@ -140,12 +140,12 @@ def identify(
     """Identify one model from a batch of experiments sampled every `dt` seconds.
 
     `method` "auto" (the default) is "aircraft" when the roles name an axis's four outputs
-    with one of its inputs (any `--axes`) and neither p nor the order is given (they are
-    OKID's: asking for them asks for OKID), and "time" otherwise: the structured model with
-    its kinematics known holds an aircraft's modes where a black-box model of the same record
-    can leave a poorly determined one to the data's last digits (an unconverged 8-state
-    refinement put a lateral record's roll mode anywhere from −9.9 ± 1.1j to −12.9 under 1e-14
-    perturbations; the aircraft method gave −12.2 on each, the truth −12.1)."""
+    with one of its inputs (any `--axes`) and none of p, the order or refine=False is given
+    (they are OKID's: asking for them asks for OKID), and "time" otherwise. The structured
+    model with its kinematics known holds an aircraft's modes where a black-box model of the
+    same record can leave a poorly determined one to the data's last digits (an unconverged
+    8-state refinement put a lateral record's roll mode anywhere from −9.9 ± 1.1j to −12.9
+    under 1e-14 perturbations; the aircraft method gave −12.2 on each, the truth −12.1)."""
     settings = settings or Settings()
     raw = okid.as_experiments(experiments)
     if dt <= 0:
@@ -156,7 +156,8 @@ def identify(
     out_roles = tuple(output_roles) if output_roles is not None else ()
     present = aircraft.axes_present(in_roles, out_roles)
     if settings.method == "auto":
-        okid_asked = settings.markov is not None or settings.order is not None
+        okid_asked = (settings.markov is not None or settings.order is not None
+                      or not settings.refine)  # fmt: skip
         settings = replace(settings, method="aircraft" if present and not okid_asked else "time")
     if settings.method == "aircraft":
         if not present:
