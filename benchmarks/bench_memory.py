@@ -6,6 +6,10 @@ a child process and reports the child's peak resident memory (getrusage) and wal
 --parse-only the child only reads the record (agent.analysis.records.read_record).
 
     .venv/bin/python benchmarks/bench_memory.py --rows 300000 1000000 5000000 [--parse-only]
+    .venv/bin/python benchmarks/bench_memory.py --rows 1000000 --method time
+
+`--axes lateral` names the channels by role, so `auto` is the aircraft method (frequency
+domain); `--method time` measures OKID/ERA with output-error refinement on the same record.
 
 Linux or macOS (ru_maxrss). A 5-million-row record is about 400 MB on disk, written under
 --dir (default: a temporary directory, removed afterwards).
@@ -63,6 +67,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rows", type=int, nargs="+", default=[300_000])
     parser.add_argument("--parse-only", action="store_true")
+    parser.add_argument("--method", default="auto", help="identify's --method (auto: aircraft)")
     parser.add_argument("--dir", type=Path)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(dir=args.dir) as tmp:
@@ -76,7 +81,8 @@ def main() -> None:
                         f"read_record({str(path)!r}, {names!r})")  # fmt: skip
                 run = ["-c", code]
             else:
-                run = ["-m", "agent", "identify", str(path), "--axes", "lateral", "--json"]
+                run = ["-m", "agent", "identify", str(path), "--axes", "lateral", "--json",
+                       "--method", args.method]  # fmt: skip
             exit_code, wall, peak, tail = child(run)
             size = path.stat().st_size / 1e6
             print(f"{rows:<10d} {size:10.0f}   {exit_code:4d}   {wall:6.1f}   {peak:11.0f}   "

@@ -90,11 +90,23 @@ def state_convolution(A: np.ndarray, C: np.ndarray, z: np.ndarray) -> np.ndarray
     z = inputs). Lifted to blocks like `simulate`.
     """
     z = np.asarray(z, dtype=float)
+    return state_convolution_from(A, C, z, np.zeros((A.shape[0], A.shape[0], z.shape[1])))[0]
+
+
+def state_convolution_from(
+    A: np.ndarray, C: np.ndarray, z: np.ndarray, start: np.ndarray, block: int | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """`state_convolution` continued from an earlier stretch of the same signals: `start`
+    (n × n × q) is the state Σ_{t<0} A^(−1−t) e_i z[t, j] the earlier samples left, and the
+    second result the state after these samples. `block`: the lifted block length (default
+    `_block_length(length)`); the end state is exact when the length is a multiple of it (the
+    padding of a last partial block would advance it), so a caller streaming a record in
+    pieces gives one that divides them."""
     length, q = z.shape
     n, m = A.shape[0], C.shape[0]
     if length == 0:
-        return np.zeros((0, m, n, q))
-    L = min(_block_length(length), length)
+        return np.zeros((0, m, n, q)), start
+    L = min(block or _block_length(length), length)
     blocks = -(-length // L)
     padded = np.zeros((blocks * L, q))
     padded[:length] = z
@@ -108,7 +120,7 @@ def state_convolution(A: np.ndarray, C: np.ndarray, z: np.ndarray) -> np.ndarray
     reach = powers[L - 1 :: -1][:L].transpose(1, 2, 0).reshape(n * n, L)  # A^(L−1−t)
     Z = padded.reshape(blocks, L, q)
     forced = (T @ Z.transpose(1, 0, 2).reshape(L, blocks * q)).reshape(L, m, n, blocks, q)
-    start = np.zeros((n, n, q))
+    start = np.array(start, dtype=float)
     free = np.empty((blocks, L * m, n * q))
     for b in range(blocks):
         free[b] = obs @ start.reshape(n, n * q)
@@ -116,7 +128,7 @@ def state_convolution(A: np.ndarray, C: np.ndarray, z: np.ndarray) -> np.ndarray
             n, n, q
         )
     out = forced.transpose(3, 0, 1, 2, 4) + free.reshape(blocks, L, m, n, q)
-    return out.reshape(blocks * L, m, n, q)[:length]
+    return out.reshape(blocks * L, m, n, q)[:length], start
 
 
 def free_response_basis(model: StateSpace, length: int) -> np.ndarray:

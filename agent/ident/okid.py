@@ -154,6 +154,26 @@ def build_regression(
     return np.vstack(blocks_phi), np.vstack(blocks_y)
 
 
+# Regression rows per block of the streamed least squares (`observer_markov`): the triangle
+# of [Φ | Y] is updated block by block, so memory is one block of Φ, not the whole record's
+# (a 5-million-row record at p = 30 with six channels would need 7 GB of Φ at once).
+REGRESSION_BLOCK = 65_536
+
+
+def regression_blocks(experiments: Sequence[Experiment], p: int, estimate_d: bool):
+    """The rows of `build_regression`, in order, as blocks (Φ_b, Y_b) of at most
+    REGRESSION_BLOCK rows."""
+    rows = REGRESSION_BLOCK
+    for exp in experiments:
+        l = exp.length
+        for first in range(p, l, rows):
+            last = min(first + rows, l)
+            v = np.hstack([exp.u[first - p : last], exp.y[first - p : last]])
+            cols = [exp.u[first:last]] if estimate_d else []
+            cols += [v[p - i : p - i + last - first] for i in range(1, p + 1)]
+            yield np.hstack(cols), exp.y[first:last]
+
+
 def channel_rms(experiments: Sequence[Experiment]) -> tuple[np.ndarray, np.ndarray]:
     """RMS of every input and output channel over the batch (1 where a channel is all zero)."""
     u = np.vstack([e.u for e in experiments])
@@ -206,14 +226,25 @@ def observer_markov(
     _check_length(batch, p, estimate_d)
     r, m = batch[0].u.shape[1], batch[0].y.shape[1]
     su, sy = channel_rms(batch)
-    phi, target = build_regression(batch, p, estimate_d)
     col_scale = np.concatenate(([su] if estimate_d else []) + [np.concatenate([su, sy])] * p)
-    phi_s = phi / col_scale
-    theta_s, sv, rank = _tikhonov_solve(phi_s, target / sy, regularization)
+    # The triangle of [Φ | Y] (column-normalised), streamed: Φ = Q R is never formed whole.
+    triangle, rows = None, 0
+    for phi, target in regression_blocks(batch, p, estimate_d):
+        block = np.hstack([phi / col_scale, target / sy])
+        rows += block.shape[0]
+        stacked = block if triangle is None else np.vstack([triangle, block])
+        if stacked.shape[0] > stacked.shape[1]:
+            stacked = scipy.linalg.qr(stacked, mode="r", overwrite_a=True, check_finite=False)[0]
+            stacked = stacked[: stacked.shape[1]]
+        triangle = stacked
+    k = col_scale.size
+    theta_s, sv, rank = _tikhonov_solve(triangle[:, :k], triangle[:, k:], regularization)
     theta = theta_s / col_scale[:, None] * sy[None, :]
-    residual = target - phi @ theta
     if not np.isfinite(theta).all():
         raise IdentificationFailed("the OKID least-squares solution is not finite")
+    squares = np.zeros(m)
+    for phi, target in regression_blocks(batch, p, estimate_d):
+        squares += np.sum((target - phi @ theta) ** 2, axis=0)
     coeffs = theta.T  # (m, columns)
     offset = r if estimate_d else 0
     D = coeffs[:, :r].copy() if estimate_d else np.zeros((m, r))
@@ -222,8 +253,8 @@ def observer_markov(
         D=D,
         Ybar1=blocks[:, :, :r].copy(),
         Ybar2=-blocks[:, :, r:].copy(),
-        rows=int(phi.shape[0]),
-        residual_rms=np.sqrt(np.mean(residual**2, axis=0)),
+        rows=rows,
+        residual_rms=np.sqrt(squares / rows),
         singular_values=sv,
         rank=rank,
     )

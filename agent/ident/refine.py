@@ -50,11 +50,12 @@ import scipy.linalg
 from agent.ident.convert import StateSpace, discretize_hold, hold_block
 from agent.ident.errors import IdentificationFailed
 from agent.ident.fit import (
+    BLOCK_MAX,
     estimate_initial_state,
     free_response_basis,
     simulate,
     simulate_states,
-    state_convolution,
+    state_convolution_from,
 )
 from agent.ident.modal import EigenvalueStd
 from agent.ident.okid import Experiment
@@ -168,14 +169,34 @@ def _chain(model: StateSpace, dt: float, hold: str) -> np.ndarray:
 DIRECT_SENSITIVITY_SIZE = 400
 
 
-def _propagate(A: np.ndarray, forcing: np.ndarray, start: np.ndarray) -> np.ndarray:
-    """S(0) = start, S(k+1) = A S(k) + forcing(k) for (n × Q) matrices: (length × n × Q)."""
+# The Jacobian is accumulated over stretches of a record (`_Problem.evaluate`) holding about
+# this many floats of sensitivities each, so its memory does not grow with the record: a
+# record shorter than one stretch is done in one, as before. Stretches are whole numbers of
+# the lifted simulation's longest block (fit.BLOCK_MAX), which a streamed record's
+# convolutions then use, so each stretch ends exactly.
+STRETCH_FLOATS = 8_000_000
+
+
+def _propagate(
+    A: np.ndarray, forcing: np.ndarray, start: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """S(0) = start, S(k+1) = A S(k) + forcing(k) for (n × Q) matrices: (length × n × Q), and
+    the S after the last sample."""
     out = np.empty_like(forcing)
     state = np.array(start, dtype=float)
     for k in range(forcing.shape[0]):
         out[k] = state
         state = A @ state + forcing[k]
-    return out
+    return out, state
+
+
+def _stretches(length: int, per_sample: int) -> list[tuple[int, int]]:
+    """[first, last) sample ranges covering `length`, each at most STRETCH_FLOATS floats of
+    `per_sample`, every one but the last a multiple of BLOCK_MAX samples."""
+    size = max(BLOCK_MAX, STRETCH_FLOATS // max(per_sample, 1) // BLOCK_MAX * BLOCK_MAX)
+    if length <= size:
+        return [(0, length)]
+    return [(first, min(first + size, length)) for first in range(0, length, size)]
 
 
 class _Problem:
@@ -256,14 +277,19 @@ class _Problem:
         return v[self.matrix_size : self.states_at].reshape(self.n, self.m)
 
     def evaluate(
-        self, beta: np.ndarray, with_jacobian: bool
-    ) -> tuple[np.ndarray, np.ndarray | None]:
-        """Weighted residuals (ŷ − y)/σ stacked over experiments, and their Jacobian in β.
+        self, beta: np.ndarray, jacobian: str | None = None
+    ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray] | np.ndarray | None]:
+        """Weighted residuals (ŷ − y)/σ stacked over experiments, and what the Jacobian J in
+        β gives: for `jacobian` "normal", (JᵀJ, Jᵀr); for "triangle", the triangular factor R
+        of [J | r] (JᵀJ = RᵀR: J's singular values without J); "full": J itself (for checks;
+        its memory grows with the record); None: nothing. J is built and summed stretch by
+        stretch (`_stretches`), whole only when asked for.
 
         Output error: ŷ is the model simulated from the inputs. Innovation form: ŷ is the
         one-step prediction of x̂(k+1) = Φ x̂ + Bd u + K (y − C x̂ − Dd u), i.e. the system
         Ā = Φ − K C driven by v = [u; y] through B̄ = [Bd − K Dd, K].
         """
+        with_jacobian = jacobian is not None
         cont, x0s = self.unpack(beta)
         K = self.gain(beta)
         n, m, r = self.n, self.m, self.r
@@ -293,42 +319,70 @@ class _Problem:
             # ŷ_a(k) depends on C_aj through x̂_j(k) and on Dd_aj through u_j(k).
             G_c = dC.transpose(1, 0, 2).reshape(n, m * q)
             G_d = dDd.transpose(1, 0, 2).reshape(r, m * q)
-        residuals, jacobians = [], []
+        residuals, parts = [], []
+        normal = triangle = None
         with np.errstate(over="ignore", invalid="ignore"):
             for index, (exp, x0) in enumerate(zip(self.batch, x0s, strict=True)):
                 v = np.hstack([exp.u, exp.y])
                 states = simulate_states(predictor, v, x0)
                 predicted = states @ disc.C.T + exp.u @ disc.D.T
-                residuals.append(((predicted - exp.y) * self.weights).ravel())
+                residual = (predicted - exp.y) * self.weights
+                residuals.append(residual.ravel())
                 if G is None:
                     continue
-                length = exp.u.shape[0]
-                z = np.hstack([states, v if self.innovation else exp.u])
+                z_all = np.hstack([states, v if self.innovation else exp.u])
                 rows = slice(self.states_at + index * n, self.states_at + (index + 1) * n)
-                if n * q > DIRECT_SENSITIVITY_SIZE:
-                    # ∂x̂ for every direction at once: ∂x̂(k+1) = Ā ∂x̂(k) + ∂Ā x̂(k) + ∂B̄ v(k),
-                    # ∂x̂(0) = ∂x0; cheaper than per-entry sensitivities for big models.
-                    forcing = z @ G_all.reshape(n, width, q).transpose(1, 0, 2).reshape(width, -1)
-                    dstates = _propagate(Abar, forcing.reshape(length, n, q), self.basis[rows])
-                    jac = np.matmul(disc.C, dstates).reshape(length * m, q)
-                else:
-                    sens = state_convolution(Abar, disc.C, z)  # (length, m, n, width)
-                    jac = sens.reshape(length * m, n * width) @ G_all
-                    jac += free_response_basis(
-                        StateSpace(Abar, Bbar, disc.C, disc.D), length
-                    ) @ self.basis[rows]  # fmt: skip
-                jac += (states @ G_c).reshape(length * m, q)
-                jac += (exp.u @ G_d).reshape(length * m, q)
-                jac *= np.tile(self.weights, length)[:, None]
-                jacobians.append(jac)
+                direct = n * q > DIRECT_SENSITIVITY_SIZE
+                per_sample = (n * q if direct else m * n * width) + m * q
+                carried = self.basis[rows] if direct else np.zeros((n, n, width))
+                reach = self.basis[rows]  # Ā^first ∂x0: the free response's start
+                stretches = _stretches(exp.u.shape[0], per_sample)
+                lifted = BLOCK_MAX if len(stretches) > 1 else None  # divides every stretch
+                for first, last in stretches:
+                    length, z = last - first, z_all[first:last]
+                    if direct:
+                        # ∂x̂ for every direction at once: ∂x̂(k+1) = Ā ∂x̂(k) + ∂Ā x̂(k) +
+                        # ∂B̄ v(k), ∂x̂(0) = ∂x0; cheaper than per-entry sensitivities for big
+                        # models.
+                        forcing = z @ G_all.reshape(n, width, q).transpose(1, 0, 2).reshape(
+                            width, -1
+                        )
+                        dstates, carried = _propagate(Abar, forcing.reshape(length, n, q),
+                                                      carried)  # fmt: skip
+                        jac = np.matmul(disc.C, dstates).reshape(length * m, q)
+                    else:
+                        sens, carried = state_convolution_from(Abar, disc.C, z, carried, lifted)
+                        jac = sens.reshape(length * m, n * width) @ G_all
+                        jac += free_response_basis(
+                            StateSpace(Abar, Bbar, disc.C, disc.D), length
+                        ) @ reach  # fmt: skip
+                        reach = np.linalg.matrix_power(Abar, length) @ reach
+                    jac += (states[first:last] @ G_c).reshape(length * m, q)
+                    jac += (exp.u[first:last] @ G_d).reshape(length * m, q)
+                    jac *= np.tile(self.weights, length)[:, None]
+                    r_part = residual[first:last].ravel()
+                    if jacobian == "full":
+                        parts.append(jac)
+                    elif jacobian == "normal":
+                        part = (jac.T @ jac, jac.T @ r_part)
+                        normal = part if normal is None else (normal[0] + part[0],
+                                                              normal[1] + part[1])  # fmt: skip
+                    else:
+                        block = np.hstack([jac, r_part[:, None]])
+                        if triangle is not None:
+                            block = np.vstack([triangle, block])
+                        triangle = scipy.linalg.qr(block, mode="r", check_finite=False)[0]
+                        triangle = triangle[: q + 1]
         res = np.concatenate(residuals)
         if not np.all(np.isfinite(res)):
             return np.full(res.shape, np.inf), None
-        return res, (np.vstack(jacobians) if G is not None else None)
+        if jacobian == "full":
+            return res, np.vstack(parts)
+        return res, normal if jacobian == "normal" else triangle
 
     def rms_errors(self, beta: np.ndarray) -> np.ndarray:
         """RMS simulation error per output (unweighted)."""
-        res = self.evaluate(beta, with_jacobian=False)[0].reshape(-1, self.m) / self.weights
+        res = self.evaluate(beta)[0].reshape(-1, self.m) / self.weights
         with np.errstate(over="ignore", invalid="ignore"):
             return np.sqrt(np.mean(res**2, axis=0))
 
@@ -342,13 +396,11 @@ def _levenberg_marquardt(
     the (samples·outputs × P) Jacobian each step; the scaling by diag(JᵀJ) makes the step
     independent of parameter units (Marquardt, *SIAM J. Appl. Math.* 11, 1963).
     """
-    res, jac = problem.evaluate(beta, with_jacobian=True)
+    res, (H, g) = problem.evaluate(beta, "normal")
     cost = float(res @ res)
     damping = 1e-3
     iterations, settled = 0, False
     for iterations in range(1, max_iterations + 1):  # noqa: B007 - reported
-        g = jac.T @ res
-        H = jac.T @ jac
         scale = np.maximum(np.diag(H), 1e-300)
         improved = False
         while damping < 1e12:
@@ -358,7 +410,7 @@ def _levenberg_marquardt(
                 damping *= 10
                 continue
             trial = beta + step
-            new_res, _ = problem.evaluate(trial, with_jacobian=False)
+            new_res, _ = problem.evaluate(trial)
             with np.errstate(over="ignore", invalid="ignore"):
                 new_cost = float(new_res @ new_res)  # inf for a diverging trial
             if new_cost < cost:
@@ -374,7 +426,7 @@ def _levenberg_marquardt(
         if decrease < RELATIVE_DECREASE:
             settled = True
             break
-        res, jac = problem.evaluate(beta, with_jacobian=True)
+        res, (H, g) = problem.evaluate(beta, "normal")
     return beta, iterations, settled
 
 
@@ -427,8 +479,8 @@ def refine(
         if change < NOISE_TOLERANCE:
             break
     problem.weights = 1.0 / sigma
-    final_res, jac = problem.evaluate(beta, with_jacobian=True)
-    start_res, _ = problem.evaluate(np.zeros_like(beta), with_jacobian=False)
+    final_res, triangle = problem.evaluate(beta, "triangle")
+    start_res, _ = problem.evaluate(np.zeros_like(beta))
     refined, x0s = problem.unpack(beta)
     return Refinement(
         gain=problem.gain(beta) if problem.innovation else None,
@@ -438,7 +490,7 @@ def refine(
         dt=dt,
         initial_states=tuple(x0s),
         noise_std=sigma,
-        covariance=_covariance(jac, problem.basis[: problem.matrix_size]),
+        covariance=_covariance(triangle[:, :-1], problem.basis[: problem.matrix_size]),
         cost_initial=float(start_res @ start_res),
         cost=float(final_res @ final_res),
         iterations=iterations,
@@ -469,12 +521,13 @@ def cramer_rao(
         model, dt, batch, x0s, free_c=not output_coordinates, free_d=estimate_d, hold=hold
     )
     problem.weights = 1.0 / np.asarray(noise_std, dtype=float)
-    _, jac = problem.evaluate(np.zeros(problem.basis.shape[1]), with_jacobian=True)
-    return _covariance(jac, problem.basis[: problem.matrix_size])
+    _, triangle = problem.evaluate(np.zeros(problem.basis.shape[1]), "triangle")
+    return _covariance(triangle[:, :-1], problem.basis[: problem.matrix_size])
 
 
 def _covariance(jac: np.ndarray, basis: np.ndarray) -> np.ndarray:
-    """Cramér–Rao covariance of the model matrices: basis (JᵀJ)⁻¹ basisᵀ, by SVD."""
+    """Cramér–Rao covariance of the model matrices: basis (JᵀJ)⁻¹ basisᵀ, by SVD of J (or of
+    its triangular factor R, which has J's singular values and right vectors)."""
     _, s, vt = np.linalg.svd(jac, full_matrices=False)
     keep = s > s[0] * 1e-12 if s.size else s.astype(bool)
     inv = (vt[keep].T / s[keep] ** 2) @ vt[keep]

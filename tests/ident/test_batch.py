@@ -73,3 +73,24 @@ def test_no_regression_row_straddles_two_experiments(pair):
     batch = identify(list(pair), DT, settings=settings)
     assert _discrete_eigenvalue_error(batch) < 1e-9
     assert _discrete_eigenvalue_error(seam) > 1e-4
+
+
+@pytest.mark.parametrize("estimate_d", [False, True])
+def test_the_streamed_regression_is_the_whole_records_least_squares(pair, monkeypatch, estimate_d):
+    """OKID's least squares is streamed block by block (memory: one block of Φ, not the
+    record's). With blocks of 7 rows (many seams inside and across the two experiments) the
+    Markov parameters, singular values and residuals are the one-shot solution's."""
+    batch = [Experiment(e.u + 0.01 * np.sin(np.arange(e.length))[:, None], e.y) for e in pair]
+    whole = okid.observer_markov(batch, 3, estimate_d=estimate_d)
+    phi, target = okid.build_regression(batch, 3, estimate_d)
+    monkeypatch.setattr(okid, "REGRESSION_BLOCK", 7)
+    streamed = okid.observer_markov(batch, 3, estimate_d=estimate_d)
+    assert streamed.rows == whole.rows == phi.shape[0]
+    assert np.allclose(streamed.Ybar1, whole.Ybar1, rtol=0, atol=1e-9)
+    assert np.allclose(streamed.Ybar2, whole.Ybar2, rtol=0, atol=1e-9)
+    assert np.allclose(streamed.D, whole.D, rtol=0, atol=1e-9)
+    assert np.allclose(streamed.singular_values, whole.singular_values, rtol=1e-9)
+    # Against plain least squares on the whole Φ, formed at once.
+    theta = np.linalg.lstsq(phi, target, rcond=None)[0]
+    residual = np.sqrt(np.mean((target - phi @ theta) ** 2, axis=0))
+    assert np.allclose(streamed.residual_rms, residual, rtol=1e-6, atol=1e-12)

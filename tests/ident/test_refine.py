@@ -254,14 +254,11 @@ def test_innovation_form_jacobian_matches_finite_differences():
             model, DT, [short], [np.zeros(4)], free_c=free_c, free_d=False, hold=hold, gain=K
         )
         beta = 1e-3 * np.random.default_rng(2).normal(size=problem.basis.shape[1])
-        _, jac = problem.evaluate(beta, with_jacobian=True)
+        _, jac = problem.evaluate(beta, "full")
         step = 1e-6
         numeric = np.column_stack(
             [
-                (
-                    problem.evaluate(beta + step * e, False)[0]
-                    - problem.evaluate(beta - step * e, False)[0]
-                )
+                (problem.evaluate(beta + step * e)[0] - problem.evaluate(beta - step * e)[0])
                 / (2 * step)
                 for e in np.eye(beta.size)
             ]
@@ -320,3 +317,44 @@ def test_refinement_refuses_a_start_whose_simulation_diverges():
     start = StateSpace(LAT.A + 30.0 * np.eye(4), LAT.B, np.eye(4), np.zeros((4, 2)))
     with pytest.raises(IdentificationFailed, match="diverges"):
         refine(start, DT, [exp], output_coordinates=True, estimate_d=False)
+
+
+@pytest.mark.parametrize("states", [4, 8])
+def test_the_jacobian_summed_stretch_by_stretch_is_the_whole_records(monkeypatch, states):
+    """The refinement's Jacobian is built and summed over stretches of the record, so its
+    memory does not grow with the record. With stretches of 96 samples (ten seams in two
+    experiments of 500), JᵀJ, Jᵀr and the triangular factor are the whole Jacobian's: the
+    sensitivities carry across each seam exactly, by per-entry convolution (4 states) and by
+    the one-recursion path (8 states, n·q above DIRECT_SENSITIVITY_SIZE)."""
+    from agent.ident import refine as refine_module
+    from agent.ident.refine import _Problem
+
+    rng = np.random.default_rng(4)
+    exp = _process_noise_record(0)
+    batch = [Experiment(exp.u[k : k + 500], exp.y[k : k + 500]) for k in (0, 600)]
+    if states == 4:
+        model = StateSpace(LAT.A * 1.02, LAT.B, np.eye(4), np.zeros((4, 2)))
+        free_c = False
+    else:  # a bigger model in free coordinates: C is refined, n·q > 400
+        A = np.kron(np.eye(2), LAT.A) + 0.01 * rng.normal(size=(8, 8))
+        model = StateSpace(A, np.vstack([LAT.B, LAT.B]), rng.normal(size=(4, 8)), np.zeros((4, 2)))
+        free_c = True
+    problem = _Problem(model, DT, batch, [np.zeros(states)] * 2, free_c=free_c, free_d=False,
+                       hold="foh")  # fmt: skip
+    assert (states * problem.basis.shape[1] > refine_module.DIRECT_SENSITIVITY_SIZE) == (
+        states == 8
+    )
+    beta = 1e-3 * rng.normal(size=problem.basis.shape[1])
+    res, whole = problem.evaluate(beta, "full")
+    monkeypatch.setattr(refine_module, "STRETCH_FLOATS", 1)  # one BLOCK_MAX stretch each
+    assert len(refine_module._stretches(500, 1)) == 6
+    streamed_res, (H, g) = problem.evaluate(beta, "normal")
+    _, triangle = problem.evaluate(beta, "triangle")
+    scale = np.abs(whole.T @ whole).max()
+    assert np.array_equal(streamed_res, res)
+    assert np.allclose(H, whole.T @ whole, rtol=0, atol=1e-10 * scale)
+    assert np.allclose(g, whole.T @ res, rtol=0, atol=1e-10 * np.sqrt(scale) * np.abs(res).max())
+    R = triangle[:, :-1]
+    assert np.allclose(R.T @ R, whole.T @ whole, rtol=0, atol=1e-10 * scale)
+    assert np.allclose(np.linalg.svd(R, compute_uv=False), np.linalg.svd(whole, compute_uv=False),
+                       rtol=1e-8)  # fmt: skip
