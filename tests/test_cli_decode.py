@@ -56,3 +56,11 @@ def test_missing_file_and_unknown_device(tmp_path, capsys):
     assert "cannot be read" in capsys.readouterr().err
     assert main(["decode", "gps", str(DATA / "airdata.txt")]) == 2
     assert "invalid choice: 'gps'" in capsys.readouterr().err
+
+
+def test_the_command_lines_device_names_are_the_codecs():
+    # The CLI names the devices itself so that `sysid --help` does not import every codec.
+    from agent.cli.decode import DEVICES
+    from drivers.decode import CODECS
+
+    assert sorted(DEVICES) == sorted(CODECS)

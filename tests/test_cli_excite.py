@@ -106,12 +106,12 @@ def test_bad_input_is_a_clear_error(tmp_path, capsys, args, message):
 def test_an_internal_error_still_leaves_one_json_object(monkeypatch, capsys):
     # Bad input tried: none the code foresaw. A bug inside a command (here the plan's summary
     # raising) must not leave `--json` with a traceback and an empty stdout.
-    import agent.cli
+    import agent.excitation.plan
 
     def broken(*args, **kwargs):
         raise RuntimeError("a bug")
 
-    monkeypatch.setattr(agent.cli, "summary", broken)
+    monkeypatch.setattr(agent.excitation.plan, "summary", broken)
     assert main(["excite", "--preset", "lateral", "--json"]) == 1
     out, err = capsys.readouterr()
     assert json.loads(out) == {

@@ -19,6 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from agent.config import Envelope, Surface
 from agent.excitation import servo, signals
+from agent.excitation.names import CONTROLS, PRESETS
 
 AxisSet = Literal["lateral", "longitudinal", "full"]
 Nonzero = Annotated[float, Field(allow_inf_nan=False)]
@@ -218,9 +219,6 @@ class Plan(_Model):
         return [c for c in CONTROLS if c in used]
 
 
-CONTROLS = ("aileron", "elevator", "rudder", "throttle")
-
-
 @dataclass(frozen=True)
 class Timeline:
     """A plan rendered at the command rate: sample i is commanded at start + i·dt."""
@@ -416,7 +414,6 @@ MULTISINE_PERIOD_S = 20.0
 MULTISINE_PERIODS = 2.0
 THROTTLE_LEVELS = (1.0, 1.0, -1.0)  # thesis figure 4.4: two counts up, one count down
 THROTTLE_COUNT_S = 2.0
-PRESETS = ("lateral", "longitudinal", "full")
 # The full preset: one period of FULL_PERIOD_S of multisines on all four controls at once, on
 # odd harmonics only and each control on its own (orthogonal multisines, Morelli, J. Aircraft
 # 40(2), 2003), the throttle below FULL_THROTTLE_TOP_HZ (the phugoid's band), the surfaces

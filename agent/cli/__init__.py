@@ -1,0 +1,94 @@
+"""The `sysid` command: parse arguments, load config, call in. Exit 0 ok, 1 failed, 2 bad input.
+
+One module per command, each with `add_parser(sub)` (its options; `set_defaults(run=…)`) and
+`run(args) -> exit code`, importing what it needs only when it runs, so that `sysid --help`
+stays quick. A command stops with `common.CommandError` (or `refused`, `failed`); `main`
+turns that, a usage error and, under `--json`, a bug into its message and exit code, once.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from agent import __version__
+from agent.cli import (
+    analyze,
+    config_check,
+    console,
+    decode,
+    excite,
+    export,
+    identify,
+    import_log,
+    onboard,
+    report,
+    sim,
+    sim_aircraft,
+)
+from agent.cli.common import (
+    EXIT_BAD_INPUT,
+    EXIT_FAILED,
+    CommandError,
+    Parser,
+    UsageError,
+    json_state,
+    print_json,
+    say_error,
+)
+
+COMMANDS = (identify, analyze, report, excite, decode, import_log, export, sim_aircraft,
+            onboard, sim, console, config_check)  # fmt: skip
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = Parser(
+        prog="sysid",
+        description="System identification of small fixed-wing "
+        "aircraft, onboard and on the ground. Exit 0 ok, 1 failed, 2 bad input.",
+    )
+    parser.add_argument("--version", action="version", version=f"sysid {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    for command in COMMANDS:
+        command.add_parser(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the `sysid` console script. Under `--json` an unexpected error (a bug)
+    still leaves exactly one JSON object on stdout; its traceback goes to stderr."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except UsageError as exc:
+        exc.parser.print_usage(sys.stderr)
+        say_error(exc.parser.prog.removeprefix("sysid "), str(exc))
+        if "--json" in argv:
+            print_json({"error": {"kind": "usage", "message": str(exc), "exit": EXIT_BAD_INPUT}})
+        return EXIT_BAD_INPUT
+    json_state.update(printed=False, error=None)
+    name = getattr(args, "name", args.command)
+    as_json = getattr(args, "json", False)
+    try:
+        code = args.run(args)
+        if as_json and not json_state["printed"]:
+            # A command that ended without its object: its error (every error path says one).
+            message = json_state["error"] or f"exit {code}"
+            print_json({"error": {"kind": "error" if code else "none", "message": message,
+                                  "exit": code}})  # fmt: skip
+        return code
+    except CommandError as exc:
+        say_error(name, exc.message if exc.kind == "error" else f"{exc.kind}: {exc.message}")
+        if as_json:
+            print_json({"error": {"kind": exc.kind, "message": exc.message, "exit": exc.code}})
+        return exc.code
+    except Exception as exc:
+        if not as_json:
+            raise
+        import traceback
+
+        traceback.print_exc()
+        message = f"internal error: {type(exc).__name__}: {exc}"
+        print_json({"error": {"kind": "internal", "message": message, "exit": EXIT_FAILED}})
+        return EXIT_FAILED

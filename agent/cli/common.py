@@ -1,0 +1,267 @@
+"""What the `sysid` commands share: exit codes, errors, JSON output, argument types, options.
+
+Light on purpose: `sysid --help` imports this and every command's `add_parser`, so anything
+heavy (numpy, scipy, pydantic, the simulator) is imported inside a command's `run`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
+DEFAULT_CONFIG = Path("config.toml")
+
+
+class CommandError(Exception):
+    """Why a command stops: `message` (stderr, and under --json the error object), the exit
+    code, and the error's kind (shown before the message unless it is plain "error")."""
+
+    def __init__(self, message: str, code: int = EXIT_BAD_INPUT, kind: str = "error"):
+        super().__init__(message)
+        self.message, self.code, self.kind = message, code, kind
+
+
+def refused(message: str) -> CommandError:
+    """Bad input: exit 2."""
+    return CommandError(message, EXIT_BAD_INPUT)
+
+
+def failed(message: str) -> CommandError:
+    """The command could not do its work: exit 1."""
+    return CommandError(message, EXIT_FAILED)
+
+
+class UsageError(Exception):
+    """A command line argparse refuses: the parser that refused it, and why."""
+
+    def __init__(self, parser: argparse.ArgumentParser, message: str):
+        super().__init__(message)
+        self.parser = parser
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse's parser (its subcommands' too), raising UsageError instead of exiting, so that
+    under --json a usage error is one JSON object on stdout like every other error."""
+
+    def error(self, message: str):  # type: ignore[override]
+        raise UsageError(self, message)
+
+
+# Under --json: whether the command printed its object, and its last error message (main()
+# prints the error object of a command that failed without printing one).
+json_state: dict = {"printed": False, "error": None}
+
+
+def say_error(command: str, message: str) -> None:
+    print(f"sysid {command}: error: {message}", file=sys.stderr)
+    json_state["error"] = message
+
+
+def print_json(document) -> None:
+    """One JSON object on stdout, non-finite numbers as null (JSON has no NaN)."""
+    print(json.dumps(finite(document), allow_nan=False))
+    json_state["printed"] = True
+
+
+def finite(value):
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [finite(v) for v in value]
+    if hasattr(value, "tolist"):  # numpy scalars and arrays
+        return finite(value.tolist())
+    return value
+
+
+def names(text: str) -> tuple[str, ...]:
+    found = tuple(n.strip() for n in text.split(",") if n.strip())
+    if not found:
+        raise argparse.ArgumentTypeError("expected comma-separated column names")
+    return found
+
+
+def positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {value}")
+    return value
+
+
+def checked(convert, accept, noun: str, hint: str):
+    """An argparse type: `convert` the text (else "is not a <noun>"), then `accept` the value
+    (else the hint)."""
+
+    def parse(text: str):
+        try:
+            value = convert(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a {noun}") from None
+        if not accept(value):
+            raise argparse.ArgumentTypeError(f"{text}: {hint}")
+        return value
+
+    return parse
+
+
+# nan, inf, 0 and negatives refused; a UDP port from 0 (any) to 65535.
+positive_seconds = checked(float, lambda v: math.isfinite(v) and v > 0, "number of seconds",
+                           "give a finite, positive number of seconds")  # fmt: skip
+port = checked(int, lambda p: 0 <= p <= 65535, "port number",
+               "not a UDP port: give 0 (any) to 65535")  # fmt: skip
+
+
+def trim(text: str) -> float:
+    from agent.analysis.identify import parse_trim
+
+    try:
+        return parse_trim(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def identification_options(parser: argparse.ArgumentParser) -> None:
+    """The options `sysid identify`, `analyze` and `report` share."""
+    parser.add_argument("--inputs", type=names, metavar="NAMES", help="input columns, a,b,…")
+    parser.add_argument("--outputs", type=names, metavar="NAMES", help="output columns, a,b,…")
+    parser.add_argument(
+        "--axes",
+        choices=("lateral", "longitudinal", "full"),
+        help="take inputs/outputs from the config's channel names for this axis set",
+    )
+    parser.add_argument("--order", type=positive_int, metavar="N", help="model order")
+    parser.add_argument("--markov", type=positive_int, metavar="P", help="Markov parameters")
+    parser.add_argument("--start", type=float, metavar="T0", help="first time used, s")
+    parser.add_argument("--end", type=float, metavar="T1", help="last time used, s")
+    parser.add_argument(
+        "--trim",
+        type=trim,
+        metavar="first:SECONDS|none",
+        help="trim = mean of the first SECONDS of each record (default from config: 0.5)",
+    )
+    parser.add_argument(
+        "--decimation",
+        type=positive_int,
+        metavar="Q",
+        help="decimation factor after the anti-alias filter (default: automatic; 1 = none)",
+    )
+    parser.add_argument(
+        "--method",
+        choices=("auto", "time", "frequency", "aircraft"),
+        help="auto (default: aircraft when an axis's four outputs are named and neither "
+        "--markov nor --order is given, else time), OKID in the time "
+        "domain, OKID from averaged spectra (thesis §4.3.1), or aircraft: decoupled "
+        "longitudinal and lateral models fitted in the frequency domain",
+    )
+    parser.add_argument(
+        "--period",
+        type=positive_seconds,
+        metavar="SECONDS",
+        help="excitation period for --method frequency (default: detected from the inputs)",
+    )
+    parser.add_argument(
+        "--refine",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="output-error refinement with Cramér–Rao standard errors (default from config: on)",
+    )
+    parser.add_argument("--config", type=Path, help="config file (default ./config.toml if any)")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def replay_options(parser: argparse.ArgumentParser) -> None:
+    """The logs and running options `sysid analyze` and `sysid report` share."""
+    parser.add_argument("data", nargs="+", type=Path, metavar="LOG",
+                        help="excitation logs, records, or a log directory")  # fmt: skip
+    identification_options(parser)
+    parser.add_argument("--excitation", action="append", metavar="N|PLAN",
+                        help="only this excitation log (running number or plan id)")  # fmt: skip
+    parser.add_argument("--jobs", type=positive_int, default=1, help="parallel processes")
+    parser.add_argument("--scheduler", metavar="ADDRESS",
+                        help="run the identifications on this Dask cluster")  # fmt: skip
+
+
+def load_optional_config(path: Path | None):
+    """The config at `path`, else ./config.toml if there is one, else the defaults; a bad
+    file is refused (exit 2)."""
+    from agent.config import Config, ConfigError, load_config
+
+    try:
+        if path is not None:
+            return load_config(path)
+        return load_config(DEFAULT_CONFIG) if DEFAULT_CONFIG.exists() else Config()
+    except ConfigError as exc:
+        raise refused(str(exc)) from None
+
+
+def identification_request(args: argparse.Namespace, paths):
+    """(config, request, settings) from the shared identification options."""
+    from agent.analysis import identify as identify_cmd
+
+    config = load_optional_config(args.config).identification
+    inputs, outputs = args.inputs, args.outputs
+    if args.axes is not None:
+        axis_inputs, axis_outputs = config.channels.axis_set(args.axes)
+        inputs, outputs = inputs or axis_inputs, outputs or axis_outputs
+    if not inputs or not outputs:
+        raise refused("give --inputs and --outputs, or --axes lateral|longitudinal|full")
+    trim_s = config.trim_seconds if args.trim is None else args.trim
+    request = identify_cmd.Request(
+        paths=tuple(paths),
+        inputs=inputs,
+        outputs=outputs,
+        start=args.start,
+        end=args.end,
+        trim_seconds=trim_s,
+        navigation=config.channels.navigation(),
+    )
+    settings = identify_cmd.settings_from(
+        config,
+        args.markov,
+        args.order,
+        decimation=args.decimation,
+        refine=args.refine,
+        method=args.method,
+        period_s=args.period,
+    )
+    return config, request, settings
+
+
+def progress(total: int, quiet: bool):
+    """A progress bar on stderr (tqdm) for long analyses; call with (None, None) to close."""
+    if quiet or total < 2:
+        return lambda done, of: None
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, unit="id", file=sys.stderr, leave=False,
+               disable=not sys.stderr.isatty())  # fmt: skip
+
+    def update(done, of):
+        if done is None:
+            bar.close()
+        else:
+            bar.n = done
+            bar.refresh()
+
+    return update
+
+
+def run_cases(cases, args: argparse.Namespace, quiet: bool):
+    """The identifications of `cases` (in processes, or on a Dask cluster), with a progress
+    bar; refused without Dask, failed when the cluster cannot be reached."""
+    from agent.analysis import analyze as an
+
+    bar = progress(len(cases), quiet=quiet)
+    try:
+        return an.run_cases(cases, workers=args.jobs, scheduler=args.scheduler, progress=bar)
+    except (OSError, ValueError, TimeoutError) as exc:  # a scheduler that cannot be reached
+        raise failed(f"cannot run the jobs: {exc}") from None
+    except ImportError as exc:  # --scheduler without Dask installed
+        raise refused(f"--scheduler needs Dask ({exc}): pip install '.[cluster]'") from None
+    finally:
+        bar(None, None)

@@ -1,0 +1,46 @@
+"""`sysid decode`: a raw sensor capture through the drivers' codecs."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from agent.cli.common import EXIT_OK, print_json, refused
+
+# The codecs' names (drivers.decode.CODECS, which imports every codec: kept out of `--help`;
+# tests/test_cli_decode.py checks the two agree).
+DEVICES = ("airdata", "surfaces", "vn200", "vn200-ascii")
+
+
+def add_parser(sub) -> None:
+    parser = sub.add_parser(
+        "decode",
+        help="decode a raw sensor capture",
+        description="Decode a raw capture (bytes as read from the port) with the drivers' codecs.",
+    )
+    parser.add_argument("device", choices=DEVICES, metavar="DEVICE",
+                        help=f"one of {', '.join(DEVICES)}")  # fmt: skip
+    parser.add_argument("file", type=Path, metavar="FILE")
+    parser.add_argument("--json", action="store_true", help="one JSON object per message")
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from drivers.decode import as_json, as_text, decode_file
+
+    try:
+        args.file.open("rb").close()
+    except OSError as exc:
+        raise refused(f"{args.file}: cannot be read ({exc.strerror or exc})") from None
+    messages, stats = decode_file(args.device, args.file)
+    try:
+        if args.json:  # one object: the messages and the stream's statistics
+            print_json({"messages": [as_json(m) for m in messages], "stats": stats.as_dict()})
+        else:
+            for message in messages:
+                print(as_text(message))
+            print("stats: " + ", ".join(f"{k} {v}" for k, v in stats.as_dict().items()))
+    except BrokenPipeError:  # the reader (head, less) went away: nothing more to say
+        sys.stdout = None
+    return EXIT_OK

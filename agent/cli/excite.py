@@ -1,0 +1,67 @@
+"""`sysid excite`: an excitation plan previewed before flight."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from agent.cli.common import EXIT_OK, load_optional_config, print_json, refused
+from agent.excitation.names import PRESETS
+
+
+def add_parser(sub) -> None:
+    parser = sub.add_parser(
+        "excite",
+        help="preview an excitation plan before flight",
+        description="Render a plan at the command rate: CSV (default), a JSON summary, a plot.",
+    )
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--preset", choices=PRESETS, help="one of the thesis's plans")
+    source.add_argument("--plan", type=Path, metavar="PLAN.json", help="a plan file")
+    parser.add_argument("--rate", type=float, metavar="HZ", help="command rate (default: config)")
+    parser.add_argument(
+        "--amplitude",
+        action="append",
+        default=[],
+        metavar="CONTROL=VALUE",
+        help="preset amplitude (deg, throttle %%) from trim; repeat per control",
+    )
+    parser.add_argument("--csv", action="store_true", help="time and one column per control")
+    parser.add_argument("--json", action="store_true", help="duration, RPF, peak, band, warnings")
+    parser.add_argument("--plot", type=Path, metavar="FILE.png", help="draw the plan")
+    parser.add_argument("--config", type=Path, help="config file (default ./config.toml if any)")
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from agent.excitation import plan as plans
+    from agent.excitation.preview import PreviewError, csv_text, load_plan, parse_amplitudes, plot
+
+    config = load_optional_config(args.config)
+    try:
+        rate = config.excitation.rate_hz if args.rate is None else args.rate
+        if not 1.0 <= rate <= 1000.0:
+            raise PreviewError(f"--rate must be within 1–1000 Hz, got {rate:g}")
+        if args.plan is not None:
+            plan = load_plan(args.plan)
+        else:
+            plan = plans.preset(args.preset, parse_amplitudes(args.amplitude))
+        timeline = plans.check(plan, rate, config.excitation.surfaces,
+                               config.excitation.envelope)  # fmt: skip
+    except (PreviewError, plans.PlanRefused, ValueError) as exc:
+        raise refused(str(exc)) from None
+    columns = {n: getattr(config.identification.channels, n) for n in timeline.values}
+    report = plans.summary(timeline, config.excitation.surfaces)
+    for warning in report["warnings"]:
+        print(f"sysid excite: warning: {warning}", file=sys.stderr)
+    if args.plot is not None:
+        try:
+            plot(timeline, report, columns, args.plot)
+        except ValueError as exc:  # PreviewError, or matplotlib's unknown file format
+            raise refused(str(exc)) from None
+    if args.json:
+        print_json(report)
+    elif args.csv or args.plot is None:
+        sys.stdout.write(csv_text(timeline, columns))
+    return EXIT_OK

@@ -1,0 +1,53 @@
+"""`sysid export`: identified models (and data) to MATLAB .mat or JSON."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from agent.cli.common import EXIT_OK, failed, refused
+
+
+def add_parser(sub) -> None:
+    parser = sub.add_parser(
+        "export",
+        help="identified models (and data) to MATLAB .mat or JSON",
+        description="Export the models of a result log, a model store file "
+        "(models/<axes>_nominal.json) or a ground log; variable names in the README.",
+    )
+    parser.add_argument("source", type=Path, metavar="SOURCE")
+    parser.add_argument("--out", type=Path, required=True, help="FILE.mat or FILE.json")
+    parser.add_argument("--model", action="append", metavar="ID", help="only these model ids")
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from agent.analysis.export import ExportError, load_models, to_json, to_mat
+
+    suffix = args.out.suffix.lower()
+    if suffix not in (".mat", ".json"):
+        raise refused(f"{args.out}: give a .mat or .json file to write")
+    try:
+        models = load_models(args.source)
+    except ExportError as exc:
+        raise refused(str(exc)) from None
+    if models.skipped:
+        more = " …" if len(models.skipped) > 10 else ""
+        lines = ", ".join(map(str, models.skipped[:10])) + more
+        print(f"sysid export: warning: {args.source}: {len(models.skipped)} line(s) not JSON "
+              f"and not exported (line {lines}); the rest is", file=sys.stderr)  # fmt: skip
+    if args.model:
+        unknown = sorted(set(args.model) - {m["id"] for m in models})
+        if unknown:
+            raise refused(f"{args.source}: no model {', '.join(unknown)}")
+        models = [m for m in models if m["id"] in args.model]
+    try:
+        if suffix == ".mat":
+            to_mat(models, args.out)
+        else:
+            args.out.write_text(to_json(models))
+    except OSError as exc:
+        raise failed(f"{args.out}: cannot be written ({exc.strerror or exc})") from None
+    print(f"{args.out}: {len(models)} model(s): {', '.join(m['id'] for m in models)}")
+    return EXIT_OK

@@ -1,0 +1,47 @@
+"""`sysid identify`: one linear model from CSV records."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from agent.cli.common import (
+    EXIT_BAD_INPUT,
+    EXIT_FAILED,
+    EXIT_OK,
+    CommandError,
+    identification_options,
+    identification_request,
+    print_json,
+)
+
+
+def add_parser(sub) -> None:
+    parser = sub.add_parser(
+        "identify",
+        help="identify a linear model from CSV flight records (OKID/ERA)",
+        description="Identify one linear model from one or more CSV records (a batch).",
+    )
+    parser.add_argument("data", nargs="+", type=Path, metavar="DATA.csv")
+    identification_options(parser)
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from agent.analysis import identify as identify_cmd
+    from agent.analysis.records import RecordError
+    from agent.ident import DataError, IdentificationFailed
+    from agent.ident.summary import format_text, to_dict
+
+    config, request, settings = identification_request(args, args.data)
+    try:
+        outcome = identify_cmd.run(request, config, settings)
+    except (RecordError, DataError) as exc:
+        raise CommandError(str(exc), EXIT_BAD_INPUT, "bad input") from None
+    except IdentificationFailed as exc:
+        raise CommandError(str(exc), EXIT_FAILED, "identification failed") from None
+    if args.json:
+        print_json(to_dict(outcome.result, outcome.trim))
+    else:
+        print(format_text(outcome.result, outcome.records, outcome.samples))
+    return EXIT_OK

@@ -1,0 +1,60 @@
+"""`sysid report`: an HTML report with figures for excitation logs."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from agent.cli.analyze import cases_for, select
+from agent.cli.common import (
+    EXIT_FAILED,
+    EXIT_OK,
+    failed,
+    identification_request,
+    print_json,
+    refused,
+    replay_options,
+    run_cases,
+)
+
+
+def add_parser(sub) -> None:
+    parser = sub.add_parser(
+        "report",
+        help="an HTML report with figures for excitation logs",
+        description="Time histories against the identified models with TIC, eigenvalues in "
+        "the s-plane, Hankel singular values, Bode plots against the data, input spectra "
+        "and RPF, mode tables.",
+    )
+    replay_options(parser)
+    parser.add_argument("--out", type=Path, required=True, metavar="DIR")
+    parser.add_argument("--nominal", type=Path, metavar="MODEL.json",
+                        help="a model store file to highlight")  # fmt: skip
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    paths = select(args)
+    prepared = identification_request(args, paths)
+    nominal = None
+    if args.nominal is not None:
+        try:
+            nominal = json.loads(args.nominal.read_text())
+            nominal = {"model_id": nominal["model_id"], "modes": nominal["result"]["modes"]}
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise refused(f"{args.nominal}: not a model store file ({exc})") from None
+    cases = cases_for(args, paths, batch=False, sweep=None, prepared=prepared)
+    outcomes = run_cases(cases, args, quiet=False)
+    from agent.analysis.report import write
+
+    try:
+        page = write(args.out, paths, cases, outcomes, nominal)
+    except OSError as exc:
+        raise failed(f"{args.out}: cannot be written ({exc.strerror or exc})") from None
+    identified = sum(o["ok"] for o in outcomes)
+    if args.json:
+        print_json({"page": str(page), "identified": identified, "excitations": len(outcomes)})
+    else:
+        print(f"{page}: {identified} of {len(outcomes)} excitation(s) identified")
+    return EXIT_OK if any(o["ok"] for o in outcomes) else EXIT_FAILED

@@ -1,0 +1,83 @@
+"""`sysid sim`: a whole flight with no hardware, end to end."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from agent.cli.common import (
+    EXIT_BAD_INPUT,
+    EXIT_FAILED,
+    EXIT_OK,
+    CommandError,
+    failed,
+    positive_int,
+    print_json,
+)
+from agent.excitation.names import PRESETS
+
+
+def add_parser(sub) -> None:
+    parser = sub.add_parser(
+        "sim",
+        help="a whole flight with no hardware, end to end",
+        description="Simulated aircraft, emulated ArduPlane, sensors and "
+        "radios, the real agent, and a scripted ground operator.",
+    )
+    parser.add_argument("--aircraft", default="J3Cub")
+    parser.add_argument("--speed-kts", type=float, default=60.0)
+    parser.add_argument(
+        "--turbulence", type=float, default=0.0, help="Dryden intensity: 1 = light (W20 = 5 ft/s)"
+    )
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--preset", choices=PRESETS, default="full")
+    parser.add_argument(
+        "--runs",
+        type=positive_int,
+        default=1,
+        help="excitations in a row (from the second on: TIC against the nominal)",
+    )
+    parser.add_argument("--keep", type=Path, metavar="DIR", help="keep logs and models in DIR")
+    parser.add_argument("--json", action="store_true", help="one JSON object")
+    parser.add_argument(
+        "--interactive",
+        action="store_true",
+        help="fly it from the ground console instead of the script (the simulated pilot "
+        "flips the switch 2 s after a plan is armed)",
+    )
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import asyncio
+
+    from agent.sim.flight import SimError, SimOptions, fly, format_report, interactive
+    from agent.sim.plant import PlantError
+
+    progress = None if args.json else (lambda text: print(text, flush=True))
+    options = SimOptions(
+        aircraft=args.aircraft,
+        speed_kts=args.speed_kts,
+        turbulence=args.turbulence,
+        seed=args.seed,
+        preset=args.preset,
+        runs=args.runs,
+        directory=args.keep,
+        progress=progress,
+    )
+    if args.interactive:
+        try:
+            asyncio.run(interactive(options))
+        except (PlantError, SimError) as exc:
+            raise failed(str(exc)) from None
+        return EXIT_OK
+    try:
+        report = asyncio.run(fly(options))
+    except (PlantError, SimError) as exc:
+        code = EXIT_BAD_INPUT if isinstance(exc, PlantError) else EXIT_FAILED
+        raise CommandError(str(exc), code) from None
+    if args.json:
+        print_json(report)
+    else:
+        print(format_report(report))
+    return EXIT_OK if not report["failure"] else EXIT_FAILED
