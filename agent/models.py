@@ -130,6 +130,16 @@ def suggest(
 CANDIDATES_KEPT = 16
 
 
+def model_summary(path: Path) -> dict:
+    """A model store file's id and modes, {"model_id", "modes"} (what a report highlights);
+    ValueError naming the file when it is not one."""
+    try:
+        stored = json.loads(Path(path).read_text())
+        return {"model_id": stored["model_id"], "modes": stored["result"]["modes"]}
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: not a model store file ({exc})") from None
+
+
 class ModelStore:
     """Nominal and previous nominal per identification type, on disk."""
 

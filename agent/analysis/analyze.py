@@ -362,3 +362,49 @@ def cross_validation(cases: Sequence[Case], outcomes: Sequence[dict]) -> list[li
                                       case.job.record_dt, other.job.experiments))  # fmt: skip
         matrix.append(row)
     return matrix
+
+
+def case_summary(outcome: dict) -> dict:
+    """What `sysid analyze` reports of one case's outcome."""
+    if not outcome["ok"]:
+        return {"ok": False, "reason": outcome["reason"]}
+    r = outcome["result"]
+    modes = [{"name": m["name"], "eigenvalue": m["eigenvalue"]} for m in r["modes"]]
+    refinement = r.get("refinement")
+    return {"ok": True, "markov": r["markov"], "order": r["order"], "tic_avg": r["tic_avg"],
+            "modes": modes, "converged": refinement["converged"] if refinement else None,
+            "warnings": list(r.get("warnings", ()))}  # fmt: skip
+
+
+def analysis_text(report: dict, paths) -> str:
+    """`sysid analyze`'s report as text: each case, the sweep table, the cross-validation."""
+    lines = [f"{len(paths)} log(s): " + ", ".join(Path(p).name for p in paths)]
+    for case in report["cases"]:
+        setting = " ".join(f"{k}={v}" for k, v in case["setting"].items())
+        head = f"excitation {case['excitation']}" + (f" ({setting})" if setting else "")
+        if not case["ok"]:
+            lines.append(f"{head}: failed: {case['reason']}")
+            continue
+        modes = ", ".join(f"{m['name']} {complex(*m['eigenvalue']):.3f}"
+                          for m in case["modes"] if m["name"])  # fmt: skip
+        lines.append(f"{head}: p {case['markov']}, n {case['order']}, "
+                     f"TIC_avg {case['tic_avg']:.3f}; {modes or 'no named mode'}")  # fmt: skip
+    if "sweep" in report:
+        lines.append("")
+        lines.append(f"{'setting':<14}{'TIC_avg':>9}  {'ok':>3}  modes (worst spread across "
+                     "excitations)")  # fmt: skip
+        for row in report["sweep"]:
+            setting = " ".join(f"{k}={v}" for k, v in row["setting"].items())
+            tic = "–" if row["tic_avg"] is None else f"{row['tic_avg']:.4f}"
+            spread = ", ".join(f"{n} {100 * s:.0f}%" for n, s in row["spread"].items())
+            lines.append(f"{setting:<14}{tic:>9}  {row['identified']:>3}  {spread or '–'}")
+        best = report["recommended"]
+        chosen = " ".join(f"{k}={v}" for k, v in best["setting"].items()) if best else None
+        lines.append(f"recommended: {chosen or 'none (nothing identified every time)'}")
+    if "cross_tic" in report:
+        lines.append("")
+        lines.append("TIC_avg of model i (rows) on excitation j (columns):")
+        for k, row in enumerate(report["cross_tic"], start=1):
+            cells = " ".join("    –" if v is None else f"{v:5.3f}" for v in row)
+            lines.append(f"  {k:>2}: {cells}")
+    return "\n".join(lines)

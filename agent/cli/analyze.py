@@ -4,7 +4,6 @@ cross-validation)."""
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from agent.cli.common import (
     EXIT_FAILED,
@@ -74,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     cases = cases_for(args, paths, args.batch, sweep)
     outcomes = run_cases(cases, args, quiet=args.json)
     report = {"logs": [str(p) for p in paths], "cases": [
-        {"excitation": c.label, "setting": dict(c.key), **case_summary(o)}
+        {"excitation": c.label, "setting": dict(c.key), **an.case_summary(o)}
         for c, o in zip(cases, outcomes, strict=True)]}  # fmt: skip
     excitations = 1 if args.batch else len(paths)
     if sweep is not None:
@@ -86,49 +85,5 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print_json(report)
     else:
-        print(analysis_text(report, paths))
+        print(an.analysis_text(report, paths))
     return EXIT_OK if any(o["ok"] for o in outcomes) else EXIT_FAILED
-
-
-def case_summary(outcome: dict) -> dict:
-    if not outcome["ok"]:
-        return {"ok": False, "reason": outcome["reason"]}
-    r = outcome["result"]
-    modes = [{"name": m["name"], "eigenvalue": m["eigenvalue"]} for m in r["modes"]]
-    refinement = r.get("refinement")
-    return {"ok": True, "markov": r["markov"], "order": r["order"], "tic_avg": r["tic_avg"],
-            "modes": modes, "converged": refinement["converged"] if refinement else None,
-            "warnings": list(r.get("warnings", ()))}  # fmt: skip
-
-
-def analysis_text(report: dict, paths) -> str:
-    lines = [f"{len(paths)} log(s): " + ", ".join(Path(p).name for p in paths)]
-    for case in report["cases"]:
-        setting = " ".join(f"{k}={v}" for k, v in case["setting"].items())
-        head = f"excitation {case['excitation']}" + (f" ({setting})" if setting else "")
-        if not case["ok"]:
-            lines.append(f"{head}: failed: {case['reason']}")
-            continue
-        modes = ", ".join(f"{m['name']} {complex(*m['eigenvalue']):.3f}"
-                          for m in case["modes"] if m["name"])  # fmt: skip
-        lines.append(f"{head}: p {case['markov']}, n {case['order']}, "
-                     f"TIC_avg {case['tic_avg']:.3f}; {modes or 'no named mode'}")  # fmt: skip
-    if "sweep" in report:
-        lines.append("")
-        lines.append(f"{'setting':<14}{'TIC_avg':>9}  {'ok':>3}  modes (worst spread across "
-                     "excitations)")  # fmt: skip
-        for row in report["sweep"]:
-            setting = " ".join(f"{k}={v}" for k, v in row["setting"].items())
-            tic = "–" if row["tic_avg"] is None else f"{row['tic_avg']:.4f}"
-            spread = ", ".join(f"{n} {100 * s:.0f}%" for n, s in row["spread"].items())
-            lines.append(f"{setting:<14}{tic:>9}  {row['identified']:>3}  {spread or '–'}")
-        best = report["recommended"]
-        chosen = " ".join(f"{k}={v}" for k, v in best["setting"].items()) if best else None
-        lines.append(f"recommended: {chosen or 'none (nothing identified every time)'}")
-    if "cross_tic" in report:
-        lines.append("")
-        lines.append("TIC_avg of model i (rows) on excitation j (columns):")
-        for k, row in enumerate(report["cross_tic"], start=1):
-            cells = " ".join("    –" if v is None else f"{v:5.3f}" for v in row)
-            lines.append(f"  {k:>2}: {cells}")
-    return "\n".join(lines)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from agent.cli.analyze import cases_for, select
@@ -39,11 +38,12 @@ def run(args: argparse.Namespace) -> int:
     prepared = identification_request(args, paths)
     nominal = None
     if args.nominal is not None:
+        from agent.models import model_summary
+
         try:
-            nominal = json.loads(args.nominal.read_text())
-            nominal = {"model_id": nominal["model_id"], "modes": nominal["result"]["modes"]}
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            raise refused(f"{args.nominal}: not a model store file ({exc})") from None
+            nominal = model_summary(args.nominal)
+        except ValueError as exc:
+            raise refused(str(exc)) from None
     cases = cases_for(args, paths, batch=False, sweep=None, prepared=prepared)
     outcomes = run_cases(cases, args, quiet=False)
     from agent.analysis.report import write
