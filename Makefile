@@ -60,15 +60,15 @@ bench: $(BENCH_STAMP)
 bench-jsbsim: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/bench_jsbsim.py
 
-# Issue 7: bytes on air and delivery time of a full-model result over the emulated radios.
+# Bytes on air and delivery time of a full-model result over the emulated radios.
 bench-link: $(STAMP)
 	$(BIN)/python benchmarks/bench_link.py
 
-# Issue 11: abort latency, switch low to trim on the MAVLink wire, over 30 drops mid-run.
+# Abort latency, switch low to trim on the MAVLink wire, over 30 drops mid-run.
 bench-abort: $(STAMP)
 	$(BIN)/python benchmarks/bench_abort.py --drops 30 --realtime 10
 
-# Issue 11's performance table (Markdown, with date, machine and commit; 20-25 minutes here):
+# The performance table (Markdown, with date, machine and commit; 20-25 minutes here):
 # identification against the peers, loop lag at 100 and 400 Hz, CPU per component, bytes on
 # air, abort latency. make bench-table ARGS=--quick for a shorter look.
 bench-table: $(BENCH_STAMP)
@@ -85,13 +85,13 @@ RUNS ?= 1000000
 fuzz: $(FUZZ_STAMP)
 	$(BIN)/python fuzz/fuzz.py --runs $(RUNS)
 
-# Issue 8: the agent's event-loop lag, CPU and memory over a simulated flight, in real time
+# The agent's event-loop lag, CPU and memory over a simulated flight, in real time
 # (45 minutes by default: make bench-agent MINUTES=5 for a quick look).
 MINUTES ?= 45
 bench-agent: $(STAMP)
 	$(BIN)/python benchmarks/bench_agent.py --minutes $(MINUTES) --world-nice 10 --realtime 10
 
-# Issue 11's soak: the same flight for HOURS (default 2) in real time, an excitation a minute;
+# The soak: the same flight for HOURS (default 2) in real time, an excitation a minute;
 # the logs stay in soak-logs/ (replaced at each run), read period by period at the end.
 HOURS ?= 2
 soak: $(STAMP)

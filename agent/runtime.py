@@ -192,11 +192,10 @@ class Agent:
             loop.set_debug(True)
             loop.slow_callback_duration = float(slow_ms) / 1000
         # Threads hand the GIL over every 0.25 ms instead of 5: a thread that wants the GIL
-        # waits up to this long for the holder to let go, so with the log writer formatting an
-        # excitation log (just as the worker starts identifying) the loop thread waited up to
-        # 5 ms at every wake-up (a convoy that stalled the loop for 50 ms and more). At 1 ms the
-        # p99 lag while identifying was 2.00–2.10 ms in four runs; at 0.25 ms 1.40–1.80 ms in four
-        # (benchmarks/bench_agent.py; README, *Measured resource use*).
+        # waits up to this long for the holder to let go, and with the log writer formatting
+        # an excitation log (as the worker starts identifying) the loop thread waited that long
+        # at every wake-up, a convoy that stalled it for 50 ms and more. The measurements are
+        # in README, *Measured resource use* (benchmarks/bench_agent.py).
         switch = sys.getswitchinterval()
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         handler = self._log_handler = self.logbook.handler(self.clock)

@@ -3,7 +3,7 @@
     make bench                                   # 20 seeds, 0 / 5 / 20 % noise (~10 min)
     .venv/bin/python benchmarks/bench_identify.py --seeds 3    # a quick look
 
-Case (a) of issue 3: the thesis's appendix A.2 lateral model (continuous, zero-order hold at
+The thesis's appendix A.2 lateral model (continuous, zero-order hold at
 50 Hz) driven by the thesis's flown excitation — Schroeder multisines with four harmonics per
 surface (aileron k = 3, 6, 9, 12; rudder k = 5, 10, 15, 20 of a 20 s period), 30 s — with
 white output noise of 0, 5 and 20 % of each output's RMS, one seed per record. Validation is

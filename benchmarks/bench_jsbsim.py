@@ -1,4 +1,4 @@
-"""Issue 19's benchmark: JSBSim's three aircraft, calm and in light turbulence, identified
+"""The whole-aircraft benchmark: JSBSim's three aircraft, calm and in light turbulence, identified
 through the full preset by suas-sysid and by the peers, in one process.
 
     make bench-jsbsim                                            # 3 × 2 × 10 seeds (~5 min)
@@ -9,7 +9,7 @@ Each seed is one offline flight (`agent.sim.offline.fly`: JSBSim trimmed as `sys
 it, the emulated ArduPlane's servos, the sensors' noise, 100 Hz). It holds the full preset
 from 2 s before to 2 s after. The record is identified as the agent does: the trim from the
 first 0.5 s, the INS's heading and velocities for the wind. The aircraft and speeds are the
-J-3 Cub at 60 kt and the Cessna 182 and PA-28 at 90 kt. Light turbulence is issue 19's:
+J-3 Cub at 60 kt and the Cessna 182 and PA-28 at 90 kt. Light turbulence:
 Dryden (MIL-F-8785C), W20 = 5 ft/s (`--turbulence 1`). Seeds start at 2, because JSBSim's
 seeds 0 and 1 give one turbulence sequence.
 

@@ -1,4 +1,4 @@
-"""Peak memory and time of `sysid identify` on long records (issue 20's bound).
+"""Peak memory and time of `sysid identify` on long records (the 2 GB bound at 5 million rows).
 
 Writes a record of N rows — time, aileron, rudder, beta, p, r, phi: the appendix A.2 lateral
 model under a multisine, with sensor noise, at 100 Hz — then runs `sysid identify` on it in

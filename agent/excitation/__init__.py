@@ -1,1 +1,1 @@
-"""Excitation signals, flight plans and the scheduler that plays them (issue 4 completes it)."""
+"""Excitation signals, flight plans and the scheduler that plays them."""

@@ -208,7 +208,8 @@ def thesis_multisine(
 
     Each surface plays its own four harmonics of a `period`-second base (aileron 3, 6, 9, 12;
     rudder 5, 10, 15, 20; elevator 7, 14, 21, 28) at its AMPLITUDE; throttle, which the
-    thesis does not excite with a multisine, gets the harmonics 2, 4 (steps are issue 4's).
+    thesis does not excite with a multisine, gets the harmonics 2, 4 (the flight
+    plans step it instead: `signals.steps`).
     """
     from agent.excitation.signals import THESIS_HARMONICS, multisine
 

@@ -1,1 +1,2 @@
-"""Hardware-free flight: the JSBSim plant (issue 6 adds the emulated autopilot, sensors, radios)."""
+"""Hardware-free flight: the JSBSim plant, the emulated ArduPlane, sensors and radios, the
+scripted pilot and operator, and the validated linear truth."""

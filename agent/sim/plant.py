@@ -11,7 +11,7 @@ p, q, r (rad/s).
 
 Turbulence is JSBSim's MIL-F-8785C Dryden model (turb-type 3), seeded through
 `simulation/randomseed` so runs repeat. `turbulence` is an intensity in units of light
-turbulence as issue 19 defines it: a wind of 5 ft/s at 20 ft (W20), so `turbulence=1` is
+turbulence: a wind of 5 ft/s at 20 ft (W20), so `turbulence=1` is
 W20 = 5 ft/s and σ_w = 0.1·W20 = 0.5 ft/s at low altitude. Below 1000 ft above the ground
 (where the sim flies) the Dryden intensities depend on W20 alone; JSBSim's severity index,
 which only acts above 1000 ft, is set to light (1) up to `turbulence=1` and grows with it.
@@ -70,7 +70,7 @@ INTEGRATORS = {
     "simulation/integrator/rate/rotational": 3,
     "simulation/integrator/position/rotational": 3,
 }
-LIGHT_TURBULENCE_WIND_FPS = 5.0  # issue 19's light turbulence: W20 = 5 ft/s
+LIGHT_TURBULENCE_WIND_FPS = 5.0  # light turbulence: W20 = 5 ft/s
 
 
 @contextlib.contextmanager

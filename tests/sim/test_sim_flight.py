@@ -47,7 +47,8 @@ REPLAY_TIC_REL = 1e-6
 
 
 def post_flight(directory, report) -> None:
-    """Issue 10 on the logs this very flight produced: analyze, export, import, report."""
+    """The post-flight commands on the logs this very flight produced: analyze, export,
+    import, report."""
     import json
     import os
     import subprocess

@@ -1,4 +1,4 @@
-"""Fault injection on the simulated aircraft (issue 11), beyond tests/sim/test_sim_faults.py.
+"""Fault injection on the simulated aircraft, beyond tests/sim/test_sim_faults.py.
 
 Every test flies the whole chain — JSBSim aircraft, emulated ArduPlane on MAVLink, sensor
 ptys, emulated radios, the real agent with its worker, the scripted ground — breaks one thing
