@@ -8,15 +8,10 @@ substitute virtual time.
 from __future__ import annotations
 
 import asyncio
-from typing import Protocol
 
+from drivers.values import Clock
 
-class Clock(Protocol):
-    """Monotonic seconds and absolute-deadline sleeping."""
-
-    def now(self) -> float: ...
-
-    async def sleep_until(self, deadline: float) -> None: ...
+__all__ = ["Clock", "LoopClock", "VirtualClock"]
 
 
 class LoopClock:

@@ -24,8 +24,8 @@ import numpy as np
 from agent.channels import SENSOR_CHANNELS
 from agent.clock import Clock
 from agent.config import Recorder as RecorderConfig
-from agent.excitation.scheduler import Window
 from drivers.sensor import Sample
+from drivers.values import Window
 
 log = logging.getLogger(__name__)
 

@@ -31,7 +31,6 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.analysis.identify import settings_from
 from agent.channels import AXIS_SETS, SENSOR_CHANNELS
 from agent.clock import Clock, LoopClock
 from agent.config import Config
@@ -40,6 +39,7 @@ from agent.excitation.scheduler import Event, Scheduler, Window
 from agent.health import GcWatch
 from agent.ident import Settings
 from agent.ident import job as jobs
+from agent.ident.job import settings_from
 from agent.link import messages
 from agent.link.codec import AIRCRAFT
 from agent.link.endpoint import build_endpoint
@@ -274,7 +274,7 @@ class Agent:
 
     # -- events -----------------------------------------------------------------------------
 
-    def _downlink(self, message: messages._Message, reliable: bool = True) -> None:
+    def _downlink(self, message: messages.Message, reliable: bool = True) -> None:
         if self.session is not None:
             (self.session.send_reliable if reliable else self.session.send_status)(message)
 
@@ -305,7 +305,7 @@ class Agent:
             self.counters["jobs_dropped"] += 1
             self._downlink(messages.Notice(text="identification queue full: window dropped"))
 
-    def _on_ground(self, message: messages._Message, seq: int | None) -> None:
+    def _on_ground(self, message: messages.Message, seq: int | None) -> None:
         """A command from the ground. An abort acts at once; the others are handled in order
         by the command task, which keeps rendering and model-store files off the loop."""
         if isinstance(message, messages.Abort):
@@ -343,7 +343,7 @@ class Agent:
             message, seq = await self._commands.get()
             await self.handle(message, seq)
 
-    async def handle(self, message: messages._Message, seq: int | None) -> None:
+    async def handle(self, message: messages.Message, seq: int | None) -> None:
         """Carry out one ground command and acknowledge it (or say why not)."""
         ok, reason = True, ""
         loop = asyncio.get_running_loop()

@@ -13,11 +13,11 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from agent.clock import Clock
-from agent.config import SerialPort
 from drivers.codec import Codec, StreamDecoder
+from drivers.config import SerialPort
 from drivers.serialio import Backoff, SerialLink
 from drivers.timing import DeviceClock
+from drivers.values import Clock
 
 log = logging.getLogger(__name__)
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import serial
 import serial_asyncio
 
-from agent.clock import Clock
+from drivers.values import Clock
 
 log = logging.getLogger(__name__)
 

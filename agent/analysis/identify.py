@@ -94,40 +94,6 @@ def load_experiments(
     return experiments, dt, trim, sum(r.time.size for r in records)
 
 
-def settings_from(
-    config: IdentConfig,
-    markov: int | None,
-    order: int | None,
-    *,
-    decimation: int | None = None,
-    refine: bool | None = None,
-    method: str | None = None,
-    period_s: float | None = None,
-) -> Settings:
-    """Identification settings: command-line values (not None) override the config file."""
-    return Settings(
-        markov=markov if markov is not None else _auto(config.markov),
-        markov_max=config.markov_max,
-        order=order if order is not None else _auto(config.order),
-        order_max=config.order_max,
-        estimate_d=config.estimate_d,
-        regularization=config.regularization,
-        hankel_blocks=config.hankel_blocks,
-        decimation=decimation if decimation is not None else _auto(config.decimation),
-        band_hz=config.band_hz,
-        held_inputs=config.held_inputs,
-        smoothing_s=config.smoothing_s,
-        refine=config.refine if refine is None else refine,
-        noise_model=config.noise_model,
-        method=method or config.method,
-        period_s=period_s if period_s is not None else config.period_s,
-    )
-
-
-def _auto(value: int | str) -> int | None:
-    return None if value == "auto" else int(value)
-
-
 def run(request: Request, config: IdentConfig, settings: Settings) -> Outcome:
     """Identify the request's records as one batch."""
     experiments, dt, trim, samples = load_experiments(request)

@@ -202,6 +202,7 @@ def load_optional_config(path: Path | None):
 def identification_request(args: argparse.Namespace, paths):
     """(config, request, settings) from the shared identification options."""
     from agent.analysis import identify as identify_cmd
+    from agent.ident.job import settings_from
 
     config = load_optional_config(args.config).identification
     inputs, outputs = args.inputs, args.outputs
@@ -220,7 +221,7 @@ def identification_request(args: argparse.Namespace, paths):
         trim_seconds=trim_s,
         navigation=config.channels.navigation(),
     )
-    settings = identify_cmd.settings_from(
+    settings = settings_from(
         config,
         args.markov,
         args.order,

@@ -20,10 +20,10 @@ from typing import Literal, Protocol
 
 import numpy as np
 
-from agent.clock import Clock
 from agent.config import Envelope, Excitation
 from agent.excitation import servo
 from agent.excitation.plan import Plan, PlanRefused, Timeline, check
+from drivers.values import Clock, FlightState, Window
 
 log = logging.getLogger(__name__)
 
@@ -31,18 +31,6 @@ log = logging.getLogger(__name__)
 PROGRESS_HZ = 1.0
 # Servo-output history kept for trim capture (samples); 10 s at 50 Hz telemetry.
 SERVO_HISTORY = 500
-
-
-@dataclass(frozen=True)
-class FlightState:
-    """Latest aircraft state the envelope is checked against (from sensors or autopilot)."""
-
-    time: float
-    bank_deg: float
-    pitch_deg: float
-    airspeed: float
-    alpha_deg: float
-    altitude_m: float
 
 
 class SurfaceSink(Protocol):
@@ -67,18 +55,6 @@ class Event:
     time: float
     detail: str = ""
     fraction: float | None = None
-
-
-@dataclass(frozen=True)
-class Window:
-    """An excitation window for the recorder: the data between start and end belong to it."""
-
-    plan_id: str
-    axes: str
-    start: float
-    end: float
-    outcome: Literal["finished", "aborted"]
-    reason: str = ""
 
 
 def envelope_violation(s: FlightState, env: Envelope, altitude_ref: float | None) -> str:

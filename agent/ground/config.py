@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from pydantic import Field
 
-from agent.config import Excitation, Link, _Section
+from agent.config import Excitation, Link, Section
 
 
-class GroundConfig(_Section):
+class GroundConfig(Section):
     """The whole ground configuration file."""
 
     link: Link = Link(counter_file="ground.counter", seen_file="ground.seen")

@@ -42,7 +42,7 @@ class Command:
     seq: int
     label: str
     sent_at: float
-    message: messages._Message
+    message: messages.Message
     ack: messages.Ack | None = None
 
 
@@ -146,7 +146,7 @@ class GroundStation:
 
     # -- what the aircraft says -------------------------------------------------------------
 
-    def on_message(self, message: messages._Message, seq: int | None) -> None:
+    def on_message(self, message: messages.Message, seq: int | None) -> None:
         now = self.clock.now()
         self._write("rx", messages.to_dict(message), seq=seq)
         h = self.heard
@@ -197,7 +197,7 @@ class GroundStation:
 
     # -- commands ---------------------------------------------------------------------------
 
-    def send(self, message: messages._Message, label: str) -> Command:
+    def send(self, message: messages.Message, label: str) -> Command:
         """Send a command reliably; its answer arrives in `command.ack`."""
         if self.session is None:
             raise RuntimeError("the radio is not open")

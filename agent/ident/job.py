@@ -9,6 +9,7 @@ import contextlib
 import os
 import sys
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -19,6 +20,44 @@ from agent.ident.errors import DataError, IdentificationFailed
 from agent.ident.fit import fit
 from agent.ident.preprocess import preprocess
 from agent.ident.summary import to_dict
+
+if TYPE_CHECKING:  # the config's type only: the worker never parses a config
+    from agent.config import Identification as IdentificationConfig
+
+
+def settings_from(
+    config: IdentificationConfig,
+    markov: int | None,
+    order: int | None,
+    *,
+    decimation: int | None = None,
+    refine: bool | None = None,
+    method: str | None = None,
+    period_s: float | None = None,
+) -> Settings:
+    """Identification settings: command-line values (not None) override the config file."""
+    return Settings(
+        markov=markov if markov is not None else _auto(config.markov),
+        markov_max=config.markov_max,
+        order=order if order is not None else _auto(config.order),
+        order_max=config.order_max,
+        estimate_d=config.estimate_d,
+        regularization=config.regularization,
+        hankel_blocks=config.hankel_blocks,
+        decimation=decimation if decimation is not None else _auto(config.decimation),
+        band_hz=config.band_hz,
+        held_inputs=config.held_inputs,
+        smoothing_s=config.smoothing_s,
+        refine=config.refine if refine is None else refine,
+        noise_model=config.noise_model,
+        method=method or config.method,
+        period_s=period_s if period_s is not None else config.period_s,
+    )
+
+
+def _auto(value: int | str) -> int | None:
+    return None if value == "auto" else int(value)
+
 
 # Gaps (NaN) up to this long are bridged linearly; longer ones fail the job with the reason.
 MAX_GAP_S = 0.1

@@ -22,7 +22,7 @@ class LinkMessageError(ValueError):
     """A payload that is not a message of this protocol version."""
 
 
-class _Message(BaseModel):
+class Message(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
     v: int = VERSION
 
@@ -30,25 +30,25 @@ class _Message(BaseModel):
 # -- uplink -------------------------------------------------------------------------------
 
 
-class Arm(_Message):
+class Arm(Message):
     """Arm this plan (the onboard envelope still decides; the pilot's switch starts it)."""
 
     kind: Literal["arm"] = "arm"
     plan: Plan
 
 
-class Start(_Message):
+class Start(Message):
     """Start the armed plan where the operator may start it (the switch still gates it)."""
 
     kind: Literal["start"] = "start"
 
 
-class Abort(_Message):
+class Abort(Message):
     kind: Literal["abort"] = "abort"
     reason: str = Field("operator abort", max_length=80)
 
 
-class IdentSettings(_Message):
+class IdentSettings(Message):
     """Identification settings (thesis B.2 4.1.1: the operator sets the update period)."""
 
     kind: Literal["settings"] = "settings"
@@ -60,7 +60,7 @@ class IdentSettings(_Message):
     update_period_s: float | None = Field(None, ge=5.0, le=3600.0, allow_inf_nan=False)
 
 
-class Decision(_Message):
+class Decision(Message):
     """The operator's decision on a candidate model: accept as nominal, or reject."""
 
     kind: Literal["decision"] = "decision"
@@ -68,20 +68,20 @@ class Decision(_Message):
     accept: bool
 
 
-class Revert(_Message):
+class Revert(Message):
     """Go back to the previous nominal model."""
 
     kind: Literal["revert"] = "revert"
 
 
-class Ping(_Message):
+class Ping(Message):
     kind: Literal["ping"] = "ping"
 
 
 # -- downlink -------------------------------------------------------------------------------
 
 
-class Status(_Message):
+class Status(Message):
     """Vehicle status, about once a second, latest wins."""
 
     kind: Literal["status"] = "status"
@@ -110,7 +110,7 @@ class Status(_Message):
     sensors: dict[str, dict[str, float | str | None]] = Field(default_factory=dict)
 
 
-class ExcitationEvent(_Message):
+class ExcitationEvent(Message):
     kind: Literal["event"] = "event"
     event: str
     plan_id: str
@@ -134,7 +134,7 @@ class ModeReport(BaseModel):
     cmi: float | None
 
 
-class Result(_Message):
+class Result(Message):
     """One identification: modes with their quality indexes, fit, stability, the update
     suggestion and the model matrices (discrete A, B, C, D at dt)."""
 
@@ -159,7 +159,7 @@ class Result(_Message):
     D: list[list[float]]
 
 
-class Failure(_Message):
+class Failure(Message):
     """An identification that failed, and why (the agent keeps flying)."""
 
     kind: Literal["failure"] = "failure"
@@ -168,7 +168,7 @@ class Failure(_Message):
     reason: str = Field(max_length=300)
 
 
-class Ack(_Message):
+class Ack(Message):
     """The answer to a command: done, or refused with the reason."""
 
     kind: Literal["ack"] = "ack"
@@ -177,7 +177,7 @@ class Ack(_Message):
     reason: str = ""
 
 
-class Notice(_Message):
+class Notice(Message):
     """A warning for the operator."""
 
     kind: Literal["warning"] = "warning"
@@ -205,7 +205,7 @@ Message = Annotated[
 _ADAPTER = TypeAdapter(Message)
 
 
-def to_dict(message: _Message) -> dict:
+def to_dict(message: Message) -> dict:
     """Plain values with defaults left out (kind, version and a plan's signal kinds stay)."""
     data = message.model_dump(mode="json", exclude_defaults=True)
     data |= {"kind": message.kind, "v": message.v}
@@ -214,7 +214,7 @@ def to_dict(message: _Message) -> dict:
     return data
 
 
-def from_dict(data: object) -> _Message:
+def from_dict(data: object) -> Message:
     """A message from its decoded form; LinkMessageError for another version or a bad one."""
     if not isinstance(data, dict):
         raise LinkMessageError(f"a message is a map, got {type(data).__name__}")

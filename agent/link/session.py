@@ -59,7 +59,7 @@ class LinkSession:
     """One end's session with its peer (see the module docstring)."""
 
     def __init__(self, codec: LinkCodec, transport: Transport, peer: bytes, clock: Clock,
-                 on_message: Callable[[messages._Message, int | None], None], *,
+                 on_message: Callable[[messages.Message, int | None], None], *,
                  heartbeat_s: float = 1.0,
                  deadline_s: float = 3.0):  # fmt: skip
         self._codec, self._transport, self._peer, self._clock = codec, transport, peer, clock
@@ -81,12 +81,12 @@ class LinkSession:
         self._saved_at = -1e9
         # Reliable messages (the ground's commands) held until the replay state that covers
         # them is on disk: a command acted on is never accepted again after a reboot.
-        self._acting: list[tuple[messages._Message, int | None]] = []
+        self._acting: list[tuple[messages.Message, int | None]] = []
         self.counters: Counter[str] = Counter()
 
     # -- application side -----------------------------------------------------------------
 
-    def send_reliable(self, message: messages._Message) -> int:
+    def send_reliable(self, message: messages.Message) -> int:
         """Queue a message for exactly-once, in-order delivery; returns its sequence number."""
         seq = self._next_seq
         self._next_seq += 1
@@ -101,7 +101,7 @@ class LinkSession:
         self._wake.set()
         return seq
 
-    def send_status(self, message: messages._Message) -> None:
+    def send_status(self, message: messages.Message) -> None:
         """Best effort, latest wins."""
         self._status = messages.to_dict(message)
         self._wake.set()

@@ -5,12 +5,12 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
-from agent.clock import Clock
-from agent.config import AirDataPort, Sensors
 from drivers.airdata.codec import SAMPLE_WRAP, AirData, AirDataCodec
+from drivers.config import AirDataPort, Sensors
 from drivers.sensor import Reading, Sample, SensorDriver
 from drivers.serialio import Backoff
 from drivers.timing import Unwrap
+from drivers.values import Clock
 
 DEG = math.pi / 180
 # ISA sea level and troposphere (ICAO Doc 7488).

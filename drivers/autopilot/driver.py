@@ -24,11 +24,10 @@ from mavsdk import LogLevel, log_subscribe
 from mavsdk.asyncio import Configuration, Mavsdk
 from mavsdk.plugins.mavlink_direct import MavlinkDirect, MavlinkMessage
 
-from agent.clock import Clock
-from agent.config import Autopilot as AutopilotConfig
-from agent.excitation.scheduler import FlightState
+from drivers.config import Autopilot as AutopilotConfig
 from drivers.sensor import Sample
 from drivers.timing import DeviceClock
+from drivers.values import Clock, FlightState
 
 log = logging.getLogger(__name__)
 

@@ -7,12 +7,12 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
-from agent.clock import Clock
-from agent.config import Calibration, Sensors, SurfacePort
+from drivers.config import Calibration, Sensors, SurfacePort
 from drivers.sensor import Reading, Sample, SensorDriver
 from drivers.serialio import Backoff
 from drivers.surfaces.codec import CHANNELS, SurfaceCodec, SurfaceFrame
 from drivers.timing import Unwrap
+from drivers.values import Clock
 
 
 def counts_to_degrees(counts: float, calibration: Calibration) -> float:

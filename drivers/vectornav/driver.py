@@ -6,11 +6,11 @@ import asyncio
 import math
 from collections.abc import Callable
 
-from agent.clock import Clock
-from agent.config import Sensors
 from drivers.codec import crc16_xmodem
+from drivers.config import Sensors
 from drivers.sensor import Reading, Sample, SensorDriver
 from drivers.serialio import Backoff
+from drivers.values import Clock
 from drivers.vectornav.codec import AsciiCodec, BinaryCodec, VnAscii, VnPacket, masks_for
 
 # Unix time of the GPS epoch, 1980-01-06T00:00:00Z.

@@ -31,7 +31,7 @@ from digi.xbee.models.address import XBee16BitAddress, XBee64BitAddress
 from digi.xbee.packets.aft import ApiFrameType
 from digi.xbee.packets.common import TransmitPacket
 
-from agent.clock import Clock
+from drivers.values import Clock
 
 log = logging.getLogger(__name__)
 

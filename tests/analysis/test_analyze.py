@@ -20,9 +20,10 @@ import numpy as np
 import pytest
 
 from agent.analysis import analyze as an
-from agent.analysis.identify import Request, settings_from
+from agent.analysis.identify import Request
 from agent.config import Config
 from agent.ident import reference
+from agent.ident.job import settings_from
 
 ROOT = Path(__file__).resolve().parents[2]
 NOISE = {"beta": 2e-3, "p": 2e-3, "r": 1e-3, "phi": 1e-3}

@@ -18,12 +18,12 @@ import numpy as np
 import pytest
 
 from agent.analysis import analyze as an
-from agent.analysis.identify import Request, settings_from
+from agent.analysis.identify import Request
 from agent.cli import main
 from agent.config import Channels, Config
 from agent.excitation.plan import preset
 from agent.ident import Settings
-from agent.ident.job import Job, run
+from agent.ident.job import Job, run, settings_from
 from agent.sim.offline import INS_CHANNELS, fly
 
 CHANNELS = Channels()
