@@ -56,6 +56,10 @@ class Candidate:
 class Suggestion:
     update: bool
     steps: list[str]
+    """Each step's outcome as a line for the operator."""
+    checks: dict[str, bool]
+    """Each step's outcome for a program: "stability", "quality", "fit" (TIC_jj), and with a
+    nominal model "no worse" (TIC_jN against TIC_NN) and "combined" (steps 6–7)."""
     tic_jj: float
     tic_jn: float | None = None
     tic_nn: float | None = None
@@ -110,9 +114,10 @@ def suggest(
     tic_jj = candidate.tic_jj
     steps.append(f"3 TIC_jj {tic_jj:.3f} {'<' if tic_jj < TIC_LIMIT else '≥'} {TIC_LIMIT}")
     ok &= tic_jj < TIC_LIMIT
+    checks = {"stability": stable, "quality": quality, "fit": bool(tic_jj < TIC_LIMIT)}
     if nominal is None:
         steps.append("4–7 no nominal model yet")
-        return Suggestion(bool(ok), steps, tic_jj)
+        return Suggestion(bool(ok), steps, checks, tic_jj)
     tic_nn = nominal.tic_nn if nominal.tic_nn is not None else nominal.tic_jj
     better = bool(tic_jn is not None and tic_jn <= tic_nn)
     steps.append(
@@ -122,7 +127,9 @@ def suggest(
     mine, theirs = tic_jj + (tic_jn or 0), tic_nn + (tic_nj or 0)
     verdict = "better" if combined else "NOT better"
     steps.append(f"6–7 TIC_jj + TIC_jN {mine:.3f} vs TIC_NN + TIC_Nj {theirs:.3f}: {verdict}")
-    return Suggestion(bool(ok and better and combined), steps, tic_jj, tic_jn, tic_nn, tic_nj)
+    checks |= {"no worse": better, "combined": combined}
+    return Suggestion(bool(ok and better and combined), steps, checks, tic_jj, tic_jn, tic_nn,
+                      tic_nj)  # fmt: skip
 
 
 # Undecided candidates kept for a decision; older ones are dropped (a decision on one is refused

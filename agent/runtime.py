@@ -853,6 +853,7 @@ def _result_message(c: Candidate, s) -> messages.Result:
         stable=r["stable"],
         suggest_update=s.update,
         reasons=s.steps,
+        checks=s.checks,
         tic_jn=s.tic_jn,
         tic_nn=s.tic_nn,
         tic_nj=s.tic_nj,

@@ -55,17 +55,23 @@ def test_a_divergence_the_record_cannot_resolve_is_reported_not_judged():
 
 
 @pytest.mark.parametrize(
-    ("change", "step", "text"),
+    ("change", "step", "text", "check"),
     [
-        ({"modes": [{"name": "roll", "eigenvalue": [0.2, 0.0], "emac": 90.0}]}, 0, "UNSTABLE"),
-        ({"modes": [{"name": "roll", "eigenvalue": [-9.0, 0.0], "emac": 30.0}]}, 1, "weak"),
-        ({"tic": 0.45}, 2, "≥ 0.3"),
+        ({"modes": [{"name": "roll", "eigenvalue": [0.2, 0.0], "emac": 90.0}]}, 0, "UNSTABLE",
+         "stability"),
+        ({"modes": [{"name": "roll", "eigenvalue": [-9.0, 0.0], "emac": 30.0}]}, 1, "weak",
+         "quality"),
+        ({"tic": 0.45}, 2, "≥ 0.3", "fit"),
     ],
-)
-def test_each_failing_step_says_no(change, step, text):
+)  # fmt: skip
+def test_each_failing_step_says_no(change, step, text, check):
+    # The line for the operator, and the outcome a program reads (the simulated operator).
     s = suggest(candidate("a", **change), None, None, None)
     assert not s.update
     assert text in s.steps[step]
+    assert s.checks[check] is False
+    assert all(passed for name, passed in s.checks.items() if name != check)
+    assert set(s.checks) == {"stability", "quality", "fit"}  # no nominal: steps 1–3
 
 
 def test_against_a_nominal_the_tic_comparison_decides():
@@ -75,9 +81,12 @@ def test_against_a_nominal_the_tic_comparison_decides():
     assert better.update
     assert "no worse" in better.steps[3]
     assert "better" in better.steps[4]
+    assert better.checks == {"stability": True, "quality": True, "fit": True, "no worse": True,
+                             "combined": True}  # fmt: skip
     worse = suggest(new, nominal, tic_jn=0.25, tic_nj=0.3)  # worse on the nominal's data
     assert not worse.update
     assert "WORSE" in worse.steps[3]
+    assert worse.checks["no worse"] is False
     combined = suggest(new, nominal, tic_jn=0.2, tic_nj=0.05)  # 0.1 + 0.2 vs 0.2 + 0.05
     assert not combined.update
     assert "NOT better" in combined.steps[4]

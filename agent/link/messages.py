@@ -150,6 +150,8 @@ class Result(Message):
     stable: bool
     suggest_update: bool
     reasons: list[str] = Field(default_factory=list)
+    checks: dict[str, bool] = Field(default_factory=dict)
+    """The suggestion's steps as outcomes (agent.models.Suggestion.checks)."""
     tic_jn: float | None = None
     tic_nn: float | None = None
     tic_nj: float | None = None

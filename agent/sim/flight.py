@@ -472,8 +472,7 @@ def _operator_accepts(result: messages.Result, first: bool) -> bool:
     quality step flagged a mode — a human establishing a baseline would."""
     if result.suggest_update:
         return True
-    basics = [r for r in result.reasons if r.startswith(("1 ", "3 "))]
-    return first and all("UNSTABLE" not in r and "≥" not in r for r in basics)
+    return first and result.checks.get("stability", False) and result.checks.get("fit", False)
 
 
 def _truth(aircraft: SimAircraft, axes: str) -> dict[str, complex | list[complex] | None]:
@@ -541,6 +540,7 @@ def _report(options: SimOptions, aircraft: SimAircraft, agent: Agent, outcomes: 
         else {
             "update": result.suggest_update,
             "steps": result.reasons,
+            "checks": result.checks,
             "tic_jn": result.tic_jn,
             "tic_nn": result.tic_nn,
             "tic_nj": result.tic_nj,
