@@ -404,6 +404,14 @@ class Config(Section):
     """The agent process's scheduling."""
 
 
+def to_toml(config: BaseModel) -> str:
+    """The settings of `config` that differ from the defaults, as a config file that
+    `load_config` reads back to an equal config (tomli-w writes what tomllib reads)."""
+    import tomli_w
+
+    return tomli_w.dumps(config.model_dump(mode="json", exclude_defaults=True, exclude_none=True))
+
+
 class ConfigError(Exception):
     """config.toml cannot be used; `problems` lists (key path, reason) pairs."""
 

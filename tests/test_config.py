@@ -166,13 +166,14 @@ def test_the_simulators_agent_config_file_loads_back_to_the_same_config(tmp_path
     # `simulated(agent_process=True)` writes only what differs from the defaults: the sensor
     # ports, the autopilot URL, the link files, the log directory, and the real-time priority
     # the benchmarks fly with.
-    from agent.sim.flight import _config, _config_toml
+    from agent.config import to_toml
+    from agent.sim.flight import _config
 
     for priority, speed in ((None, 60.0), (10, 90.0)):
         config = _config(tmp_path, tmp_path / "ports", ("127.0.0.1", 14555), "lateral", priority,
                          speed)  # fmt: skip
         path = tmp_path / "agent.toml"
-        path.write_text(_config_toml(config))
+        path.write_text(to_toml(config))
         assert load_config(path) == config
         assert load_config(path).runtime.realtime_priority == priority
         # The envelope fits the simulated aircraft: a 90 kt PA-28's trim (46.3 m/s) is inside
@@ -190,3 +191,36 @@ def test_an_update_period_from_the_radio_is_range_checked(period):
     with pytest.raises(ValidationError):
         messages.IdentSettings(axes="lateral", update_period_s=period)
     assert messages.IdentSettings(axes="lateral", update_period_s=20.0).update_period_s == 20.0
+
+
+def test_a_config_written_as_toml_reads_back_equal(tmp_path):
+    """`to_toml` writes what differs from the defaults (the simulator's agent config file);
+    `load_config` reads it back to an equal config: ports, the peer's address, a table of
+    calibration points, a nested envelope, a None left out."""
+    from agent.config import (
+        Calibration,
+        Config,
+        Envelope,
+        Excitation,
+        Link,
+        Sensors,
+        SurfacePort,
+        load_config,
+        to_toml,
+    )
+
+    calibration = {name: Calibration(poly=(-100.0, 0.2)) for name in SurfacePort().calibration}
+    calibration["rudder"] = Calibration(table=((0.0, -30.0), (1023.0, 30.0)))
+    config = Config(
+        excitation=Excitation(envelope=Envelope(min_airspeed=18.5, max_altitude_loss_m=93.0)),
+        sensors=Sensors(surfaces=SurfacePort(port="/tmp/surfaces", calibration=calibration)),
+        link=Link(port="/tmp/xbee", peer="0013a20040a1b2c3", key_file="k"),
+    )
+    text = to_toml(config)
+    assert "[link]" in text
+    assert "max_altitude_loss_m = 93.0" in text
+    assert "baud" not in text.split("[link]")[1].split("[")[0]  # defaults left out
+    path = tmp_path / "agent.toml"
+    path.write_text(text)
+    assert load_config(path) == config
+    assert to_toml(Config()) == ""

@@ -34,10 +34,12 @@ from agent.config import (
     Sensors,
     SurfacePort,
     VectorNav,
+    to_toml,
 )
 from agent.excitation.plan import preset
 from agent.link import messages
-from agent.link.codec import GROUND, CounterStore, LinkCodec
+from agent.link.codec import GROUND
+from agent.link.endpoint import build_endpoint
 from agent.link.session import LinkSession
 from agent.runtime import Agent
 from agent.sim.aircraft import AircraftOptions, SimAircraft
@@ -156,30 +158,6 @@ def _config(tmp: Path, ports: Path, mavlink: tuple[str, int], axes: str,
     )
 
 
-def _config_toml(config: Config) -> str:
-    """The settings `_config` makes, as the agent's config file (for the agent as a process):
-    only what differs from the defaults."""
-    s, link = config.sensors, config.link
-    return "\n".join([
-        "[identification]", f'axes = "{config.identification.axes}"',
-        "[excitation.envelope]",
-        f"min_airspeed = {config.excitation.envelope.min_airspeed!r}",
-        f"max_airspeed = {config.excitation.envelope.max_airspeed!r}",
-        f"max_altitude_loss_m = {config.excitation.envelope.max_altitude_loss_m!r}",
-        "[sensors.vn200]", f'port = "{s.vn200.port}"',
-        "[sensors.airdata]", f'port = "{s.airdata.port}"',
-        "[sensors.surfaces]", f'port = "{s.surfaces.port}"',
-        "[autopilot]", f'url = "{config.autopilot.url}"',
-        "[link]", f'port = "{link.port}"', f'peer = "{link.peer}"',
-        f'key_file = "{link.key_file}"', f'counter_file = "{link.counter_file}"',
-        f'seen_file = "{link.seen_file}"',
-        "[recorder]", f'log_dir = "{config.recorder.log_dir}"',
-        *(["[runtime]", f"realtime_priority = {config.runtime.realtime_priority}"]
-          if config.runtime.realtime_priority else []),
-        "",
-    ])  # fmt: skip
-
-
 class AgentProcess:
     """The real `sysid agent` entry point in its own process, for faults only a process can
     have (kill -9) and for the benchmark; output in agent-N.log in the flight's directory."""
@@ -187,7 +165,7 @@ class AgentProcess:
     def __init__(self, directory: Path, config: Config):
         self.directory = directory
         self.config_path = directory / "agent.toml"
-        self.config_path.write_text(_config_toml(config))
+        self.config_path.write_text(to_toml(config))
         self.proc: subprocess.Popen | None = None
         self.starts = 0
 
@@ -319,7 +297,7 @@ async def _parts(options: SimOptions, tmp: Path, params: Params, say, operator: 
             agent = Agent(config, base=tmp, clock=clock)
             tasks.append(asyncio.create_task(agent.run(), name="agent"))
         if operator:
-            ground = await ground_station(ground_module, key, clock, tasks)
+            ground = await ground_station(ground_module, tmp, clock, tasks)
         say(f"simulated {options.aircraft} at {options.speed_kts:g} kt; agent up")
 
         def connected() -> bool:
@@ -353,11 +331,14 @@ async def _parts(options: SimOptions, tmp: Path, params: Params, say, operator: 
         await asyncio.gather(*tasks, return_exceptions=True)
 
 
-async def ground_station(module: EmulatedXBee, key: bytes, clock, tasks) -> Ground:
-    holder: list[Ground] = []
-    radio = XBeeRadio(
-        str(module.path), 115200, clock, lambda s, p, t: holder[0].session.receive(s, p, t)
-    )
+async def ground_station(module: EmulatedXBee, directory: Path, clock, tasks) -> Ground:
+    """The scripted operator's end: the link as the ground console builds it (`build_endpoint`,
+    the flight's key, its own counter and replay state), on the ground's emulated module."""
+    config = Link(port=str(module.path), peer=AIR.hex(), key_file="link.key",
+                  counter_file="ground.counter", seen_file="ground.seen")  # fmt: skip
+    ground = Ground(None, None)  # type: ignore[arg-type]
+    radio, ground.session = build_endpoint(config, GROUND, directory, clock, ground.on_message)
+    ground.radio = radio
     for attempt in range(OPEN_ATTEMPTS):
         try:
             await radio.open()
@@ -368,11 +349,6 @@ async def ground_station(module: EmulatedXBee, key: bytes, clock, tasks) -> Grou
             if attempt == OPEN_ATTEMPTS - 1:
                 raise
             log.warning("simulated ground radio: %s; opening again", exc)
-    codec = LinkCodec(key, GROUND, {AIR}, counter=CounterStore(), max_payload=radio.max_payload,
-                      address=radio.address)  # fmt: skip
-    ground = Ground(None, radio)  # type: ignore[arg-type]
-    ground.session = LinkSession(codec, radio, AIR, clock, ground.on_message)
-    holder.append(ground)
     tasks.append(asyncio.create_task(ground.session.run(), name="ground-session"))
     tasks.append(asyncio.create_task(radio.watch(), name="ground-radio"))
     return ground

@@ -174,6 +174,7 @@ class AutopilotLink:
             await self._watch(loop, executor)
         finally:
             await self._let_go()
+            await _drained(loop, executor)
             for handle in handles:
                 self._direct.unsubscribe_message(handle)
             if self._direct is not None:
@@ -181,7 +182,6 @@ class AutopilotLink:
                 self._direct = None
             self.connected = False
             mavsdk.destroy()
-            executor.shutdown(wait=False, cancel_futures=True)
 
     async def _let_go(self) -> None:
         """Stopping (the agent shutting down): while an override is held — a run being ended,
@@ -313,3 +313,19 @@ class AutopilotLink:
             component_id=cfg.component_id, target_system_id=cfg.target_system,
             target_component_id=1, fields_json=json.dumps(fields),
         ))  # fmt: skip
+
+
+def _nothing() -> None:
+    pass
+
+
+async def _drained(loop, executor: ThreadPoolExecutor) -> None:
+    """The command thread's last command awaited (MAVSDK's own timeout bounds it), then the
+    idle thread joined: nothing left running once the driver is done, and the loop never held.
+    Cancelled meanwhile, it stops waiting and lets the thread end on its own."""
+    try:
+        await loop.run_in_executor(executor, _nothing)
+    except asyncio.CancelledError:
+        executor.shutdown(wait=False, cancel_futures=True)
+        raise
+    executor.shutdown(wait=True)
