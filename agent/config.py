@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import os
 import tomllib
+import types
+import typing
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -402,6 +404,80 @@ class Config(Section):
     """The XBee air–ground link."""
     runtime: Runtime = Runtime()
     """The agent process's scheduling."""
+
+
+def reference(model: type[BaseModel], file: str) -> str:
+    """The configuration reference of `model` as Markdown: each section (a TOML table) with
+    its description, and each key with its type, default and description — all from the
+    models and their field docstrings, so the reference cannot drift from the code."""
+    lines = [f"## `{file}`", "", (model.__doc__ or "").strip(), ""]
+    _section(model, [], lines)
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def _section(model: type[BaseModel], path: list[str], lines: list[str]) -> None:
+    keys, tables = [], []
+    for name, info in model.model_fields.items():
+        kind, args = info.annotation, typing.get_args(info.annotation)
+        if isinstance(kind, type) and issubclass(kind, BaseModel):
+            tables.append(([*path, name], kind))
+        elif typing.get_origin(kind) is dict and _is_model(args[1]):
+            keys.append((name, info))
+            tables.append(([*path, name, "<name>"], args[1]))
+        else:
+            keys.append((name, info))
+    if path:
+        lines += [f"### `[{'.'.join(path)}]`", "", _text(model.__doc__), ""]
+    if keys:
+        lines += ["| key | type | default | what it is |", "|---|---|---|---|"]
+        for name, info in keys:
+            default = info.get_default(call_default_factory=True)
+            shown = "required" if info.is_required() else _shown(default)
+            text = _text(info.description).replace("|", "\\|")
+            lines.append(f"| `{name}` | {_type_name(info.annotation)} | {shown} | {text} |")
+        lines.append("")
+    for where, kind in tables:
+        _section(kind, where, lines)
+
+
+def _is_model(kind) -> bool:
+    return isinstance(kind, type) and issubclass(kind, BaseModel)
+
+
+def _text(doc: str | None) -> str:
+    return " ".join((doc or "").split())
+
+
+def _type_name(annotation) -> str:
+    """A field's type as a reader wants it: `one of "a", "b"`, `int or "auto"`, `float`."""
+    origin, args = typing.get_origin(annotation), typing.get_args(annotation)
+    if origin is typing.Literal and len(args) == 1:
+        return f'`"{args[0]}"`' if isinstance(args[0], str) else f"`{args[0]}`"
+    if origin is typing.Literal:
+        return "one of " + ", ".join(f'`"{a}"`' if isinstance(a, str) else f"`{a}`" for a in args)
+    if origin is typing.Annotated:
+        return _type_name(args[0])
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join(_type_name(a) for a in args if a is not type(None)) + (
+            " (or unset)" if type(None) in args else ""
+        )
+    if origin in (tuple, list):
+        inner = _type_name(args[0]) if args else "value"
+        return f"list of {inner}"
+    if origin is dict:
+        return f"table of {_type_name(args[1])}"
+    return f"`{getattr(annotation, '__name__', annotation)}`"
+
+
+def _shown(value) -> str:
+    if isinstance(value, BaseModel):
+        return "(table)"
+    if isinstance(value, dict):
+        return ", ".join(f"`{k}`" for k in value) if value else "`{}`"
+    if value is None:
+        return "unset"
+    text = repr(value) if not isinstance(value, str) else f'"{value}"'
+    return "`" + text.replace("|", "\\|") + "`"
 
 
 def to_toml(config: BaseModel) -> str:

@@ -44,7 +44,9 @@ class VectorNav(SerialPort):
     """VN-200 INS (binary output, or ASCII $VNYMR/$VNINS)."""
 
     port: str = "/dev/ttyS1"
+    """Device path of the VN-200's serial port."""
     baud: int = Field(921600, ge=1200, le=4_000_000)
+    """Baud rate (the VN-200 is set to it: register 5)."""
     protocol: Literal["binary", "ascii"] = "binary"
     """Binary output packets (the thesis's choice) or ASCII sentences."""
     fields: tuple[str, ...] = (
@@ -76,6 +78,7 @@ class AirDataPort(SerialPort):
     """Aeroprobe µADC (ASCII lines)."""
 
     port: str = "/dev/ttyS2"
+    """Device path of the µADC's serial port."""
     probe_limit_deg: float = Field(20.0, gt=0.0, le=90.0)
     """Vane/probe range: α or β within 0.05° of it is flagged as clipped."""
 
@@ -109,6 +112,7 @@ class SurfacePort(SerialPort):
     """The surface box (seven potentiometers and RPM on an Arduino UNO)."""
 
     port: str = "/dev/ttyACM0"
+    """Device path of the surface box (its Arduino's USB serial port)."""
     calibration: dict[str, Calibration] = Field(default_factory=_default_calibration)
     """Per potentiometer (aileron_left, aileron_right, elevator_left, elevator_right, rudder,
     flap_left, flap_right): counts → degrees, positive by the right-hand rule."""

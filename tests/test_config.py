@@ -224,3 +224,20 @@ def test_a_config_written_as_toml_reads_back_equal(tmp_path):
     path.write_text(text)
     assert load_config(path) == config
     assert to_toml(Config()) == ""
+
+
+def test_the_configuration_reference_is_current_and_every_key_is_described():
+    """docs/configuration.md is `sysid config reference`'s output: regenerate it with
+    `.venv/bin/sysid config reference > docs/configuration.md` when a key changes."""
+    from pathlib import Path
+
+    from agent.cli.config_check import configuration_reference
+
+    text = configuration_reference()
+    docs = Path(__file__).resolve().parents[1] / "docs" / "configuration.md"
+    assert docs.read_text() == text, "docs/configuration.md is stale: regenerate it"
+    rows = [line for line in text.splitlines() if line.startswith("| `")]
+    assert len(rows) > 100
+    cells = [row.split(" | ") for row in rows]  # key, type, default, description
+    undescribed = [c[0] for c in cells if not c[-1].strip(" |")]
+    assert not undescribed, undescribed
