@@ -291,7 +291,7 @@ class Recorder(Section):
     """A channel whose newest sample is older than this at a frame time is recorded empty
     (NaN) there; its age is recorded either way."""
     channels: tuple[str, ...] | None = None
-    """Channels to record (unset: every sensor channel, see the README)."""
+    """Channels to record (unset: every sensor channel, docs/sensors.md)."""
     log_dir: str = "logs"
     """Directory of the flight, excitation and execution logs."""
     excitation_margin_s: float = Field(2.0, ge=0.0, le=60.0)

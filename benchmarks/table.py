@@ -1,5 +1,5 @@
 """The performance table: every number measured on this machine, now, by one command; printed
-as Markdown with the date, the machine and the commit, for the README.
+as Markdown with the date, the machine and the commit, for benchmarks/README.md.
 
     make bench-table                                  # 20-25 minutes here
     .venv/bin/python benchmarks/table.py --quick      # fewer samples

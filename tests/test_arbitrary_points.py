@@ -1,6 +1,6 @@
 """Code that runs at arbitrary points — the gc callback, and the callbacks digi-xbee and MAVSDK
-make on their own threads — must never take a lock or log (README, *Reliability*): it runs
-inside whatever the interrupted thread was doing, with that thread's locks held.
+make on their own threads — must never take a lock or log (docs/hardening.md, *Reliability*):
+it runs inside whatever the interrupted thread was doing, with that thread's locks held.
 
 Bad input tried: a full garbage collection forced at every Python call a logging thread makes
 (inside the logging handler, inside the log queue's put), each one slow, while another thread

@@ -1,6 +1,6 @@
 """`sysid --help` and `sysid --version` stay quick: building the parser (every command's
 options) imports none of the heavy libraries, which each command imports when it runs
-(measured with `python -X importtime -m agent --help`: README, *Two commands*)."""
+(measured with `python -X importtime -m agent --help`: README, *Commands*)."""
 
 from __future__ import annotations
 

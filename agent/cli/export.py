@@ -14,7 +14,7 @@ def add_parser(sub) -> None:
         "export",
         help="identified models (and data) to MATLAB .mat or JSON",
         description="Export the models of a result log, a model store file "
-        "(models/<axes>_nominal.json) or a ground log; variable names in the README.",
+        "(models/<axes>_nominal.json) or a ground log; variable names in docs/post-flight.md.",
     )
     parser.add_argument("source", type=Path, metavar="SOURCE")
     parser.add_argument("--out", type=Path, required=True, help="FILE.mat or FILE.json")

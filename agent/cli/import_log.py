@@ -14,7 +14,7 @@ def add_parser(sub) -> None:
         help="an autopilot log (ArduPilot .bin, PX4 .ulg) as a record for sysid identify",
         description="Map an ArduPilot DataFlash log to the channel names of `sysid identify` "
         "(attitude, rates, accelerations, airspeed, AoA/sideslip, surface outputs, SystemID "
-        "records), uniformly resampled; see the README for the mapping.",
+        "records), uniformly resampled; see docs/post-flight.md for the mapping.",
     )
     parser.add_argument("file", type=Path, metavar="FILE", help="ArduPilot .bin or PX4 .ulg")
     parser.add_argument("--out", type=Path, required=True, help="CSV to write")

@@ -407,7 +407,7 @@ def max_cross_correlation(values: Mapping[str, np.ndarray]) -> float:
     return worst
 
 
-# Preset defaults (documented in the README): amplitudes in degrees / percent from trim.
+# Preset defaults (documented in docs/excitation.md): amplitudes in degrees / percent from trim.
 PRESET_AMPLITUDE = {"aileron": 4.0, "elevator": 3.0, "rudder": 4.0, "throttle": 10.0}
 DOUBLET_PULSE_S = {"aileron": 1.0, "rudder": 1.0, "elevator": 0.5}
 MULTISINE_PERIOD_S = 20.0

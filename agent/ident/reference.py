@@ -221,7 +221,7 @@ def thesis_multisine(
 
 
 def with_output_noise(y: np.ndarray, fraction: float, seed: int) -> np.ndarray:
-    """y plus white noise of `fraction` × each output's RMS (the issue-3 noise convention)."""
+    """y plus white noise of `fraction` × each output's RMS (the benchmarks' noise convention)."""
     rng = np.random.default_rng(seed)
     scale = fraction * np.sqrt(np.mean(y**2, axis=0))
     return y + rng.normal(size=y.shape) * scale

@@ -21,7 +21,7 @@ CLIP_MARGIN_DEG = 0.05
 
 def true_airspeed(ias: float, static_pa: float, pressure_altitude: float) -> float:
     """TAS = IAS·√(ρ₀/ρ), ρ from static pressure and the ISA temperature at the pressure
-    altitude (the µADC carries no temperature: the ISA assumption is stated in the README)."""
+    altitude (the µADC carries no temperature: the ISA assumption is stated in docs/sensors.md)."""
     temperature = T0 - LAPSE * pressure_altitude
     rho = static_pa / (R_AIR * temperature)
     return ias * math.sqrt(RHO0 / rho)

@@ -62,8 +62,8 @@ class AutopilotError(RuntimeError):
 
 class _Seam:
     """MAVSDK's threads → the loop: newest message per name, at most one pending drain. The
-    callback takes no lock and logs nothing (README, *Reliability*): it stores into dicts, one
-    atomic operation each under the GIL, and the drain pops what it finds."""
+    callback takes no lock and logs nothing (docs/hardening.md, *Reliability*): it stores into
+    dicts, one atomic operation each under the GIL, and the drain pops what it finds."""
 
     def __init__(self, loop: asyncio.AbstractEventLoop, deliver: Callable[[dict], None]):
         self._loop, self._deliver = loop, deliver

@@ -246,9 +246,9 @@ class XBeeRadio:
     # -- the seam: digi-xbee's threads → the loop -----------------------------------------
 
     def _packet(self, packet) -> None:  # on a digi-xbee callback thread
-        # No lock, no logging (README, *Reliability*): the bound is checked without one, so
-        # with several callback threads it may be passed by as many; two drops at the same
-        # instant may count one.
+        # No lock, no logging (docs/hardening.md, *Reliability*): the bound is checked without
+        # one, so with several callback threads it may be passed by as many; two drops at the
+        # same instant may count one.
         if len(self._inbox) >= INBOX:
             self._inbox_dropped += 1
             return

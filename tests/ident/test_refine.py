@@ -190,9 +190,10 @@ def test_modal_truncation_keeps_exactly_the_chosen_modes():
 
 @pytest.mark.parametrize(("noise", "bound"), [(0.05, 0.02), (0.2, 0.10)])
 def test_default_identification_meets_the_issue_target_on_the_thesis_multisine(noise, bound):
-    """Defaults only (data, inputs, outputs): worst-mode error within the issue-3 targets.
+    """Defaults only (data, inputs, outputs): worst-mode error within the targets.
 
-    Textbook OKID on this record misses the Dutch roll by hundreds of percent (README).
+    Textbook OKID on this record misses the Dutch roll by hundreds of percent
+    (benchmarks/README.md).
     """
     truth = true_eigenvalues(LAT)
     errors = []

@@ -3,8 +3,8 @@ the console, the simulated pilot flips the switch, the real agent identifies in 
 the result crosses the emulated radios and renders, and the operator's accept makes it the
 aircraft's nominal model.
 
-SAVE_SCREENSHOT=DIR also writes the console's screens as SVG there (the README's picture:
-`make screenshot`).
+SAVE_SCREENSHOT=DIR also writes the console's screens as SVG there (the pictures in the README
+and docs/console.md: `make screenshot`).
 """
 
 from __future__ import annotations
