@@ -293,8 +293,12 @@ class JsonLinesHandler(logging.Handler):
     @staticmethod
     def _raw_line(record: logging.LogRecord) -> bytes:
         template = record.msg if isinstance(record.msg, str) else type(record.msg).__name__
-        event = {"t": time.monotonic(), "level": record.levelname, "logger": record.name,
-                 "message": f"unformattable log record: {template}"}  # fmt: skip
+        event = {
+            "t": time.monotonic(),
+            "level": record.levelname,
+            "logger": record.name,
+            "message": f"unformattable log record: {template}",
+        }
         return (json.dumps(event) + "\n").encode()
 
     def _line(self, record: logging.LogRecord) -> bytes:
@@ -334,8 +338,14 @@ class Logbook:
     """The logs of one agent run: the flight log (every recorder frame), the execution log,
     and an input/output log per excitation window."""
 
-    def __init__(self, writer: LogWriter, columns: Sequence[str], units: Sequence[str],
-                 config_sha256: str, rate_hz: float | None = None):  # fmt: skip
+    def __init__(
+        self,
+        writer: LogWriter,
+        columns: Sequence[str],
+        units: Sequence[str],
+        config_sha256: str,
+        rate_hz: float | None = None,
+    ):
         self._writer, self._columns, self._units = writer, list(columns), list(units)
         self._sha, self._rate_hz = config_sha256, rate_hz
         number = writer.next_number()

@@ -128,8 +128,9 @@ def suggest(
     verdict = "better" if combined else "NOT better"
     steps.append(f"6–7 TIC_jj + TIC_jN {mine:.3f} vs TIC_NN + TIC_Nj {theirs:.3f}: {verdict}")
     checks |= {"no worse": better, "combined": combined}
-    return Suggestion(bool(ok and better and combined), steps, checks, tic_jj, tic_jn, tic_nn,
-                      tic_nj)  # fmt: skip
+    return Suggestion(
+        bool(ok and better and combined), steps, checks, tic_jj, tic_jn, tic_nn, tic_nj
+    )
 
 
 # Undecided candidates kept for a decision; older ones are dropped (a decision on one is refused

@@ -415,8 +415,9 @@ class Agent:
             return None
         previous = (os.sched_getscheduler(0), os.sched_getparam(0))
         try:
-            os.sched_setscheduler(0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK,
-                                  os.sched_param(priority))  # fmt: skip
+            os.sched_setscheduler(
+                0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, os.sched_param(priority)
+            )
         except (OSError, AttributeError) as exc:
             self.counters["realtime_refused"] += 1
             log.warning("realtime_priority %d not set (%s): normal scheduling", priority, exc)
@@ -444,9 +445,12 @@ class Agent:
                 log.error("the identification worker died (%s); starting a new one", exc)
                 self._pool.shutdown(wait=False, cancel_futures=True)
                 self._pool = self._new_worker()
-                self._failed(f"{window.plan_id}", self.ident.axes,
-                             "the identification worker process died; a new one is started "
-                             "for the next window")  # fmt: skip
+                self._failed(
+                    f"{window.plan_id}",
+                    self.ident.axes,
+                    "the identification worker process died; a new one is started "
+                    "for the next window",
+                )
             except Exception as exc:  # a fault in one identification: a failure result, go on
                 log.exception("identification of %s failed", window.plan_id)
                 self._failed(f"{window.plan_id}", self.ident.axes, f"internal error: {exc!r}")
@@ -466,9 +470,19 @@ class Agent:
         dt = 1.0 / self.config.recorder.rate_hz
         batch = self._batch.setdefault(axes, []) if self.ident.batch else []
         settings = _settings(self.config, self.ident)
-        job = jobs.Job(model_id, axes, dt, inputs, outputs, roles, tuple(batch), settings,
-                       window=columns, trim_s=self.config.identification.trim_seconds,
-                       navigation=navigation)  # fmt: skip
+        job = jobs.Job(
+            model_id,
+            axes,
+            dt,
+            inputs,
+            outputs,
+            roles,
+            tuple(batch),
+            settings,
+            window=columns,
+            trim_s=self.config.identification.trim_seconds,
+            navigation=navigation,
+        )
         outcome = await loop.run_in_executor(pool, jobs.run, job)
         if not outcome["ok"]:
             return self._failed(model_id, axes, outcome["reason"])
@@ -591,8 +605,13 @@ class Agent:
         if not self.gc_watch.pending:
             return
         slow, longest = self.gc_watch.take()
-        log.warning("%d full garbage collection%s slower than %.0f ms, the longest %.0f ms",
-                    slow, "s" * (slow != 1), GC_WARN_S * 1000, longest * 1000)  # fmt: skip
+        log.warning(
+            "%d full garbage collection%s slower than %.0f ms, the longest %.0f ms",
+            slow,
+            "s" * (slow != 1),
+            GC_WARN_S * 1000,
+            longest * 1000,
+        )
 
     async def _health_loop(self) -> None:
         """Every HEALTH_S: one `health {json}` line in the execution log — loop lag
@@ -617,8 +636,13 @@ class Agent:
             if not len(ms):
                 return {"n": 0}
             p50, p99 = np.percentile(ms, [50, 99])
-            return {"n": len(ms), "p50_ms": p50, "p99_ms": p99, "max_ms": float(ms.max()),
-                    "hist": lag_histogram(ms)}  # fmt: skip
+            return {
+                "n": len(ms),
+                "p50_ms": p50,
+                "p99_ms": p99,
+                "max_ms": float(ms.max()),
+                "hist": lag_histogram(ms),
+            }
 
         return {
             "t": self.clock.now(),
@@ -652,8 +676,10 @@ class Agent:
         once when they are written again; recording to memory and identification go on."""
         failing = self.writer.failing
         if failing is not None and not self._logs_failing:
-            text = (f"logs not written: {failing}; {self.writer.lost_lines} lines lost so far; "
-                    "recording in memory and identification go on")  # fmt: skip
+            text = (
+                f"logs not written: {failing}; {self.writer.lost_lines} lines lost so far; "
+                "recording in memory and identification go on"
+            )
             log.error(text)
             self._downlink(messages.Notice(text=text[:200]))
         elif failing is None and self._logs_failing:
@@ -750,8 +776,10 @@ class StallTracer(threading.Thread):
                 if ident in (self.loop_thread, threading.get_ident()):
                     continue
                 top = traceback.extract_stack(frame)[-1]
-                lines.append(f"thread {names.get(ident, ident)}: {top.name} "
-                             f"({Path(top.filename).name}:{top.lineno})")  # fmt: skip
+                lines.append(
+                    f"thread {names.get(ident, ident)}: {top.name} "
+                    f"({Path(top.filename).name}:{top.lineno})"
+                )
             log.warning("\n".join(lines))
 
 

@@ -96,8 +96,11 @@ async def measure(drops: int, seed: int = 0, realtime: int | None = None) -> lis
                 raise RuntimeError(f"the agent refused the plan: {ack.reason}")
             seen = len(ground.inbox)
             pilot.set_switch(True)
-            begun = await _until(lambda s=seen: _events(ground, s, "started")
-                                 or _events(ground, s, "refused"), 10, "start")  # fmt: skip
+            begun = await _until(
+                lambda s=seen: _events(ground, s, "started") or _events(ground, s, "refused"),
+                10,
+                "start",
+            )
             if begun[0].event == "refused":
                 raise RuntimeError(f"drop {k}: the agent refused the start: {begun[0].detail}")
             started = begun[0]
@@ -111,25 +114,32 @@ async def measure(drops: int, seed: int = 0, realtime: int | None = None) -> lis
                 await level_wings(sim.aircraft)
                 await asyncio.sleep(1.5)
                 continue
-            trim = {CHANNEL[name]: int(us)
-                    for name, us in re.findall(r"(\w+) (\d+) µs", started.detail)}  # fmt: skip
+            trim = {
+                CHANNEL[name]: int(us) for name, us in re.findall(r"(\w+) (\d+) µs", started.detail)
+            }
             wire = list(ap.wire)
-            reports = [t for t, kind, *rest in wire
-                       if kind == "switch" and t >= dropped and rest[0] < 1500]  # fmt: skip
+            reports = [
+                t for t, kind, *rest in wire if kind == "switch" and t >= dropped and rest[0] < 1500
+            ]
             if not reports:
                 raise RuntimeError(f"drop {k}: no RC_CHANNELS with the switch low on the wire")
-            after = [(t, values) for t, kind, values, _ in
-                     (e for e in wire if e[1] == "override") if t >= reports[0]]  # fmt: skip
+            after = [
+                (t, values)
+                for t, kind, values, _ in (e for e in wire if e[1] == "override")
+                if t >= reports[0]
+            ]
             trims = [i for i, (_, values) in enumerate(after) if values == trim]
             if not trims:
                 raise RuntimeError(f"drop {k}: no trim override {trim} after the switch report")
             reported, first = reports[0], trims[0]
             t_trim = after[first][0]
-            out.append({
-                "report_to_trim_s": t_trim - reported,
-                "flip_to_trim_s": t_trim - dropped,
-                "commands_before_trim": first,
-            })  # fmt: skip
+            out.append(
+                {
+                    "report_to_trim_s": t_trim - reported,
+                    "flip_to_trim_s": t_trim - dropped,
+                    "commands_before_trim": first,
+                }
+            )
             await level_wings(sim.aircraft)
             await asyncio.sleep(1.5)  # trimmed flight (the agent captures trim) before the next
     return out
@@ -174,8 +184,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--drops", type=int, default=30)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--realtime", type=int, metavar="PRIORITY",
-                        help="the agent's [runtime] realtime_priority")  # fmt: skip
+    parser.add_argument(
+        "--realtime", type=int, metavar="PRIORITY", help="the agent's [runtime] realtime_priority"
+    )
     args = parser.parse_args()
     print(report(summary(asyncio.run(measure(args.drops, args.seed, args.realtime)))))
 

@@ -99,8 +99,13 @@ async def world(directory: Path, every: float, rate: float = 100.0) -> None:
             began, seen = clock.now(), len(ground.inbox)
             try:
                 outcome = await one_run(options, aircraft, ground, len(runs), lambda _: None)
-                runs.append({"t": began, "ok": "result" in outcome,
-                             "result_after_s": _result_after(ground, seen)})  # fmt: skip
+                runs.append(
+                    {
+                        "t": began,
+                        "ok": "result" in outcome,
+                        "result_after_s": _result_after(ground, seen),
+                    }
+                )
             except Exception as exc:  # a missed run is counted, the flight goes on
                 aircraft.pilot.set_switch(False)
                 runs.append({"t": began, "ok": False, "error": str(exc)})
@@ -121,8 +126,9 @@ def _result_after(ground, seen: int) -> float | None:
     from agent.link import messages
 
     new = list(zip(ground.inbox[seen:], ground.received_at[seen:], strict=True))
-    ends = [m.time for m, _ in new if isinstance(m, messages.ExcitationEvent)
-            and m.event == "finished"]  # fmt: skip
+    ends = [
+        m.time for m, _ in new if isinstance(m, messages.ExcitationEvent) and m.event == "finished"
+    ]
     results = [t for m, t in new if isinstance(m, messages.Result)]
     return results[0] - ends[0] if ends and results else None
 
@@ -130,8 +136,9 @@ def _result_after(ground, seen: int) -> float | None:
 # -- the parent --------------------------------------------------------------------------------
 
 
-def agent_config(directory: Path, mavlink: list, realtime: int | None = None,
-                 rate: float = 100.0) -> str:  # fmt: skip
+def agent_config(
+    directory: Path, mavlink: list, realtime: int | None = None, rate: float = 100.0
+) -> str:
     ports = directory / "ports"
     runtime = f"[runtime]\nrealtime_priority = {realtime}\n" if realtime else ""
     return (
@@ -203,8 +210,14 @@ async def probe(lags: list[float]) -> None:
         lags.append(loop.time() - start - 0.01)
 
 
-async def measure(minutes: float, every: float, keep: Path | None, world_nice: int,
-                  realtime: int | None = None, rate: float = 100.0) -> dict:  # fmt: skip
+async def measure(
+    minutes: float,
+    every: float,
+    keep: Path | None,
+    world_nice: int,
+    realtime: int | None = None,
+    rate: float = 100.0,
+) -> dict:
     with contextlib.ExitStack() as stack:
         directory = keep or Path(stack.enter_context(tempfile.TemporaryDirectory()))
         directory.mkdir(parents=True, exist_ok=True)
@@ -238,10 +251,20 @@ async def measure(minutes: float, every: float, keep: Path | None, world_nice: i
             (directory / "agent.toml").write_text(config)
             agent_log = stack.enter_context(open(directory / "agent.log", "w"))
             agent_proc = subprocess.Popen(
-                [sys.executable, "-m", "agent", "agent", "--config",
-                 str(directory / "agent.toml"), "--base", str(directory)],
-                env=env, stdout=agent_log, stderr=subprocess.STDOUT,
-            )  # fmt: skip
+                [
+                    sys.executable,
+                    "-m",
+                    "agent",
+                    "agent",
+                    "--config",
+                    str(directory / "agent.toml"),
+                    "--base",
+                    str(directory),
+                ],
+                env=env,
+                stdout=agent_log,
+                stderr=subprocess.STDOUT,
+            )
             result = await sample(directory, agent_proc, world_proc, minutes)
             return {"rate_hz": rate, "realtime": realtime, "world_nice": world_nice, **result}
         finally:
@@ -267,8 +290,14 @@ async def sample(directory: Path, agent_proc, world_proc, minutes: float) -> dic
                 raise RuntimeError(f"a process stopped early; see the logs in {directory}")
             agent, world_now = proc_sample(agent_proc.pid), proc_sample(world_proc.pid)
             workers = [s for k in children(agent_proc.pid) if (s := proc_sample(k))]
-            samples.append({"t": time.monotonic() - start, "agent": agent, "workers": workers,
-                            "world": world_now})  # fmt: skip
+            samples.append(
+                {
+                    "t": time.monotonic() - start,
+                    "agent": agent,
+                    "workers": workers,
+                    "world": world_now,
+                }
+            )
             done = int((time.monotonic() - start) / 60)
             print(f"\r{done}/{minutes:g} min", end="", file=sys.stderr, flush=True)
     finally:
@@ -293,8 +322,9 @@ def summarise(samples, health, baseline, runs, exit_code) -> dict:
     cpu = np.array([s["agent"]["cpu_s"] for s in samples])
     loop_cpu = np.array([s["agent"]["main_thread_cpu_s"] for s in samples])
     worker_cpu = np.array([sum(w["cpu_s"] for w in s["workers"]) for s in samples])
-    worker_rss = np.array([sum(w["rss_mb"] for w in s["workers"] if not w["tracker"])
-                           for s in samples])  # fmt: skip
+    worker_rss = np.array(
+        [sum(w["rss_mb"] for w in s["workers"] if not w["tracker"]) for s in samples]
+    )
     world_cpu = np.array([s["world"]["cpu_s"] for s in samples])
     half = t >= t[-1] / 2
     slope = float(np.polyfit(t[half] / 3600, rss[half], 1)[0]) if half.sum() > 2 else None
@@ -420,17 +450,24 @@ def main() -> None:
     parser.add_argument("--every", type=float, default=60.0, help="s between excitations")
     parser.add_argument("--keep", type=Path, help="keep the logs in this directory")
     parser.add_argument(
-        "--world-nice", type=int, default=0,
+        "--world-nice",
+        type=int,
+        default=0,
         help="run the world (aircraft, sensors, radios, ground) at this nice value",
-    )  # fmt: skip
+    )
     parser.add_argument(
-        "--realtime", type=int, metavar="PRIORITY",
+        "--realtime",
+        type=int,
+        metavar="PRIORITY",
         help="the agent's [runtime] realtime_priority (SCHED_FIFO for its loop thread)",
-    )  # fmt: skip
+    )
     parser.add_argument(
-        "--rate", type=float, default=100.0, metavar="HZ",
+        "--rate",
+        type=float,
+        default=100.0,
+        metavar="HZ",
         help="sensor and recorder rate (100, or 400 as the VN-200's IMU rate)",
-    )  # fmt: skip
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     if args.mode == "world":

@@ -62,9 +62,11 @@ async def _one(interval_s: float, cycles: int) -> str:
         finally:
             writer.close()
     w, i = np.array(writing) * 1e3, np.array(idle) * 1e3
-    return (f"| {interval_s * 1e3:g} ms | {np.median(w):.2f} / {np.percentile(w, 99):.2f} / "
-            f"{w.max():.2f} | {np.median(i):.2f} / {np.percentile(i, 99):.2f} / {i.max():.2f} "
-            f"| {w.size} + {i.size} | {realtime} |")  # fmt: skip
+    return (
+        f"| {interval_s * 1e3:g} ms | {np.median(w):.2f} / {np.percentile(w, 99):.2f} / "
+        f"{w.max():.2f} | {np.median(i):.2f} / {np.percentile(i, 99):.2f} / {i.max():.2f} "
+        f"| {w.size} + {i.size} | {realtime} |"
+    )
 
 
 def main() -> None:
@@ -76,13 +78,20 @@ def main() -> None:
     if args.one is not None:
         print(asyncio.run(_one(args.one / 1000, args.cycles)))
         return
-    print("| switch interval | lag writing p50 / p99 / max (ms) | idle p50 / p99 / max (ms) "
-          "| samples | loop thread |")  # fmt: skip
+    print(
+        "| switch interval | lag writing p50 / p99 / max (ms) | idle p50 / p99 / max (ms) "
+        "| samples | loop thread |"
+    )
     print("|---|---|---|---|---|")
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
     for ms in args.intervals.split(","):
-        done = subprocess.run([sys.executable, __file__, "--one", ms, "--cycles", str(args.cycles)],
-                              capture_output=True, text=True, env=env, check=True)  # fmt: skip
+        done = subprocess.run(
+            [sys.executable, __file__, "--one", ms, "--cycles", str(args.cycles)],
+            capture_output=True,
+            text=True,
+            env=env,
+            check=True,
+        )
         print(done.stdout.strip(), flush=True)
 
 

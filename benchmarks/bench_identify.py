@@ -56,8 +56,7 @@ DT = 0.02
 MODEL = reference.LATERAL
 # The names `sysid identify --axes lateral` gives the channels: with them `auto` is the
 # aircraft method (`identify`), the default row keeps OKID's.
-ROLES = {"input_names": MODEL.inputs, "output_names": MODEL.outputs,
-         "output_roles": MODEL.outputs}  # fmt: skip
+ROLES = {"input_names": MODEL.inputs, "output_names": MODEL.outputs, "output_roles": MODEL.outputs}
 TRUE_MODES = {"Dutch roll": 0, "roll": 1, "spiral": 2}  # index into _true_modes()
 TEXTBOOK_P = (1, 2, 3, 4, 6, 8, 10, 15, 20)
 

@@ -77,16 +77,16 @@ COMMAND_HZ = 50.0  # `fly`'s command rate
 
 def experiment(rec: Record, wind: bool = True) -> Experiment:
     u0, y0 = rec.u[:TRIM_SAMPLES].mean(0), rec.y[:TRIM_SAMPLES].mean(0)
-    return Experiment(rec.u - u0, rec.y - y0, operating_point=y0,
-                      navigation=rec.ins if wind else None)  # fmt: skip
+    return Experiment(
+        rec.u - u0, rec.y - y0, operating_point=y0, navigation=rec.ins if wind else None
+    )
 
 
 # The validation records: each axis's doublets, judged on that axis's outputs. One record
 # with every doublet would judge a linear model on what no linear model holds: the lateral
 # doublets' sideslip drag and bank move V, α and θ by more than the elevator's doublet does
 # (the validated truth itself scores TIC 0.25 there on the PA-28, 0.76 on V).
-VALIDATION = {"longitudinal": (("elevator", 8.0),),
-              "lateral": (("aileron", 6.0), ("rudder", 8.0))}  # fmt: skip
+VALIDATION = {"longitudinal": (("elevator", 8.0),), "lateral": (("aileron", 6.0), ("rudder", 8.0))}
 AXIS_OUTPUTS = {"longitudinal": (0, 1, 2, 3), "lateral": (4, 5, 6, 7)}
 
 
@@ -187,9 +187,15 @@ def named_by_truth(eigenvalues: np.ndarray, truth: dict[str, list[complex]]) -> 
 
 def ours(exp: Experiment, dt: float, rec: Record):
     start = time.perf_counter()
-    result = identify(exp, dt, input_names=rec.inputs, output_names=rec.outputs,
-                      input_roles=INPUT_ROLES, output_roles=OUTPUT_ROLES,
-                      settings=Settings(held_inputs=False))  # fmt: skip
+    result = identify(
+        exp,
+        dt,
+        input_names=rec.inputs,
+        output_names=rec.outputs,
+        input_roles=INPUT_ROLES,
+        output_roles=OUTPUT_ROLES,
+        settings=Settings(held_inputs=False),
+    )
     seconds = time.perf_counter() - start
     found: dict[str, list[complex]] = {}
     spiral = None
@@ -228,14 +234,17 @@ def sippy_n4sid(exp: Experiment, dt: float, rec: Record):
     start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        s = sippy_unipi.system_identification(exp.y.T, exp.u.T, "N4SID",
-                                              SS_fixed_order=PEER_ORDER, SS_f=20, SS_p=20,
-                                              tsample=dt)  # fmt: skip
+        s = sippy_unipi.system_identification(
+            exp.y.T, exp.u.T, "N4SID", SS_fixed_order=PEER_ORDER, SS_f=20, SS_p=20, tsample=dt
+        )
     return StateSpace(s.A, s.B, s.C, s.D), time.perf_counter() - start
 
 
-PEERS = {"textbook OKID/ERA": textbook, "python-control ERA": python_control,
-         "SIPPY N4SID": sippy_n4sid}  # fmt: skip
+PEERS = {
+    "textbook OKID/ERA": textbook,
+    "python-control ERA": python_control,
+    "SIPPY N4SID": sippy_n4sid,
+}
 
 
 def truth_tic(truth: Truth, records: list[tuple[Experiment, tuple]], dt: float) -> float:
@@ -288,8 +297,9 @@ def main() -> None:
             rows: dict[str, list] = {}
             sizes: list[float] = []
             for seed in range(FIRST_SEED, FIRST_SEED + args.seeds):
-                rec = fly(plan, aircraft=name, speed_kts=AIRCRAFT[name], turbulence=turbulence,
-                          seed=seed)  # fmt: skip
+                rec = fly(
+                    plan, aircraft=name, speed_kts=AIRCRAFT[name], turbulence=turbulence, seed=seed
+                )
                 exp = experiment(rec)
                 found, model, seconds, spiral = ours(exp, rec.dt, rec)
                 check, scales = validation(name, turbulence, seed, model)
@@ -340,8 +350,11 @@ def _print(name: str, turbulence: float, method: str, results: list) -> None:
     spiral_cell = f"{sum(spiral):2d}/{len(spiral):<2d}" if spiral else "  –  "
     times = [r[2] for r in results if np.isfinite(r[2])]
     seconds = f"{np.median(times):5.2f}" if times else "    –"
-    print(f"{name:8} {turbulence:4.1f} {method:20} {cells}  {ok:2d}/{len(e):<2d}  {spiral_cell}  "
-          f"{np.median(tics):5.3f}/{np.max(tics):5.3f}  {seconds}", flush=True)  # fmt: skip
+    print(
+        f"{name:8} {turbulence:4.1f} {method:20} {cells}  {ok:2d}/{len(e):<2d}  {spiral_cell}  "
+        f"{np.median(tics):5.3f}/{np.max(tics):5.3f}  {seconds}",
+        flush=True,
+    )
 
 
 def _pair(median: float, worst: float) -> str:

@@ -53,8 +53,9 @@ def write_record(path: Path, rows: int) -> None:
 def child(args: list[str]) -> tuple[int, float, float, str]:
     """(exit code, wall s, peak RSS MB, last line of stderr) of one child process."""
     start = time.perf_counter()
-    done = subprocess.run([sys.executable, *args], capture_output=True, text=True,
-                          cwd=ROOT, check=False)  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, *args], capture_output=True, text=True, cwd=ROOT, check=False
+    )
     wall = time.perf_counter() - start
     peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     per_mb = 1024 * 1024 if sys.platform == "darwin" else 1024  # bytes on macOS, KB on Linux
@@ -77,16 +78,28 @@ def main() -> None:
             write_record(path, rows)
             if args.parse_only:
                 names = ["aileron", "rudder", "beta", "p", "r", "phi"]
-                code = ("from agent.analysis.records import read_record; "
-                        f"read_record({str(path)!r}, {names!r})")  # fmt: skip
+                code = (
+                    "from agent.analysis.records import read_record; "
+                    f"read_record({str(path)!r}, {names!r})"
+                )
                 run = ["-c", code]
             else:
-                run = ["-m", "agent", "identify", str(path), "--axes", "lateral", "--json",
-                       "--method", args.method]  # fmt: skip
+                run = [
+                    "-m",
+                    "agent",
+                    "identify",
+                    str(path),
+                    "--axes",
+                    "lateral",
+                    "--json",
+                    "--method",
+                    args.method,
+                ]
             exit_code, wall, peak, tail = child(run)
             size = path.stat().st_size / 1e6
-            print(f"{rows:<10d} {size:10.0f}   {exit_code:4d}   {wall:6.1f}   {peak:11.0f}   "
-                  f"{tail}")  # fmt: skip
+            print(
+                f"{rows:<10d} {size:10.0f}   {exit_code:4d}   {wall:6.1f}   {peak:11.0f}   {tail}"
+            )
             path.unlink()
 
 

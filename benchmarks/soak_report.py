@@ -102,8 +102,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("directory", type=Path)
     parser.add_argument("--period", type=float, default=30.0, help="minutes per row")
-    parser.add_argument("--window", type=float, nargs=2, metavar=("FROM", "TO"),
-                        help="only these minutes of the flight")  # fmt: skip
+    parser.add_argument(
+        "--window",
+        type=float,
+        nargs=2,
+        metavar=("FROM", "TO"),
+        help="only these minutes of the flight",
+    )
     args = parser.parse_args()
     print(report(args.directory, args.period, tuple(args.window) if args.window else None))
 

@@ -53,16 +53,25 @@ REALTIME = 10  # the agent's [runtime] realtime_priority; --realtime 0: normal s
 
 def machine() -> str:
     info = Path("/proc/cpuinfo").read_text()
-    names = [line.split(":", 1)[1].strip() for line in info.splitlines()
-             if line.startswith("model name")]  # fmt: skip
+    names = [
+        line.split(":", 1)[1].strip() for line in info.splitlines() if line.startswith("model name")
+    ]
     model = names[0] if names else platform.processor() or "unknown CPU"
-    mem = next(line.split()[1] for line in Path("/proc/meminfo").read_text().splitlines()
-               if line.startswith("MemTotal"))  # fmt: skip
+    mem = next(
+        line.split()[1]
+        for line in Path("/proc/meminfo").read_text().splitlines()
+        if line.startswith("MemTotal")
+    )
     git = ["git", "-C", str(ROOT)]
-    commit = subprocess.run([*git, "rev-parse", "--short", "HEAD"], capture_output=True,
-                            text=True).stdout.strip() or "unknown"  # fmt: skip
-    dirty = subprocess.run([*git, "status", "--porcelain", "--untracked-files=no"],
-                           capture_output=True, text=True).stdout.strip()  # fmt: skip
+    commit = (
+        subprocess.run(
+            [*git, "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+        ).stdout.strip()
+        or "unknown"
+    )
+    dirty = subprocess.run(
+        [*git, "status", "--porcelain", "--untracked-files=no"], capture_output=True, text=True
+    ).stdout.strip()
     now = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
     return (
         f"Measured {now} on {model}, {os.cpu_count()} cores, {int(mem) / 2**20:.0f} GiB, "
@@ -108,8 +117,9 @@ def identification(seeds: int, noise: float = 0.05) -> list[str]:
     return lines
 
 
-def loop_lag(minutes: float, every: float, rates: tuple[float, ...], realtime: int | None
-             ) -> list[str]:  # fmt: skip
+def loop_lag(
+    minutes: float, every: float, rates: tuple[float, ...], realtime: int | None
+) -> list[str]:
     results = [
         asyncio.run(bench_agent.measure(minutes, every, None, WORLD_NICE, realtime, rate))
         for rate in rates
@@ -167,8 +177,11 @@ def loop_lag(minutes: float, every: float, rates: tuple[float, ...], realtime: i
 
 
 def link() -> list[str]:
-    size = len(bench_link.msgpack.packb(bench_link.messages.to_dict(bench_link.full_result()),
-                                        use_bin_type=True))  # fmt: skip
+    size = len(
+        bench_link.msgpack.packb(
+            bench_link.messages.to_dict(bench_link.full_result()), use_bin_type=True
+        )
+    )
     lines = [
         f"**Bytes on air per result** — one full-model result (8 states, 4 inputs, 8 outputs, "
         f"5 modes with every quality index; {size} bytes of MessagePack) through the real "
@@ -211,17 +224,19 @@ def abort(drops: int, realtime: int | None) -> list[str]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true",
-                        help="3 seeds, 3 min per rate, 10 drops")  # fmt: skip
+    parser.add_argument("--quick", action="store_true", help="3 seeds, 3 min per rate, 10 drops")
     parser.add_argument("--seeds", type=int)
     parser.add_argument("--minutes", type=float, help="per sensor rate")
     parser.add_argument("--every", type=float, default=30.0, help="s between excitations")
     parser.add_argument("--drops", type=int)
     parser.add_argument("--rates", type=float, nargs="+", default=[100.0, 400.0])
     parser.add_argument(
-        "--realtime", type=int, default=REALTIME, metavar="PRIORITY",
+        "--realtime",
+        type=int,
+        default=REALTIME,
+        metavar="PRIORITY",
         help="the agent's realtime_priority (default 10; 0: normal scheduling)",
-    )  # fmt: skip
+    )
     args = parser.parse_args()
     realtime = args.realtime or None
     seeds = args.seeds or (3 if args.quick else 10)

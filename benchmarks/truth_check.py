@@ -21,8 +21,16 @@ from agent.sim import truth as T  # noqa: N812 — T for truth, as in the docs
 from agent.sim.plant import FT, INPUTS, Plant
 
 BENCHMARK = [("J3Cub", 60.0), ("c182", 90.0), ("pa28", 90.0)]
-FG_STATES = {"Vt": "Vt", "alpha": "Alpha", "q": "Q", "theta": "Theta", "beta": "Beta",
-             "p": "P", "r": "R", "phi": "Phi"}  # fmt: skip
+FG_STATES = {
+    "Vt": "Vt",
+    "alpha": "Alpha",
+    "q": "Q",
+    "theta": "Theta",
+    "beta": "Beta",
+    "p": "P",
+    "r": "R",
+    "phi": "Phi",
+}
 FG_INPUTS = {"throttle": "ThtlCmd", "elevator": "DeCmd", "aileron": "DaCmd", "rudder": "DrCmd"}
 
 
@@ -59,8 +67,10 @@ def main() -> None:
         ours = T.check(truth)
         theirs = fg_worst(aircraft, speed, ours)
         for check in ours:
-            print(f"{aircraft:<8}{check.test:<10}{theirs[check.test]:>17.3f}{check.worst:>17.3f}",
-                  flush=True)  # fmt: skip
+            print(
+                f"{aircraft:<8}{check.test:<10}{theirs[check.test]:>17.3f}{check.worst:>17.3f}",
+                flush=True,
+            )
         modes = ", ".join(f"{k} {v[0]:.3f}" for k, v in truth.modes().items() if v)
         print(f"  truth modes: {modes}")
 

@@ -122,8 +122,9 @@ class SurfacePort(SerialPort):
         missing = sorted(set(CHANNELS) - set(self.calibration))
         unknown = sorted(set(self.calibration) - set(CHANNELS))
         if missing or unknown:
-            raise ValueError(f"calibration must cover {list(CHANNELS)}; missing {missing}, "
-                             f"unknown {unknown}")  # fmt: skip
+            raise ValueError(
+                f"calibration must cover {list(CHANNELS)}; missing {missing}, unknown {unknown}"
+            )
         return self
 
 

@@ -89,9 +89,15 @@ class SensorDriver:
         self._device_clock = DeviceClock()
         self._on_open, self._on_reconnect = on_open, on_reconnect
         self.link = SerialLink(
-            name, port.port, port.baud, clock, self._on_data,
-            silence_s=port.silence_s, backoff=backoff, on_open=self._opened,
-        )  # fmt: skip
+            name,
+            port.port,
+            port.baud,
+            clock,
+            self._on_data,
+            silence_s=port.silence_s,
+            backoff=backoff,
+            on_open=self._opened,
+        )
         self._last_time: float | None = None
         self._recent: deque[float] = deque(maxlen=int(4 * port.rate_hz) + 8)
         self._gaps = 0

@@ -65,10 +65,21 @@ def campaign(name: str, runs: int) -> dict:
     began = time.monotonic()
     with open(log, "w") as handle:
         code = subprocess.call(
-            [sys.executable, __file__, "--one", name, "--", str(corpus), f"-runs={runs}",
-             f"-artifact_prefix={out}/", *LIMITS],
-            stdout=handle, stderr=subprocess.STDOUT, cwd=ROOT,
-        )  # fmt: skip
+            [
+                sys.executable,
+                __file__,
+                "--one",
+                name,
+                "--",
+                str(corpus),
+                f"-runs={runs}",
+                f"-artifact_prefix={out}/",
+                *LIMITS,
+            ],
+            stdout=handle,
+            stderr=subprocess.STDOUT,
+            cwd=ROOT,
+        )
     wall = time.monotonic() - began
     (out / "exit").write_text(f"{code} {wall:.1f}\n")
     return summary(name)
@@ -83,8 +94,11 @@ def summary(name: str) -> dict:
     text = log.read_text(errors="replace") if log.exists() else ""
     stat = {k: int(v) for k, v in re.findall(r"stat::(\w+):\s+(\d+)", text)}
     cov = re.findall(r"cov: (\d+) ft: (\d+)", text)
-    crashes = sorted(p.name for p in out.glob("*-*") if p.is_file() and p.name[:4] in
-                     ("cras", "leak", "time", "oom-", "slow"))  # fmt: skip
+    crashes = sorted(
+        p.name
+        for p in out.glob("*-*")
+        if p.is_file() and p.name[:4] in ("cras", "leak", "time", "oom-", "slow")
+    )
     return {
         "target": name,
         "exit": code,
@@ -121,8 +135,10 @@ def main() -> int:
     else:
         with ThreadPoolExecutor(args.jobs) as pool:
             results = list(pool.map(lambda n: campaign(n, args.runs), names))
-    print(f"{'target':<13} {'inputs':>10} {'time s':>8} {'inputs/s':>9} {'cov':>6} {'ft':>6} "
-          f"{'peak MB':>8}  result")  # fmt: skip
+    print(
+        f"{'target':<13} {'inputs':>10} {'time s':>8} {'inputs/s':>9} {'cov':>6} {'ft':>6} "
+        f"{'peak MB':>8}  result"
+    )
     failed = False
     for r in results:
         ok = r["exit"] == 0 and not r["findings"] and r["runs"] >= (0 if args.report else args.runs)

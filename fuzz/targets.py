@@ -154,8 +154,11 @@ def _digi_xbee(data: bytes) -> None:
 def _report_digi() -> None:
     if not DIGI_RAISED["(inputs)"]:
         return
-    print(f"digi-xbee: of {DIGI_RAISED['(inputs)']} inputs, exceptions that end its reader "
-          "thread (by type and frame type):", flush=True)  # fmt: skip
+    print(
+        f"digi-xbee: of {DIGI_RAISED['(inputs)']} inputs, exceptions that end its reader "
+        "thread (by type and frame type):",
+        flush=True,
+    )
     for what, count in DIGI_RAISED.most_common():
         if what != "(inputs)":
             print(f"  {count:8d}  {what}", flush=True)
@@ -178,23 +181,63 @@ def seeds(name: str) -> list[bytes]:
     """Valid inputs for a target, from the encoders."""
     if name in STREAMS:
         frames = {
-            "vn200": lambda: [BinaryCodec().encode(VnPacket({
-                "common.time_startup": 10**9, "common.quaternion": (0.0, 0.0, 0.0, 1.0),
-                "common.angular_rate": (0.1, -0.2, 0.3), "common.ins_status": 2,
-                "attitude.ypr": (10.0, 2.0, -1.0)}))],
-            "vn200-ascii": lambda: [AsciiCodec().encode(VnAscii("VNYMR", dict.fromkeys((
-                "yaw", "pitch", "roll", "mag_x", "mag_y", "mag_z", "accel_x", "accel_y",
-                "accel_z", "gyro_x", "gyro_y", "gyro_z"), 1.5)), crc=crc) for crc in (False, True)],
-            "airdata": lambda: [AirDataCodec().encode(AirData(k, 21.5, -3.25, 1.5, 150, 101_600,
-                                                              99_800)) for k in range(2)],
-            "surfaces": lambda: [SurfaceCodec().encode(SurfaceFrame(k, 1000 * k,
-                                                                    (512,) * 7, 5000))
-                                 for k in range(2)],
-            "xbee-ap1": lambda: [xbee.ApiCodec(escaped=False).encode(
-                xbee.receive_packet(AIR_ADDR, b"\x7e\x7d\x11\x13 payload"))],
-            "xbee-ap2": lambda: [xbee.ApiCodec(escaped=True).encode(
-                xbee.receive_packet(AIR_ADDR, b"\x7e\x7d\x11\x13 payload"))],
-        }[name]()  # fmt: skip
+            "vn200": lambda: [
+                BinaryCodec().encode(
+                    VnPacket(
+                        {
+                            "common.time_startup": 10**9,
+                            "common.quaternion": (0.0, 0.0, 0.0, 1.0),
+                            "common.angular_rate": (0.1, -0.2, 0.3),
+                            "common.ins_status": 2,
+                            "attitude.ypr": (10.0, 2.0, -1.0),
+                        }
+                    )
+                )
+            ],
+            "vn200-ascii": lambda: [
+                AsciiCodec().encode(
+                    VnAscii(
+                        "VNYMR",
+                        dict.fromkeys(
+                            (
+                                "yaw",
+                                "pitch",
+                                "roll",
+                                "mag_x",
+                                "mag_y",
+                                "mag_z",
+                                "accel_x",
+                                "accel_y",
+                                "accel_z",
+                                "gyro_x",
+                                "gyro_y",
+                                "gyro_z",
+                            ),
+                            1.5,
+                        ),
+                    ),
+                    crc=crc,
+                )
+                for crc in (False, True)
+            ],
+            "airdata": lambda: [
+                AirDataCodec().encode(AirData(k, 21.5, -3.25, 1.5, 150, 101_600, 99_800))
+                for k in range(2)
+            ],
+            "surfaces": lambda: [
+                SurfaceCodec().encode(SurfaceFrame(k, 1000 * k, (512,) * 7, 5000)) for k in range(2)
+            ],
+            "xbee-ap1": lambda: [
+                xbee.ApiCodec(escaped=False).encode(
+                    xbee.receive_packet(AIR_ADDR, b"\x7e\x7d\x11\x13 payload")
+                )
+            ],
+            "xbee-ap2": lambda: [
+                xbee.ApiCodec(escaped=True).encode(
+                    xbee.receive_packet(AIR_ADDR, b"\x7e\x7d\x11\x13 payload")
+                )
+            ],
+        }[name]()
         return [bytes([7]) + b"".join(frames), bytes([0]) + frames[0]]
     if name in ("link", "link-signed"):
         air = LinkCodec(
@@ -210,8 +253,10 @@ def seeds(name: str) -> list[bytes]:
             return [b"\x01" + b"".join(f.ljust(64, b"\x00") for f in frames)]
         return [b"".join(bytes([1]) + f[1:-TAG].ljust(79, b"\x00") for f in frames)]
     if name == "messages":
-        return [msgpack.packb(messages.to_dict(m), use_bin_type=True) for m in (
-            messages.Abort(reason="seed"), messages.Notice(text="seed"))]  # fmt: skip
+        return [
+            msgpack.packb(messages.to_dict(m), use_bin_type=True)
+            for m in (messages.Abort(reason="seed"), messages.Notice(text="seed"))
+        ]
     if name == "config":
         return [
             b"a" + (ROOT / "config.toml").read_bytes(),

@@ -37,9 +37,10 @@ def no_leaked_threads():
     before = set(threading.enumerate())
     yield
     leaked = [
-        t for t in threading.enumerate()
+        t
+        for t in threading.enumerate()
         if t not in before and t.is_alive() and not _library_pool(t)
-    ]  # fmt: skip
+    ]
     assert not leaked, f"test leaked threads: {leaked}"
 
 
@@ -103,8 +104,16 @@ def small_disk_at():
 
     def mount(where, size: str = "256k"):
         where.mkdir(parents=True, exist_ok=True)
-        command = [*prefix, "mount", "-t", "tmpfs", "-o", f"size={size},mode=0777", "tmpfs",
-                   str(where)]  # fmt: skip
+        command = [
+            *prefix,
+            "mount",
+            "-t",
+            "tmpfs",
+            "-o",
+            f"size={size},mode=0777",
+            "tmpfs",
+            str(where),
+        ]
         done = subprocess.run(command, capture_output=True, text=True, check=False)
         assert done.returncode == 0, (
             f"the disk-full tests need to mount a small tmpfs (root or `sudo -n`): {done.stderr}"

@@ -175,14 +175,21 @@ def test_the_gc_callback_takes_no_lock_and_does_not_log(tracked_locks):
 
 async def test_the_radio_callback_takes_no_lock_and_does_not_log(tracked_locks):
     frames = []
-    radio = XBeeRadio("/dev/null", 115200, VirtualClock(0.0),
-                      on_frame=lambda source, data, t: frames.append((source, data)))  # fmt: skip
+    radio = XBeeRadio(
+        "/dev/null",
+        115200,
+        VirtualClock(0.0),
+        on_frame=lambda source, data, t: frames.append((source, data)),
+    )
     radio._loop = asyncio.get_running_loop()
-    packet = ReceivePacket(XBee64BitAddress(bytes(range(8))), XBee16BitAddress.UNKNOWN_ADDRESS,
-                           0, bytearray(b"frame"))  # fmt: skip
+    packet = ReceivePacket(
+        XBee64BitAddress(bytes(range(8))), XBee16BitAddress.UNKNOWN_ADDRESS, 0, bytearray(b"frame")
+    )
     seen = []
-    thread = threading.Thread(target=lambda: seen.extend(_locks_and_logging(
-        lambda: radio._packet(packet))), name="digi-xbee-callback")  # fmt: skip
+    thread = threading.Thread(
+        target=lambda: seen.extend(_locks_and_logging(lambda: radio._packet(packet))),
+        name="digi-xbee-callback",
+    )
     thread.start()
     thread.join()
     assert seen == []
@@ -198,8 +205,12 @@ async def test_the_autopilot_callback_takes_no_lock_and_does_not_log(tracked_loc
     seam = _Seam(asyncio.get_running_loop(), delivered.append)
     message = MavlinkMessage(message_name="ATTITUDE", fields_json='{"roll": 0.1}')
     seen = []
-    thread = threading.Thread(target=lambda: seen.extend(_locks_and_logging(
-        lambda: [seam.callback(message) for _ in range(3)])), name="mavsdk-callback")  # fmt: skip
+    thread = threading.Thread(
+        target=lambda: seen.extend(
+            _locks_and_logging(lambda: [seam.callback(message) for _ in range(3)])
+        ),
+        name="mavsdk-callback",
+    )
     thread.start()
     thread.join()
     assert seen == []
@@ -305,11 +316,28 @@ def _run_pytest_on(tmp_path, text: str) -> tuple[int, str]:
     root = Path(__file__).resolve().parents[1]
     (tmp_path / "test_hung.py").write_text(text)
     done = subprocess.run(
-        [sys.executable, "-m", "pytest", "-c", str(root / "pyproject.toml"), "--rootdir",
-         str(tmp_path), "-p", "no:cacheprovider", "-p", "tests.watchdog", "--timeout", "3",
-         str(tmp_path / "test_hung.py")],
-        capture_output=True, text=True, timeout=DEADLOCK_S, check=False, cwd=root,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "pytest",
+            "-c",
+            str(root / "pyproject.toml"),
+            "--rootdir",
+            str(tmp_path),
+            "-p",
+            "no:cacheprovider",
+            "-p",
+            "tests.watchdog",
+            "--timeout",
+            "3",
+            str(tmp_path / "test_hung.py"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=DEADLOCK_S,
+        check=False,
+        cwd=root,
+    )
     return done.returncode, done.stdout + done.stderr
 
 

@@ -28,8 +28,11 @@ def _start_agent(tmp_path: Path, extra: str = "") -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"}
     return subprocess.Popen(
         [sys.executable, "-m", "agent", "agent", "--config", str(config), "--base", str(tmp_path)],
-        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
 
 
 def test_sigterm_shuts_the_agent_down_cleanly(tmp_path):
@@ -55,8 +58,11 @@ def test_a_missing_config_is_a_clear_error(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     result = subprocess.run(
         [sys.executable, "-m", "agent", "agent", "--config", str(tmp_path / "none.toml")],
-        env=env, capture_output=True, text=True, timeout=60,
-    )  # fmt: skip
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert result.returncode == 2
     assert "no such file" in result.stderr
 
@@ -90,10 +96,11 @@ def test_realtime_priority_puts_only_the_loop_thread_under_sched_fifo(tmp_path):
         children = Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()
         # The worker (spawned) and multiprocessing's resource tracker.
         child_policies = {
-            "worker" if b"spawn_main" in Path(f"/proc/{c}/cmdline").read_bytes() else "tracker":
-            os.sched_getscheduler(int(c))
+            "worker"
+            if b"spawn_main" in Path(f"/proc/{c}/cmdline").read_bytes()
+            else "tracker": os.sched_getscheduler(int(c))
             for c in children
-        }  # fmt: skip
+        }
     finally:
         proc.send_signal(signal.SIGTERM)
         out, _ = proc.communicate(timeout=30)

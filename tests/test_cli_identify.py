@@ -162,8 +162,10 @@ def test_frequency_method_from_the_command_line(capsys, tmp_path):
     assert code == 0  # a wrong period is not an error: it leaks, and says so
     assert any("leakage" in w or "period" in w for w in doc["warnings"])
     # Bad input tried: a negative period and one longer than the record.
-    for period, message in (("-3", "give a finite, positive number of seconds"),
-                            ("500", "excitation period")):  # fmt: skip
+    for period, message in (
+        ("-3", "give a finite, positive number of seconds"),
+        ("500", "excitation period"),
+    ):
         code, doc = run_json(capsys, str(path), *LAT, "--method", "frequency", "--period", period)
         assert code == 2
         assert message in doc["error"]["message"]
@@ -192,8 +194,9 @@ def test_batch_of_two_files_and_time_window(capsys, tmp_path):
         write(tmp_path / f"r{s}.csv", reference.make_record(reference.LATERAL, seed=s).columns())
         for s in (1, 2)
     ]
-    code, doc = run_json(capsys, *map(str, files), *LAT, "--start", "0.2", "--end", "25",
-                         "--method", "time")  # fmt: skip
+    code, doc = run_json(
+        capsys, *map(str, files), *LAT, "--start", "0.2", "--end", "25", "--method", "time"
+    )
     assert code == 0
     assert len(doc["trim"]) == 2
     assert np.allclose(doc["Ac"], reference.LATERAL.A, atol=1e-6)
@@ -303,18 +306,26 @@ HEADER = "time,aileron,rudder,beta,p,r,phi\n"
 RAW = [
     ("nul.csv", b"\x00" * 4096, "NUL bytes in the header: a binary file"),
     ("nonewline.csv", b"0," * (1 << 20), "a line longer than 1048576 characters"),
-    ("cell.csv", (HEADER + "0,1,2,3,4,5," + "7" * 200_000 + "\n0.02,1,2,3,4,5,6\n").encode(),
-     "line 2: not a readable CSV line (field larger than field limit"),
-    ("semicolon.csv", (HEADER.replace(",", ";") + "0;1;2;3;4;5;6\n").encode(),
-     "the fields are separated by ';'"),
-    ("latin1.csv", HEADER.encode() + "0,1,2,3,4,5,6 \xb0\n".encode("latin-1"),
-     "not a text CSV file"),
-]  # fmt: skip
+    (
+        "cell.csv",
+        (HEADER + "0,1,2,3,4,5," + "7" * 200_000 + "\n0.02,1,2,3,4,5,6\n").encode(),
+        "line 2: not a readable CSV line (field larger than field limit",
+    ),
+    (
+        "semicolon.csv",
+        (HEADER.replace(",", ";") + "0;1;2;3;4;5;6\n").encode(),
+        "the fields are separated by ';'",
+    ),
+    (
+        "latin1.csv",
+        HEADER.encode() + "0,1,2,3,4,5,6 \xb0\n".encode("latin-1"),
+        "not a text CSV file",
+    ),
+]
 
 
 @pytest.mark.parametrize(("name", "content", "message"), RAW, ids=[r[0] for r in RAW])
-def test_files_that_are_not_csv_records_are_a_clear_error(tmp_path, capsys, name, content,
-                                                          message):  # fmt: skip
+def test_files_that_are_not_csv_records_are_a_clear_error(tmp_path, capsys, name, content, message):
     """Bad input tried: a file of NUL bytes, one with no newline (as /dev/zero), a 200 KB cell
     (beyond the csv module's field limit), a spreadsheet's ';'-separated export, a Latin-1
     byte: exit 2 with the reason, no traceback, with and without --json."""

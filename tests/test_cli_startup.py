@@ -15,16 +15,20 @@ HEAVY = ("numpy", "scipy", "pydantic", "matplotlib", "jsbsim", "textual", "mavsd
 
 
 def test_building_the_parser_imports_nothing_heavy():
-    code = ("import sys; import agent.cli as c; c.build_parser(); "
-            f"print(sorted(m for m in {HEAVY!r} if m in sys.modules))")  # fmt: skip
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          cwd=ROOT, check=True)  # fmt: skip
+    code = (
+        "import sys; import agent.cli as c; c.build_parser(); "
+        f"print(sorted(m for m in {HEAVY!r} if m in sys.modules))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True
+    )
     assert done.stdout.strip() == "[]"
 
 
 @pytest.mark.parametrize("argv", [["--version"], ["--help"], ["identify", "--help"]])
 def test_version_and_help(argv):
-    done = subprocess.run([sys.executable, "-m", "agent", *argv], capture_output=True,
-                          text=True, cwd=ROOT)  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-m", "agent", *argv], capture_output=True, text=True, cwd=ROOT
+    )
     assert done.returncode == 0
     assert ("sysid 0.1.0" if argv == ["--version"] else "usage: sysid") in done.stdout

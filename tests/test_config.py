@@ -170,8 +170,9 @@ def test_the_simulators_agent_config_file_loads_back_to_the_same_config(tmp_path
     from agent.sim.flight import _config
 
     for priority, speed in ((None, 60.0), (10, 90.0)):
-        config = _config(tmp_path, tmp_path / "ports", ("127.0.0.1", 14555), "lateral", priority,
-                         speed)  # fmt: skip
+        config = _config(
+            tmp_path, tmp_path / "ports", ("127.0.0.1", 14555), "lateral", priority, speed
+        )
         path = tmp_path / "agent.toml"
         path.write_text(to_toml(config))
         assert load_config(path) == config

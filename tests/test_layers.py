@@ -66,17 +66,22 @@ def test_imports_go_to_lower_layers_only():
             if other is None or other == own:
                 continue
             if LEVEL[other] >= LEVEL[own]:
-                wrong.append(f"{path.relative_to(ROOT)}:{line} imports {target} "
-                             f"({own} may not import {other})")  # fmt: skip
+                wrong.append(
+                    f"{path.relative_to(ROOT)}:{line} imports {target} "
+                    f"({own} may not import {other})"
+                )
     assert not wrong, "\n".join(wrong)
 
 
-@pytest.mark.parametrize(("module", "target", "allowed"), [
-    ("drivers.sensor", "agent.config", False),
-    ("agent.runtime", "agent.analysis.identify", False),
-    ("agent.cli.sim", "agent.sim.flight", True),
-    ("agent.ident.job", "agent.channels", True),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("module", "target", "allowed"),
+    [
+        ("drivers.sensor", "agent.config", False),
+        ("agent.runtime", "agent.analysis.identify", False),
+        ("agent.cli.sim", "agent.sim.flight", True),
+        ("agent.ident.job", "agent.channels", True),
+    ],
+)
 def test_the_rule_itself(module, target, allowed):
     # The check above on four imports whose answer is known: two the layers forbid (a driver
     # reading the agent's config; the onboard runtime reaching into the offline analysis).

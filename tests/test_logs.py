@@ -41,8 +41,9 @@ def test_logbook_flight_excitation_and_execution_logs(tmp_path):
         for k in range(5):
             book.row(np.array([k * 0.01, np.nan if k == 2 else 0.1 * k, 0.001]))
         rows = np.array([[1.0, 0.5, 0.0], [1.01, 0.6, 0.0]])
-        path = book.excitation(Window("lat1", "lateral", 1.0, 1.01, "aborted", "pilot switch low"),
-                               rows)  # fmt: skip
+        path = book.excitation(
+            Window("lat1", "lateral", 1.0, 1.01, "aborted", "pilot switch low"), rows
+        )
         import logging
 
         logger = logging.getLogger("test.exec")
@@ -117,8 +118,9 @@ while True:
 @pytest.mark.parametrize("delay", [0.7, 1.3])
 def test_kill_9_leaves_only_whole_lines(tmp_path, delay):
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, "-c", WRITER, str(tmp_path)], stdout=subprocess.PIPE,
-                            env=env)  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-c", WRITER, str(tmp_path)], stdout=subprocess.PIPE, env=env
+    )
     try:
         assert proc.stdout.readline().strip() == b"ready"
         time.sleep(delay)
@@ -247,6 +249,5 @@ def test_a_record_that_cannot_be_formatted_is_kept_and_counted(tmp_path):
         logger.removeHandler(handler)
         writer.close()
     lines = [json.loads(x) for x in (tmp_path / "0001_exec_x.jsonl").read_text().splitlines()]
-    assert [e["message"] for e in lines] == [
-        "unformattable log record: two values %d %d", "fine 2"]  # fmt: skip
+    assert [e["message"] for e in lines] == ["unformattable log record: two values %d %d", "fine 2"]
     assert handler.unformattable == 1

@@ -23,8 +23,9 @@ def candidate(model_id: str, *, tic: float = 0.1, modes=None, record_s: float = 
     rng = np.random.default_rng(len(model_id))
     data = ((rng.normal(size=(100, 2)), rng.normal(size=(100, 4))),)
     result = {"tic_avg": tic, "stable": stable, "modes": modes}
-    return Candidate(model_id, "lateral", 0.02, result, {"decimate": 1}, data,
-                     extra={"record_s": record_s})  # fmt: skip
+    return Candidate(
+        model_id, "lateral", 0.02, result, {"decimate": 1}, data, extra={"record_s": record_s}
+    )
 
 
 def test_first_candidate_steps_and_the_slow_spiral_is_not_judged():
@@ -57,13 +58,21 @@ def test_a_divergence_the_record_cannot_resolve_is_reported_not_judged():
 @pytest.mark.parametrize(
     ("change", "step", "text", "check"),
     [
-        ({"modes": [{"name": "roll", "eigenvalue": [0.2, 0.0], "emac": 90.0}]}, 0, "UNSTABLE",
-         "stability"),
-        ({"modes": [{"name": "roll", "eigenvalue": [-9.0, 0.0], "emac": 30.0}]}, 1, "weak",
-         "quality"),
+        (
+            {"modes": [{"name": "roll", "eigenvalue": [0.2, 0.0], "emac": 90.0}]},
+            0,
+            "UNSTABLE",
+            "stability",
+        ),
+        (
+            {"modes": [{"name": "roll", "eigenvalue": [-9.0, 0.0], "emac": 30.0}]},
+            1,
+            "weak",
+            "quality",
+        ),
         ({"tic": 0.45}, 2, "≥ 0.3", "fit"),
     ],
-)  # fmt: skip
+)
 def test_each_failing_step_says_no(change, step, text, check):
     # The line for the operator, and the outcome a program reads (the simulated operator).
     s = suggest(candidate("a", **change), None, None, None)
@@ -81,8 +90,13 @@ def test_against_a_nominal_the_tic_comparison_decides():
     assert better.update
     assert "no worse" in better.steps[3]
     assert "better" in better.steps[4]
-    assert better.checks == {"stability": True, "quality": True, "fit": True, "no worse": True,
-                             "combined": True}  # fmt: skip
+    assert better.checks == {
+        "stability": True,
+        "quality": True,
+        "fit": True,
+        "no worse": True,
+        "combined": True,
+    }
     worse = suggest(new, nominal, tic_jn=0.25, tic_nj=0.3)  # worse on the nominal's data
     assert not worse.update
     assert "WORSE" in worse.steps[3]

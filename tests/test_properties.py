@@ -56,8 +56,7 @@ STREAMS = {
     "xbee-ap1": (lambda: xbee.ApiCodec(escaped=False), 1 + 2 + xbee.MAX_DATA + 1, b"\x7e"),
     "xbee-ap2": (lambda: xbee.ApiCodec(escaped=True), 1 + 2 * (xbee.MAX_DATA + 3), b"\x7e"),
 }
-PROPERTY = settings(max_examples=300, deadline=None,
-                    suppress_health_check=[HealthCheck.too_slow])  # fmt: skip
+PROPERTY = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
 def _outcome(function, *args, error: type[Exception]):
@@ -108,14 +107,28 @@ def _frames(draw, name):
     """A few valid frames of one codec (values drawn from each field's full range)."""
     count = draw(st.integers(1, 5))
     if name == "surfaces":
-        return [SurfaceFrame(draw(st.integers(0, 0xFFFF)), draw(st.integers(0, 0xFFFFFFFF)),
-                             tuple(draw(st.lists(st.integers(0, 1023), min_size=7, max_size=7))),
-                             draw(st.integers(0, 0xFFFF))) for _ in range(count)]  # fmt: skip
+        return [
+            SurfaceFrame(
+                draw(st.integers(0, 0xFFFF)),
+                draw(st.integers(0, 0xFFFFFFFF)),
+                tuple(draw(st.lists(st.integers(0, 1023), min_size=7, max_size=7))),
+                draw(st.integers(0, 0xFFFF)),
+            )
+            for _ in range(count)
+        ]
     if name == "airdata":
-        return [AirData(draw(st.integers(0, 99_999)), draw(st.integers(0, 9999)) / 100,
-                        draw(st.integers(-9999, 9999)) / 100, draw(st.integers(-9999, 9999)) / 100,
-                        float(draw(st.integers(-999, 9999))), float(draw(st.integers(0, 999_999))),
-                        float(draw(st.integers(0, 999_999)))) for _ in range(count)]  # fmt: skip
+        return [
+            AirData(
+                draw(st.integers(0, 99_999)),
+                draw(st.integers(0, 9999)) / 100,
+                draw(st.integers(-9999, 9999)) / 100,
+                draw(st.integers(-9999, 9999)) / 100,
+                float(draw(st.integers(-999, 9999))),
+                float(draw(st.integers(0, 999_999))),
+                float(draw(st.integers(0, 999_999))),
+            )
+            for _ in range(count)
+        ]
     payloads = st.binary(min_size=0, max_size=240)
     address = st.binary(min_size=8, max_size=8)
     return [xbee.receive_packet(draw(address), draw(payloads)) for _ in range(count)]
@@ -146,12 +159,17 @@ def test_garbage_between_valid_frames_never_costs_a_frame(name, data):
 KEY = bytes(range(32))
 AIR_ADDR, GROUND_ADDR = b"A" * 8, b"G" * 8
 PLAIN = st.recursive(
-    st.none() | st.booleans() | st.integers(-(2**63), 2**64 - 1) | st.text(max_size=20)
-    | st.floats(allow_nan=False) | st.binary(max_size=20),
-    lambda inner: st.lists(inner, max_size=5) | st.dictionaries(st.text(max_size=8), inner,
-                                                                 max_size=5),
+    st.none()
+    | st.booleans()
+    | st.integers(-(2**63), 2**64 - 1)
+    | st.text(max_size=20)
+    | st.floats(allow_nan=False)
+    | st.binary(max_size=20),
+    lambda inner: (
+        st.lists(inner, max_size=5) | st.dictionaries(st.text(max_size=8), inner, max_size=5)
+    ),
     max_leaves=30,
-)  # fmt: skip
+)
 
 
 def _ground() -> LinkCodec:
@@ -160,8 +178,10 @@ def _ground() -> LinkCodec:
 
 
 @PROPERTY
-@given(source=st.sampled_from([AIR_ADDR, b"X" * 8, b""]), frames=st.lists(st.binary(max_size=300),
-       max_size=20))  # fmt: skip
+@given(
+    source=st.sampled_from([AIR_ADDR, b"X" * 8, b""]),
+    frames=st.lists(st.binary(max_size=300), max_size=20),
+)
 def test_arbitrary_radio_frames_are_dropped_and_counted(source, frames):
     ground = _ground()
     for frame in frames:
@@ -177,10 +197,14 @@ def test_frames_signed_around_arbitrary_bodies_never_raise(data):
     delivered as a plain value, held as a fragment, or dropped and counted."""
     ground = _ground()
     for counter in range(data.draw(st.integers(1, 12))):
-        header = HEADER.pack(VERSION, data.draw(st.sampled_from([AIRCRAFT, GROUND, 7])),
-                             data.draw(st.sampled_from([counter, 0, 2**64 - 1])),
-                             data.draw(st.integers(0, 3)), data.draw(st.integers(0, 4)),
-                             data.draw(st.integers(0, 4)))  # fmt: skip
+        header = HEADER.pack(
+            VERSION,
+            data.draw(st.sampled_from([AIRCRAFT, GROUND, 7])),
+            data.draw(st.sampled_from([counter, 0, 2**64 - 1])),
+            data.draw(st.integers(0, 3)),
+            data.draw(st.integers(0, 4)),
+            data.draw(st.integers(0, 4)),
+        )
         body = header + data.draw(st.binary(max_size=200))
         frame = body + ground._tag(AIR_ADDR, GROUND_ADDR, body)
         out = ground.decode(AIR_ADDR, frame, float(counter))
@@ -191,13 +215,22 @@ def test_frames_signed_around_arbitrary_bodies_never_raise(data):
 
 
 @PROPERTY
-@given(message=st.dictionaries(st.text(max_size=10), PLAIN, max_size=8),
-       payload=st.integers(OVERHEAD + 1, 256), seed=st.integers(0, 2**32))  # fmt: skip
+@given(
+    message=st.dictionaries(st.text(max_size=10), PLAIN, max_size=8),
+    payload=st.integers(OVERHEAD + 1, 256),
+    seed=st.integers(0, 2**32),
+)
 def test_any_message_survives_fragmentation_and_reordering(message, payload, seed):
     """Any message, any radio payload size, frames reordered by up to the replay window (64
     frames: a frame older than that is refused as stale, so deeper reordering loses it)."""
-    air = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(None), address=AIR_ADDR,
-                    max_payload=payload)  # fmt: skip
+    air = LinkCodec(
+        KEY,
+        AIRCRAFT,
+        {GROUND_ADDR},
+        counter=CounterStore(None),
+        address=AIR_ADDR,
+        max_payload=payload,
+    )
     ground = _ground()
     body = msgpack.packb(message, use_bin_type=True)
     assume(len(body) <= 255 * (payload - OVERHEAD))
@@ -220,8 +253,12 @@ def test_any_message_survives_fragmentation_and_reordering(message, payload, see
 @PROPERTY
 @given(value=PLAIN)
 def test_the_message_validator_takes_or_refuses_clearly(value):
-    for candidate in (value, {"kind": "arm", "plan": value}, {"kind": "decision", "id": value},
-                      {"kind": "status", "v": value}):  # fmt: skip
+    for candidate in (
+        value,
+        {"kind": "arm", "plan": value},
+        {"kind": "decision", "id": value},
+        {"kind": "status", "v": value},
+    ):
         message, error = _outcome(messages.from_dict, candidate, error=messages.LinkMessageError)
         if error is not None:
             assert str(error)
@@ -274,8 +311,13 @@ MODELS = {
         _flatten(load_config(GROUND_TOML, GroundConfig).model_dump(mode="json")),
     ),
 }
-SCALARS = (st.booleans() | st.integers(-(10**6), 10**6) | st.floats(allow_nan=True)
-           | st.text(max_size=12) | st.lists(st.integers(-5, 5), max_size=3))  # fmt: skip
+SCALARS = (
+    st.booleans()
+    | st.integers(-(10**6), 10**6)
+    | st.floats(allow_nan=True)
+    | st.text(max_size=12)
+    | st.lists(st.integers(-5, 5), max_size=3)
+)
 
 
 @pytest.mark.parametrize("which", MODELS)

@@ -108,8 +108,9 @@ async def test_excitation_window_goes_to_its_log_after_the_margin():
     clock = VirtualClock(0.0)
     logged = []
     config = RecorderConfig(capacity_s=60.0, excitation_margin_s=1.0, delay_s=0.05)
-    rec = Recorder(config, clock, channels=["p"],
-                   on_excitation=lambda w, rows: logged.append((w, rows)))  # fmt: skip
+    rec = Recorder(
+        config, clock, channels=["p"], on_excitation=lambda w, rows: logged.append((w, rows))
+    )
     rec.mark(Event("started", "lat", 2.0))  # not a window: ignored
     rec.mark(Window("lat", "lateral", 2.0, 4.0, "finished"))
     task = asyncio.create_task(rec.run(), name="recorder")

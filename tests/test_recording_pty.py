@@ -26,8 +26,9 @@ async def _record(tmp_path, seconds: float, during=None):
     rig = Rig(tmp_path)
     writer = LogWriter(tmp_path / "logs")
     recorder = Recorder(RecorderConfig(), rig.clock)
-    book = Logbook(writer, recorder.columns, units_of(recorder.columns, SENSOR_CHANNELS),
-                   config_hash("test"))  # fmt: skip
+    book = Logbook(
+        writer, recorder.columns, units_of(recorder.columns, SENSOR_CHANNELS), config_hash("test")
+    )
     recorder.sink = book.row
     try:
         await rig.start(sink=recorder.push)

@@ -39,8 +39,11 @@ def agent(tmp_path):
 
 
 async def test_ground_commands_are_acknowledged_with_the_reason(agent):
-    big = Plan(id="big", axes="lateral", segments=(Segment(signals={"aileron": Doublet(
-        pulse_s=1.0, amplitude=20.0)}),))  # fmt: skip
+    big = Plan(
+        id="big",
+        axes="lateral",
+        segments=(Segment(signals={"aileron": Doublet(pulse_s=1.0, amplitude=20.0)}),),
+    )
     commands = [
         messages.Arm(plan=preset("lateral")),
         messages.Arm(plan=big),
@@ -99,8 +102,12 @@ async def test_an_unusable_window_gives_a_failure_result_and_the_agent_goes_on(a
     from concurrent.futures import ThreadPoolExecutor
 
     with ThreadPoolExecutor(1) as pool:  # the worker's job, here on a thread
-        await agent._identify(asyncio.get_running_loop(), pool,
-                              Window("lat", "lateral", 100.0, 115.0, "finished"), rows)  # fmt: skip
+        await agent._identify(
+            asyncio.get_running_loop(),
+            pool,
+            Window("lat", "lateral", 100.0, 115.0, "finished"),
+            rows,
+        )
     failures = [m for m in agent.sent if isinstance(m, messages.Failure)]
     assert len(failures) == 1
     assert "1.00 s gap" in failures[0].reason
@@ -158,8 +165,10 @@ async def test_a_new_nominal_that_predicts_worse_is_rolled_back(tmp_path):
     root = Path(__file__).resolve().parents[1]
     with (root / "examples" / "a2_lateral.csv").open() as handle:
         table = list(csv.DictReader(handle))
-    config = Config(recorder=Recorder(log_dir=str(tmp_path / "logs"), rate_hz=50.0),
-                    identification=Identification(refine=False))  # fmt: skip
+    config = Config(
+        recorder=Recorder(log_dir=str(tmp_path / "logs"), rate_hz=50.0),
+        identification=Identification(refine=False),
+    )
     agent = Agent(config, base=tmp_path)
     sent = []
     agent._downlink = lambda message, reliable=True: sent.append(message)
@@ -186,8 +195,9 @@ async def test_a_new_nominal_that_predicts_worse_is_rolled_back(tmp_path):
         agent._store.shutdown()
     assert agent.models.nominal_id("lateral") == "lat-1"
     notices = [m.text for m in sent if isinstance(m, messages.Notice)]
-    assert any(t.startswith("self-check: nominal lat-2") and t.endswith("reverted")
-               for t in notices), notices  # fmt: skip
+    assert any(
+        t.startswith("self-check: nominal lat-2") and t.endswith("reverted") for t in notices
+    ), notices
 
 
 def test_lag_percentiles_pool_the_health_records_histograms():

@@ -26,8 +26,9 @@ def budget(timeout_s: float | None) -> None:
     _deadline[0] = None if not timeout_s else time.monotonic() + timeout_s * (1 - TEARDOWN_RESERVE)
 
 
-async def until(predicate: Callable[[], Any], what: str,
-                pause: Callable[[float], Awaitable[Any]] | None = None) -> Any:  # fmt: skip
+async def until(
+    predicate: Callable[[], Any], what: str, pause: Callable[[float], Awaitable[Any]] | None = None
+) -> Any:
     """predicate()'s first truthy value, polled every 20 ms (`pause`: how to wait, such as
     Textual's pilot.pause); AssertionError naming `what` if the test's budget runs out."""
     wait = pause or asyncio.sleep

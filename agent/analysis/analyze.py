@@ -86,8 +86,11 @@ def select_logs(paths: Sequence[Path], excitations: Sequence[str] | None) -> lis
     files: list[Path] = []
     for path in paths:
         if path.is_dir():
-            files += sorted(p for p in path.glob("*.csv")
-                            if re.match(r"\d{4}_(lateral|longitudinal|full)_", p.name))  # fmt: skip
+            files += sorted(
+                p
+                for p in path.glob("*.csv")
+                if re.match(r"\d{4}_(lateral|longitudinal|full)_", p.name)
+            )
         elif path.exists():
             files.append(path)
         else:
@@ -160,10 +163,18 @@ def build_cases(
     for key in keys:
         case_settings = replace(settings, **dict(key))
         for label, group, context in groups:
-            job = jobs.Job(label, "analysis", dt, tuple(request.inputs), tuple(request.outputs),
-                           tuple(r or "" for r in roles), group, case_settings,
-                           contexts=context,
-                           input_roles=tuple(r or "" for r in input_roles))  # fmt: skip
+            job = jobs.Job(
+                label,
+                "analysis",
+                dt,
+                tuple(request.inputs),
+                tuple(request.outputs),
+                tuple(r or "" for r in roles),
+                group,
+                case_settings,
+                contexts=context,
+                input_roles=tuple(r or "" for r in input_roles),
+            )
             cases.append(Case(label, key, job))
     return cases, dt
 
@@ -210,11 +221,13 @@ def _experiment(path: Path, request: Request) -> tuple[Experiment, float, bool]:
     rate = _header(path, r"recorded at (\S+) Hz")
     dt = 1.0 / float(rate) if rate else float(np.median(np.diff(time)))
     navigation = [n for n in request.navigation if n in columns]
-    values = {n: rows[keep, columns.index(n)]
-              for n in (*request.inputs, *request.outputs, *navigation)}  # fmt: skip
+    values = {
+        n: rows[keep, columns.index(n)] for n in (*request.inputs, *request.outputs, *navigation)
+    }
     try:
-        (u, y), trim = jobs.window_and_trim(values, request.inputs, request.outputs, dt,
-                                            max(request.trim_seconds, dt))  # fmt: skip
+        (u, y), trim = jobs.window_and_trim(
+            values, request.inputs, request.outputs, dt, max(request.trim_seconds, dt)
+        )
     except (DataError, KeyError) as exc:
         raise AnalyzeError(f"{path}: {exc}") from exc
     operating_point = np.array(list(trim["outputs"].values()))
@@ -235,12 +248,19 @@ def _check_time(path: Path, time: np.ndarray) -> None:
     steps = np.diff(time)
     if np.any(steps <= 0):
         k = int(np.argmax(steps <= 0))
-        raise AnalyzeError(f"{path}: time does not increase at data row {k + 2} "
-                           f"({time[k]:.6f} s → {time[k + 1]:.6f} s)")  # fmt: skip
+        raise AnalyzeError(
+            f"{path}: time does not increase at data row {k + 2} "
+            f"({time[k]:.6f} s → {time[k + 1]:.6f} s)"
+        )
 
 
-def run_cases(cases: Sequence[Case], *, workers: int = 1, scheduler: str | None = None,
-              progress: Callable[[int, int], None] | None = None) -> list[dict]:  # fmt: skip
+def run_cases(
+    cases: Sequence[Case],
+    *,
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[dict]:
     """Run every case's job; results in case order. `scheduler`: a Dask cluster address."""
     done = 0
 
@@ -278,8 +298,7 @@ def run_cases(cases: Sequence[Case], *, workers: int = 1, scheduler: str | None 
 def named_modes(outcome: dict) -> dict[str, complex]:
     if not outcome["ok"]:
         return {}
-    return {m["name"]: complex(*m["eigenvalue"]) for m in outcome["result"]["modes"]
-            if m["name"]}  # fmt: skip
+    return {m["name"]: complex(*m["eigenvalue"]) for m in outcome["result"]["modes"] if m["name"]}
 
 
 def sweep_table(cases: Sequence[Case], outcomes: Sequence[dict]) -> list[dict]:
@@ -303,16 +322,18 @@ def sweep_table(cases: Sequence[Case], outcomes: Sequence[dict]) -> list[dict]:
             centre = complex(np.median(values.real), np.median(np.abs(values.imag)))
             values = values.real + 1j * np.abs(values.imag)
             spread[name] = float(np.max(np.abs(values - centre)) / max(abs(centre), 1e-9))
-        table.append({
-            "setting": dict(key),
-            "identified": len(ok),
-            "failed": [o["reason"] for o in group if not o["ok"]],
-            "tic_avg": float(np.mean(tics)) if tics else None,
-            "orders": sorted({o["result"]["order"] for o in ok}),
-            "markov": sorted({o["result"]["markov"] for o in ok}),
-            "modes": {n: [[m[n].real, m[n].imag] for m in modes] for n in common},
-            "spread": spread,
-        })  # fmt: skip
+        table.append(
+            {
+                "setting": dict(key),
+                "identified": len(ok),
+                "failed": [o["reason"] for o in group if not o["ok"]],
+                "tic_avg": float(np.mean(tics)) if tics else None,
+                "orders": sorted({o["result"]["order"] for o in ok}),
+                "markov": sorted({o["result"]["markov"] for o in ok}),
+                "modes": {n: [[m[n].real, m[n].imag] for m in modes] for n in common},
+                "spread": spread,
+            }
+        )
     if single and len(table) > 1:
         _spread_over_sweep(table)
     return table
@@ -358,8 +379,14 @@ def cross_validation(cases: Sequence[Case], outcomes: Sequence[dict]) -> list[li
             if not outcome["ok"]:
                 row.append(None)
                 continue
-            row.append(jobs.cross_tic(outcome["result"], outcome["preprocessing"],
-                                      case.job.record_dt, other.job.experiments))  # fmt: skip
+            row.append(
+                jobs.cross_tic(
+                    outcome["result"],
+                    outcome["preprocessing"],
+                    case.job.record_dt,
+                    other.job.experiments,
+                )
+            )
         matrix.append(row)
     return matrix
 
@@ -371,9 +398,15 @@ def case_summary(outcome: dict) -> dict:
     r = outcome["result"]
     modes = [{"name": m["name"], "eigenvalue": m["eigenvalue"]} for m in r["modes"]]
     refinement = r.get("refinement")
-    return {"ok": True, "markov": r["markov"], "order": r["order"], "tic_avg": r["tic_avg"],
-            "modes": modes, "converged": refinement["converged"] if refinement else None,
-            "warnings": list(r.get("warnings", ()))}  # fmt: skip
+    return {
+        "ok": True,
+        "markov": r["markov"],
+        "order": r["order"],
+        "tic_avg": r["tic_avg"],
+        "modes": modes,
+        "converged": refinement["converged"] if refinement else None,
+        "warnings": list(r.get("warnings", ())),
+    }
 
 
 def analysis_text(report: dict, paths) -> str:
@@ -385,14 +418,18 @@ def analysis_text(report: dict, paths) -> str:
         if not case["ok"]:
             lines.append(f"{head}: failed: {case['reason']}")
             continue
-        modes = ", ".join(f"{m['name']} {complex(*m['eigenvalue']):.3f}"
-                          for m in case["modes"] if m["name"])  # fmt: skip
-        lines.append(f"{head}: p {case['markov']}, n {case['order']}, "
-                     f"TIC_avg {case['tic_avg']:.3f}; {modes or 'no named mode'}")  # fmt: skip
+        modes = ", ".join(
+            f"{m['name']} {complex(*m['eigenvalue']):.3f}" for m in case["modes"] if m["name"]
+        )
+        lines.append(
+            f"{head}: p {case['markov']}, n {case['order']}, "
+            f"TIC_avg {case['tic_avg']:.3f}; {modes or 'no named mode'}"
+        )
     if "sweep" in report:
         lines.append("")
-        lines.append(f"{'setting':<14}{'TIC_avg':>9}  {'ok':>3}  modes (worst spread across "
-                     "excitations)")  # fmt: skip
+        lines.append(
+            f"{'setting':<14}{'TIC_avg':>9}  {'ok':>3}  modes (worst spread across excitations)"
+        )
         for row in report["sweep"]:
             setting = " ".join(f"{k}={v}" for k, v in row["setting"].items())
             tic = "–" if row["tic_avg"] is None else f"{row['tic_avg']:.4f}"

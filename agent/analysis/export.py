@@ -78,8 +78,11 @@ def load_models(path: str | Path) -> Models:
             continue
         try:
             if "result" in record and "model_id" in record:  # the agent's result log
-                models.append(_from_result(record["model_id"], record["axes"],
-                                           record["result"], record.get("trim")))  # fmt: skip
+                models.append(
+                    _from_result(
+                        record["model_id"], record["axes"], record["result"], record.get("trim")
+                    )
+                )
             elif record.get("dir") == "rx" and record["message"].get("kind") == "result":
                 models.append(_from_message(record["message"]))
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
@@ -112,8 +115,10 @@ def _or_nan(value: float | None) -> float:
 def _trim(trim: dict | None, inputs, outputs) -> dict:
     if not trim:
         return {"u0": np.zeros((0,)), "y0": np.zeros((0,))}
-    return {"u0": np.array([trim["inputs"][n] for n in inputs]),
-            "y0": np.array([trim["outputs"][n] for n in outputs])}  # fmt: skip
+    return {
+        "u0": np.array([trim["inputs"][n] for n in inputs]),
+        "y0": np.array([trim["outputs"][n] for n in outputs]),
+    }
 
 
 def _from_result(model_id: str, axes: str, r: dict, trim: dict | None) -> dict:
@@ -140,8 +145,10 @@ def _tic(tic, outputs) -> np.ndarray:
 
 
 def _from_message(m: dict) -> dict:
-    modes = [{"name": x["name"], "eigenvalue": [x["real"], x["imag"]], "damping": x["damping"]}
-             for x in m["modes"]]  # fmt: skip
+    modes = [
+        {"name": x["name"], "eigenvalue": [x["real"], x["imag"]], "damping": x["damping"]}
+        for x in m["modes"]
+    ]
     return {
         "id": m["model_id"],
         "axes": m["axes"],
@@ -158,8 +165,9 @@ def _from_message(m: dict) -> dict:
 
 
 def _from_store(path: Path, meta: dict) -> dict:
-    model = _from_result(meta["model_id"], meta["axes"], meta["result"],
-                         (meta.get("extra") or {}).get("trim"))  # fmt: skip
+    model = _from_result(
+        meta["model_id"], meta["axes"], meta["result"], (meta.get("extra") or {}).get("trim")
+    )
     data = path.with_suffix(".npz")
     if data.exists():
         try:

@@ -89,8 +89,9 @@ def load_experiments(
         navigation = None
         if request.navigation and all(n in rec.columns for n in request.navigation):
             navigation = rec.matrix(request.navigation)
-        experiments.append(Experiment(u=u, y=y, operating_point=operating_point,
-                                      navigation=navigation))  # fmt: skip
+        experiments.append(
+            Experiment(u=u, y=y, operating_point=operating_point, navigation=navigation)
+        )
     return experiments, dt, trim, sum(r.time.size for r in records)
 
 

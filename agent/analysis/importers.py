@@ -38,23 +38,39 @@ from agent.config import Surface
 
 DEG = np.pi / 180.0
 # ArduPilot's SID_AXIS values (SystemID mode).
-SID_AXES = {1: "input roll", 2: "input pitch", 3: "input yaw", 4: "recovery roll",
-            5: "recovery pitch", 6: "recovery yaw", 7: "rate roll", 8: "rate pitch",
-            9: "rate yaw", 10: "mixer roll", 11: "mixer pitch", 12: "mixer yaw",
-            13: "mixer thrust"}  # fmt: skip
+SID_AXES = {
+    1: "input roll",
+    2: "input pitch",
+    3: "input yaw",
+    4: "recovery roll",
+    5: "recovery pitch",
+    6: "recovery yaw",
+    7: "rate roll",
+    8: "rate pitch",
+    9: "rate yaw",
+    10: "mixer roll",
+    11: "mixer pitch",
+    12: "mixer yaw",
+    13: "mixer thrust",
+}
 # (message, field, column, scale, instance field or None)
 DATAFLASH = [
-    ("ATT", "Roll", "phi", DEG, None), ("ATT", "Pitch", "theta", DEG, None),
+    ("ATT", "Roll", "phi", DEG, None),
+    ("ATT", "Pitch", "theta", DEG, None),
     ("ATT", "Yaw", "psi", DEG, None),
-    ("IMU", "GyrX", "p", 1.0, "I"), ("IMU", "GyrY", "q", 1.0, "I"),
+    ("IMU", "GyrX", "p", 1.0, "I"),
+    ("IMU", "GyrY", "q", 1.0, "I"),
     ("IMU", "GyrZ", "r", 1.0, "I"),
-    ("IMU", "AccX", "ax", 1.0, "I"), ("IMU", "AccY", "ay", 1.0, "I"),
+    ("IMU", "AccX", "ax", 1.0, "I"),
+    ("IMU", "AccY", "ay", 1.0, "I"),
     ("IMU", "AccZ", "az", 1.0, "I"),
     ("ARSP", "Airspeed", "Vt", 1.0, "I"),
-    ("AOA", "AOA", "alpha", DEG, None), ("AOA", "SSA", "beta", DEG, None),
-    ("SIDD", "Targ", "sid_target", 1.0, None), ("SIDD", "F", "sid_frequency_hz", 1.0, None),
+    ("AOA", "AOA", "alpha", DEG, None),
+    ("AOA", "SSA", "beta", DEG, None),
+    ("SIDD", "Targ", "sid_target", 1.0, None),
+    ("SIDD", "F", "sid_frequency_hz", 1.0, None),
     ("SIDD", "Time", "sid_time", 1.0, None),
-]  # fmt: skip
+]
 DEFAULT_RATE_HZ = 50.0
 
 
@@ -86,8 +102,9 @@ class Imported:
         return out.getvalue()
 
 
-def import_log(path: str | Path, surfaces: Mapping[str, Surface],
-               rate_hz: float = DEFAULT_RATE_HZ) -> Imported:  # fmt: skip
+def import_log(
+    path: str | Path, surfaces: Mapping[str, Surface], rate_hz: float = DEFAULT_RATE_HZ
+) -> Imported:
     """Read an autopilot log (by its extension) into uniformly sampled columns."""
     path = Path(path)
     if not path.exists():
@@ -130,8 +147,10 @@ def _dataflash(path: Path, surfaces: Mapping[str, Surface], rate_hz: float) -> I
         kind, t = m.get_type(), m.TimeUS * 1e-6
         if kind == "SIDS":
             axis = SID_AXES.get(int(m.Ax), f"axis {m.Ax}")
-            notes.append(f"ArduPilot SystemID run: {axis}, magnitude {m.Mag:g}, "
-                         f"{m.FSt:g}–{m.FSp:g} Hz over {m.TR:g} s")  # fmt: skip
+            notes.append(
+                f"ArduPilot SystemID run: {axis}, magnitude {m.Mag:g}, "
+                f"{m.FSt:g}–{m.FSp:g} Hz over {m.TR:g} s"
+            )
             continue
         if kind == "RCOU":
             for control, ch in channels.items():
@@ -154,8 +173,15 @@ def _dataflash(path: Path, surfaces: Mapping[str, Surface], rate_hz: float) -> I
 def _ulog(path: Path, surfaces: Mapping[str, Surface], rate_hz: float) -> Imported:
     from pyulog import ULog
 
-    topics = ["vehicle_attitude", "vehicle_angular_velocity", "vehicle_acceleration",
-              "airspeed_validated", "airflow_aoa", "airflow_slip", "actuator_outputs"]  # fmt: skip
+    topics = [
+        "vehicle_attitude",
+        "vehicle_angular_velocity",
+        "vehicle_acceleration",
+        "airspeed_validated",
+        "airflow_aoa",
+        "airflow_slip",
+        "actuator_outputs",
+    ]
     try:
         log = ULog(str(path), message_name_filter_list=topics)
     except Exception as exc:  # pyulog raises bare exceptions on a file that is not a ULog
@@ -173,15 +199,19 @@ def _ulog(path: Path, surfaces: Mapping[str, Surface], rate_hz: float) -> Import
         put("phi", t, np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y)))
         put("theta", t, np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0)))
         put("psi", t, np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
-    for topic, columns in (("vehicle_angular_velocity", ("p", "q", "r")),
-                           ("vehicle_acceleration", ("ax", "ay", "az"))):  # fmt: skip
+    for topic, columns in (
+        ("vehicle_angular_velocity", ("p", "q", "r")),
+        ("vehicle_acceleration", ("ax", "ay", "az")),
+    ):
         if topic in data:
             d = data[topic]
             for k, column in enumerate(columns):
                 put(column, d["timestamp"] * 1e-6, d[f"xyz[{k}]"])
-    for topic, name, column in (("airspeed_validated", "true_airspeed_m_s", "Vt"),
-                                ("airflow_aoa", "aoa_rad", "alpha"),
-                                ("airflow_slip", "slip_rad", "beta")):  # fmt: skip
+    for topic, name, column in (
+        ("airspeed_validated", "true_airspeed_m_s", "Vt"),
+        ("airflow_aoa", "aoa_rad", "alpha"),
+        ("airflow_slip", "slip_rad", "beta"),
+    ):
         if topic in data:
             put(column, data[topic]["timestamp"] * 1e-6, data[topic][name])
     if "actuator_outputs" in data:
@@ -242,12 +272,16 @@ def _stretch(core: dict, start: float, end: float) -> tuple[float, float, list[t
 
 def _resample(path: Path, kind: str, series, rate_hz: float, notes: list[str]) -> Imported:
     skipped: dict[str, int] = {}
-    series = {c: _clean(c, np.asarray(t, float), np.asarray(v, float), skipped)
-              for c, (t, v) in series.items()}  # fmt: skip
+    series = {
+        c: _clean(c, np.asarray(t, float), np.asarray(v, float), skipped)
+        for c, (t, v) in series.items()
+    }
     if skipped:
         listed = ", ".join(f"{c} {n}" for c, n in skipped.items())
-        notes.append(f"samples dropped (a non-finite value or a timestamp jumping away and back "
-                     f"by over {JUMP_S:g} s): {listed}")  # fmt: skip
+        notes.append(
+            f"samples dropped (a non-finite value or a timestamp jumping away and back "
+            f"by over {JUMP_S:g} s): {listed}"
+        )
     core = {c: s for c, s in series.items() if not c.startswith("sid_") and s[0].size}
     if not core:
         raise LogImportError(f"{path}: none of the mapped messages are in this log")

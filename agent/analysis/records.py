@@ -61,8 +61,11 @@ def read_record(path: str | Path, names: Sequence[str], optional: Sequence[str] 
             header = [h.strip() for h in next(csv.reader([line]))]
             _check_header(path, header)
             index = _column_index(path, header, ["time", *names])
-            extra = [n for n in dict.fromkeys(optional)
-                     if n not in names and n != "time" and header.count(n) == 1]  # fmt: skip
+            extra = [
+                n
+                for n in dict.fromkeys(optional)
+                if n not in names and n != "time" and header.count(n) == 1
+            ]
             index += [header.index(n) for n in extra]
             wanted = ["time", *names, *extra]
             start = handle.tell()
@@ -73,8 +76,9 @@ def read_record(path: str | Path, names: Sequence[str], optional: Sequence[str] 
             if values is None or not np.isfinite(values).all():
                 handle.seek(start)
                 reader = csv.reader(_lines(path, handle))
-                values = _read_rows(path, reader, len(header), index, wanted, 2 + comments,
-                                    lenient=len(extra))  # fmt: skip
+                values = _read_rows(
+                    path, reader, len(header), index, wanted, 2 + comments, lenient=len(extra)
+                )
     except OSError as exc:
         raise RecordError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
     except UnicodeDecodeError as exc:
@@ -169,8 +173,9 @@ def _fast_rows(handle, width: int, index: list[int]) -> np.ndarray | None:
     try:
         with warnings.catch_warnings():  # an empty file: the row-by-row reader says so
             warnings.simplefilter("ignore", UserWarning)
-            values = np.loadtxt(handle, delimiter=",", usecols=index, ndmin=2,
-                                max_rows=MAX_ROWS + 1, comments=None)  # fmt: skip
+            values = np.loadtxt(
+                handle, delimiter=",", usecols=index, ndmin=2, max_rows=MAX_ROWS + 1, comments=None
+            )
     except (ValueError, OverflowError):
         return None
     if not MAX_ROWS >= values.shape[0] >= 2:

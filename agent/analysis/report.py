@@ -41,10 +41,13 @@ COLOURS = plt.rcParams["axes.prop_cycle"].by_key()["color"]
 def _prepared(case: Case, outcome: dict) -> tuple[list[Experiment], float]:
     p = outcome["preprocessing"]
     batch, prep = preprocess(
-        [Experiment(u, y) for u, y in case.job.experiments], case.job.record_dt,
-        decimation=p["factor"], band_hz=p["band_hz"], held_inputs=p["held_inputs"],
+        [Experiment(u, y) for u, y in case.job.experiments],
+        case.job.record_dt,
+        decimation=p["factor"],
+        band_hz=p["band_hz"],
+        held_inputs=p["held_inputs"],
         smoothing_s=p["smoothing_s"],
-    )  # fmt: skip
+    )
     return batch, prep.dt
 
 
@@ -63,11 +66,24 @@ def time_histories(case: Case, outcome: dict, path: Path) -> None:
         for k, (exp, predicted) in enumerate(zip(batch, result.predictions, strict=True)):
             t = np.arange(exp.length) * dt
             ax.plot(t, exp.y[:, j], color="0.3", lw=1.0, label="measured" if k == 0 else None)
-            ax.plot(t, predicted[:, j], color=COLOURS[0], lw=1.2, ls="--",
-                    label="identified" if k == 0 else None)  # fmt: skip
+            ax.plot(
+                t,
+                predicted[:, j],
+                color=COLOURS[0],
+                lw=1.2,
+                ls="--",
+                label="identified" if k == 0 else None,
+            )
         ax.set_ylabel(name)
-        ax.text(0.99, 0.9, f"TIC {result.tic[j]:.3f}", transform=ax.transAxes, ha="right",
-                va="top", fontsize=9)  # fmt: skip
+        ax.text(
+            0.99,
+            0.9,
+            f"TIC {result.tic[j]:.3f}",
+            transform=ax.transAxes,
+            ha="right",
+            va="top",
+            fontsize=9,
+        )
         ax.grid(alpha=0.3)
     axes[0].legend(loc="upper left", fontsize=8)
     axes[0].set_title(f"excitation {case.label}: TIC_avg {result.tic_avg:.3f}")
@@ -77,21 +93,36 @@ def time_histories(case: Case, outcome: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def s_plane(cases: Sequence[Case], outcomes: Sequence[dict], nominal: dict | None,
-            path: Path) -> None:  # fmt: skip
+def s_plane(
+    cases: Sequence[Case], outcomes: Sequence[dict], nominal: dict | None, path: Path
+) -> None:
     fig, ax = plt.subplots(figsize=(7, 5))
     for k, (case, outcome) in enumerate(zip(cases, outcomes, strict=True)):
         if not outcome["ok"]:
             continue
         lam = np.array([complex(*m["eigenvalue"]) for m in outcome["result"]["modes"]])
         lam = np.concatenate([lam, lam[lam.imag != 0].conj()])
-        ax.plot(lam.real, lam.imag, "x", color=COLOURS[k % len(COLOURS)], ms=7,
-                label=f"excitation {case.label}")  # fmt: skip
+        ax.plot(
+            lam.real,
+            lam.imag,
+            "x",
+            color=COLOURS[k % len(COLOURS)],
+            ms=7,
+            label=f"excitation {case.label}",
+        )
     if nominal is not None:
         lam = np.array([complex(*m["eigenvalue"]) for m in nominal["modes"]])
         lam = np.concatenate([lam, lam[lam.imag != 0].conj()])
-        ax.plot(lam.real, lam.imag, "o", mfc="none", mec="k", ms=12, mew=2,
-                label=f"nominal {nominal['model_id']}")  # fmt: skip
+        ax.plot(
+            lam.real,
+            lam.imag,
+            "o",
+            mfc="none",
+            mec="k",
+            ms=12,
+            mew=2,
+            label=f"nominal {nominal['model_id']}",
+        )
     ax.axvline(0, color="0.5", lw=0.8)
     ax.axhline(0, color="0.5", lw=0.8)
     ax.set_xlabel("real (1/s)")
@@ -112,8 +143,13 @@ def hankel(cases: Sequence[Case], outcomes: Sequence[dict], path: Path) -> None:
         sv = np.asarray(outcome["result"]["singular_values"], dtype=float)
         n = outcome["result"]["order"]
         colour = COLOURS[k % len(COLOURS)]
-        ax.semilogy(np.arange(1, sv.size + 1), sv, ".-", color=colour,
-                    label=f"excitation {case.label} (n = {n})")  # fmt: skip
+        ax.semilogy(
+            np.arange(1, sv.size + 1),
+            sv,
+            ".-",
+            color=colour,
+            label=f"excitation {case.label} (n = {n})",
+        )
         ax.axvline(n + 0.5, color=colour, ls=":", lw=1)
     ax.set_xlabel("index")
     ax.set_ylabel("Hankel singular value")
@@ -142,8 +178,12 @@ def bode(case: Case, outcome: dict, path: Path) -> None:
         for j, oname in enumerate(outputs):
             _, puy = scipy.signal.csd(u[:, i], y[:, j], fs=1 / dt, nperseg=nper)
             h1 = puy / np.where(puu > 0, puu, np.nan)
-            hm = np.array([model.C[j] @ np.linalg.solve(zk * eye - model.A, model.B[:, i])
-                           + model.D[j, i] for zk in z])  # fmt: skip
+            hm = np.array(
+                [
+                    model.C[j] @ np.linalg.solve(zk * eye - model.A, model.B[:, i]) + model.D[j, i]
+                    for zk in z
+                ]
+            )
             band = puu > 1e-3 * puu.max()  # where the input put power: the estimate means something
             mag, ph = axes[2 * i, j], axes[2 * i + 1, j]
             mag.loglog(f[band], np.abs(h1[band]), ".", color="0.4", ms=3, label="data (H1)")
@@ -189,16 +229,23 @@ def _fmt(value, spec: str = "{:.2f}") -> str:
 
 
 def mode_table(outcome: dict) -> str:
-    head = ("mode", "eigenvalue", "f (Hz)", "ζ", "τ (s)", "MSV", "MCI", "MOI", "EMAC", "MPC",
-            "CMI")  # fmt: skip
+    head = ("mode", "eigenvalue", "f (Hz)", "ζ", "τ (s)", "MSV", "MCI", "MOI", "EMAC", "MPC", "CMI")
     rows = []
     for m in outcome["result"]["modes"]:
         lam = complex(*m["eigenvalue"])
-        cells = (m["name"] or "–", f"{lam.real:+.3f}{lam.imag:+.3f}j",
-                 _fmt(m["frequency_rad_s"] / (2 * np.pi), "{:.3f}"), _fmt(m["damping"]),
-                 _fmt(m["time_constant_s"]), _fmt(m["msv"], "{:.3g}"), _fmt(m["mci"], "{:.3g}"),
-                 _fmt(m["moi"], "{:.3g}"), _fmt(m["emac"], "{:.0f}"), _fmt(m["mpc"], "{:.0f}"),
-                 _fmt(m["cmi"], "{:.0f}"))  # fmt: skip
+        cells = (
+            m["name"] or "–",
+            f"{lam.real:+.3f}{lam.imag:+.3f}j",
+            _fmt(m["frequency_rad_s"] / (2 * np.pi), "{:.3f}"),
+            _fmt(m["damping"]),
+            _fmt(m["time_constant_s"]),
+            _fmt(m["msv"], "{:.3g}"),
+            _fmt(m["mci"], "{:.3g}"),
+            _fmt(m["moi"], "{:.3g}"),
+            _fmt(m["emac"], "{:.0f}"),
+            _fmt(m["mpc"], "{:.0f}"),
+            _fmt(m["cmi"], "{:.0f}"),
+        )
         rows.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
     header = "<tr>" + "".join(f"<th>{h}</th>" for h in head) + "</tr>"
     return f"<table>{header}{''.join(rows)}</table>"
@@ -210,37 +257,54 @@ font-size:0.85em;text-align:right}th{background:#eee}img{max-width:100%;display:
 margin:0.5em 0}h2{border-bottom:2px solid #ccc;margin-top:2em}.fail{color:#b00}"""
 
 
-def write(directory: Path, logs: Sequence[Path], cases: Sequence[Case],
-          outcomes: Sequence[dict], nominal: dict | None = None) -> Path:  # fmt: skip
+def write(
+    directory: Path,
+    logs: Sequence[Path],
+    cases: Sequence[Case],
+    outcomes: Sequence[dict],
+    nominal: dict | None = None,
+) -> Path:
     """The report in `directory` (index.html and its PNGs); returns the page's path."""
     directory.mkdir(parents=True, exist_ok=True)
-    parts = [f"<h1>suas-sysid report</h1><p>{len(logs)} log(s): "
-             + ", ".join(html.escape(Path(p).name) for p in logs) + "</p>"]  # fmt: skip
+    parts = [
+        f"<h1>suas-sysid report</h1><p>{len(logs)} log(s): "
+        + ", ".join(html.escape(Path(p).name) for p in logs)
+        + "</p>"
+    ]
     s_plane(cases, outcomes, nominal, directory / "s_plane.png")
     hankel(cases, outcomes, directory / "hankel.png")
-    parts.append('<h2>Eigenvalues</h2><img src="s_plane.png" alt="s-plane">'
-                 '<h2>Hankel singular values</h2><img src="hankel.png" alt="Hankel">')  # fmt: skip
+    parts.append(
+        '<h2>Eigenvalues</h2><img src="s_plane.png" alt="s-plane">'
+        '<h2>Hankel singular values</h2><img src="hankel.png" alt="Hankel">'
+    )
     for case, outcome in zip(cases, outcomes, strict=True):
         tag = f"excitation_{case.label}"
         parts.append(f"<h2>Excitation {html.escape(case.label)}</h2>")
         if not outcome["ok"]:
-            parts.append(f'<p class="fail">identification failed: '
-                         f'{html.escape(outcome["reason"])}</p>')  # fmt: skip
+            parts.append(
+                f'<p class="fail">identification failed: {html.escape(outcome["reason"])}</p>'
+            )
             continue
         r = outcome["result"]
-        parts.append(f"<p>p = {r['markov']}, n = {r['order']}, TIC_avg = {r['tic_avg']:.3f}, "
-                     f"{'stable' if r['stable'] else 'not stable'}</p>")  # fmt: skip
+        parts.append(
+            f"<p>p = {r['markov']}, n = {r['order']}, TIC_avg = {r['tic_avg']:.3f}, "
+            f"{'stable' if r['stable'] else 'not stable'}</p>"
+        )
         parts.append(mode_table(outcome))
         time_histories(case, outcome, directory / f"{tag}_time.png")
         bode(case, outcome, directory / f"{tag}_bode.png")
         rpf = input_spectra(case, case.job.record_dt, directory / f"{tag}_inputs.png")
         rpf_text = ", ".join(f"{n} {v:.2f}" for n, v in rpf)
-        parts.append(f'<img src="{tag}_time.png" alt="time histories {tag}">'
-                     f'<img src="{tag}_bode.png" alt="Bode {tag}">'
-                     f'<p>Relative peak factors: {rpf_text}</p>'
-                     f'<img src="{tag}_inputs.png" alt="input spectra {tag}">')  # fmt: skip
+        parts.append(
+            f'<img src="{tag}_time.png" alt="time histories {tag}">'
+            f'<img src="{tag}_bode.png" alt="Bode {tag}">'
+            f"<p>Relative peak factors: {rpf_text}</p>"
+            f'<img src="{tag}_inputs.png" alt="input spectra {tag}">'
+        )
     page = directory / "index.html"
-    page.write_text(f'<!doctype html><html><head><meta charset="utf-8"><title>suas-sysid '
-                    f"report</title><style>{CSS}</style></head><body>{''.join(parts)}"
-                    "</body></html>")  # fmt: skip
+    page.write_text(
+        f'<!doctype html><html><head><meta charset="utf-8"><title>suas-sysid '
+        f"report</title><style>{CSS}</style></head><body>{''.join(parts)}"
+        "</body></html>"
+    )
     return page

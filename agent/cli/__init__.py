@@ -38,8 +38,20 @@ from agent.cli.common import (
     say_error,
 )
 
-COMMANDS = (identify, analyze, report, excite, decode, import_log, export, sim_aircraft,
-            onboard, sim, console, config_check)  # fmt: skip
+COMMANDS = (
+    identify,
+    analyze,
+    report,
+    excite,
+    decode,
+    import_log,
+    export,
+    sim_aircraft,
+    onboard,
+    sim,
+    console,
+    config_check,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -75,8 +87,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if as_json and not json_state["printed"]:
             # A command that ended without its object: its error (every error path says one).
             message = json_state["error"] or f"exit {code}"
-            print_json({"error": {"kind": "error" if code else "none", "message": message,
-                                  "exit": code}})  # fmt: skip
+            print_json(
+                {"error": {"kind": "error" if code else "none", "message": message, "exit": code}}
+            )
         return code
     except CommandError as exc:
         say_error(name, exc.message if exc.kind == "error" else f"{exc.kind}: {exc.message}")

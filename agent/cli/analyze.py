@@ -26,10 +26,12 @@ def add_parser(sub) -> None:
     )
     replay_options(parser)
     parser.add_argument("--batch", action="store_true", help="one identification of all")
-    parser.add_argument("--sweep", metavar="NAME=RANGE",
-                        help="markov=1:20 or order=2:12:2 or markov=1,2,5")  # fmt: skip
-    parser.add_argument("--cross", action="store_true",
-                        help="each model on every other excitation (TIC_jN)")  # fmt: skip
+    parser.add_argument(
+        "--sweep", metavar="NAME=RANGE", help="markov=1:20 or order=2:12:2 or markov=1,2,5"
+    )
+    parser.add_argument(
+        "--cross", action="store_true", help="each model on every other excitation (TIC_jN)"
+    )
     parser.set_defaults(run=run)
 
 
@@ -55,8 +57,9 @@ def cases_for(args: argparse.Namespace, paths, batch: bool, sweep, prepared=None
     roles = [config.channels.role_of(n) for n in request.outputs]
     input_roles = [config.channels.role_of(n) for n in request.inputs]
     try:
-        cases, _ = an.build_cases(request, roles, settings, batch=batch, sweep=sweep,
-                                  input_roles=input_roles)  # fmt: skip
+        cases, _ = an.build_cases(
+            request, roles, settings, batch=batch, sweep=sweep, input_roles=input_roles
+        )
     except an.AnalyzeError as exc:
         raise refused(str(exc)) from None
     return cases
@@ -72,9 +75,13 @@ def run(args: argparse.Namespace) -> int:
         raise refused(str(exc)) from None
     cases = cases_for(args, paths, args.batch, sweep)
     outcomes = run_cases(cases, args, quiet=args.json)
-    report = {"logs": [str(p) for p in paths], "cases": [
-        {"excitation": c.label, "setting": dict(c.key), **an.case_summary(o)}
-        for c, o in zip(cases, outcomes, strict=True)]}  # fmt: skip
+    report = {
+        "logs": [str(p) for p in paths],
+        "cases": [
+            {"excitation": c.label, "setting": dict(c.key), **an.case_summary(o)}
+            for c, o in zip(cases, outcomes, strict=True)
+        ],
+    }
     excitations = 1 if args.batch else len(paths)
     if sweep is not None:
         table = an.sweep_table(cases, outcomes)

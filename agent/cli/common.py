@@ -110,10 +110,15 @@ def checked(convert, accept, noun: str, hint: str):
 
 
 # nan, inf, 0 and negatives refused; a UDP port from 0 (any) to 65535.
-positive_seconds = checked(float, lambda v: math.isfinite(v) and v > 0, "number of seconds",
-                           "give a finite, positive number of seconds")  # fmt: skip
-port = checked(int, lambda p: 0 <= p <= 65535, "port number",
-               "not a UDP port: give 0 (any) to 65535")  # fmt: skip
+positive_seconds = checked(
+    float,
+    lambda v: math.isfinite(v) and v > 0,
+    "number of seconds",
+    "give a finite, positive number of seconds",
+)
+port = checked(
+    int, lambda p: 0 <= p <= 65535, "port number", "not a UDP port: give 0 (any) to 65535"
+)
 
 
 def trim(text: str) -> float:
@@ -176,14 +181,24 @@ def identification_options(parser: argparse.ArgumentParser) -> None:
 
 def replay_options(parser: argparse.ArgumentParser) -> None:
     """The logs and running options `sysid analyze` and `sysid report` share."""
-    parser.add_argument("data", nargs="+", type=Path, metavar="LOG",
-                        help="excitation logs, records, or a log directory")  # fmt: skip
+    parser.add_argument(
+        "data",
+        nargs="+",
+        type=Path,
+        metavar="LOG",
+        help="excitation logs, records, or a log directory",
+    )
     identification_options(parser)
-    parser.add_argument("--excitation", action="append", metavar="N|PLAN",
-                        help="only this excitation log (running number or plan id)")  # fmt: skip
+    parser.add_argument(
+        "--excitation",
+        action="append",
+        metavar="N|PLAN",
+        help="only this excitation log (running number or plan id)",
+    )
     parser.add_argument("--jobs", type=positive_int, default=1, help="parallel processes")
-    parser.add_argument("--scheduler", metavar="ADDRESS",
-                        help="run the identifications on this Dask cluster")  # fmt: skip
+    parser.add_argument(
+        "--scheduler", metavar="ADDRESS", help="run the identifications on this Dask cluster"
+    )
 
 
 def load_optional_config(path: Path | None):
@@ -239,8 +254,9 @@ def progress(total: int, quiet: bool):
         return lambda done, of: None
     from tqdm import tqdm
 
-    bar = tqdm(total=total, unit="id", file=sys.stderr, leave=False,
-               disable=not sys.stderr.isatty())  # fmt: skip
+    bar = tqdm(
+        total=total, unit="id", file=sys.stderr, leave=False, disable=not sys.stderr.isatty()
+    )
 
     def update(done, of):
         if done is None:

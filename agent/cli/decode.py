@@ -19,8 +19,9 @@ def add_parser(sub) -> None:
         help="decode a raw sensor capture",
         description="Decode a raw capture (bytes as read from the port) with the drivers' codecs.",
     )
-    parser.add_argument("device", choices=DEVICES, metavar="DEVICE",
-                        help=f"one of {', '.join(DEVICES)}")  # fmt: skip
+    parser.add_argument(
+        "device", choices=DEVICES, metavar="DEVICE", help=f"one of {', '.join(DEVICES)}"
+    )
     parser.add_argument("file", type=Path, metavar="FILE")
     parser.add_argument("--json", action="store_true", help="one JSON object per message")
     parser.set_defaults(run=run)

@@ -47,8 +47,7 @@ def run(args: argparse.Namespace) -> int:
             plan = load_plan(args.plan)
         else:
             plan = plans.preset(args.preset, parse_amplitudes(args.amplitude))
-        timeline = plans.check(plan, rate, config.excitation.surfaces,
-                               config.excitation.envelope)  # fmt: skip
+        timeline = plans.check(plan, rate, config.excitation.surfaces, config.excitation.envelope)
     except (PreviewError, plans.PlanRefused, ValueError) as exc:
         raise refused(str(exc)) from None
     columns = {n: getattr(config.identification.channels, n) for n in timeline.values}

@@ -35,8 +35,11 @@ def run(args: argparse.Namespace) -> int:
     if models.skipped:
         more = " …" if len(models.skipped) > 10 else ""
         lines = ", ".join(map(str, models.skipped[:10])) + more
-        print(f"sysid export: warning: {args.source}: {len(models.skipped)} line(s) not JSON "
-              f"and not exported (line {lines}); the rest is", file=sys.stderr)  # fmt: skip
+        print(
+            f"sysid export: warning: {args.source}: {len(models.skipped)} line(s) not JSON "
+            f"and not exported (line {lines}); the rest is",
+            file=sys.stderr,
+        )
     if args.model:
         unknown = sorted(set(args.model) - {m["id"] for m in models})
         if unknown:

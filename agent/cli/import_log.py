@@ -41,8 +41,10 @@ def run(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise failed(f"{args.out}: cannot be written ({exc.strerror or exc})") from None
     span = imported.time[-1] if len(imported.time) else 0.0
-    print(f"{args.out}: {len(imported.time)} rows over {span:.1f} s at {args.rate:g} Hz; "
-          f"columns {', '.join(imported.columns)}")  # fmt: skip
+    print(
+        f"{args.out}: {len(imported.time)} rows over {span:.1f} s at {args.rate:g} Hz; "
+        f"columns {', '.join(imported.columns)}"
+    )
     for note in imported.notes:
         print(f"note: {note}")
     if imported.missing:

@@ -28,8 +28,9 @@ def add_parser(sub) -> None:
     )
     replay_options(parser)
     parser.add_argument("--out", type=Path, required=True, metavar="DIR")
-    parser.add_argument("--nominal", type=Path, metavar="MODEL.json",
-                        help="a model store file to highlight")  # fmt: skip
+    parser.add_argument(
+        "--nominal", type=Path, metavar="MODEL.json", help="a model store file to highlight"
+    )
     parser.set_defaults(run=run)
 
 

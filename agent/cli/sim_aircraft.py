@@ -79,8 +79,9 @@ def run(args: argparse.Namespace) -> int:
         raise refused(str(exc)) from None
     announce = lambda text: print(text, flush=True)  # noqa: E731
     try:
-        asyncio.run(serve(options, args.pty_dir, args.duration, tuple(args.switch_at),
-                          announce=announce))  # fmt: skip
+        asyncio.run(
+            serve(options, args.pty_dir, args.duration, tuple(args.switch_at), announce=announce)
+        )
     except PlantError as exc:
         raise refused(str(exc)) from None
     except OSError as exc:

@@ -90,9 +90,15 @@ class Sweep(_Signal):
 
     def samples(self, dt: float) -> np.ndarray:
         return signals.sweep(
-            dt, self.f0_hz, self.f1_hz, self.duration_s, self.amplitude, self.law,
-            self.fade_s, self.dwell_cycles,
-        )  # fmt: skip
+            dt,
+            self.f0_hz,
+            self.f1_hz,
+            self.duration_s,
+            self.amplitude,
+            self.law,
+            self.fade_s,
+            self.dwell_cycles,
+        )
 
     @property
     def top_hz(self) -> float:
@@ -129,9 +135,13 @@ class Multisine(_Signal):
             else signals.schroeder_phases(len(self.harmonics)),
         )
         return signals.multisine(
-            self.harmonics, self.period_s, dt, self.periods * self.period_s, self.amplitude,
+            self.harmonics,
+            self.period_s,
+            dt,
+            self.periods * self.period_s,
+            self.amplitude,
             phases,
-        )  # fmt: skip
+        )
 
     @property
     def top_hz(self) -> float:
@@ -435,8 +445,12 @@ def full_harmonics() -> dict[str, tuple[int, ...]]:
     odd = range(1, round(FULL_TOP_HZ * FULL_PERIOD_S) + 1, 2)
     low = [k for k in odd if k / FULL_PERIOD_S < FULL_THROTTLE_TOP_HZ]
     rest = [k for k in odd if k / FULL_PERIOD_S >= FULL_THROTTLE_TOP_HZ]
-    return {"throttle": tuple(low), "elevator": tuple(rest[0::3]),
-            "aileron": tuple(rest[1::3]), "rudder": tuple(rest[2::3])}  # fmt: skip
+    return {
+        "throttle": tuple(low),
+        "elevator": tuple(rest[0::3]),
+        "aileron": tuple(rest[1::3]),
+        "rudder": tuple(rest[2::3]),
+    }
 
 
 # The full preset's amplitudes: its multisine spreads the elevator's power over 25 lines, and at
@@ -474,15 +488,24 @@ def preset(name: str, amplitude: Mapping[str, float] | None = None, plan_id: str
     steps = Steps(levels=THROTTLE_LEVELS, hold_s=THROTTLE_COUNT_S, amplitude=amp["throttle"])
     throttle = {"throttle": steps}
     if name == "lateral":
-        segments = [Segment(signals=doublet("aileron"), free_s=4.0),
-                    Segment(signals=doublet("rudder"), free_s=6.0)]  # fmt: skip
+        segments = [
+            Segment(signals=doublet("aileron"), free_s=4.0),
+            Segment(signals=doublet("rudder"), free_s=6.0),
+        ]
     elif name == "longitudinal":
-        segments = [Segment(signals=doublet("elevator"), free_s=3.0),
-                    Segment(signals=throttle, free_s=10.0)]  # fmt: skip
+        segments = [
+            Segment(signals=doublet("elevator"), free_s=3.0),
+            Segment(signals=throttle, free_s=10.0),
+        ]
     elif name == "full":
-        segments = [Segment(signals={c: Multisine(harmonics=h, period_s=FULL_PERIOD_S,
-                                                  periods=1, amplitude=amp[c])
-                                     for c, h in full_harmonics().items()})]  # fmt: skip
+        segments = [
+            Segment(
+                signals={
+                    c: Multisine(harmonics=h, period_s=FULL_PERIOD_S, periods=1, amplitude=amp[c])
+                    for c, h in full_harmonics().items()
+                }
+            )
+        ]
     else:
         raise ValueError(f"unknown preset {name!r}; presets are {', '.join(PRESETS)}")
     return Plan(id=plan_id or name, axes=name, segments=tuple(segments))

@@ -132,8 +132,9 @@ class Scheduler:
             if self._running is not None:
                 raise PlanRefused(f"plan {plan.id!r} refused: plan {self._running.id!r} is running")
             if timeline is None:
-                timeline = check(plan, self._config.rate_hz, self._config.surfaces,
-                                 self._config.envelope)  # fmt: skip
+                timeline = check(
+                    plan, self._config.rate_hz, self._config.surfaces, self._config.envelope
+                )
         except PlanRefused as exc:
             self.counters["refused"] += 1
             self._emit(Event("refused", plan.id, now, str(exc)))
@@ -227,8 +228,13 @@ class Scheduler:
                 self.counters["clamped_samples"] += clamped
                 log.warning(
                     "plan %s: %d %s samples clamped to %d–%d µs around trim %.0f µs",
-                    plan.id, clamped, name, surface.min_us, surface.max_us, trim[name],
-                )  # fmt: skip
+                    plan.id,
+                    clamped,
+                    name,
+                    surface.min_us,
+                    surface.max_us,
+                    trim[name],
+                )
         return trim
 
     def _capture_trim(self, now: float, controls: Sequence[str]) -> dict[str, float]:

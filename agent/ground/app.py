@@ -43,8 +43,7 @@ from agent.link import messages
 
 REFRESH_S = 0.5
 LEVEL_STYLE = {"info": "", "warning": "yellow", "error": "bold red"}
-MODE_COLUMNS = ("mode", "eigenvalue", "f Hz", "ζ", "τ s", "MSV", "MCI", "MOI", "EMAC",
-                "MPC", "CMI")  # fmt: skip
+MODE_COLUMNS = ("mode", "eigenvalue", "f Hz", "ζ", "τ s", "MSV", "MCI", "MOI", "EMAC", "MPC", "CMI")
 
 
 def _num(value: float | None, fmt: str = "{:.2f}") -> str:
@@ -71,8 +70,11 @@ def mode_row(m: messages.ModeReport) -> tuple[str, ...]:
 class Confirm(ModalScreen[bool]):
     """Yes or no, on one key."""
 
-    BINDINGS: ClassVar = [("y", "answer(True)", "yes"), ("n", "answer(False)", "no"),
-                          ("escape", "answer(False)", "no")]  # fmt: skip
+    BINDINGS: ClassVar = [
+        ("y", "answer(True)", "yes"),
+        ("n", "answer(False)", "no"),
+        ("escape", "answer(False)", "no"),
+    ]
     DEFAULT_CSS = """
     Confirm { align: center middle; }
     Confirm > Vertical { width: 60; height: auto; border: thick $warning; padding: 1 2;
@@ -165,8 +167,13 @@ class Console(App):
                     yield Static(id="health")
             with TabPane("Excite 2", id="excite"):
                 with Horizontal(id="preset-row"):
-                    yield Select([(p, p) for p in PRESETS], value="lateral", allow_blank=False,
-                                 id="preset", compact=True)  # fmt: skip
+                    yield Select(
+                        [(p, p) for p in PRESETS],
+                        value="lateral",
+                        allow_blank=False,
+                        id="preset",
+                        compact=True,
+                    )
                     yield Button("Arm F2", id="arm", variant="primary", compact=True)
                     yield Button("ABORT F5", id="abort", variant="error", compact=True)
                 with Horizontal():
@@ -279,8 +286,10 @@ class Console(App):
             text = "in effect: the aircraft's configured defaults (none sent yet)"
         else:
             period = f"every {now.update_period_s:g} s" if now.update_period_s else "no period"
-            text = (f"in effect: {now.axes}, p {now.markov}, n {now.order}, "
-                    f"batch {'on' if now.batch else 'off'}, {period}")  # fmt: skip
+            text = (
+                f"in effect: {now.axes}, p {now.markov}, n {now.order}, "
+                f"batch {'on' if now.batch else 'off'}, {period}"
+            )
         self._q("#settings-now", Static).update(text)
 
     def _status(self) -> None:
@@ -296,8 +305,10 @@ class Console(App):
         def angle(value: float | None) -> str:
             return _num(None if value is None else value * deg, "{:+.1f}°")
 
-        head = Text(f"STALE: {age:.0f} s old\n" if stale else f"status {age:.1f} s old\n",
-                    "bold red" if stale else "green")  # fmt: skip
+        head = Text(
+            f"STALE: {age:.0f} s old\n" if stale else f"status {age:.1f} s old\n",
+            "bold red" if stale else "green",
+        )
         rows = [
             ("mode", s.flight_mode or "?"),
             ("airspeed", _num(s.airspeed, "{:.1f} m/s")),
@@ -350,9 +361,12 @@ class Console(App):
             table.clear()
             for model_id in reversed(ids):
                 r = results[model_id]
-                table.add_row(model_id, f"{r.tic_avg:.3f}",
-                              Text("update", "green") if r.suggest_update else Text("no", "red"),
-                              key=model_id)  # fmt: skip
+                table.add_row(
+                    model_id,
+                    f"{r.tic_avg:.3f}",
+                    Text("update", "green") if r.suggest_update else Text("no", "red"),
+                    key=model_id,
+                )
             self._results_shown = ids
         if self.selected is None and ids:
             self.selected = ids[-1]
@@ -361,8 +375,11 @@ class Console(App):
     def _detail(self) -> None:
         result = self.station.heard.results.get(self.selected or "")
         nominal = self.station.nominal(result.axes) if result is not None else None
-        key = (self.selected, nominal.model_id if nominal else None,
-               len(self.station.heard.results))  # fmt: skip
+        key = (
+            self.selected,
+            nominal.model_id if nominal else None,
+            len(self.station.heard.results),
+        )
         if key == self._detail_key:
             return  # nothing new: keep the tables (and where the operator scrolled) as they are
         self._detail_key = key
@@ -374,8 +391,10 @@ class Console(App):
         tic = ", ".join(f"{o} {t:.3f}" for o, t in zip(result.outputs, result.tic, strict=False))
         text = Text()
         text.append(f"{result.model_id} · {result.axes} · ", "bold")
-        text.append("stable" if result.stable else "has a divergent mode",
-                    "green" if result.stable else "yellow")  # fmt: skip
+        text.append(
+            "stable" if result.stable else "has a divergent mode",
+            "green" if result.stable else "yellow",
+        )
         text.append(f"\nTIC {tic}; average {result.tic_avg:.3f}\n")
         text.append(
             "suggestion: UPDATE\n" if result.suggest_update else "suggestion: do not update\n",
@@ -406,8 +425,11 @@ class Console(App):
         ]
         for kind, r in (("candidate", result), ("nominal", nominal)):
             if r is not None:
-                points += [Point(complex(m.real, s * m.imag), kind) for m in r.modes
-                           for s in ((1, -1) if m.imag else (1,))]  # fmt: skip
+                points += [
+                    Point(complex(m.real, s * m.imag), kind)
+                    for m in r.modes
+                    for s in ((1, -1) if m.imag else (1,))
+                ]
         self._q("#splane", SPlane).show(points)
 
     def on_worker_state_changed(self, event: Worker.StateChanged) -> None:
@@ -454,12 +476,13 @@ class Console(App):
         text.append(f"{plan.id} · {plan.axes} · {info['duration_s']:.1f} s\n", "bold")
         for name, c in info["controls"].items():
             band = "–".join(f"{f:.2f}" for f in c["band_hz"])
-            text.append(f"{name:<9} peak ±{c['peak']:.1f} {c['unit'] or ''}  "
-                        f"RPF {c['rpf']:.2f}  {band} Hz\n")  # fmt: skip
+            text.append(
+                f"{name:<9} peak ±{c['peak']:.1f} {c['unit'] or ''}  "
+                f"RPF {c['rpf']:.2f}  {band} Hz\n"
+            )
         for warning in info["warnings"]:
             text.append(f"warning: {warning}\n", "yellow")
-        for reason in refusals(plan, excitation.rate_hz, excitation.surfaces,
-                               excitation.envelope):  # fmt: skip
+        for reason in refusals(plan, excitation.rate_hz, excitation.surfaces, excitation.envelope):
             text.append(f"would be refused: {reason}\n", "bold red")
         panel.update(text)
 

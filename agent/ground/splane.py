@@ -8,8 +8,11 @@ from dataclasses import dataclass
 from rich.text import Text
 from textual.widget import Widget
 
-MARKS = {"history": ("·", "grey50"), "candidate": ("◆", "bold yellow"),
-         "nominal": ("●", "bold green")}  # fmt: skip
+MARKS = {
+    "history": ("·", "grey50"),
+    "candidate": ("◆", "bold yellow"),
+    "nominal": ("●", "bold green"),
+}
 # Drawn last wins: the nominal and the selected candidate stay visible over the history.
 ORDER = ("history", "candidate", "nominal")
 

@@ -164,8 +164,10 @@ class GroundStation:
         elif isinstance(message, messages.Result):
             self._keep(message)
             verdict = "update suggested" if message.suggest_update else "no update suggested"
-            self.note("info", f"result {message.model_id} ({message.axes}): TIC "
-                              f"{message.tic_avg:.3f}, {verdict}")  # fmt: skip
+            self.note(
+                "info",
+                f"result {message.model_id} ({message.axes}): TIC {message.tic_avg:.3f}, {verdict}",
+            )
             self._tell("result")
         elif isinstance(message, messages.Failure):
             h.failures.append(message)

@@ -156,9 +156,15 @@ class AxisFit:
     lag_powers: dict[int, int] = field(default_factory=dict)
 
 
-def spectra(batch: Sequence, dt: float, band_hz: float | None, held_inputs: bool,
-            known: Sequence[np.ndarray] | None = None, kinematics: np.ndarray | None = None,
-            attitude: Sequence[int] = ()) -> Spectra:  # fmt: skip
+def spectra(
+    batch: Sequence,
+    dt: float,
+    band_hz: float | None,
+    held_inputs: bool,
+    known: Sequence[np.ndarray] | None = None,
+    kinematics: np.ndarray | None = None,
+    attitude: Sequence[int] = (),
+) -> Spectra:
     """Transforms of every experiment (X = Δt · DFT) at the bins in the analysis band;
     `known`: per experiment, a known forcing of each output's equation (samples × outputs);
     `kinematics` and `attitude`: see Spectra."""
@@ -182,8 +188,16 @@ def spectra(batch: Sequence, dt: float, band_hz: float | None, held_inputs: bool
     if not parts:
         raise DataError("the records are too short for a single frequency bin in the band")
     s, Y, U, record, K = (np.concatenate(p) for p in zip(*parts, strict=True))
-    return Spectra(s, Y, U, record, (float(np.abs(s).min() / 2 / np.pi), float(top)), K,
-                   kinematics, tuple(attitude))  # fmt: skip
+    return Spectra(
+        s,
+        Y,
+        U,
+        record,
+        (float(np.abs(s).min() / 2 / np.pi), float(top)),
+        K,
+        kinematics,
+        tuple(attitude),
+    )
 
 
 def excited(sp: Spectra, controls: Sequence[int]) -> Spectra:
@@ -224,9 +238,16 @@ class _Problem:
     θ̇ = 1.37 q and an airspeed equation with 11 q in it. The kinematics' linear terms in
     the other axis's states join the known forcing."""
 
-    def __init__(self, sp: Spectra, states, inputs, lagged: Sequence[int], experiments: int,
-                 controls: Sequence[int] = (),
-                 powers: Mapping[int, int] | None = None):  # fmt: skip
+    def __init__(
+        self,
+        sp: Spectra,
+        states,
+        inputs,
+        lagged: Sequence[int],
+        experiments: int,
+        controls: Sequence[int] = (),
+        powers: Mapping[int, int] | None = None,
+    ):
         states, inputs = list(states), list(inputs)
         if controls:
             sp = excited(sp, controls)
@@ -257,8 +278,13 @@ class _Problem:
             others = [c for c in range(sp.Y.shape[1]) if c not in states]
             if others:  # the other axis's states through the kinematics' linear terms
                 self.K = self.K + sp.Y[:, others] @ J[np.ix_(states, others)].T
-        self.free = np.concatenate([~self.fixed_A.ravel(), ~self.fixed_B.ravel(),
-                                    np.ones(self.size - n * n - n * r, dtype=bool)])  # fmt: skip
+        self.free = np.concatenate(
+            [
+                ~self.fixed_A.ravel(),
+                ~self.fixed_B.ravel(),
+                np.ones(self.size - n * n - n * r, dtype=bool),
+            ]
+        )
 
     def unpack(self, theta: np.ndarray):
         n, r = self.n, self.r
@@ -271,8 +297,9 @@ class _Problem:
         return A, B, taus, d[0] + 1j * d[1]
 
     def pack(self, A, B, taus, d) -> np.ndarray:
-        return np.concatenate([A.ravel(), B.ravel(), np.ravel(taus), d.real.ravel(),
-                               d.imag.ravel()])  # fmt: skip
+        return np.concatenate(
+            [A.ravel(), B.ravel(), np.ravel(taus), d.real.ravel(), d.imag.ravel()]
+        )
 
     def effective_inputs(self, taus: np.ndarray) -> np.ndarray:
         U = self.U.copy()
@@ -326,8 +353,9 @@ def equation_error(problem: _Problem) -> np.ndarray:
         free = np.concatenate([~problem.fixed_A[i], ~problem.fixed_B[i]])
         lhs = s * Y[:, i] - known[:, i] - Y @ A[i]
         sub = reg[:, free]
-        real = np.vstack([np.hstack([sub.real, -onehot, 0 * onehot]),
-                          np.hstack([sub.imag, 0 * onehot, -onehot])])  # fmt: skip
+        real = np.vstack(
+            [np.hstack([sub.real, -onehot, 0 * onehot]), np.hstack([sub.imag, 0 * onehot, -onehot])]
+        )
         coef, *_ = np.linalg.lstsq(real, np.concatenate([lhs.real, lhs.imag]), rcond=None)
         k = int(free.sum())
         row = np.zeros(n + r)
@@ -367,8 +395,9 @@ def _sigma(residual: np.ndarray, s: np.ndarray) -> np.ndarray:
     if SMOOTH_BINS > 0 and power.shape[0] > 2 * SMOOTH_BINS + 1:
         order = np.argsort(np.abs(s), kind="stable")
         smooth = np.empty_like(power)
-        smooth[order] = scipy.ndimage.uniform_filter1d(power[order], 2 * SMOOTH_BINS + 1,
-                                                       axis=0, mode="nearest")  # fmt: skip
+        smooth[order] = scipy.ndimage.uniform_filter1d(
+            power[order], 2 * SMOOTH_BINS + 1, axis=0, mode="nearest"
+        )
     else:
         smooth = np.broadcast_to(power.mean(axis=0), power.shape)
     # No band's weight beyond (1/SMOOTH_FLOOR)² times the output's average: a band the model
@@ -438,9 +467,16 @@ def covariance(problem: _Problem, theta: np.ndarray, sigma: np.ndarray) -> np.nd
     return out
 
 
-def fit_axis(sp: Spectra, name: str, states, inputs, lagged, experiments: int,
-             controls: Sequence[int] = (),
-             powers: Mapping[int, int] | None = None) -> AxisFit:  # fmt: skip
+def fit_axis(
+    sp: Spectra,
+    name: str,
+    states,
+    inputs,
+    lagged,
+    experiments: int,
+    controls: Sequence[int] = (),
+    powers: Mapping[int, int] | None = None,
+) -> AxisFit:
     """One axis's model: `lagged` inputs reach it through fitted lags, THROTTLE_LAGS of them
     unless `powers` (input column → number) says otherwise."""
     powers = {j: p for j, p in (powers or {}).items() if j in lagged}
@@ -460,9 +496,24 @@ def fit_axis(sp: Spectra, name: str, states, inputs, lagged, experiments: int,
     lags = {list(inputs)[j]: float(abs(taus[i])) for i, j in enumerate(problem.lagged)}
     X, _ = problem.response(theta)
     noise = np.sqrt(np.mean(sigma**2, axis=0))
-    return AxisFit(name, tuple(states), tuple(inputs), A, B, lags, d, cov[:k, :k], noise, sigma,
-                   start, _cost(problem.Y - X, sigma), iterations, converged,
-                   tuple(controls), powers)  # fmt: skip
+    return AxisFit(
+        name,
+        tuple(states),
+        tuple(inputs),
+        A,
+        B,
+        lags,
+        d,
+        cov[:k, :k],
+        noise,
+        sigma,
+        start,
+        _cost(problem.Y - X, sigma),
+        iterations,
+        converged,
+        tuple(controls),
+        powers,
+    )
 
 
 def coupling(sp: Spectra, fitted: AxisFit, other_inputs, experiments: int) -> tuple[float, float]:
@@ -472,8 +523,15 @@ def coupling(sp: Spectra, fitted: AxisFit, other_inputs, experiments: int) -> tu
     second tells a coupling the outputs show from the last digits of a perfect fit."""
     if not other_inputs:
         return 0.0, 0.0
-    problem = _Problem(sp, fitted.states, (*fitted.inputs, *other_inputs), tuple(fitted.lags),
-                       experiments, fitted.controls, fitted.lag_powers)  # fmt: skip
+    problem = _Problem(
+        sp,
+        fitted.states,
+        (*fitted.inputs, *other_inputs),
+        tuple(fitted.lags),
+        experiments,
+        fitted.controls,
+        fitted.lag_powers,
+    )
     B = np.hstack([fitted.B, np.zeros((fitted.B.shape[0], len(other_inputs)))])
     taus = np.array([fitted.lags[j] for j in fitted.lags])
     theta = problem.pack(fitted.A, B, taus, fitted.transients)
@@ -562,8 +620,14 @@ def inertial_air_data(x: np.ndarray, navigation: np.ndarray) -> np.ndarray:
     Returns (N, 3): V (m/s), α, β (rad)."""
     theta, phi = x[:, 3], x[:, 7]
     psi, vn, ve, vd = navigation.T
-    cps, sps, cth, sth, cph, sph = (np.cos(psi), np.sin(psi), np.cos(theta), np.sin(theta),
-                                    np.cos(phi), np.sin(phi))  # fmt: skip
+    cps, sps, cth, sth, cph, sph = (
+        np.cos(psi),
+        np.sin(psi),
+        np.cos(theta),
+        np.sin(theta),
+        np.cos(phi),
+        np.sin(phi),
+    )
     u = cth * cps * vn + cth * sps * ve - sth * vd
     v = (sph * sth * cps - cph * sps) * vn + (sph * sth * sps + cph * cps) * ve + sph * cth * vd
     w = (cph * sth * cps + sph * sps) * vn + (cph * sth * sps - sph * cps) * ve + cph * cth * vd
@@ -629,8 +693,12 @@ class Prepared:
     rates: tuple[int, ...] = ()  # known input columns of gust rates (GUST_RATE_LAGS lags each)
 
 
-def prepare(batch: Sequence[Experiment], output_roles: Sequence[str | None],
-            trim_samples: int = 1, dt: float = 1.0) -> Prepared:  # fmt: skip
+def prepare(
+    batch: Sequence[Experiment],
+    output_roles: Sequence[str | None],
+    trim_samples: int = 1,
+    dt: float = 1.0,
+) -> Prepared:
     """Use the operating point and the INS's velocities when every experiment carries them.
 
     With the operating point, the exact kinematics' nonlinear remainder is a known forcing
@@ -704,6 +772,14 @@ def prepare(batch: Sequence[Experiment], output_roles: Sequence[str | None],
         for b, cb in present:
             J[ca, cb] = mean[a, b]
     attitude = tuple(index[role] for role in ATTITUDE if role in index)
-    return Prepared(out, known, gusts, names, {r + k: a for k, a in enumerate(where)},
-                    {role: float(np.sqrt(v / count)) for role, v in squares.items()}, J,
-                    attitude, rates)  # fmt: skip
+    return Prepared(
+        out,
+        known,
+        gusts,
+        names,
+        {r + k: a for k, a in enumerate(where)},
+        {role: float(np.sqrt(v / count)) for role, v in squares.items()},
+        J,
+        attitude,
+        rates,
+    )

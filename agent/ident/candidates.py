@@ -116,10 +116,15 @@ def supported_modes(
     input_rms, output_rms = okid.channel_rms(batch)
     try:
         modes = modal_analysis(
-            realised.A, realised.B, realised.C, dt,
+            realised.A,
+            realised.B,
+            realised.C,
+            dt,
             factors=HankelFactors(realised.observability, realised.controllability),
-            input_scale=input_rms, output_scale=output_rms, balance=False,
-        )  # fmt: skip
+            input_scale=input_rms,
+            output_scale=output_rms,
+            balance=False,
+        )
     except IdentificationFailed:
         return realised  # defective A: no modal decomposition to cut with
     limit = 2 * np.pi * BAND_MULTIPLE * band_hz

@@ -214,8 +214,11 @@ class Fit:
         return float(np.mean(self.tic))
 
 
-def fit(model: StateSpace, experiments: Sequence[Experiment],
-        initial_states: Sequence[np.ndarray] | None = None) -> Fit:  # fmt: skip
+def fit(
+    model: StateSpace,
+    experiments: Sequence[Experiment],
+    initial_states: Sequence[np.ndarray] | None = None,
+) -> Fit:
     """Simulate `model` on every experiment (own x0 each: estimated, or `initial_states`
     when given) and score it with TIC per output."""
     predictions, states = [], []

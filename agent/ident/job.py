@@ -94,8 +94,10 @@ def window_and_trim(values: dict[str, np.ndarray], inputs, outputs, dt: float, t
     {"inputs": {name: value}, "outputs": {name: value}}. `window_navigation` gives the
     navigation over the same rows."""
     (u, y), (u0, y0) = _window(values, inputs, outputs, dt, trim_s)
-    trim = {"inputs": dict(zip(inputs, map(float, u0), strict=True)),
-            "outputs": dict(zip(outputs, map(float, y0), strict=True))}  # fmt: skip
+    trim = {
+        "inputs": dict(zip(inputs, map(float, u0), strict=True)),
+        "outputs": dict(zip(outputs, map(float, y0), strict=True)),
+    }
     return (u - u0, y - y0), trim
 
 
@@ -140,8 +142,10 @@ def _bridge(x: np.ndarray, dt: float, name: str) -> np.ndarray:
     starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
     longest = int(np.max(ends - starts))
     if longest * dt > MAX_GAP_S:
-        raise DataError(f"channel {name!r} has a {longest * dt:.2f} s gap in the window "
-                        f"(at most {MAX_GAP_S:g} s is bridged)")  # fmt: skip
+        raise DataError(
+            f"channel {name!r} has a {longest * dt:.2f} s gap in the window "
+            f"(at most {MAX_GAP_S:g} s is bridged)"
+        )
     t = np.arange(x.size)
     return np.interp(t, t[~bad], x[~bad])
 
@@ -157,8 +161,9 @@ def run(job: Job) -> dict:
     extra: dict = {}
     if job.window is not None:
         try:
-            (u, y), trim = window_and_trim(job.window, job.inputs, job.outputs, job.record_dt,
-                                           job.trim_s)  # fmt: skip
+            (u, y), trim = window_and_trim(
+                job.window, job.inputs, job.outputs, job.record_dt, job.trim_s
+            )
         except (DataError, KeyError) as exc:
             return {"ok": False, "model_id": job.model_id, "reason": f"window unusable: {exc}"}
         extra = {"experiment": (u, y), "trim": trim}
@@ -167,10 +172,15 @@ def run(job: Job) -> dict:
         nav = window_navigation(job.window, job.inputs, job.outputs, job.navigation)
         experiments.append(Experiment(u, y, operating_point=op, navigation=nav))
     try:
-        result = identify(experiments, job.record_dt, input_names=job.inputs,
-                          output_names=job.outputs, output_roles=job.roles,
-                          input_roles=_input_roles(job),
-                          settings=job.settings)  # fmt: skip
+        result = identify(
+            experiments,
+            job.record_dt,
+            input_names=job.inputs,
+            output_names=job.outputs,
+            output_roles=job.roles,
+            input_roles=_input_roles(job),
+            settings=job.settings,
+        )
     except (DataError, IdentificationFailed, np.linalg.LinAlgError, ValueError) as exc:
         return {**extra, "ok": False, "model_id": job.model_id, "reason": str(exc)}
     prep = result.preprocessing
@@ -195,15 +205,22 @@ def _input_roles(job: Job) -> tuple[str | None, ...] | None:
     return AXIS_SETS[job.axes][0] if job.axes in AXIS_SETS else None
 
 
-def cross_tic(result: dict, preprocessing: dict, record_dt: float,
-              experiments: tuple[tuple[np.ndarray, np.ndarray], ...]) -> float:  # fmt: skip
+def cross_tic(
+    result: dict,
+    preprocessing: dict,
+    record_dt: float,
+    experiments: tuple[tuple[np.ndarray, np.ndarray], ...],
+) -> float:
     """TIC_avg of an identified model (its discrete A, B, C, D) on other data, preprocessed
     as the model's own data was (thesis 5.3: TIC_jN, TIC_Nj)."""
     batch, _ = preprocess(
-        [Experiment(u, y) for u, y in experiments], record_dt,
-        decimation=preprocessing["factor"], band_hz=preprocessing["band_hz"],
-        held_inputs=preprocessing["held_inputs"], smoothing_s=preprocessing["smoothing_s"],
-    )  # fmt: skip
+        [Experiment(u, y) for u, y in experiments],
+        record_dt,
+        decimation=preprocessing["factor"],
+        band_hz=preprocessing["band_hz"],
+        held_inputs=preprocessing["held_inputs"],
+        smoothing_s=preprocessing["smoothing_s"],
+    )
     model = StateSpace(*(np.asarray(result[k], dtype=float) for k in ("A", "B", "C", "D")))
     return fit(model, batch).tic_avg
 

@@ -73,8 +73,9 @@ def _plausible(mode: Mode, min_msv: float) -> bool:
     return mode.msv >= min_msv and consistent and mode.frequency <= MAX_FREQUENCY
 
 
-def name_modes(modes: Sequence[Mode], output_roles: Sequence[str | None],
-               min_msv: float = MIN_MSV) -> list[Mode]:  # fmt: skip
+def name_modes(
+    modes: Sequence[Mode], output_roles: Sequence[str | None], min_msv: float = MIN_MSV
+) -> list[Mode]:
     """The modes with `name` set where the rules above identify an aircraft mode.
     `min_msv` 0 names modes whatever their share of the response: for a model whose every
     state is a measured aircraft state (the aircraft method), where no mode is noise. There
@@ -131,11 +132,16 @@ def _name_longitudinal(
             names[pairs[0]] = "phugoid"
             # An overdamped short period: the two fastest real modes, faster than the
             # phugoid and mostly α and q (JSBSim's J-3 Cub: −6.4 and −10.1 1/s).
-            reals = sorted((i for i in lon if not modes[i].pair
-                            and modes[i].frequency > mode.frequency),
-                           key=lambda i: -modes[i].frequency)  # fmt: skip
-            fast = [i for i in reals[:2] if _energy(modes[i], roles, ("alpha", "q"))
-                    > _energy(modes[i], roles, ("airspeed", "theta"))]  # fmt: skip
+            reals = sorted(
+                (i for i in lon if not modes[i].pair and modes[i].frequency > mode.frequency),
+                key=lambda i: -modes[i].frequency,
+            )
+            fast = [
+                i
+                for i in reals[:2]
+                if _energy(modes[i], roles, ("alpha", "q"))
+                > _energy(modes[i], roles, ("airspeed", "theta"))
+            ]
             if len(fast) == 2:
                 for i in fast:
                     names[i] = "short period"

@@ -66,13 +66,17 @@ def _optional(exp, index: int, length: int, outputs: int):
     if op is not None:
         op = np.asarray(op, dtype=float).ravel()
         if op.shape != (outputs,) or not np.isfinite(op).all():
-            raise DataError(f"experiment {index}: the operating point needs {outputs} finite "
-                            "values, one per output")  # fmt: skip
+            raise DataError(
+                f"experiment {index}: the operating point needs {outputs} finite "
+                "values, one per output"
+            )
     if nav is not None:
         nav = np.asarray(nav, dtype=float)
         if nav.shape != (length, 4) or not np.isfinite(nav).all():
-            raise DataError(f"experiment {index}: navigation needs {length} finite rows of "
-                            "heading, north, east and down velocity")  # fmt: skip
+            raise DataError(
+                f"experiment {index}: navigation needs {length} finite rows of "
+                "heading, north, east and down velocity"
+            )
     return op, nav
 
 

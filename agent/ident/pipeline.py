@@ -156,8 +156,9 @@ def identify(
     out_roles = tuple(output_roles) if output_roles is not None else ()
     present = aircraft.axes_present(in_roles, out_roles)
     if settings.method == "auto":
-        okid_asked = (settings.markov is not None or settings.order is not None
-                      or not settings.refine)  # fmt: skip
+        okid_asked = (
+            settings.markov is not None or settings.order is not None or not settings.refine
+        )
         settings = replace(settings, method="aircraft" if present and not okid_asked else "time")
     if settings.method == "aircraft":
         if not present:
@@ -165,8 +166,7 @@ def identify(
                 "method 'aircraft' needs the four outputs of an axis (airspeed, alpha, q, "
                 "theta or beta, p, r, phi) and its inputs, named by their roles"
             )
-        return _identify_aircraft(raw, dt, inputs, outputs, in_roles, out_roles, present,
-                                  settings)  # fmt: skip
+        return _identify_aircraft(raw, dt, inputs, outputs, in_roles, out_roles, present, settings)
     batch, prep = preprocess(
         raw,
         dt,
@@ -263,15 +263,25 @@ def _modes(
     """Modes with indicators; after refinement with EMAC inherited and Cramér–Rao 1-σ."""
     input_rms, output_rms = okid.channel_rms(batch)
     okid_modes = modal_analysis(
-        okid_model.A, okid_model.B, okid_model.C, dt,
-        factors=factors, input_scale=input_rms, output_scale=output_rms,
-    )  # fmt: skip
+        okid_model.A,
+        okid_model.B,
+        okid_model.C,
+        dt,
+        factors=factors,
+        input_scale=input_rms,
+        output_scale=output_rms,
+    )
     if refinement is None:
         return okid_modes
     modes = modal_analysis(
-        model.A, model.B, model.C, dt, input_scale=input_rms, output_scale=output_rms,
+        model.A,
+        model.B,
+        model.C,
+        dt,
+        input_scale=input_rms,
+        output_scale=output_rms,
         horizon=(candidate.era.rows, candidate.era.cols),
-    )  # fmt: skip
+    )
     return _with_uncertainty(_with_consistency(modes, okid_modes), refinement)
 
 
@@ -445,20 +455,38 @@ def _identify_aircraft(
     r = len(inputs)
     ready = aircraft.prepare(batch, output_roles, max(1, round(TRIM_S / dt)), dt)
     band = settings.band_hz or aircraft.input_band(batch, dt)
-    sp = aircraft.spectra(ready.batch, dt, band, settings.held_inputs, ready.known,
-                          ready.kinematics, ready.attitude)  # fmt: skip
+    sp = aircraft.spectra(
+        ready.batch, dt, band, settings.held_inputs, ready.known, ready.kinematics, ready.attitude
+    )
     E = len(batch)
     throttle = [j for j, role in enumerate(input_roles) if role == "throttle"]
     known = {axis: [j for j, a in ready.extra_axes.items() if a == axis] for axis in aircraft.AXES}
     names = [*inputs, *ready.extra_names]
     wind = {"measured": bool(ready.gusts), "gust_rms": ready.gust_rms}
-    fits, report = [], {"band_hz": list(sp.band_hz), "bins": int(sp.s.size), "coupling": {},
-                        "kinematics": ready.known is not None, "wind": wind}  # fmt: skip
+    fits, report = (
+        [],
+        {
+            "band_hz": list(sp.band_hz),
+            "bins": int(sp.s.size),
+            "coupling": {},
+            "kinematics": ready.known is not None,
+            "wind": wind,
+        },
+    )
     for axis, (states, ins) in present.items():
         rated = [j for j in known[axis] if j in ready.rates]  # gust rates: one lag each
-        fits.append(aircraft.fit_axis(sp, axis, states, [*ins, *known[axis]],
-                                      [j for j in ins if j in throttle] + rated, E, ins,
-                                      dict.fromkeys(rated, aircraft.GUST_RATE_LAGS)))  # fmt: skip
+        fits.append(
+            aircraft.fit_axis(
+                sp,
+                axis,
+                states,
+                [*ins, *known[axis]],
+                [j for j in ins if j in throttle] + rated,
+                E,
+                ins,
+                dict.fromkeys(rated, aircraft.GUST_RATE_LAGS),
+            )
+        )
     width = sp.U.shape[1]
     if len(fits) == 2:
         # The other axis's measured states as known inputs: their gains are the coupling
@@ -472,9 +500,11 @@ def _identify_aircraft(
             by_inputs, moved_inputs = aircraft.coupling(sp, fitted, other, E)
             by_states, moved_states = aircraft.coupling(augmented, fitted, cross, E)
             report["coupling"][fitted.name] = {
-                "by_inputs": by_inputs, "by_states": by_states,
-                "response_by_inputs": moved_inputs, "response_by_states": moved_states,
-            }  # fmt: skip
+                "by_inputs": by_inputs,
+                "by_states": by_states,
+                "response_by_inputs": moved_inputs,
+                "response_by_states": moved_states,
+            }
             ins, controls = list(fitted.inputs), list(fitted.controls)
             # The longitudinal forces and moments are even in the lateral variables (the
             # airframe's symmetry), so lateral controls never join the longitudinal axis: what
@@ -499,9 +529,16 @@ def _identify_aircraft(
             if join_states:
                 ins += cross
             if ins != list(fitted.inputs):
-                fits[k] = aircraft.fit_axis(augmented, fitted.name, fitted.states, ins,
-                                            tuple(lags), E, controls,
-                                            fitted.lag_powers)  # fmt: skip
+                fits[k] = aircraft.fit_axis(
+                    augmented,
+                    fitted.name,
+                    fitted.states,
+                    ins,
+                    tuple(lags),
+                    E,
+                    controls,
+                    fitted.lag_powers,
+                )
         coupled = []
         for k, f in enumerate(fits):
             if any(j >= width for j in f.inputs):
@@ -514,15 +551,19 @@ def _identify_aircraft(
     model, covariance, _lag_times = _assemble(
         fits, len(inputs), len(outputs), {width + c: c for c in range(len(outputs))}
     )
-    report["engine_lag_s"] = {f.name: {inputs[j]: tau for j, tau in f.lags.items() if j < r}
-                              for f in fits if f.lags}  # fmt: skip
+    report["engine_lag_s"] = {
+        f.name: {inputs[j]: tau for j, tau in f.lags.items() if j < r} for f in fits if f.lags
+    }
     report["axes"] = [
-        {"name": f.name, "outputs": [outputs[i] for i in f.states],
-         "inputs": [names[j] if j < width else outputs[j - width] for j in f.inputs],
-         "iterations": f.iterations,
-         "converged": f.converged}
+        {
+            "name": f.name,
+            "outputs": [outputs[i] for i in f.states],
+            "inputs": [names[j] if j < width else outputs[j - width] for j in f.inputs],
+            "iterations": f.iterations,
+            "converged": f.converged,
+        }
         for f in fits
-    ]  # fmt: skip
+    ]
     hold = "zoh" if settings.held_inputs else "foh"
     discrete = discretize_hold(model.A, model.B, model.C, model.D, dt, hold)
     n_model = model.A.shape[0]
@@ -531,23 +572,42 @@ def _identify_aircraft(
     # unobservable states took values of ±1000 that traded the bank angle's fit for the
     # airspeed's (the Cub's φ TIC 0.64 against 0.06).
     start = max(1, round(INITIAL_S / dt))
-    initial = [np.concatenate([e.y[:start].mean(axis=0), np.zeros(n_model - len(outputs))])
-               for e in batch]  # fmt: skip
+    initial = [
+        np.concatenate([e.y[:start].mean(axis=0), np.zeros(n_model - len(outputs))]) for e in batch
+    ]
     fitted = fit(discrete, batch, initial)
     warnings: list[str] = []
     if not all(f.converged for f in fits):
         warnings.append("the output-error fit stopped at its iteration limit")
     residuals = np.vstack([e.y - p for e, p in zip(batch, fitted.predictions, strict=True)])
     refinement = Refinement(
-        gain=None, continuous=model, discrete=discrete, dt=dt, hold=hold,
-        initial_states=fitted.initial_states, noise_std=residuals.std(axis=0),
-        covariance=covariance, cost_initial=sum(f.cost_start for f in fits),
-        cost=sum(f.cost for f in fits), iterations=sum(f.iterations for f in fits),
-        passes=1, converged=all(f.converged for f in fits),
-    )  # fmt: skip
+        gain=None,
+        continuous=model,
+        discrete=discrete,
+        dt=dt,
+        hold=hold,
+        initial_states=fitted.initial_states,
+        noise_std=residuals.std(axis=0),
+        covariance=covariance,
+        cost_initial=sum(f.cost_start for f in fits),
+        cost=sum(f.cost for f in fits),
+        iterations=sum(f.iterations for f in fits),
+        passes=1,
+        converged=all(f.converged for f in fits),
+    )
     n = model.A.shape[0]
-    era = EraResult(discrete.A, discrete.B, discrete.C, discrete.D, np.zeros(0), n, 0, 0,
-                    np.zeros((0, n)), np.zeros((n, 0)))  # fmt: skip
+    era = EraResult(
+        discrete.A,
+        discrete.B,
+        discrete.C,
+        discrete.D,
+        np.zeros(0),
+        n,
+        0,
+        0,
+        np.zeros((0, n)),
+        np.zeros((n, 0)),
+    )
     # Modes of the aircraft states alone (the lag states are the engine's, two equal poles
     # with no modal decomposition), with each lagged input at its steady gain.
     m = len(outputs)
@@ -558,12 +618,14 @@ def _identify_aircraft(
                 Bm[list(f.states), j] = f.B[:, c]
     states_only = StateSpace(model.A[:m, :m], Bm, np.eye(m), np.zeros((m, len(inputs))))
     index = np.arange(n * n).reshape(n, n)[:m, :m].ravel()
-    for_modes = replace(refinement, continuous=states_only,
-                        covariance=covariance[np.ix_(index, index)])  # fmt: skip
+    for_modes = replace(
+        refinement, continuous=states_only, covariance=covariance[np.ix_(index, index)]
+    )
     Am, Bmd = _zoh(states_only, dt)
     input_rms, output_rms = okid.channel_rms(batch)
-    modes = modal_analysis(Am, Bmd, states_only.C, dt, input_scale=input_rms,
-                           output_scale=output_rms)  # fmt: skip
+    modes = modal_analysis(
+        Am, Bmd, states_only.C, dt, input_scale=input_rms, output_scale=output_rms
+    )
     modes = _with_uncertainty(modes, for_modes)
     if any(role is not None for role in output_roles):
         modes = name_modes(modes, output_roles, min_msv=0.0)
@@ -571,16 +633,35 @@ def _identify_aircraft(
         warnings.append("the identified model has unstable modes")
     if fitted.tic_avg >= TIC_DECENT:
         warnings.append(f"average TIC {fitted.tic_avg:.3f} is not below {TIC_DECENT}")
-    prep = Preprocessing(record_dt=dt, dt=dt, factor=1, band_hz=sp.band_hz[1],
-                         held_inputs=settings.held_inputs, smoothing_s=None,
-                         dropped_samples=0)  # fmt: skip
+    prep = Preprocessing(
+        record_dt=dt,
+        dt=dt,
+        factor=1,
+        band_hz=sp.band_hz[1],
+        held_inputs=settings.held_inputs,
+        smoothing_s=None,
+        dropped_samples=0,
+    )
     return Identification(
-        dt=dt, preprocessing=prep, input_names=inputs, output_names=outputs, markov=0,
-        markov_choice=None, era=era, discrete=discrete, continuous=model,
-        coordinates="outputs", observer_gain=np.zeros((n, len(outputs))), modes=tuple(modes),
-        fit=fitted, refinement=refinement, okid_fit=fitted, warnings=tuple(warnings),
-        method="aircraft", aircraft=report,
-    )  # fmt: skip
+        dt=dt,
+        preprocessing=prep,
+        input_names=inputs,
+        output_names=outputs,
+        markov=0,
+        markov_choice=None,
+        era=era,
+        discrete=discrete,
+        continuous=model,
+        coordinates="outputs",
+        observer_gain=np.zeros((n, len(outputs))),
+        modes=tuple(modes),
+        fit=fitted,
+        refinement=refinement,
+        okid_fit=fitted,
+        warnings=tuple(warnings),
+        method="aircraft",
+        aircraft=report,
+    )
 
 
 def _assemble(fits: Sequence[aircraft.AxisFit], r: int, m: int, states_of: dict | None = None):

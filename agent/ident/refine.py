@@ -347,15 +347,15 @@ class _Problem:
                         forcing = z @ G_all.reshape(n, width, q).transpose(1, 0, 2).reshape(
                             width, -1
                         )
-                        dstates, carried = _propagate(Abar, forcing.reshape(length, n, q),
-                                                      carried)  # fmt: skip
+                        dstates, carried = _propagate(Abar, forcing.reshape(length, n, q), carried)
                         jac = np.matmul(disc.C, dstates).reshape(length * m, q)
                     else:
                         sens, carried = state_convolution_from(Abar, disc.C, z, carried, lifted)
                         jac = sens.reshape(length * m, n * width) @ G_all
-                        jac += free_response_basis(
-                            StateSpace(Abar, Bbar, disc.C, disc.D), length
-                        ) @ reach  # fmt: skip
+                        jac += (
+                            free_response_basis(StateSpace(Abar, Bbar, disc.C, disc.D), length)
+                            @ reach
+                        )
                         reach = np.linalg.matrix_power(Abar, length) @ reach
                     jac += (states[first:last] @ G_c).reshape(length * m, q)
                     jac += (exp.u[first:last] @ G_d).reshape(length * m, q)
@@ -365,8 +365,9 @@ class _Problem:
                         parts.append(jac)
                     elif jacobian == "normal":
                         part = (jac.T @ jac, jac.T @ r_part)
-                        normal = part if normal is None else (normal[0] + part[0],
-                                                              normal[1] + part[1])  # fmt: skip
+                        normal = (
+                            part if normal is None else (normal[0] + part[0], normal[1] + part[1])
+                        )
                     else:
                         block = np.hstack([jac, r_part[:, None]])
                         if triangle is not None:

@@ -121,9 +121,17 @@ class _Partial:
 class LinkCodec:
     """One end of the link: frames our messages, checks and reassembles the other end's."""
 
-    def __init__(self, key: bytes, role: int, allow: set[bytes], *, counter: CounterStore,
-                 max_payload: int = 256, seen: Path | None = None,
-                 address: bytes = b""):  # fmt: skip
+    def __init__(
+        self,
+        key: bytes,
+        role: int,
+        allow: set[bytes],
+        *,
+        counter: CounterStore,
+        max_payload: int = 256,
+        seen: Path | None = None,
+        address: bytes = b"",
+    ):
         if len(key) < 16:
             raise ValueError("the link key must be at least 16 bytes (32 random bytes advised)")
         self._key, self.role, self.allow = key, role, set(allow)
@@ -136,8 +144,7 @@ class LinkCodec:
         floors = {}
         if seen is not None and seen.exists():
             try:
-                floors = {bytes.fromhex(k): int(v)
-                          for k, v in json.loads(seen.read_text()).items()}  # fmt: skip
+                floors = {bytes.fromhex(k): int(v) for k, v in json.loads(seen.read_text()).items()}
             except (ValueError, AttributeError, TypeError, UnicodeDecodeError) as exc:
                 raise ValueError(
                     f"{seen}: the replay state is unreadable ({exc}); without it every frame "
@@ -167,8 +174,9 @@ class LinkCodec:
         self._message_number = (self._message_number + 1) & 0xFFFF
         frames = []
         for index in range(count):
-            header = HEADER.pack(VERSION, self.role, self._counter.next(), self._message_number,
-                                 index, count)  # fmt: skip
+            header = HEADER.pack(
+                VERSION, self.role, self._counter.next(), self._message_number, index, count
+            )
             data = header + body[index * chunk : (index + 1) * chunk]
             frames.append(data + self._tag(self.address, destination, data))
         return frames
@@ -241,8 +249,9 @@ class LinkCodec:
         self.counters[reason] += 1
         return None
 
-    def _reassemble(self, source: bytes, number: int, index: int, count: int, chunk: bytes,
-                    now: float) -> bytes | None:  # fmt: skip
+    def _reassemble(
+        self, source: bytes, number: int, index: int, count: int, chunk: bytes, now: float
+    ) -> bytes | None:
         if count == 1:
             return chunk
         partials = self._partials.setdefault(source, OrderedDict())
@@ -264,5 +273,6 @@ class LinkCodec:
     @property
     def partial_bytes(self) -> int:
         """Bytes held in incomplete messages (bounded by MAX_PARTIAL × 255 × NP per source)."""
-        return sum(len(c) for ps in self._partials.values() for p in ps.values()
-                   for c in p.chunks.values())  # fmt: skip
+        return sum(
+            len(c) for ps in self._partials.values() for p in ps.values() for c in p.chunks.values()
+        )

@@ -12,8 +12,9 @@ from agent.link.session import LinkSession
 from drivers.xbee.driver import XBeeRadio
 
 
-def build_endpoint(cfg: Link, role: str, base: Path, clock: Clock,
-                   on_message: Callable) -> tuple[XBeeRadio, LinkSession]:  # fmt: skip
+def build_endpoint(
+    cfg: Link, role: str, base: Path, clock: Clock, on_message: Callable
+) -> tuple[XBeeRadio, LinkSession]:
     """The radio and the session: the shared key, this end's counter and replay state under
     `base`, the peer as the only source accepted. The radio is not opened here: its `watch()`
     opens it and reopens it whenever it is lost, and the session's frames until then are
@@ -49,16 +50,30 @@ def build_endpoint(cfg: Link, role: str, base: Path, clock: Clock,
         codec.max_payload = radio.max_payload
         codec.address = radio.address
 
-    radio = XBeeRadio(cfg.port, cfg.baud, clock, receive, on_open=opened,
-                      require_encryption=cfg.require_encryption)  # fmt: skip
-    session = LinkSession(codec, radio, peer, clock, on_message,
-                          heartbeat_s=cfg.heartbeat_s, deadline_s=cfg.deadline_s)  # fmt: skip
+    radio = XBeeRadio(
+        cfg.port,
+        cfg.baud,
+        clock,
+        receive,
+        on_open=opened,
+        require_encryption=cfg.require_encryption,
+    )
+    session = LinkSession(
+        codec,
+        radio,
+        peer,
+        clock,
+        on_message,
+        heartbeat_s=cfg.heartbeat_s,
+        deadline_s=cfg.deadline_s,
+    )
     sessions.append(session)
     return radio, session
 
 
-async def open_endpoint(cfg: Link, role: str, base: Path, clock: Clock,
-                        on_message: Callable) -> tuple[XBeeRadio, LinkSession]:  # fmt: skip
+async def open_endpoint(
+    cfg: Link, role: str, base: Path, clock: Clock, on_message: Callable
+) -> tuple[XBeeRadio, LinkSession]:
     """`build_endpoint` with the radio opened now (the ground console: an operator at the
     keyboard is told at once). Raises ValueError or the radio's error with the reason."""
     radio, session = build_endpoint(cfg, role, base, clock, on_message)

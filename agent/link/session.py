@@ -58,10 +58,17 @@ class _InFlight:
 class LinkSession:
     """One end's session with its peer (see the module docstring)."""
 
-    def __init__(self, codec: LinkCodec, transport: Transport, peer: bytes, clock: Clock,
-                 on_message: Callable[[messages.Message, int | None], None], *,
-                 heartbeat_s: float = 1.0,
-                 deadline_s: float = 3.0):  # fmt: skip
+    def __init__(
+        self,
+        codec: LinkCodec,
+        transport: Transport,
+        peer: bytes,
+        clock: Clock,
+        on_message: Callable[[messages.Message, int | None], None],
+        *,
+        heartbeat_s: float = 1.0,
+        deadline_s: float = 3.0,
+    ):
         self._codec, self._transport, self._peer, self._clock = codec, transport, peer, clock
         self._on_message = on_message
         self._heartbeat_s, self._deadline_s = heartbeat_s, deadline_s
@@ -93,8 +100,7 @@ class LinkSession:
         if len(self._outbox) >= OUTBOX:
             # The oldest message that is not an Abort goes: an abort queued during an outage
             # must still reach the aircraft (if all are aborts, the oldest, as they repeat).
-            drop = next((k for k, (_, d) in enumerate(self._outbox) if d.get("kind") != "abort"),
-                        0)  # fmt: skip
+            drop = next((k for k, (_, d) in enumerate(self._outbox) if d.get("kind") != "abort"), 0)
             del self._outbox[drop]
             self.counters["outbox_dropped"] += 1
         self._outbox.append((seq, messages.to_dict(message) | {"e": self._epoch, "s": seq}))

@@ -35,11 +35,26 @@ TICK_HZ = 100.0
 DEG = math.pi / 180
 # 1-σ sensor noise (VN-200 and µADC data sheets via the thesis's chapter 3; pots ±0.5 %).
 NOISE = {
-    "phi": 0.05 * DEG, "theta": 0.05 * DEG, "psi": 0.1 * DEG, "p": 0.02 * DEG,
-    "q": 0.02 * DEG, "r": 0.02 * DEG, "ax": 0.01, "ay": 0.01, "az": 0.01, "Vt": 0.1,
-    "alpha": 0.2 * DEG, "beta": 0.2 * DEG, "aileron_left": 0.1, "aileron_right": 0.1,
-    "elevator": 0.1, "rudder": 0.1, "vn": 0.05, "ve": 0.05, "vd": 0.05,
-}  # fmt: skip
+    "phi": 0.05 * DEG,
+    "theta": 0.05 * DEG,
+    "psi": 0.1 * DEG,
+    "p": 0.02 * DEG,
+    "q": 0.02 * DEG,
+    "r": 0.02 * DEG,
+    "ax": 0.01,
+    "ay": 0.01,
+    "az": 0.01,
+    "Vt": 0.1,
+    "alpha": 0.2 * DEG,
+    "beta": 0.2 * DEG,
+    "aileron_left": 0.1,
+    "aileron_right": 0.1,
+    "elevator": 0.1,
+    "rudder": 0.1,
+    "vn": 0.05,
+    "ve": 0.05,
+    "vd": 0.05,
+}
 
 
 @dataclass
@@ -95,10 +110,15 @@ class SimAircraft:
         self.directory = Path(directory)
         self.per_tick = max(1, round(options.sensor_rate_hz / TICK_HZ))
         """Sensor samples per autopilot tick."""
-        self.plant = Plant(options.aircraft, airspeed_kts=options.speed_kts,
-                           altitude_ft=options.altitude_ft, turbulence=options.turbulence,
-                           seed=options.seed, linearise=False,
-                           integration_hz=max(200.0, TICK_HZ * self.per_tick))  # fmt: skip
+        self.plant = Plant(
+            options.aircraft,
+            airspeed_kts=options.speed_kts,
+            altitude_ft=options.altitude_ft,
+            turbulence=options.turbulence,
+            seed=options.seed,
+            linearise=False,
+            integration_hz=max(200.0, TICK_HZ * self.per_tick),
+        )
         sticks = {ch: normalised_to_pwm(ch, self.plant.trim[name]) for ch, name in OUTPUTS.items()}
         self.pilot = ScriptedPilot(sticks, options.params.switch_channel)
         self.autopilot = EmulatedArduPlane(
@@ -178,8 +198,13 @@ class SimAircraft:
             await self._clock.sleep_until(start + sample * h)
 
 
-async def serve(options: AircraftOptions, directory: Path, duration: float | None,
-                switch_at: tuple[float, ...] = (), announce=print) -> None:  # fmt: skip
+async def serve(
+    options: AircraftOptions,
+    directory: Path,
+    duration: float | None,
+    switch_at: tuple[float, ...] = (),
+    announce=print,
+) -> None:
     """`sysid sim-aircraft`: fly, say where to connect, flip the switch as asked (the
     schedule, or SIGUSR1 to toggle), stop after `duration` s or when cancelled."""
     import signal
@@ -200,8 +225,9 @@ async def serve(options: AircraftOptions, directory: Path, duration: float | Non
         for k, at in enumerate(switch_at):
             aircraft.pilot.schedule(start + at, high=k % 2 == 0)
         loop = asyncio.get_running_loop()
-        loop.add_signal_handler(signal.SIGUSR1, lambda: aircraft.pilot.set_switch(
-            not aircraft.pilot.switch_high))  # fmt: skip
+        loop.add_signal_handler(
+            signal.SIGUSR1, lambda: aircraft.pilot.set_switch(not aircraft.pilot.switch_high)
+        )
         trim = ", ".join(f"{k} {v:+.3f}" for k, v in aircraft.plant.trim.items())
         hz, ports = options.sensor_rate_hz, aircraft.ports
         announce(

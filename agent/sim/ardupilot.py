@@ -138,9 +138,12 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
         """What crossed the wire, stamped by the clock: ("override", {channel: value},
         accepted) received, ("switch", pwm) sent in RC_CHANNELS — for the safety tests."""
         start = {ch: trim.get(name, 0.0) for ch, name in OUTPUTS.items()}
-        self.servos = {ch: ServoModel(params.servo_delay_s, params.servo_rate,
-                                      params.servo_travel, dt, start[ch])
-                       for ch in OUTPUTS}  # fmt: skip
+        self.servos = {
+            ch: ServoModel(
+                params.servo_delay_s, params.servo_rate, params.servo_travel, dt, start[ch]
+            )
+            for ch in OUTPUTS
+        }
         self.outputs: dict[int, int] = {ch: normalised_to_pwm(ch, start[ch]) for ch in OUTPUTS}
 
     async def reboot(self, silent_s: float = 2.0) -> None:
@@ -189,8 +192,9 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
             self.counters["overrides_wrong_sysid"] += 1
             return
         values = {ch: getattr(m, f"chan{ch}_raw") for ch in range(1, CHANNELS + 1)}
-        values = {ch: v for ch, v in values.items()
-                  if v != IGNORE and not (ch > 8 and v == RELEASE_LOW)}  # fmt: skip
+        values = {
+            ch: v for ch, v in values.items() if v != IGNORE and not (ch > 8 and v == RELEASE_LOW)
+        }
         if p.switch_option_46 and self._pilot(self._now)[p.switch_channel - 1] < p.switch_high_us:
             self.counters["overrides_switch_low"] += 1
             self.wire.append((self._clock(), "override", values, False))
@@ -222,8 +226,9 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
             else:
                 self.intervals[msg_id] = interval_us * 1e-6
             result = mavlink.MAV_RESULT_ACCEPTED
-        ack = self.mav.command_ack_encode(m.command, result, 0, 0, m.get_srcSystem(),
-                                          m.get_srcComponent())  # fmt: skip
+        ack = self.mav.command_ack_encode(
+            m.command, result, 0, 0, m.get_srcSystem(), m.get_srcComponent()
+        )
         self._send(ack, [addr])
 
     # -- the vehicle ----------------------------------------------------------------------
@@ -266,23 +271,43 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
         if self._ticks == 0:
             log.write("MODE", TimeUS=us, Mode=MANUAL, ModeNum=MANUAL)
         deg = 180.0 / np.pi
-        log.write("ATT", TimeUS=us, Roll=s["phi"] * deg, Pitch=s["theta"] * deg,
-                  Yaw=(s["psi"] * deg) % 360.0)  # fmt: skip
-        log.write("IMU", TimeUS=us, GyrX=s["p"], GyrY=s["q"], GyrZ=s["r"], AccX=s["ax"],
-                  AccY=s["ay"], AccZ=s["az"], GH=1, AH=1)  # fmt: skip
+        log.write(
+            "ATT",
+            TimeUS=us,
+            Roll=s["phi"] * deg,
+            Pitch=s["theta"] * deg,
+            Yaw=(s["psi"] * deg) % 360.0,
+        )
+        log.write(
+            "IMU",
+            TimeUS=us,
+            GyrX=s["p"],
+            GyrY=s["q"],
+            GyrZ=s["r"],
+            AccX=s["ax"],
+            AccY=s["ay"],
+            AccZ=s["az"],
+            GH=1,
+            AH=1,
+        )
         log.write("ARSP", TimeUS=us, Airspeed=s["Vt"], U=1, H=1, Pri=1)
         log.write("AOA", TimeUS=us, AOA=s["alpha"] * deg, SSA=s["beta"] * deg)
         log.write("RCIN", TimeUS=us, **{f"C{ch}": rc[ch - 1] for ch in range(1, 15)})
-        log.write("RCOU", TimeUS=us,
-                  **{f"C{ch}": self.outputs.get(ch, 0) for ch in range(1, 15)})  # fmt: skip
+        log.write("RCOU", TimeUS=us, **{f"C{ch}": self.outputs.get(ch, 0) for ch in range(1, 15)})
 
     def _telemetry(self, now: float, s: dict[str, float], rc: list[int]) -> None:
         if now - self._heartbeat_at >= 1.0:
             self._heartbeat_at = now
-            self._send(self.mav.heartbeat_encode(
-                mavlink.MAV_TYPE_FIXED_WING, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, BASE_MODE,
-                MANUAL, mavlink.MAV_STATE_ACTIVE, 3,
-            ))  # fmt: skip
+            self._send(
+                self.mav.heartbeat_encode(
+                    mavlink.MAV_TYPE_FIXED_WING,
+                    mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                    BASE_MODE,
+                    MANUAL,
+                    mavlink.MAV_STATE_ACTIVE,
+                    3,
+                )
+            )
         boot_ms = int((now - self._boot) * 1000) & 0xFFFFFFFF
         for msg_id, interval in self.intervals.items():
             due = self._due.get(msg_id, now)
@@ -313,10 +338,16 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
             return m.servo_output_raw_encode((boot_ms * 1000) & 0xFFFFFFFF, 0, *servos)
         if msg_id == mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
             return m.global_position_int_encode(
-                boot_ms, int(s["lat"] * 1e7), int(s["lon"] * 1e7), int(s["alt"] * 1000),
-                int(s["alt"] * 1000), int(s["vn"] * 100), int(s["ve"] * 100),
-                int(s["vd"] * 100), int(np.degrees(s["psi"]) % 360 * 100),
-            )  # fmt: skip
+                boot_ms,
+                int(s["lat"] * 1e7),
+                int(s["lon"] * 1e7),
+                int(s["alt"] * 1000),
+                int(s["alt"] * 1000),
+                int(s["vn"] * 100),
+                int(s["ve"] * 100),
+                int(s["vd"] * 100),
+                int(np.degrees(s["psi"]) % 360 * 100),
+            )
         return None
 
     def _send(self, message, peers=None) -> None:

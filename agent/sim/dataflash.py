@@ -20,15 +20,14 @@ MESSAGES: dict[str, tuple[str, str]] = {
     "PARM": ("QNf", "TimeUS,Name,Value"),
     "MODE": ("QMBB", "TimeUS,Mode,ModeNum,Rsn"),
     "ATT": ("QccccCCCCB", "TimeUS,DesRoll,Roll,DesPitch,Pitch,DesYaw,Yaw,ErrRP,ErrYaw,AEKF"),
-    "IMU": ("QBffffffIIfBBHH",
-            "TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,EG,EA,T,GH,AH,GHz,AHz"),
+    "IMU": ("QBffffffIIfBBHH", "TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,EG,EA,T,GH,AH,GHz,AHz"),
     "ARSP": ("QBffcffBBfB", "TimeUS,I,Airspeed,DiffPress,Temp,RawPress,Offset,U,H,Hp,Pri"),
     "AOA": ("Qff", "TimeUS,AOA,SSA"),
     "RCIN": ("QHHHHHHHHHHHHHH", "TimeUS,C1,C2,C3,C4,C5,C6,C7,C8,C9,C10,C11,C12,C13,C14"),
     "RCOU": ("QHHHHHHHHHHHHHH", "TimeUS,C1,C2,C3,C4,C5,C6,C7,C8,C9,C10,C11,C12,C13,C14"),
     "SIDS": ("QBfffffff", "TimeUS,Ax,Mag,FSt,FSp,TFin,TC,TR,TFout"),
     "SIDD": ("Qfffffffff", "TimeUS,Time,Targ,F,Gx,Gy,Gz,Ax,Ay,Az"),
-}  # fmt: skip
+}
 
 
 class DataFlashWriter:
@@ -52,8 +51,13 @@ class DataFlashWriter:
         return fmt
 
     def _format_message(self, fmt: DFFormat) -> bytes:
-        values = [fmt.type, fmt.len, fmt.name.encode(), fmt.format.encode(),
-                  ",".join(fmt.columns).encode()]  # fmt: skip
+        values = [
+            fmt.type,
+            fmt.len,
+            fmt.name.encode(),
+            fmt.format.encode(),
+            ",".join(fmt.columns).encode(),
+        ]
         return bytes([0xA3, 0x95, FMT_TYPE]) + struct.pack(self._fmt.msg_struct, *values)
 
     def write(self, name: str, **fields: float | int | str) -> None:

@@ -185,12 +185,19 @@ def vn200_ascii(state: Callable[[float], State]) -> Callable[[float, int], bytes
         s = state(t)
         deg = 180 / np.pi
         values = {
-            "yaw": round(s["psi"] * deg, 3), "pitch": round(s["theta"] * deg, 3),
-            "roll": round(s["phi"] * deg, 3), "mag_x": 0.2, "mag_y": 0.0, "mag_z": 0.45,
-            "accel_x": s.get("ax", 0.0), "accel_y": s.get("ay", 0.0),
-            "accel_z": s.get("az", -9.81), "gyro_x": round(s["p"], 6),
-            "gyro_y": round(s["q"], 6), "gyro_z": round(s["r"], 6),
-        }  # fmt: skip
+            "yaw": round(s["psi"] * deg, 3),
+            "pitch": round(s["theta"] * deg, 3),
+            "roll": round(s["phi"] * deg, 3),
+            "mag_x": 0.2,
+            "mag_y": 0.0,
+            "mag_z": 0.45,
+            "accel_x": s.get("ax", 0.0),
+            "accel_y": s.get("ay", 0.0),
+            "accel_z": s.get("az", -9.81),
+            "gyro_x": round(s["p"], 6),
+            "gyro_y": round(s["q"], 6),
+            "gyro_z": round(s["r"], 6),
+        }
         return codec.encode(VnAscii("VNYMR", values))
 
     return encode
@@ -207,11 +214,17 @@ def airdata(state: Callable[[float], State]) -> Callable[[float, int], bytes]:
         rho = static / (R_AIR * (T0 - LAPSE * h))
         ias = s["Vt"] * np.sqrt(rho / RHO0)
         deg = 180 / np.pi
-        return codec.encode(AirData(
-            k, ias, float(np.clip(s["alpha"] * deg, -20, 20)),
-            float(np.clip(s["beta"] * deg, -20, 20)), h, static + 0.5 * rho * s["Vt"] ** 2,
-            static,
-        ))  # fmt: skip
+        return codec.encode(
+            AirData(
+                k,
+                ias,
+                float(np.clip(s["alpha"] * deg, -20, 20)),
+                float(np.clip(s["beta"] * deg, -20, 20)),
+                h,
+                static + 0.5 * rho * s["Vt"] ** 2,
+                static,
+            )
+        )
 
     return encode
 
@@ -227,9 +240,12 @@ def surfaces(
         deflection = {
             "aileron_left": s.get("aileron_left", -s.get("aileron", 0.0)),
             "aileron_right": s.get("aileron_right", s.get("aileron", 0.0)),
-            "elevator_left": s.get("elevator", 0.0), "elevator_right": s.get("elevator", 0.0),
-            "rudder": s.get("rudder", 0.0), "flap_left": 0.0, "flap_right": 0.0,
-        }  # fmt: skip
+            "elevator_left": s.get("elevator", 0.0),
+            "elevator_right": s.get("elevator", 0.0),
+            "rudder": s.get("rudder", 0.0),
+            "flap_left": 0.0,
+            "flap_right": 0.0,
+        }
         counts = tuple(
             int(np.clip(round(degrees_to_counts(deflection[n], calibration[n])), 0, 1023))
             for n in CHANNELS

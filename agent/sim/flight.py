@@ -128,8 +128,14 @@ ENVELOPE_SPEED = (0.6, 1.3)
 ENVELOPE_HEIGHT_S = 3.0
 
 
-def _config(tmp: Path, ports: Path, mavlink: tuple[str, int], axes: str,
-            realtime_priority: int | None = None, speed_kts: float = 60.0) -> Config:  # fmt: skip
+def _config(
+    tmp: Path,
+    ports: Path,
+    mavlink: tuple[str, int],
+    axes: str,
+    realtime_priority: int | None = None,
+    speed_kts: float = 60.0,
+) -> Config:
     trim = speed_kts * KT
     return Config(
         runtime=Runtime(realtime_priority=realtime_priority),
@@ -173,13 +179,25 @@ class AgentProcess:
         self.starts += 1
         log = open(self.directory / f"agent-{self.starts}.log", "w")  # noqa: SIM115
         with log:
-            env = {**os.environ, "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS",
-                                                                        "1")}  # fmt: skip
+            env = {
+                **os.environ,
+                "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "1"),
+            }
             self.proc = subprocess.Popen(
-                [sys.executable, "-m", "agent", "agent", "--config", str(self.config_path),
-                 "--base", str(self.directory)],
-                stdout=log, stderr=subprocess.STDOUT, env=env,
-            )  # fmt: skip
+                [
+                    sys.executable,
+                    "-m",
+                    "agent",
+                    "agent",
+                    "--config",
+                    str(self.config_path),
+                    "--base",
+                    str(self.directory),
+                ],
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                env=env,
+            )
 
     @property
     def pid(self) -> int | None:
@@ -232,8 +250,12 @@ async def fly(options: SimOptions) -> dict:
 
 
 @contextlib.asynccontextmanager
-async def simulated(options: SimOptions, params: Params | None = None, operator: bool = True,
-                    agent_process: bool = False):  # fmt: skip
+async def simulated(
+    options: SimOptions,
+    params: Params | None = None,
+    operator: bool = True,
+    agent_process: bool = False,
+):
     """The aircraft, radios, agent and ground, connected and in trimmed flight; torn down in
     order on exit. `params`: the emulated ArduPlane's (default: switch on channel 7).
     `operator`: False leaves the ground radio free for the console (`sim.ground` is None).
@@ -248,8 +270,9 @@ async def simulated(options: SimOptions, params: Params | None = None, operator:
 
 
 @contextlib.asynccontextmanager
-async def _parts(options: SimOptions, tmp: Path, params: Params, say, operator: bool,
-                 agent_process: bool):  # fmt: skip
+async def _parts(
+    options: SimOptions, tmp: Path, params: Params, say, operator: bool, agent_process: bool
+):
     clock = LoopClock()
     ports = tmp / "ports"
     ports.mkdir(parents=True, exist_ok=True)
@@ -288,8 +311,9 @@ async def _parts(options: SimOptions, tmp: Path, params: Params, say, operator: 
         ):
             raise SimError("the simulated aircraft did not start")
         axes = preset(options.preset).axes
-        config = _config(tmp, ports, aircraft.mavlink_address, axes, options.realtime_priority,
-                         options.speed_kts)  # fmt: skip
+        config = _config(
+            tmp, ports, aircraft.mavlink_address, axes, options.realtime_priority, options.speed_kts
+        )
         if agent_process:
             agent = AgentProcess(tmp, config)
             agent.start()
@@ -309,8 +333,10 @@ async def _parts(options: SimOptions, tmp: Path, params: Params, say, operator: 
             if agent_process:
                 missing = "the autopilot and the ground (no status with a flight mode)"
             else:
-                parts = [("the autopilot", agent.autopilot.connected),
-                         ("the ground", ground is None or ground.session.link_up)]  # fmt: skip
+                parts = [
+                    ("the autopilot", agent.autopilot.connected),
+                    ("the ground", ground is None or ground.session.link_up),
+                ]
                 missing = " and ".join(name for name, up in parts if not up)
             raise SimError(f"the agent did not connect to {missing} in {CONNECT_S:g} s")
         await asyncio.sleep(1.0)  # trimmed flight before the first excitation
@@ -334,8 +360,13 @@ async def _parts(options: SimOptions, tmp: Path, params: Params, say, operator: 
 async def ground_station(module: EmulatedXBee, directory: Path, clock, tasks) -> Ground:
     """The scripted operator's end: the link as the ground console builds it (`build_endpoint`,
     the flight's key, its own counter and replay state), on the ground's emulated module."""
-    config = Link(port=str(module.path), peer=AIR.hex(), key_file="link.key",
-                  counter_file="ground.counter", seen_file="ground.seen")  # fmt: skip
+    config = Link(
+        port=str(module.path),
+        peer=AIR.hex(),
+        key_file="link.key",
+        counter_file="ground.counter",
+        seen_file="ground.seen",
+    )
     ground = Ground(None, None)  # type: ignore[arg-type]
     radio, ground.session = build_endpoint(config, GROUND, directory, clock, ground.on_message)
     ground.radio = radio
@@ -461,8 +492,10 @@ def _truth(aircraft: SimAircraft, axes: str) -> dict[str, complex | list[complex
         return modes[name][0] if modes.get(name) else None
 
     truth: dict[str, complex | list[complex] | None] = {
-        "Dutch roll": one("Dutch roll"), "roll": one("roll"), "spiral": one("spiral"),
-    }  # fmt: skip
+        "Dutch roll": one("Dutch roll"),
+        "roll": one("roll"),
+        "spiral": one("spiral"),
+    }
     if axes != "lateral":
         truth["phugoid"] = one("phugoid")
         truth["short period"] = list(modes.get("short period", []))

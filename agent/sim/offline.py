@@ -25,8 +25,16 @@ from agent.sim.plant import OUTPUTS, Plant
 
 INPUT_CHANNELS = ("throttle", "elevator", "aileron", "rudder")
 CHANNEL = {"aileron": 1, "elevator": 2, "throttle": 3, "rudder": 4}
-OUTPUT_NOISE = {"Vt": "Vt", "alpha": "alpha", "q": "q", "theta": "theta", "beta": "beta",
-                "p": "p", "r": "r", "phi": "phi"}  # fmt: skip
+OUTPUT_NOISE = {
+    "Vt": "Vt",
+    "alpha": "alpha",
+    "q": "q",
+    "theta": "theta",
+    "beta": "beta",
+    "p": "p",
+    "r": "r",
+    "phi": "phi",
+}
 # The INS's heading and velocity (north, east, down): with the attitude they give the inertial
 # velocity the wind is measured from (agent.ident.aircraft.prepare).
 INS_CHANNELS = ("psi", "vn", "ve", "vd")
@@ -59,16 +67,21 @@ def fly(
 ) -> Record:
     """Fly `plan` (or a timeline already rendered) once from trim; `settle_s` of trimmed flight
     precede the recorded margin."""
-    plant = plant or Plant(aircraft, airspeed_kts=speed_kts, turbulence=turbulence, seed=seed,
-                           linearise=False)  # fmt: skip
+    plant = plant or Plant(
+        aircraft, airspeed_kts=speed_kts, turbulence=turbulence, seed=seed, linearise=False
+    )
     surfaces = Excitation().surfaces
     params = Params()
     timeline = plan if isinstance(plan, Timeline) else render(plan, rate_hz)
     tick = 1.0 / TICK_HZ
     steps = round(tick / plant.dt)
     trim_pwm = {c: normalised_to_pwm(CHANNEL[c], plant.trim[c]) for c in INPUT_CHANNELS}
-    servos = {c: ServoModel(params.servo_delay_s, params.servo_rate, params.servo_travel, tick,
-                            plant.trim[c]) for c in INPUT_CHANNELS}  # fmt: skip
+    servos = {
+        c: ServoModel(
+            params.servo_delay_s, params.servo_rate, params.servo_travel, tick, plant.trim[c]
+        )
+        for c in INPUT_CHANNELS
+    }
     lead = round((settle_s + margin_s) / tick)
     played = round(timeline.duration / tick)
     total = lead + played + round(margin_s / tick)
@@ -84,8 +97,10 @@ def fly(
             delta = timeline.values[c][j] if 0 <= j < timeline.count and c in timeline.values else 0
             value = trim_pwm[c] + surfaces[c].direction * surfaces[c].us_per_unit * delta
             pwm[c] = round(float(np.clip(value, surfaces[c].min_us, surfaces[c].max_us)))
-        plant.set_normalised({c: servos[c].step(pwm_to_normalised(CHANNEL[c], pwm[c]))
-                              for c in INPUT_CHANNELS}, steps)  # fmt: skip
+        plant.set_normalised(
+            {c: servos[c].step(pwm_to_normalised(CHANNEL[c], pwm[c])) for c in INPUT_CHANNELS},
+            steps,
+        )
         for _ in range(steps):
             plant.step()
         s = plant.state()
@@ -93,8 +108,11 @@ def fly(
         y[k] = [s[name] for name in OUTPUTS]
         ins[k] = [s[name] for name in INS_CHANNELS]
         if noise:
-            u[k, 1:] += rng.normal(size=3) * [NOISE["elevator"], np.sqrt(0.5) * NOISE[
-                "aileron_left"], NOISE["rudder"]]  # fmt: skip
+            u[k, 1:] += rng.normal(size=3) * [
+                NOISE["elevator"],
+                np.sqrt(0.5) * NOISE["aileron_left"],
+                NOISE["rudder"],
+            ]
             y[k] += rng.normal(size=len(OUTPUTS)) * [NOISE[OUTPUT_NOISE[n]] for n in OUTPUTS]
             ins[k] += rng.normal(size=len(INS_CHANNELS)) * [NOISE[n] for n in INS_CHANNELS]
     keep = round(settle_s / tick)

@@ -61,8 +61,16 @@ class RfChannel:
 class EmulatedXBee:
     """One module: its pty, its address, the channel it shares with its peers."""
 
-    def __init__(self, name: str, address: bytes, directory: Path, channel: RfChannel,
-                 clock: Clock, *, escaped: bool = False):  # fmt: skip
+    def __init__(
+        self,
+        name: str,
+        address: bytes,
+        directory: Path,
+        channel: RfChannel,
+        clock: Clock,
+        *,
+        escaped: bool = False,
+    ):
         self.name, self.address, self.channel, self._clock = name, address, channel, clock
         self.port = PtyPort(Path(directory) / name)
         self.escaped = escaped
@@ -138,13 +146,19 @@ class EmulatedXBee:
 
     def _at(self, frame_id: int, command: bytes, value: bytes) -> None:
         answers = {
-            b"AP": bytes([2 if self.escaped else 1]), b"HV": HV_900HP, b"VR": VR_DIGIMESH,
-            b"SH": self.address[:4], b"SL": self.address[4:], b"NI": self.name.encode(),
-            b"CE": b"\x00", b"NP": self.channel.payload_limit.to_bytes(2, "big"),
-            b"MY": b"\xff\xfe", b"BR": b"\x01",
+            b"AP": bytes([2 if self.escaped else 1]),
+            b"HV": HV_900HP,
+            b"VR": VR_DIGIMESH,
+            b"SH": self.address[:4],
+            b"SL": self.address[4:],
+            b"NI": self.name.encode(),
+            b"CE": b"\x00",
+            b"NP": self.channel.payload_limit.to_bytes(2, "big"),
+            b"MY": b"\xff\xfe",
+            b"BR": b"\x01",
             b"DB": bytes([min(255, max(0, -self.channel.rssi_dbm))]),
             b"EE": bytes([1 if self.encryption else 0]),
-        }  # fmt: skip
+        }
         if value and command in answers:  # a write: accepted, value unchanged here
             self._send(api.at_response(frame_id, command, 0))
         elif command in answers:
@@ -159,8 +173,9 @@ class EmulatedXBee:
         self.counters["forged_source"] += 1
         await self._transmit(0, destination, payload, source=source)
 
-    async def _transmit(self, frame_id: int, destination: bytes, payload: bytes,
-                        source: bytes | None = None) -> None:  # fmt: skip
+    async def _transmit(
+        self, frame_id: int, destination: bytes, payload: bytes, source: bytes | None = None
+    ) -> None:
         ch = self.channel
         if len(payload) > ch.payload_limit:
             self.counters["too_large"] += 1

@@ -80,12 +80,18 @@ CHECK_TIC = 0.05
 COUNTED_SHARE = 0.1
 
 _PROPERTIES = (
-    ("velocities/vt-fps", FT), ("aero/alpha-rad", 1.0), ("velocities/q-rad_sec", 1.0),
-    ("attitude/theta-rad", 1.0), ("aero/beta-rad", 1.0), ("velocities/p-rad_sec", 1.0),
-    ("velocities/r-rad_sec", 1.0), ("attitude/phi-rad", 1.0),
-    ("propulsion/engine/engine-rpm", 1.0), ("position/h-sl-meters", 1.0),
+    ("velocities/vt-fps", FT),
+    ("aero/alpha-rad", 1.0),
+    ("velocities/q-rad_sec", 1.0),
+    ("attitude/theta-rad", 1.0),
+    ("aero/beta-rad", 1.0),
+    ("velocities/p-rad_sec", 1.0),
+    ("velocities/r-rad_sec", 1.0),
+    ("attitude/phi-rad", 1.0),
+    ("propulsion/engine/engine-rpm", 1.0),
+    ("position/h-sl-meters", 1.0),
     ("propulsion/engine/map-inhg", 1.0),
-)  # fmt: skip
+)
 
 
 @dataclass(frozen=True)
@@ -156,8 +162,9 @@ def odd_response(aircraft: str, airspeed_kts: float, commands: np.ndarray, **pla
     return (xp - xm) / 2, (up_u - down_u) / 2, trim
 
 
-def excitation(rate_hz: float, realisation: int = 0, seconds: float = PERIOD_S,
-               amplitude: float = AMPLITUDE) -> np.ndarray:  # fmt: skip
+def excitation(
+    rate_hz: float, realisation: int = 0, seconds: float = PERIOD_S, amplitude: float = AMPLITUDE
+) -> np.ndarray:
     """The fitting multisine: each control its own log-spaced harmonics in BAND_HZ (disjoint
     between controls), random phases (seeded: the truth is deterministic), faded in over 2 s."""
     rng = np.random.default_rng(realisation)
@@ -280,8 +287,13 @@ def check(truth: Truth, amplitude: float = AMPLITUDE) -> list[Check]:
         predicted = truth.simulate(np.vstack([u, np.zeros(len(INPUTS))]), 1.0 / rate)[1:]
         tic = theil(x, predicted)
         rms = np.sqrt(np.mean(x**2, axis=0))
-        checks.append(Check(name, {o: float(tic[k]) for k, o in enumerate(OUTPUTS)},
-                            {o: float(rms[k]) for k, o in enumerate(OUTPUTS)}))  # fmt: skip
+        checks.append(
+            Check(
+                name,
+                {o: float(tic[k]) for k, o in enumerate(OUTPUTS)},
+                {o: float(rms[k]) for k, o in enumerate(OUTPUTS)},
+            )
+        )
     largest = {o: max(c.rms[o] for c in checks) for o in OUTPUTS}
     return [
         replace(c, counted=tuple(o for o in OUTPUTS if c.rms[o] >= COUNTED_SHARE * largest[o]))

@@ -11,20 +11,31 @@ import struct
 from pathlib import Path
 
 MAGIC = b"ULog\x01\x12\x35"
-TYPES = {"uint64_t": "Q", "int64_t": "q", "uint32_t": "I", "int32_t": "i", "uint16_t": "H",
-         "int16_t": "h", "uint8_t": "B", "int8_t": "b", "float": "f", "double": "d",
-         "bool": "?", "char": "c"}  # fmt: skip
+TYPES = {
+    "uint64_t": "Q",
+    "int64_t": "q",
+    "uint32_t": "I",
+    "int32_t": "i",
+    "uint16_t": "H",
+    "int16_t": "h",
+    "uint8_t": "B",
+    "int8_t": "b",
+    "float": "f",
+    "double": "d",
+    "bool": "?",
+    "char": "c",
+}
 # The PX4 topics the importer maps (the fields it reads, timestamp first, as PX4 defines them).
 TOPICS = {
     "vehicle_attitude": "uint64_t timestamp;uint64_t timestamp_sample;float[4] q",
     "vehicle_angular_velocity": "uint64_t timestamp;uint64_t timestamp_sample;float[3] xyz",
     "vehicle_acceleration": "uint64_t timestamp;uint64_t timestamp_sample;float[3] xyz",
     "airspeed_validated": "uint64_t timestamp;float indicated_airspeed_m_s;"
-                          "float calibrated_airspeed_m_s;float true_airspeed_m_s",
+    "float calibrated_airspeed_m_s;float true_airspeed_m_s",
     "airflow_aoa": "uint64_t timestamp;float aoa_rad;bool valid",
     "airflow_slip": "uint64_t timestamp;float slip_rad;bool valid",
     "actuator_outputs": "uint64_t timestamp;uint32_t noutputs;float[16] output",
-}  # fmt: skip
+}
 
 
 def _struct(fields: str) -> tuple[str, list[tuple[str, int]]]:

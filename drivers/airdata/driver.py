@@ -61,5 +61,6 @@ def make_driver(sensors: Sensors, clock: Clock, publish: Callable[[Sample], None
     cfg = sensors.airdata
     convert = AirDataConverter(cfg)
     backoff = Backoff(sensors.backoff_initial_s, sensors.backoff_max_s)
-    return SensorDriver("airdata", cfg, backoff, AirDataCodec(), convert, publish, clock,
-                        on_reconnect=convert.reset)  # fmt: skip
+    return SensorDriver(
+        "airdata", cfg, backoff, AirDataCodec(), convert, publish, clock, on_reconnect=convert.reset
+    )

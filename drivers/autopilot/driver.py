@@ -32,9 +32,13 @@ from drivers.values import Clock, FlightState
 log = logging.getLogger(__name__)
 
 MESSAGES = {  # name → MAVLink id, for SET_MESSAGE_INTERVAL
-    "ATTITUDE": 30, "VFR_HUD": 74, "AOA_SSA": 11020, "RC_CHANNELS": 65,
-    "SERVO_OUTPUT_RAW": 36, "HEARTBEAT": 0,
-}  # fmt: skip
+    "ATTITUDE": 30,
+    "VFR_HUD": 74,
+    "AOA_SSA": 11020,
+    "RC_CHANNELS": 65,
+    "SERVO_OUTPUT_RAW": 36,
+    "HEARTBEAT": 0,
+}
 SET_MESSAGE_INTERVAL = 511
 IGNORE, RELEASE_LOW, RELEASE_HIGH = 65535, 0, 65534
 # Releases are repeated so one lost datagram does not leave a surface overridden until
@@ -50,10 +54,25 @@ MAVSDK_LOG = 200
 
 # ArduPlane's custom_mode numbers (HEARTBEAT), for the console and the log.
 PLANE_MODES = {
-    0: "MANUAL", 1: "CIRCLE", 2: "STABILIZE", 3: "TRAINING", 4: "ACRO", 5: "FBWA", 6: "FBWB",
-    7: "CRUISE", 8: "AUTOTUNE", 10: "AUTO", 11: "RTL", 12: "LOITER", 13: "TAKEOFF",
-    15: "GUIDED", 17: "QSTABILIZE", 19: "QLOITER", 20: "QLAND", 21: "QRTL",
-}  # fmt: skip
+    0: "MANUAL",
+    1: "CIRCLE",
+    2: "STABILIZE",
+    3: "TRAINING",
+    4: "ACRO",
+    5: "FBWA",
+    6: "FBWB",
+    7: "CRUISE",
+    8: "AUTOTUNE",
+    10: "AUTO",
+    11: "RTL",
+    12: "LOITER",
+    13: "TAKEOFF",
+    15: "GUIDED",
+    17: "QSTABILIZE",
+    19: "QLOITER",
+    20: "QLAND",
+    21: "QRTL",
+}
 
 
 class AutopilotError(RuntimeError):
@@ -196,26 +215,42 @@ class AutopilotLink:
                 break
         if self._held:
             self.counters["closed_holding_override"] += 1
-            log.warning("autopilot link closed while channels %s were overridden",
-                        sorted(self._held))  # fmt: skip
+            log.warning(
+                "autopilot link closed while channels %s were overridden", sorted(self._held)
+            )
 
     async def _set_rates(self, loop, executor) -> None:
 
         cfg = self._cfg
         rates = {
-            "ATTITUDE": cfg.attitude_hz, "VFR_HUD": cfg.vfr_hud_hz, "AOA_SSA": cfg.aoa_hz,
-            "RC_CHANNELS": cfg.rc_channels_hz, "SERVO_OUTPUT_RAW": cfg.servo_output_hz,
-        }  # fmt: skip
+            "ATTITUDE": cfg.attitude_hz,
+            "VFR_HUD": cfg.vfr_hud_hz,
+            "AOA_SSA": cfg.aoa_hz,
+            "RC_CHANNELS": cfg.rc_channels_hz,
+            "SERVO_OUTPUT_RAW": cfg.servo_output_hz,
+        }
         for name, hz in rates.items():
-            fields = {"target_system": cfg.target_system, "target_component": 1,
-                      "command": SET_MESSAGE_INTERVAL, "confirmation": 0,
-                      "param1": MESSAGES[name], "param2": round(1e6 / hz), "param3": 0,
-                      "param4": 0, "param5": 0, "param6": 0, "param7": 0}  # fmt: skip
+            fields = {
+                "target_system": cfg.target_system,
+                "target_component": 1,
+                "command": SET_MESSAGE_INTERVAL,
+                "confirmation": 0,
+                "param1": MESSAGES[name],
+                "param2": round(1e6 / hz),
+                "param3": 0,
+                "param4": 0,
+                "param5": 0,
+                "param6": 0,
+                "param7": 0,
+            }
             command = MavlinkMessage(
-                message_name="COMMAND_LONG", system_id=cfg.system_id, component_id=cfg.component_id,
-                target_system_id=cfg.target_system, target_component_id=1,
+                message_name="COMMAND_LONG",
+                system_id=cfg.system_id,
+                component_id=cfg.component_id,
+                target_system_id=cfg.target_system,
+                target_component_id=1,
                 fields_json=json.dumps(fields),
-            )  # fmt: skip
+            )
             try:
                 ack = await loop.run_in_executor(executor, self._direct.send_command, command)
                 result = json.loads(ack.fields_json or "{}").get("result")
@@ -261,8 +296,11 @@ class AutopilotLink:
             if pwm is not None and self._on_switch is not None:
                 self._on_switch(int(pwm), t)
         elif name == "SERVO_OUTPUT_RAW":
-            servos = {ch: int(fields[f"servo{ch}_raw"]) for ch in range(1, 17)
-                      if f"servo{ch}_raw" in fields}  # fmt: skip
+            servos = {
+                ch: int(fields[f"servo{ch}_raw"])
+                for ch in range(1, 17)
+                if f"servo{ch}_raw" in fields
+            }
             if self._on_servos is not None:
                 self._on_servos(t, servos)
             if self._on_sample is not None and 3 in servos:
@@ -279,8 +317,16 @@ class AutopilotLink:
         else:
             parts.update(alpha=f["AOA"])
         if name == "ATTITUDE" and len(parts) == 5 and self._on_state is not None:
-            self._on_state(FlightState(t, parts["bank"], parts["pitch"], parts["airspeed"],
-                                       parts["alpha"], parts["altitude"]))  # fmt: skip
+            self._on_state(
+                FlightState(
+                    t,
+                    parts["bank"],
+                    parts["pitch"],
+                    parts["airspeed"],
+                    parts["alpha"],
+                    parts["altitude"],
+                )
+            )
 
     # -- the surface sink -----------------------------------------------------------------
 
@@ -308,11 +354,16 @@ class AutopilotLink:
         fields = {"target_system": cfg.target_system, "target_component": 1}
         for ch in range(1, 19):
             fields[f"chan{ch}_raw"] = values.get(ch, IGNORE if ch <= 8 else RELEASE_LOW)
-        self._direct.send_message(MavlinkMessage(
-            message_name="RC_CHANNELS_OVERRIDE", system_id=cfg.system_id,
-            component_id=cfg.component_id, target_system_id=cfg.target_system,
-            target_component_id=1, fields_json=json.dumps(fields),
-        ))  # fmt: skip
+        self._direct.send_message(
+            MavlinkMessage(
+                message_name="RC_CHANNELS_OVERRIDE",
+                system_id=cfg.system_id,
+                component_id=cfg.component_id,
+                target_system_id=cfg.target_system,
+                target_component_id=1,
+                fields_json=json.dumps(fields),
+            )
+        )
 
 
 def _nothing() -> None:

@@ -24,9 +24,14 @@ from drivers.codec import CodecStats, crc16_xmodem, skip
 SYNC = b"\xaa\x55"
 VERSION = 1
 CHANNELS = (
-    "aileron_left", "aileron_right", "elevator_left", "elevator_right", "rudder",
-    "flap_left", "flap_right",
-)  # fmt: skip
+    "aileron_left",
+    "aileron_right",
+    "elevator_left",
+    "elevator_right",
+    "rudder",
+    "flap_left",
+    "flap_right",
+)
 _BODY = struct.Struct("<BHI7HH")
 LENGTH = len(SYNC) + _BODY.size + 2
 ADC_MAX = 1023
@@ -72,10 +77,12 @@ class SurfaceCodec:
 
     def _resync(self, buffer: bytes | bytearray, *, crc=False, rejected=False) -> int:
         following = buffer.find(SYNC, 1)
-        return skip(self.stats, len(buffer) if following < 0 else following, crc=crc,
-                    rejected=rejected)  # fmt: skip
+        return skip(
+            self.stats, len(buffer) if following < 0 else following, crc=crc, rejected=rejected
+        )
 
     def encode(self, frame: SurfaceFrame) -> bytes:
-        body = _BODY.pack(VERSION, frame.seq & 0xFFFF, frame.millis & 0xFFFFFFFF,
-                          *frame.counts, frame.rpm)  # fmt: skip
+        body = _BODY.pack(
+            VERSION, frame.seq & 0xFFFF, frame.millis & 0xFFFFFFFF, *frame.counts, frame.rpm
+        )
         return SYNC + body + struct.pack(">H", crc16_xmodem(body))

@@ -62,5 +62,13 @@ def make_driver(sensors: Sensors, clock: Clock, publish: Callable[[Sample], None
     cfg = sensors.surfaces
     convert = SurfaceConverter(cfg)
     backoff = Backoff(sensors.backoff_initial_s, sensors.backoff_max_s)
-    return SensorDriver("surfaces", cfg, backoff, SurfaceCodec(), convert, publish, clock,
-                        on_reconnect=convert.reset)  # fmt: skip
+    return SensorDriver(
+        "surfaces",
+        cfg,
+        backoff,
+        SurfaceCodec(),
+        convert,
+        publish,
+        clock,
+        on_reconnect=convert.reset,
+    )

@@ -20,42 +20,105 @@ SYNC = 0xFA
 # (name, struct format) per group, by field bit. Sizes follow from the formats.
 _TIME_UTC = "<bBBBBBH"  # year − 2000, month, day, hour, minute, second, millisecond
 _GNSS = [
-    ("utc", _TIME_UTC), ("tow", "<Q"), ("week", "<H"), ("num_sats", "<B"), ("fix", "<B"),
-    ("pos_lla", "<3d"), ("pos_ecef", "<3d"), ("vel_ned", "<3f"), ("vel_ecef", "<3f"),
-    ("pos_u", "<3f"), ("vel_u", "<f"), ("time_u", "<f"),
-]  # fmt: skip
+    ("utc", _TIME_UTC),
+    ("tow", "<Q"),
+    ("week", "<H"),
+    ("num_sats", "<B"),
+    ("fix", "<B"),
+    ("pos_lla", "<3d"),
+    ("pos_ecef", "<3d"),
+    ("vel_ned", "<3f"),
+    ("vel_ecef", "<3f"),
+    ("pos_u", "<3f"),
+    ("vel_u", "<f"),
+    ("time_u", "<f"),
+]
 GROUPS: list[tuple[str, list[tuple[str, str]]]] = [
-    ("common", [
-        ("time_startup", "<Q"), ("time_gps", "<Q"), ("time_syncin", "<Q"), ("ypr", "<3f"),
-        ("quaternion", "<4f"), ("angular_rate", "<3f"), ("position", "<3d"),
-        ("vel_ned", "<3f"), ("accel", "<3f"), ("imu", "<6f"), ("mag_pres", "<5f"),
-        ("delta_theta_vel", "<7f"), ("ins_status", "<H"), ("sync_in_cnt", "<I"),
-        ("time_gps_pps", "<Q"),
-    ]),
-    ("time", [
-        ("time_startup", "<Q"), ("time_gps", "<Q"), ("gps_tow", "<Q"), ("gps_week", "<H"),
-        ("time_syncin", "<Q"), ("time_gps_pps", "<Q"), ("time_utc", _TIME_UTC),
-        ("sync_in_cnt", "<I"), ("sync_out_cnt", "<I"), ("time_status", "<B"),
-    ]),
-    ("imu", [
-        ("imu_status", "<H"), ("uncomp_mag", "<3f"), ("uncomp_accel", "<3f"),
-        ("uncomp_gyro", "<3f"), ("temp", "<f"), ("pres", "<f"), ("delta_theta", "<4f"),
-        ("delta_vel", "<3f"), ("mag", "<3f"), ("accel", "<3f"), ("angular_rate", "<3f"),
-        ("sens_sat", "<H"),
-    ]),
+    (
+        "common",
+        [
+            ("time_startup", "<Q"),
+            ("time_gps", "<Q"),
+            ("time_syncin", "<Q"),
+            ("ypr", "<3f"),
+            ("quaternion", "<4f"),
+            ("angular_rate", "<3f"),
+            ("position", "<3d"),
+            ("vel_ned", "<3f"),
+            ("accel", "<3f"),
+            ("imu", "<6f"),
+            ("mag_pres", "<5f"),
+            ("delta_theta_vel", "<7f"),
+            ("ins_status", "<H"),
+            ("sync_in_cnt", "<I"),
+            ("time_gps_pps", "<Q"),
+        ],
+    ),
+    (
+        "time",
+        [
+            ("time_startup", "<Q"),
+            ("time_gps", "<Q"),
+            ("gps_tow", "<Q"),
+            ("gps_week", "<H"),
+            ("time_syncin", "<Q"),
+            ("time_gps_pps", "<Q"),
+            ("time_utc", _TIME_UTC),
+            ("sync_in_cnt", "<I"),
+            ("sync_out_cnt", "<I"),
+            ("time_status", "<B"),
+        ],
+    ),
+    (
+        "imu",
+        [
+            ("imu_status", "<H"),
+            ("uncomp_mag", "<3f"),
+            ("uncomp_accel", "<3f"),
+            ("uncomp_gyro", "<3f"),
+            ("temp", "<f"),
+            ("pres", "<f"),
+            ("delta_theta", "<4f"),
+            ("delta_vel", "<3f"),
+            ("mag", "<3f"),
+            ("accel", "<3f"),
+            ("angular_rate", "<3f"),
+            ("sens_sat", "<H"),
+        ],
+    ),
     ("gnss1", _GNSS),
-    ("attitude", [
-        ("vpe_status", "<H"), ("ypr", "<3f"), ("quaternion", "<4f"), ("dcm", "<9f"),
-        ("mag_ned", "<3f"), ("accel_ned", "<3f"), ("linear_accel_body", "<3f"),
-        ("linear_accel_ned", "<3f"), ("ypr_u", "<3f"),
-    ]),
-    ("ins", [
-        ("ins_status", "<H"), ("pos_lla", "<3d"), ("pos_ecef", "<3d"), ("vel_body", "<3f"),
-        ("vel_ned", "<3f"), ("vel_ecef", "<3f"), ("mag_ecef", "<3f"), ("accel_ecef", "<3f"),
-        ("linear_accel_ecef", "<3f"), ("pos_u", "<f"), ("vel_u", "<f"),
-    ]),
+    (
+        "attitude",
+        [
+            ("vpe_status", "<H"),
+            ("ypr", "<3f"),
+            ("quaternion", "<4f"),
+            ("dcm", "<9f"),
+            ("mag_ned", "<3f"),
+            ("accel_ned", "<3f"),
+            ("linear_accel_body", "<3f"),
+            ("linear_accel_ned", "<3f"),
+            ("ypr_u", "<3f"),
+        ],
+    ),
+    (
+        "ins",
+        [
+            ("ins_status", "<H"),
+            ("pos_lla", "<3d"),
+            ("pos_ecef", "<3d"),
+            ("vel_body", "<3f"),
+            ("vel_ned", "<3f"),
+            ("vel_ecef", "<3f"),
+            ("mag_ecef", "<3f"),
+            ("accel_ecef", "<3f"),
+            ("linear_accel_ecef", "<3f"),
+            ("pos_u", "<f"),
+            ("vel_u", "<f"),
+        ],
+    ),
     ("gnss2", _GNSS),
-]  # fmt: skip
+]
 _STRUCTS = [[struct.Struct(fmt) for _, fmt in fields] for _, fields in GROUPS]
 # Longest packet the decoder will wait for: every supported field of every group.
 MAX_PACKET = 1 + 1 + 2 * len(GROUPS) + sum(s.size for g in _STRUCTS for s in g) + 2
@@ -135,8 +198,9 @@ class BinaryCodec:
     def _reject(self, buffer: bytes | bytearray, *, crc: bool, rejected: bool) -> int:
         """Skip to the next possible sync after this one."""
         following = buffer.find(SYNC, 1)
-        return skip(self.stats, len(buffer) if following < 0 else following, crc=crc,
-                    rejected=rejected)  # fmt: skip
+        return skip(
+            self.stats, len(buffer) if following < 0 else following, crc=crc, rejected=rejected
+        )
 
     def encode(self, packet: VnPacket) -> bytes:
         masks = masks_for(list(packet.fields))
@@ -157,11 +221,38 @@ class BinaryCodec:
 
 MAX_ASCII = 256  # the longest VN ASCII line is ~200 bytes; anything longer is garbage
 ASCII_FIELDS = {
-    "VNYMR": ("yaw", "pitch", "roll", "mag_x", "mag_y", "mag_z", "accel_x", "accel_y",
-              "accel_z", "gyro_x", "gyro_y", "gyro_z"),
-    "VNINS": ("tow", "week", "status", "yaw", "pitch", "roll", "lat", "lon", "alt", "vel_n",
-              "vel_e", "vel_d", "att_u", "pos_u", "vel_u"),
-}  # fmt: skip
+    "VNYMR": (
+        "yaw",
+        "pitch",
+        "roll",
+        "mag_x",
+        "mag_y",
+        "mag_z",
+        "accel_x",
+        "accel_y",
+        "accel_z",
+        "gyro_x",
+        "gyro_y",
+        "gyro_z",
+    ),
+    "VNINS": (
+        "tow",
+        "week",
+        "status",
+        "yaw",
+        "pitch",
+        "roll",
+        "lat",
+        "lon",
+        "alt",
+        "vel_n",
+        "vel_e",
+        "vel_d",
+        "att_u",
+        "pos_u",
+        "vel_u",
+    ),
+}
 
 
 @dataclass(frozen=True)

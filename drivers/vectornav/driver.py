@@ -95,14 +95,27 @@ def convert_ascii(leap_seconds: int) -> Callable[[VnAscii], Reading | None]:
         values = {"psi": v["yaw"] * DEG, "theta": v["pitch"] * DEG, "phi": v["roll"] * DEG}
         device_time = None
         if message.kind == "VNYMR":
-            values.update(p=v["gyro_x"], q=v["gyro_y"], r=v["gyro_z"],
-                          ax=v["accel_x"], ay=v["accel_y"], az=v["accel_z"])  # fmt: skip
+            values.update(
+                p=v["gyro_x"],
+                q=v["gyro_y"],
+                r=v["gyro_z"],
+                ax=v["accel_x"],
+                ay=v["accel_y"],
+                az=v["accel_z"],
+            )
         else:
             gps = v["week"] * SECONDS_PER_WEEK + v["tow"]
             device_time = gps
-            values.update(lat=v["lat"], lon=v["lon"], alt_gps=v["alt"], vn=v["vel_n"],
-                          ve=v["vel_e"], vd=v["vel_d"], ins_status=float(v["status"]),
-                          utc=gps_to_unix(gps, leap_seconds))  # fmt: skip
+            values.update(
+                lat=v["lat"],
+                lon=v["lon"],
+                alt_gps=v["alt"],
+                vn=v["vel_n"],
+                ve=v["vel_e"],
+                vd=v["vel_d"],
+                ins_status=float(v["status"]),
+                utc=gps_to_unix(gps, leap_seconds),
+            )
         if not all(math.isfinite(x) for x in values.values()):
             return None
         return Reading(device_time, values)

@@ -25,8 +25,12 @@ MAX_DATA = 300
 
 TRANSMIT_REQUEST, TRANSMIT_STATUS, RECEIVE_PACKET = 0x10, 0x8B, 0x90
 AT_COMMAND, AT_COMMAND_QUEUED, AT_RESPONSE = 0x08, 0x09, 0x88
-DELIVERY = {0x00: "ok", 0x21: "network ACK failure", 0x25: "route not found",
-            0x74: "payload too large"}  # fmt: skip
+DELIVERY = {
+    0x00: "ok",
+    0x21: "network ACK failure",
+    0x25: "route not found",
+    0x74: "payload too large",
+}
 
 
 @dataclass(frozen=True)
@@ -107,15 +111,21 @@ class ApiCodec:
 
     def _resync(self, buffer: bytes | bytearray, *, crc: bool = False, rejected: bool = False):
         following = buffer.find(START, 1)
-        return skip(self.stats, len(buffer) if following < 0 else following, crc=crc,
-                    rejected=rejected)  # fmt: skip
+        return skip(
+            self.stats, len(buffer) if following < 0 else following, crc=crc, rejected=rejected
+        )
 
 
 def transmit_request(
     frame_id: int, destination: bytes, payload: bytes, options: int = 0
 ) -> ApiFrame:
-    return ApiFrame(bytes([TRANSMIT_REQUEST, frame_id]) + destination + b"\xff\xfe\x00"
-                    + bytes([options]) + payload)  # fmt: skip
+    return ApiFrame(
+        bytes([TRANSMIT_REQUEST, frame_id])
+        + destination
+        + b"\xff\xfe\x00"
+        + bytes([options])
+        + payload
+    )
 
 
 def parse_transmit_request(frame: ApiFrame) -> tuple[int, bytes, bytes]:

@@ -48,8 +48,13 @@ OPEN_TIMEOUT_S = 30.0
 # How often `watch` looks at the port, and the longest wait between attempts to reopen it.
 WATCH_S = 1.0
 REOPEN_MAX_S = 8.0
-DELIVERY = {0x00: "ok", 0x01: "MAC ACK failure", 0x21: "network ACK failure",
-            0x25: "route not found", 0x74: "payload too large"}  # fmt: skip
+DELIVERY = {
+    0x00: "ok",
+    0x01: "MAC ACK failure",
+    0x21: "network ACK failure",
+    0x25: "route not found",
+    0x74: "payload too large",
+}
 
 
 class RadioError(RuntimeError):
@@ -73,10 +78,15 @@ class SendResult:
 class XBeeRadio:
     """One XBee module on a serial port."""
 
-    def __init__(self, port: str, baud: int, clock: Clock,
-                 on_frame: Callable[[bytes, bytes, float], None],
-                 on_open: Callable[[XBeeRadio], None] | None = None,
-                 require_encryption: bool = False):  # fmt: skip
+    def __init__(
+        self,
+        port: str,
+        baud: int,
+        clock: Clock,
+        on_frame: Callable[[bytes, bytes, float], None],
+        on_open: Callable[[XBeeRadio], None] | None = None,
+        require_encryption: bool = False,
+    ):
         self.port, self.baud, self._clock, self._on_frame = port, baud, clock, on_frame
         self.require_encryption = require_encryption
         self.encrypted: bool | None = None
@@ -157,8 +167,10 @@ class XBeeRadio:
         if encrypted is False and self.require_encryption:
             with contextlib.suppress(Exception):
                 device.close()
-            raise RadioError(f"{self.port}: the XBee's AES encryption is off (EE = 0) and "
-                             "[link] require_encryption is set: set EE = 1 and KY")  # fmt: skip
+            raise RadioError(
+                f"{self.port}: the XBee's AES encryption is off (EE = 0) and "
+                "[link] require_encryption is set: set EE = 1 and KY"
+            )
         self.max_payload, self.address, self.encrypted = max_payload, address, encrypted
         return device
 
@@ -267,8 +279,9 @@ class XBeeRadio:
         if kind == ApiFrameType.TRANSMIT_STATUS:
             future = self._pending.pop(packet.frame_id, None)
             if future is not None and not future.done():
-                future.set_result(SendResult(packet.transmit_status.code,
-                                             packet.transmit_retry_count))  # fmt: skip
+                future.set_result(
+                    SendResult(packet.transmit_status.code, packet.transmit_retry_count)
+                )
         elif kind == ApiFrameType.RECEIVE_PACKET:
             self.counters["received"] += 1
             source = bytes(packet.x64bit_source_addr.address)
@@ -288,9 +301,15 @@ class XBeeRadio:
         frame_id = self._frame_id()
         future = self._loop.create_future()
         self._pending[frame_id] = future
-        packet = TransmitPacket(frame_id, XBee64BitAddress(destination),
-                                XBee16BitAddress.UNKNOWN_ADDRESS, 0, 0, payload,
-                                op_mode=device.operating_mode)  # fmt: skip
+        packet = TransmitPacket(
+            frame_id,
+            XBee64BitAddress(destination),
+            XBee16BitAddress.UNKNOWN_ADDRESS,
+            0,
+            0,
+            payload,
+            op_mode=device.operating_mode,
+        )
         try:
             # The write blocks until the UART has taken the frame (23 ms for 260 bytes at
             # 115200 baud): never on the loop.

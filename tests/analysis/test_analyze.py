@@ -36,9 +36,11 @@ def excitation_logs(directory: Path, count: int = 3) -> list[Path]:
         record = reference.make_record(MODEL, seed=10 + k, noise=NOISE, duration=25.0)
         cols = record.columns()
         path = directory / f"{k + 2:04d}_lateral_single_20261122.csv"
-        lines = ["# suas-sysid lateral log, created 2026-11-22",
-                 f"# excitation plan lateral-{k + 1}, finished, window 0 – 25 s",
-                 ",".join(cols)]  # fmt: skip
+        lines = [
+            "# suas-sysid lateral log, created 2026-11-22",
+            f"# excitation plan lateral-{k + 1}, finished, window 0 – 25 s",
+            ",".join(cols),
+        ]
         table = np.column_stack(list(cols.values()))
         lines += [",".join(f"{v:.9g}" for v in row) for row in table]
         path.write_text("\n".join(lines) + "\n")
@@ -101,15 +103,40 @@ def test_command_line_with_a_dask_cluster(tmp_path):
 
     (tmp_path / "logs").mkdir()
     excitation_logs(tmp_path / "logs")  # a directory of logs, picked by number and plan id
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
-                      host="127.0.0.1", dashboard_address=None) as cluster:  # fmt: skip
+    with LocalCluster(
+        n_workers=1,
+        threads_per_worker=1,
+        processes=False,
+        protocol="tcp",
+        host="127.0.0.1",
+        dashboard_address=None,
+    ) as cluster:
         done = subprocess.run(
-            [sys.executable, "-m", "agent", "analyze", str(tmp_path / "logs"), "--axes",
-             "lateral", "--excitation", "2", "--excitation", "lateral-3", "--sweep",
-             "markov=1:2", "--no-refine", "--scheduler", cluster.scheduler_address, "--json"],
-            capture_output=True, text=True, timeout=180, cwd=tmp_path,
+            [
+                sys.executable,
+                "-m",
+                "agent",
+                "analyze",
+                str(tmp_path / "logs"),
+                "--axes",
+                "lateral",
+                "--excitation",
+                "2",
+                "--excitation",
+                "lateral-3",
+                "--sweep",
+                "markov=1:2",
+                "--no-refine",
+                "--scheduler",
+                cluster.scheduler_address,
+                "--json",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=180,
+            cwd=tmp_path,
             env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "OPENBLAS_NUM_THREADS": "1"},
-        )  # fmt: skip
+        )
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)
     assert [Path(p).name[:4] for p in report["logs"]] == ["0002", "0004"]
@@ -131,9 +158,12 @@ def test_bad_arguments(tmp_path, args, message):
     excitation_logs(tmp_path, count=1)
     done = subprocess.run(
         [sys.executable, "-m", "agent", "analyze", str(tmp_path), "--axes", "lateral", *args],
-        capture_output=True, text=True, timeout=60, cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=tmp_path,
         env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
-    )  # fmt: skip
+    )
     assert done.returncode == 2
     assert message in done.stderr
 
@@ -205,11 +235,24 @@ def test_an_unreachable_scheduler_is_a_clear_error(tmp_path):
     thread behind.)"""
     excitation_logs(tmp_path, count=1)
     done = subprocess.run(
-        [sys.executable, "-m", "agent", "analyze", str(tmp_path), "--axes", "lateral",
-         "--scheduler", "nonsense", "--json"],
-        capture_output=True, text=True, timeout=120, cwd=tmp_path,
+        [
+            sys.executable,
+            "-m",
+            "agent",
+            "analyze",
+            str(tmp_path),
+            "--axes",
+            "lateral",
+            "--scheduler",
+            "nonsense",
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=tmp_path,
         env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "OPENBLAS_NUM_THREADS": "1"},
-    )  # fmt: skip
+    )
     assert done.returncode == 1, done.stderr
     assert "cannot run the jobs: missing port number in address 'nonsense'" in done.stderr
     assert "missing port number" in json.loads(done.stdout)["error"]["message"]

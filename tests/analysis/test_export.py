@@ -34,8 +34,10 @@ def flight(tmp_path):
     """An agent that identified the A.2 record twice and accepted the first as nominal."""
     with (ROOT / "examples" / "a2_lateral.csv").open() as handle:
         table = list(csv.DictReader(handle))
-    config = Config(recorder=Recorder(log_dir=str(tmp_path / "logs"), rate_hz=50.0),
-                    identification=Identification(trim_seconds=0.5))  # fmt: skip
+    config = Config(
+        recorder=Recorder(log_dir=str(tmp_path / "logs"), rate_hz=50.0),
+        identification=Identification(trim_seconds=0.5),
+    )
     agent = Agent(config, base=tmp_path)
     agent._downlink = lambda message, reliable=True: None
     channels = agent.recorder.channels
@@ -112,8 +114,13 @@ def test_json_and_the_command_line(flight, tmp_path):
     assert len(data[1]["eigenvalues"][0]) == 2  # [re, im]
     env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
     run = lambda *a: subprocess.run(  # noqa: E731
-        [sys.executable, "-m", "agent", "export", *a], capture_output=True, text=True,
-        cwd=tmp_path, timeout=60, env=env)  # fmt: skip
+        [sys.executable, "-m", "agent", "export", *a],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=60,
+        env=env,
+    )
     done = run(str(log), "--out", "one.mat", "--model", "lat-2")
     assert done.returncode == 0, done.stderr
     assert (
@@ -144,8 +151,12 @@ def test_results_heard_by_the_ground_console_export_too(tmp_path):
 
     message = messages.to_dict(result("lat-7"))
     log = tmp_path / "0001_ground_20261122.jsonl"
-    log.write_text(json.dumps({"dir": "rx", "seq": 4, "message": message}) + "\n"
-                   + json.dumps({"dir": "note", "message": {"text": "x"}}) + "\n")  # fmt: skip
+    log.write_text(
+        json.dumps({"dir": "rx", "seq": 4, "message": message})
+        + "\n"
+        + json.dumps({"dir": "note", "message": {"text": "x"}})
+        + "\n"
+    )
     (model,) = load_models(log)
     assert model["id"] == "lat-7"
     np.testing.assert_array_equal(model["A"], np.eye(4))
@@ -178,9 +189,11 @@ def test_damaged_sources_are_clear_errors_and_nothing_is_dropped_silently(flight
     assert models.skipped == (2,)
     done = subprocess.run(
         [sys.executable, "-m", "agent", "export", str(torn), "--out", str(tmp_path / "t.mat")],
-        capture_output=True, text=True, timeout=60,
+        capture_output=True,
+        text=True,
+        timeout=60,
         env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
-    )  # fmt: skip
+    )
     assert done.returncode == 0, done.stderr
     assert "1 line(s) not JSON and not exported (line 2)" in done.stderr
     twins = load_models(log)

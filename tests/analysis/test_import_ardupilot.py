@@ -60,8 +60,15 @@ def systemid_log(path: Path, seconds: float = 30.0, seed: int = 0) -> dict:
         for k in range(n):
             us = int(t[k] * 1e6)
             log.write("ATT", TimeUS=us + 300, Roll=np.degrees(phi[k]), Pitch=2.0, Yaw=90.0)
-            log.write("IMU", TimeUS=us + 600, I=0, GyrX=p[k] + rng.normal(0, 1e-4), GyrY=0.0,
-                      GyrZ=0.0, AccZ=-9.81)  # fmt: skip
+            log.write(
+                "IMU",
+                TimeUS=us + 600,
+                I=0,
+                GyrX=p[k] + rng.normal(0, 1e-4),
+                GyrY=0.0,
+                GyrZ=0.0,
+                AccZ=-9.81,
+            )
             log.write("IMU", TimeUS=us + 700, I=1, GyrX=99.0)  # a second IMU: not mapped
             log.write("ARSP", TimeUS=us + 900, I=0, Airspeed=22.0)
             log.write("AOA", TimeUS=us + 1000, AOA=3.0, SSA=-1.0)
@@ -95,8 +102,9 @@ def test_units_names_and_the_systemid_run(tmp_path):
     assert active[0] == pytest.approx(5.0, abs=0.05)
     assert active[-1] == pytest.approx(25.0, abs=0.05)
     assert np.max(np.abs(c["sid_target"])) == pytest.approx(4.0, abs=0.1)
-    assert any("SystemID run: input roll, magnitude 4, 0.2–3 Hz over 20 s" in n
-               for n in imported.notes)  # fmt: skip
+    assert any(
+        "SystemID run: input roll, magnitude 4, 0.2–3 Hz over 20 s" in n for n in imported.notes
+    )
     assert imported.missing == []
     assert len(truth["t"]) == 1500
 
@@ -105,28 +113,73 @@ def test_the_imported_record_identifies_the_known_pole(tmp_path):
     systemid_log(tmp_path / "sid.bin")
     csv = tmp_path / "sid.csv"
     run = lambda *args: subprocess.run(  # noqa: E731
-        [sys.executable, "-m", "agent", *args], cwd=tmp_path, capture_output=True, text=True,
-        timeout=120, env={"PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1",
-                          "PATH": "/usr/bin:/bin"},
-    )  # fmt: skip
+        [sys.executable, "-m", "agent", *args],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={"PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1", "PATH": "/usr/bin:/bin"},
+    )
     done = run("import", str(tmp_path / "sid.bin"), "--out", str(csv))
     assert done.returncode == 0, done.stderr
     assert "1 rows" not in done.stdout
     assert "note: ArduPilot SystemID run" in done.stdout
-    done = run("identify", str(csv), "--inputs", "aileron", "--outputs", "p", "--start", "4",
-               "--end", "27", "--order", "1", "--json")  # fmt: skip
+    done = run(
+        "identify",
+        str(csv),
+        "--inputs",
+        "aileron",
+        "--outputs",
+        "p",
+        "--start",
+        "4",
+        "--end",
+        "27",
+        "--order",
+        "1",
+        "--json",
+    )
     assert done.returncode == 0, done.stderr
     modes = json.loads(done.stdout)["modes"]
     assert modes[0]["eigenvalue"][0] == pytest.approx(POLE, rel=0.05)
     # The post-flight tools take the imported record too: a p sweep, and the report.
-    done = run("analyze", str(csv), "--inputs", "aileron", "--outputs", "p", "--start", "4",
-               "--end", "27", "--order", "1", "--sweep", "markov=1:3", "--json")  # fmt: skip
+    done = run(
+        "analyze",
+        str(csv),
+        "--inputs",
+        "aileron",
+        "--outputs",
+        "p",
+        "--start",
+        "4",
+        "--end",
+        "27",
+        "--order",
+        "1",
+        "--sweep",
+        "markov=1:3",
+        "--json",
+    )
     assert done.returncode == 0, done.stderr
     sweep = json.loads(done.stdout)
     for case in sweep["cases"]:
         assert case["modes"][0]["eigenvalue"][0] == pytest.approx(POLE, rel=0.05)
-    done = run("report", str(csv), "--inputs", "aileron", "--outputs", "p", "--start", "4",
-               "--end", "27", "--order", "1", "--out", str(tmp_path / "report"))  # fmt: skip
+    done = run(
+        "report",
+        str(csv),
+        "--inputs",
+        "aileron",
+        "--outputs",
+        "p",
+        "--start",
+        "4",
+        "--end",
+        "27",
+        "--order",
+        "1",
+        "--out",
+        str(tmp_path / "report"),
+    )
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "report" / "excitation_1_bode.png").exists()
 
@@ -170,9 +223,14 @@ def test_fifty_flipped_bytes_cost_the_damaged_messages_not_the_rest(tmp_path):
 
 def test_command_line_refusals(tmp_path):
     def run(*args):
-        return subprocess.run([sys.executable, "-m", "agent", "import", *args], cwd=tmp_path,
-                              capture_output=True, text=True, timeout=60,
-                              env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})  # fmt: skip
+        return subprocess.run(
+            [sys.executable, "-m", "agent", "import", *args],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
+        )
 
     missing = run("nope.bin", "--out", "x.csv")
     assert missing.returncode == 2

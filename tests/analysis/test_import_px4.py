@@ -23,8 +23,12 @@ def quaternion(phi, theta, psi):
     cr, sr = np.cos(phi / 2), np.sin(phi / 2)
     cp, sp = np.cos(theta / 2), np.sin(theta / 2)
     cy, sy = np.cos(psi / 2), np.sin(psi / 2)
-    return [cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
-            cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy]  # fmt: skip
+    return [
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    ]
 
 
 def px4_log(path, seconds=20.0, rate=100.0, pause=None):
@@ -57,7 +61,8 @@ def test_px4_topics_map_to_the_channels(tmp_path):
     assert np.allclose(c["theta"], 0.05, atol=1e-5)
     assert np.allclose(c["psi"], 1.0, atol=1e-5)
     assert np.interp(10.0, imported.time, c["phi"]) == pytest.approx(
-        np.interp(10.0 + 0.0, t, phi), abs=2e-3)  # fmt: skip
+        np.interp(10.0 + 0.0, t, phi), abs=2e-3
+    )
     assert np.allclose(c["p"], np.interp(imported.time + 0.0004, t, p), atol=1e-3)
     assert np.allclose(c["Vt"], 21.5)
     assert np.allclose(c["alpha"], 0.06)
@@ -88,19 +93,46 @@ def test_imported_px4_record_through_the_post_flight_tools(tmp_path):
     env = {"PYTHONPATH": str(root), "PATH": "/usr/bin:/bin", "OPENBLAS_NUM_THREADS": "1"}
 
     def sysid(*args):
-        done = subprocess.run([sys.executable, "-m", "agent", *args], capture_output=True,
-                              text=True, timeout=120, env=env, cwd=tmp_path)  # fmt: skip
+        done = subprocess.run(
+            [sys.executable, "-m", "agent", *args],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            env=env,
+            cwd=tmp_path,
+        )
         assert done.returncode == 0, done.stderr
         return done.stdout
 
     px4_log(tmp_path / "flight.ulg")
     sysid("import", "flight.ulg", "--out", "flight.csv", "--rate", "50")
-    out = json.loads(sysid("analyze", "flight.csv", "--inputs", "aileron", "--outputs", "p",
-                           "--order", "1", "--json"))  # fmt: skip
+    out = json.loads(
+        sysid(
+            "analyze",
+            "flight.csv",
+            "--inputs",
+            "aileron",
+            "--outputs",
+            "p",
+            "--order",
+            "1",
+            "--json",
+        )
+    )
     pole = out["cases"][0]["modes"][0]["eigenvalue"][0]
     assert pole == pytest.approx(POLE, rel=0.05)
-    sysid("report", "flight.csv", "--inputs", "aileron", "--outputs", "p", "--order", "1",
-          "--out", "report")  # fmt: skip
+    sysid(
+        "report",
+        "flight.csv",
+        "--inputs",
+        "aileron",
+        "--outputs",
+        "p",
+        "--order",
+        "1",
+        "--out",
+        "report",
+    )
     assert (tmp_path / "report" / "excitation_1_time.png").exists()
 
 

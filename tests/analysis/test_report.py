@@ -32,9 +32,23 @@ def test_the_report_renders_in_headless_chromium(tmp_path):
     excitation_logs(logs, count=2)
     out = tmp_path / "report"
     done = subprocess.run(
-        [sys.executable, "-m", "agent", "report", str(logs), "--axes", "lateral", "--no-refine",
-         "--out", str(out)], capture_output=True, text=True, timeout=180, env=ENV,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "agent",
+            "report",
+            str(logs),
+            "--axes",
+            "lateral",
+            "--no-refine",
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=180,
+        env=ENV,
+    )
     assert done.returncode == 0, done.stderr
     page = (out / "index.html").read_text()
     images = sorted(p.name for p in out.glob("*.png"))
@@ -48,10 +62,20 @@ def test_the_report_renders_in_headless_chromium(tmp_path):
     assert "Relative peak factors: aileron" in page
     shot = tmp_path / "shot.png"
     subprocess.run(
-        [chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
-         f"--screenshot={shot}", "--window-size=1100,2400", (out / "index.html").as_uri()],
-        capture_output=True, timeout=120, check=True,
-    )  # fmt: skip
+        [
+            chromium(),
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--hide-scrollbars",
+            f"--screenshot={shot}",
+            "--window-size=1100,2400",
+            (out / "index.html").as_uri(),
+        ],
+        capture_output=True,
+        timeout=120,
+        check=True,
+    )
     pixels = imread(shot)[..., :3]
     assert pixels.shape[:2] == (2400, 1100)
     ink = (pixels < 0.9).any(axis=2)  # anything not (near) white
@@ -70,9 +94,23 @@ def test_a_bad_nominal_file_is_refused(tmp_path):
     excitation_logs(tmp_path, count=1)
     (tmp_path / "nominal.json").write_text("{}")
     done = subprocess.run(
-        [sys.executable, "-m", "agent", "report", str(tmp_path), "--axes", "lateral",
-         "--out", str(tmp_path / "r"), "--nominal", str(tmp_path / "nominal.json")],
-        capture_output=True, text=True, timeout=60, env=ENV,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "agent",
+            "report",
+            str(tmp_path),
+            "--axes",
+            "lateral",
+            "--out",
+            str(tmp_path / "r"),
+            "--nominal",
+            str(tmp_path / "nominal.json"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=ENV,
+    )
     assert done.returncode == 2
     assert "not a model store file" in done.stderr

@@ -23,12 +23,20 @@ def state(t: float) -> dict[str, float]:
     """A smooth flight state: every channel moves, so timing errors show up as value errors."""
     w = 2 * math.pi * 0.5
     return {
-        "phi": 0.2 * math.sin(w * t), "theta": 0.05 + 0.02 * math.cos(w * t),
-        "psi": 1.0 + 0.01 * t, "p": 0.2 * w * math.cos(w * t), "q": -0.02 * w * math.sin(w * t),
-        "r": 0.01, "Vt": 22.0 + math.sin(w * t), "alpha": 0.05 + 0.01 * math.sin(w * t),
-        "beta": 0.02 * math.cos(w * t), "aileron": 5.0 * math.sin(w * t), "elevator": -2.0,
-        "rudder": 3.0 * math.cos(w * t), "alt": 120.0,
-    }  # fmt: skip
+        "phi": 0.2 * math.sin(w * t),
+        "theta": 0.05 + 0.02 * math.cos(w * t),
+        "psi": 1.0 + 0.01 * t,
+        "p": 0.2 * w * math.cos(w * t),
+        "q": -0.02 * w * math.sin(w * t),
+        "r": 0.01,
+        "Vt": 22.0 + math.sin(w * t),
+        "alpha": 0.05 + 0.01 * math.sin(w * t),
+        "beta": 0.02 * math.cos(w * t),
+        "aileron": 5.0 * math.sin(w * t),
+        "elevator": -2.0,
+        "rudder": 3.0 * math.cos(w * t),
+        "alt": 120.0,
+    }
 
 
 @dataclass

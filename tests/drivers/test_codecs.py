@@ -46,15 +46,52 @@ def _vn_packets() -> list[VnPacket]:
 
 
 ASCII = [
-    VnAscii("VNYMR", dict(zip(
-        ("yaw", "pitch", "roll", "mag_x", "mag_y", "mag_z", "accel_x", "accel_y", "accel_z",
-         "gyro_x", "gyro_y", "gyro_z"), [12.5 + k, 1.25, -3.5, 0.25, 0.5, 0.75, 0.125, -0.25,
-                                         -9.75, 0.0625, -0.03125, 0.5], strict=True)))
+    VnAscii(
+        "VNYMR",
+        dict(
+            zip(
+                (
+                    "yaw",
+                    "pitch",
+                    "roll",
+                    "mag_x",
+                    "mag_y",
+                    "mag_z",
+                    "accel_x",
+                    "accel_y",
+                    "accel_z",
+                    "gyro_x",
+                    "gyro_y",
+                    "gyro_z",
+                ),
+                [12.5 + k, 1.25, -3.5, 0.25, 0.5, 0.75, 0.125, -0.25, -9.75, 0.0625, -0.03125, 0.5],
+                strict=True,
+            )
+        ),
+    )
     for k in range(3)
-] + [VnAscii("VNINS", {
-    "tow": 345600.5, "week": 2390, "status": 0x0A12, "yaw": 45.5, "pitch": 2.25, "roll": -1.5,
-    "lat": 30.625, "lon": -96.375, "alt": 120.5, "vel_n": 20.5, "vel_e": 1.5, "vel_d": -0.5,
-    "att_u": 0.25, "pos_u": 1.5, "vel_u": 0.125})]  # fmt: skip
+] + [
+    VnAscii(
+        "VNINS",
+        {
+            "tow": 345600.5,
+            "week": 2390,
+            "status": 0x0A12,
+            "yaw": 45.5,
+            "pitch": 2.25,
+            "roll": -1.5,
+            "lat": 30.625,
+            "lon": -96.375,
+            "alt": 120.5,
+            "vel_n": 20.5,
+            "vel_e": 1.5,
+            "vel_d": -0.5,
+            "att_u": 0.25,
+            "pos_u": 1.5,
+            "vel_u": 0.125,
+        },
+    )
+]
 
 
 @dataclass
@@ -93,8 +130,11 @@ SPECIAL = bytes([0x7E, 0x7D, 0x11, 0x13]) * 3  # every byte AP=2 must escape
 XBEE_FRAMES = [
     xbee.transmit_request(k + 1, bytes.fromhex("0013A20040000002"), SPECIAL + bytes([k]))
     for k in range(5)
-] + [xbee.receive_packet(bytes.fromhex("0013A20040000001"), b"plain payload " * 4),
-     xbee.transmit_status(7, 0x21, 3), xbee.at_response(1, b"NP", 0, b"\x01\x00")]  # fmt: skip
+] + [
+    xbee.receive_packet(bytes.fromhex("0013A20040000001"), b"plain payload " * 4),
+    xbee.transmit_status(7, 0x21, 3),
+    xbee.at_response(1, b"NP", 0, b"\x01\x00"),
+]
 CASES += [
     Case("xbee-ap1", lambda: xbee.ApiCodec(escaped=False), XBEE_FRAMES, 20),
     Case("xbee-ap2", lambda: xbee.ApiCodec(escaped=True), XBEE_FRAMES, 30),

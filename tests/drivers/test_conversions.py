@@ -46,10 +46,14 @@ def test_gps_time_to_utc():
 
 def test_vn200_binary_conversion():
     q = euler_to_quaternion(0.1, 0.05, 1.0)
-    packet = VnPacket({
-        "common.time_startup": 2_500_000_000, "common.time_gps": 1_400_000_000_000_000_000,
-        "common.quaternion": q, "common.angular_rate": (0.1, 0.2, 0.3),
-    })  # fmt: skip
+    packet = VnPacket(
+        {
+            "common.time_startup": 2_500_000_000,
+            "common.time_gps": 1_400_000_000_000_000_000,
+            "common.quaternion": q,
+            "common.angular_rate": (0.1, 0.2, 0.3),
+        }
+    )
     reading = convert_binary(18)(packet)
     assert reading.device_time == pytest.approx(2.5)
     assert (reading.values["phi"], reading.values["theta"], reading.values["psi"]) == pytest.approx(
@@ -63,9 +67,23 @@ def test_vn200_binary_conversion():
 
 
 def test_vn200_ascii_conversion_degrees_to_radians():
-    message = VnAscii("VNYMR", {"yaw": 90.0, "pitch": 0.0, "roll": -45.0, "mag_x": 0, "mag_y": 0,
-                                "mag_z": 0, "accel_x": 0, "accel_y": 0, "accel_z": -9.8,
-                                "gyro_x": 0.1, "gyro_y": 0, "gyro_z": 0})  # fmt: skip
+    message = VnAscii(
+        "VNYMR",
+        {
+            "yaw": 90.0,
+            "pitch": 0.0,
+            "roll": -45.0,
+            "mag_x": 0,
+            "mag_y": 0,
+            "mag_z": 0,
+            "accel_x": 0,
+            "accel_y": 0,
+            "accel_z": -9.8,
+            "gyro_x": 0.1,
+            "gyro_y": 0,
+            "gyro_z": 0,
+        },
+    )
     reading = convert_ascii(18)(message)
     assert reading.values["psi"] == pytest.approx(math.pi / 2)
     assert reading.values["phi"] == pytest.approx(-math.pi / 4)

@@ -104,14 +104,18 @@ def test_malformed_plans_are_rejected_with_the_field_named():
         Doublet(pulse_s=1.0, amplitude=0.0)
     with pytest.raises(ValidationError, match="distinct"):
         Multisine(harmonics=(3, 3), period_s=20.0, amplitude=1.0)
-    bad = {"id": "x", "axes": "lateral", "segments": [{"signals": {"flaps": {
-        "kind": "doublet", "pulse_s": 1, "amplitude": 1}}}]}  # fmt: skip
+    bad = {
+        "id": "x",
+        "axes": "lateral",
+        "segments": [{"signals": {"flaps": {"kind": "doublet", "pulse_s": 1, "amplitude": 1}}}],
+    }
     with pytest.raises(ValidationError, match="unknown control"):
         Plan.model_validate(bad)
     steps = {"kind": "steps", "levels": [2], "hold_s": 1, "amplitude": 5}
     with pytest.raises(ValidationError, match="within −1"):
-        Plan.model_validate({"id": "x", "axes": "lateral", "segments": [{"signals": {
-            "throttle": steps}}]})  # fmt: skip
+        Plan.model_validate(
+            {"id": "x", "axes": "lateral", "segments": [{"signals": {"throttle": steps}}]}
+        )
 
 
 def _one(signal, name="aileron", free_s=0.0) -> Plan:
@@ -143,11 +147,13 @@ def test_plans_outside_the_envelope_are_refused_before_start():
 
 ABSURD = [
     (Multisine(harmonics=(1_000_000,), period_s=10.0, amplitude=2.0), "100000 Hz, not below"),
-    (Sweep(f0_hz=1e-9, f1_hz=1.0, duration_s=10.0, dwell_cycles=2.0, amplitude=2.0),
-     "longer than the envelope's max_duration_s"),
+    (
+        Sweep(f0_hz=1e-9, f1_hz=1.0, duration_s=10.0, dwell_cycles=2.0, amplitude=2.0),
+        "longer than the envelope's max_duration_s",
+    ),
     (Doublet(pulse_s=1e-4, amplitude=2.0), "holds a level for 0.0001 s, shorter than one"),
     (Steps(levels=(1.0, -1.0), hold_s=0.005, amplitude=2.0), "shorter than one command period"),
-]  # fmt: skip
+]
 
 
 @pytest.mark.parametrize(("signal", "message"), ABSURD, ids=["harmonic", "dwell", "pulse", "hold"])

@@ -67,8 +67,11 @@ def feed(s: Scheduler, now: float, switch=HIGH, state=CRUISE) -> None:
     s.update_switch(switch, now)
     if state is None:  # the sensors went quiet
         return
-    s.update_state(FlightState(now, state.bank_deg, state.pitch_deg, state.airspeed,
-                               state.alpha_deg, state.altitude_m))  # fmt: skip
+    s.update_state(
+        FlightState(
+            now, state.bank_deg, state.pitch_deg, state.airspeed, state.alpha_deg, state.altitude_m
+        )
+    )
 
 
 def make(clock, script=None, config=CONFIG):
@@ -296,8 +299,11 @@ async def test_plan_outside_the_envelope_is_refused_at_arming():
     # Bad input tried: an aileron doublet of 15° against a 10° max_amplitude.
     clock = VirtualClock(0.0)
     s, _, events = make(clock)
-    big = Plan(id="big", axes="lateral", segments=(Segment(signals={"aileron": Doublet(
-        pulse_s=1.0, amplitude=15.0)}),))  # fmt: skip
+    big = Plan(
+        id="big",
+        axes="lateral",
+        segments=(Segment(signals={"aileron": Doublet(pulse_s=1.0, amplitude=15.0)}),),
+    )
     with pytest.raises(PlanRefused, match="exceeds its max_amplitude of 10 deg"):
         s.arm(big)
     assert s.status == "idle"

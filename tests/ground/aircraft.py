@@ -26,25 +26,50 @@ GROUND = bytes.fromhex("0013A20040000002")
 def mode(name, real, imag=0.0, emac=95.0) -> messages.ModeReport:
     w = abs(complex(real, imag))
     return messages.ModeReport(
-        name=name, real=real, imag=imag, frequency_hz=w / 6.283185307179586,
-        damping=-real / w, time_constant_s=None if imag else -1 / real, msv=0.4, mci=0.8,
-        moi=0.7, emac=emac, mpc=60.0, cmi=76.0,
-    )  # fmt: skip
+        name=name,
+        real=real,
+        imag=imag,
+        frequency_hz=w / 6.283185307179586,
+        damping=-real / w,
+        time_constant_s=None if imag else -1 / real,
+        msv=0.4,
+        mci=0.8,
+        moi=0.7,
+        emac=emac,
+        mpc=60.0,
+        cmi=76.0,
+    )
 
 
 def result(model_id: str, shift: float = 0.0, update: bool = True) -> messages.Result:
-    modes = [mode("Dutch roll", -0.8 + shift, 3.1 + shift), mode("roll", -9.5 + shift),
-             mode("spiral", 0.004, emac=30.0)]  # fmt: skip
+    modes = [
+        mode("Dutch roll", -0.8 + shift, 3.1 + shift),
+        mode("roll", -9.5 + shift),
+        mode("spiral", 0.004, emac=30.0),
+    ]
     eye = [[1.0 if i == j else 0.0 for j in range(4)] for i in range(4)]
     return messages.Result(
-        model_id=model_id, axes="lateral", dt=0.04, inputs=["aileron", "rudder"],
-        outputs=["beta", "p", "r", "phi"], modes=modes, tic=[0.02, 0.03, 0.02, 0.04],
-        tic_avg=0.0275, stable=False, suggest_update=update,
-        reasons=["1 stability: slowly divergent (doubles in 173 s)",
-                 "2 quality: named modes EMAC ≥ 50 %", "3 TIC_jj 0.028 < 0.3",
-                 "4–7 no nominal model yet"],
-        A=eye, B=[[0.0, 0.0]] * 4, C=eye, D=[[0.0, 0.0]] * 4,
-    )  # fmt: skip
+        model_id=model_id,
+        axes="lateral",
+        dt=0.04,
+        inputs=["aileron", "rudder"],
+        outputs=["beta", "p", "r", "phi"],
+        modes=modes,
+        tic=[0.02, 0.03, 0.02, 0.04],
+        tic_avg=0.0275,
+        stable=False,
+        suggest_update=update,
+        reasons=[
+            "1 stability: slowly divergent (doubles in 173 s)",
+            "2 quality: named modes EMAC ≥ 50 %",
+            "3 TIC_jj 0.028 < 0.3",
+            "4–7 no nominal model yet",
+        ],
+        A=eye,
+        B=[[0.0, 0.0]] * 4,
+        C=eye,
+        D=[[0.0, 0.0]] * 4,
+    )
 
 
 @dataclass
@@ -77,16 +102,36 @@ class ScriptedAircraft:
 
     def status(self, t: float) -> messages.Status:
         return messages.Status(
-            time=t, flight_mode="MANUAL", airspeed=self.airspeed, altitude=305.0,
-            alpha=3.0, beta=-0.2, roll=0.02, pitch=0.05, yaw=1.2,
-            excitation=self.excitation, loop_lag_ms=0.9,
+            time=t,
+            flight_mode="MANUAL",
+            airspeed=self.airspeed,
+            altitude=305.0,
+            alpha=3.0,
+            beta=-0.2,
+            roll=0.02,
+            pitch=0.05,
+            yaw=1.2,
+            excitation=self.excitation,
+            loop_lag_ms=0.9,
             nominal={"lateral": self.nominal[-1]} if self.nominal else {},
             recorder={"frames": 1200.0},
-            sensors={"vn200": {"state": "open", "rate_hz": 100.0, "gaps": 0.0,
-                               "crc_errors": 0.0, "age_s": 0.01},
-                     "airdata": {"state": "waiting", "rate_hz": 0.0, "gaps": 2.0,
-                                 "crc_errors": 1.0, "age_s": 4.2}},
-        )  # fmt: skip
+            sensors={
+                "vn200": {
+                    "state": "open",
+                    "rate_hz": 100.0,
+                    "gaps": 0.0,
+                    "crc_errors": 0.0,
+                    "age_s": 0.01,
+                },
+                "airdata": {
+                    "state": "waiting",
+                    "rate_hz": 0.0,
+                    "gaps": 2.0,
+                    "crc_errors": 1.0,
+                    "age_s": 4.2,
+                },
+            },
+        )
 
 
 @dataclass
@@ -106,16 +151,18 @@ async def rig(tmp_path: Path, status_every: float = 0.2):
     ground_module = EmulatedXBee("ground", GROUND, tmp_path, channel, clock)
     air_module.join(ground_module)
     ground_module.join(air_module)
-    tasks = [asyncio.create_task(m.run(), name=f"xbee-{m.name}")
-             for m in (air_module, ground_module)]  # fmt: skip
+    tasks = [
+        asyncio.create_task(m.run(), name=f"xbee-{m.name}") for m in (air_module, ground_module)
+    ]
     await asyncio.sleep(0.05)
     (tmp_path / "link.key").write_text(KEY.hex())
     (tmp_path / "link.key").chmod(0o600)
     aircraft = ScriptedAircraft()
     codec = LinkCodec(KEY, AIRCRAFT, {GROUND}, counter=CounterStore(tmp_path / "air.counter"))
     holder: list[LinkSession] = []
-    radio = XBeeRadio(str(air_module.path), 115200, clock,
-                      lambda s, p, t: holder[0].receive(s, p, t))  # fmt: skip
+    radio = XBeeRadio(
+        str(air_module.path), 115200, clock, lambda s, p, t: holder[0].receive(s, p, t)
+    )
     await radio.open()
     codec.max_payload = radio.max_payload
     codec.address = radio.address
@@ -131,10 +178,15 @@ async def rig(tmp_path: Path, status_every: float = 0.2):
     status_task = asyncio.create_task(status(), name="air-status")
     tasks.append(status_task)
     config = GroundConfig(
-        link=Link(port=str(ground_module.path), peer=AIR.hex(), key_file="link.key",
-                  counter_file="ground.counter", seen_file="ground.seen"),
+        link=Link(
+            port=str(ground_module.path),
+            peer=AIR.hex(),
+            key_file="link.key",
+            counter_file="ground.counter",
+            seen_file="ground.seen",
+        ),
         log_dir="ground-logs",
-    )  # fmt: skip
+    )
     try:
         yield Rig(channel, aircraft, config, tmp_path, status_task)
     finally:

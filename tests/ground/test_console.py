@@ -94,8 +94,9 @@ async def test_a_preset_is_armed_and_acknowledged_and_a_refusal_shows_its_reason
     # F5 aborts from anywhere, even with the editor focused.
     app.query_one("#plan").focus()
     await pilot.press("f5")
-    await until(pilot, lambda: any(isinstance(m, messages.Abort) for m in r.aircraft.inbox),
-                what="abort")  # fmt: skip
+    await until(
+        pilot, lambda: any(isinstance(m, messages.Abort) for m in r.aircraft.inbox), what="abort"
+    )
 
 
 async def test_a_result_renders_and_accept_reject_revert_round_trip(console, tmp_path):
@@ -131,8 +132,9 @@ async def test_a_result_renders_and_accept_reject_revert_round_trip(console, tmp
     await pilot.press("r")
     await pilot.press("y")
     await until(pilot, lambda: "REFUSED — no previous lateral" in log_text(app), "revert")
-    decisions = [(m.model_id, m.accept) for m in r.aircraft.inbox
-                 if isinstance(m, messages.Decision)]  # fmt: skip
+    decisions = [
+        (m.model_id, m.accept) for m in r.aircraft.inbox if isinstance(m, messages.Decision)
+    ]
     assert decisions == [("lat-1", True), ("lat-2", False)]
     # Everything is in the ground log too, results in full.
     log = next((tmp_path / "ground-logs").glob("*_ground_*.jsonl")).read_text().splitlines()
@@ -157,7 +159,11 @@ async def test_settings_are_sent_and_bad_ones_are_not(console):
     await until(pilot, lambda: "settings lateral: acknowledged" in log_text(app), "ack")
     settings = [m for m in r.aircraft.inbox if isinstance(m, messages.IdentSettings)][-1]
     assert (settings.markov, settings.order, settings.batch, settings.update_period_s) == (
-        12, "auto", True, 30.0)  # fmt: skip
+        12,
+        "auto",
+        True,
+        30.0,
+    )
     await until(pilot, lambda: "p 12" in text_of(app, "#settings-now"), "in effect")
     assert "every 30 s" in text_of(app, "#settings-now")
 

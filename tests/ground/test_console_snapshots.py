@@ -63,5 +63,7 @@ async def test_screen(tmp_path, tab, size):
             await until(pilot, lambda: station.rssi_dbm is not None, "RSSI")
             await pilot.press(tab)
             await pilot.pause(0.3)
-            matches(f"console-{app.query_one('#tabs').active}-{size[0]}x{size[1]}",
-                    app.export_screenshot())  # fmt: skip
+            matches(
+                f"console-{app.query_one('#tabs').active}-{size[0]}x{size[1]}",
+                app.export_screenshot(),
+            )

@@ -56,8 +56,14 @@ def full_preset_record(A, B, C):
 def test_noise_free_aircraft_is_recovered_with_its_engine_lag_and_no_coupling():
     A, B, C = aircraft_with_engine_lag()
     record = full_preset_record(A, B, C)
-    result = identify(record, DT, input_names=INPUTS, output_names=OUTPUTS,
-                      output_roles=OUTPUTS, settings=Settings(held_inputs=False))  # fmt: skip
+    result = identify(
+        record,
+        DT,
+        input_names=INPUTS,
+        output_names=OUTPUTS,
+        output_roles=OUTPUTS,
+        settings=Settings(held_inputs=False),
+    )
     assert result.method == "aircraft"  # chosen by "auto" for both axes' outputs
     report = result.aircraft
     assert report["model"] == "decoupled"
@@ -88,8 +94,14 @@ def test_the_same_identification_in_one_bin_set_per_record_batches_records():
     half = one.u.shape[0] // 2
     # Two records of one flight (a cut anywhere: each has its own transient).
     batch = [Experiment(one.u[:half], one.y[:half]), Experiment(one.u[half:], one.y[half:])]
-    result = identify(batch, DT, input_names=INPUTS, output_names=OUTPUTS,
-                      output_roles=OUTPUTS, settings=Settings(held_inputs=False))  # fmt: skip
+    result = identify(
+        batch,
+        DT,
+        input_names=INPUTS,
+        output_names=OUTPUTS,
+        output_roles=OUTPUTS,
+        settings=Settings(held_inputs=False),
+    )
     found = np.sort_complex(np.linalg.eigvals(result.continuous.A[:8, :8]))
     true = np.sort_complex(np.linalg.eigvals(A[:8, :8]))
     # A cut mid-flight leaves each record a large jump between its ends; the rectangle rule
@@ -103,8 +115,14 @@ def test_the_aircraft_method_without_an_axis_is_refused_clearly():
     record = full_preset_record(A, B, C)
     names = tuple(f"y{i}" for i in range(8))
     with pytest.raises(DataError, match="four outputs of an axis"):
-        identify(record, DT, input_names=INPUTS, output_names=names, output_roles=names,
-                 settings=Settings(method="aircraft"))  # fmt: skip
+        identify(
+            record,
+            DT,
+            input_names=INPUTS,
+            output_names=names,
+            output_roles=names,
+            settings=Settings(method="aircraft"),
+        )
 
 
 TRIM = {"airspeed": 30.0, "alpha": 0.06, "theta": 0.06}  # the operating point, SI
@@ -169,8 +187,9 @@ def gusty_record(seed: int, tau_q: float = 0.0):
     air[:, GUSTS] -= g
     x = inertial + op  # absolute, OUTPUTS order: V, α, q, θ, β, p, r, φ
     V, alpha, theta, beta, phi = x[:, 0], x[:, 1], x[:, 3], x[:, 4], x[:, 7]
-    body = np.column_stack([V * np.cos(alpha) * np.cos(beta), V * np.sin(beta),
-                            V * np.sin(alpha) * np.cos(beta)])  # fmt: skip
+    body = np.column_stack(
+        [V * np.cos(alpha) * np.cos(beta), V * np.sin(beta), V * np.sin(alpha) * np.cos(beta)]
+    )
     psi = np.full(len(V), 0.3)
     ned = np.empty_like(body)
     for k in range(len(V)):
@@ -179,11 +198,21 @@ def gusty_record(seed: int, tau_q: float = 0.0):
 
 
 def _body_to_ned(phi: float, theta: float, psi: float) -> np.ndarray:
-    cf, sf, ct, st, cp, sp = (np.cos(phi), np.sin(phi), np.cos(theta), np.sin(theta),
-                              np.cos(psi), np.sin(psi))  # fmt: skip
-    return np.array([[ct * cp, sf * st * cp - cf * sp, cf * st * cp + sf * sp],
-                     [ct * sp, sf * st * sp + cf * cp, cf * st * sp - sf * cp],
-                     [-st, sf * ct, cf * ct]])  # fmt: skip
+    cf, sf, ct, st, cp, sp = (
+        np.cos(phi),
+        np.sin(phi),
+        np.cos(theta),
+        np.sin(theta),
+        np.cos(psi),
+        np.sin(psi),
+    )
+    return np.array(
+        [
+            [ct * cp, sf * st * cp - cf * sp, cf * st * cp + sf * sp],
+            [ct * sp, sf * st * sp + cf * cp, cf * st * sp - sf * cp],
+            [-st, sf * ct, cf * ct],
+        ]
+    )
 
 
 def test_the_measured_wind_turns_the_gust_from_bias_into_excitation():
@@ -198,11 +227,14 @@ def test_the_measured_wind_turns_the_gust_from_bias_into_excitation():
         found = np.linalg.eigvals(result.continuous.A[:8, :8])
         return max(np.min(np.abs(found - t)) / max(abs(t), 1.0) for t in true)
 
-    common = dict(input_names=INPUTS, output_names=OUTPUTS, output_roles=OUTPUTS,
-                  settings=Settings(held_inputs=False))  # fmt: skip
+    common = dict(
+        input_names=INPUTS,
+        output_names=OUTPUTS,
+        output_roles=OUTPUTS,
+        settings=Settings(held_inputs=False),
+    )
     blind = identify(Experiment(u, air), DT, **common)
-    measured = identify(Experiment(u, air, operating_point=op, navigation=navigation), DT,
-                        **common)  # fmt: skip
+    measured = identify(Experiment(u, air, operating_point=op, navigation=navigation), DT, **common)
     report = measured.aircraft
     assert report["wind"]["measured"]
     assert report["kinematics"]
@@ -222,9 +254,14 @@ def test_the_pitch_rate_gust_is_modelled_from_the_alpha_gusts_rate():
     GUST_RATES emptied, 32 % off and a lateral coupling that is not there)."""
     u, air, op, navigation, A = gusty_record(seed=5, tau_q=0.4)
     true = np.linalg.eigvals(A[:8, :8])
-    result = identify(Experiment(u, air, operating_point=op, navigation=navigation), DT,
-                      input_names=INPUTS, output_names=OUTPUTS, output_roles=OUTPUTS,
-                      settings=Settings(held_inputs=False))  # fmt: skip
+    result = identify(
+        Experiment(u, air, operating_point=op, navigation=navigation),
+        DT,
+        input_names=INPUTS,
+        output_names=OUTPUTS,
+        output_roles=OUTPUTS,
+        settings=Settings(held_inputs=False),
+    )
     found = np.linalg.eigvals(result.continuous.A[:8, :8])
     worst = max(np.min(np.abs(found - t)) / max(abs(t), 1.0) for t in true)
     longitudinal = next(a for a in result.aircraft["axes"] if a["name"] == "longitudinal")
@@ -237,11 +274,21 @@ def test_navigation_of_the_wrong_shape_is_refused_clearly():
     # Bad input tried: navigation with a row missing, and an operating point one value short.
     u, air, op, navigation, _ = gusty_record(seed=1)
     with pytest.raises(DataError, match="navigation needs"):
-        identify(Experiment(u, air, operating_point=op, navigation=navigation[1:]), DT,
-                 input_names=INPUTS, output_names=OUTPUTS, output_roles=OUTPUTS)  # fmt: skip
+        identify(
+            Experiment(u, air, operating_point=op, navigation=navigation[1:]),
+            DT,
+            input_names=INPUTS,
+            output_names=OUTPUTS,
+            output_roles=OUTPUTS,
+        )
     with pytest.raises(DataError, match="operating point needs 8"):
-        identify(Experiment(u, air, operating_point=op[:7]), DT,
-                 input_names=INPUTS, output_names=OUTPUTS, output_roles=OUTPUTS)  # fmt: skip
+        identify(
+            Experiment(u, air, operating_point=op[:7]),
+            DT,
+            input_names=INPUTS,
+            output_names=OUTPUTS,
+            output_roles=OUTPUTS,
+        )
 
 
 def test_a_propellers_gyroscopic_coupling_is_found_as_a_coupling_block_of_a():
@@ -250,8 +297,14 @@ def test_a_propellers_gyroscopic_coupling_is_found_as_a_coupling_block_of_a():
     A, B, C = aircraft_with_engine_lag()
     A[2, 6] = -0.5
     record = full_preset_record(A, B, C)
-    result = identify(record, DT, input_names=INPUTS, output_names=OUTPUTS,
-                      output_roles=OUTPUTS, settings=Settings(held_inputs=False))  # fmt: skip
+    result = identify(
+        record,
+        DT,
+        input_names=INPUTS,
+        output_names=OUTPUTS,
+        output_roles=OUTPUTS,
+        settings=Settings(held_inputs=False),
+    )
     report = result.aircraft
     assert "longitudinal" in report["model"]
     assert "coupled" in report["model"]
@@ -272,8 +325,14 @@ def test_the_other_axis_joins_by_its_controls_or_its_states_not_both():
     A, B, C = aircraft_with_engine_lag()
     A[5:7, 9] = [0.04, -0.02]  # thrust state → ṗ, ṙ
     record = full_preset_record(A, B, C)
-    result = identify(record, DT, input_names=INPUTS, output_names=OUTPUTS,
-                      output_roles=OUTPUTS, settings=Settings(held_inputs=False))  # fmt: skip
+    result = identify(
+        record,
+        DT,
+        input_names=INPUTS,
+        output_names=OUTPUTS,
+        output_roles=OUTPUTS,
+        settings=Settings(held_inputs=False),
+    )
     report = result.aircraft
     coupling = report["coupling"]["lateral"]
     assert coupling["response_by_inputs"] > COUPLED

@@ -14,8 +14,10 @@ from agent.ident import DataError, Experiment, IdentificationFailed, identify, o
 from agent.ident.era import era
 from agent.ident.modal import modal_analysis
 
-GOOD = Experiment(u=np.random.default_rng(0).normal(size=(200, 1)),
-                  y=np.random.default_rng(1).normal(size=(200, 2)))  # fmt: skip
+GOOD = Experiment(
+    u=np.random.default_rng(0).normal(size=(200, 1)),
+    y=np.random.default_rng(1).normal(size=(200, 2)),
+)
 
 
 @pytest.mark.parametrize(

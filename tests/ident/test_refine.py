@@ -106,8 +106,9 @@ def test_a_refinement_stopped_at_its_iteration_limit_says_it_did_not_converge(mo
     settled = refine(start, DT, [exp], output_coordinates=True, estimate_d=False, hold="zoh")
     assert settled.converged
     monkeypatch.setattr(refine_module, "MAX_ITERATIONS", 1)
-    cut = refine(start, DT, [exp], output_coordinates=True, estimate_d=False, hold="zoh",
-                 max_passes=1)  # fmt: skip
+    cut = refine(
+        start, DT, [exp], output_coordinates=True, estimate_d=False, hold="zoh", max_passes=1
+    )
     assert not cut.converged
     assert cut.iterations == 1
     assert np.abs(cut.continuous.A - settled.continuous.A).max() > 1e-3  # stopped short of it
@@ -340,8 +341,9 @@ def test_the_jacobian_summed_stretch_by_stretch_is_the_whole_records(monkeypatch
         A = np.kron(np.eye(2), LAT.A) + 0.01 * rng.normal(size=(8, 8))
         model = StateSpace(A, np.vstack([LAT.B, LAT.B]), rng.normal(size=(4, 8)), np.zeros((4, 2)))
         free_c = True
-    problem = _Problem(model, DT, batch, [np.zeros(states)] * 2, free_c=free_c, free_d=False,
-                       hold="foh")  # fmt: skip
+    problem = _Problem(
+        model, DT, batch, [np.zeros(states)] * 2, free_c=free_c, free_d=False, hold="foh"
+    )
     assert (states * problem.basis.shape[1] > refine_module.DIRECT_SENSITIVITY_SIZE) == (
         states == 8
     )
@@ -357,5 +359,6 @@ def test_the_jacobian_summed_stretch_by_stretch_is_the_whole_records(monkeypatch
     assert np.allclose(g, whole.T @ res, rtol=0, atol=1e-10 * np.sqrt(scale) * np.abs(res).max())
     R = triangle[:, :-1]
     assert np.allclose(R.T @ R, whole.T @ whole, rtol=0, atol=1e-10 * scale)
-    assert np.allclose(np.linalg.svd(R, compute_uv=False), np.linalg.svd(whole, compute_uv=False),
-                       rtol=1e-8)  # fmt: skip
+    assert np.allclose(
+        np.linalg.svd(R, compute_uv=False), np.linalg.svd(whole, compute_uv=False), rtol=1e-8
+    )

@@ -37,8 +37,13 @@ class Pair:
 
 
 @contextlib.asynccontextmanager
-async def link_pair(tmp_path: Path, *, escaped: bool = False, channel: RfChannel | None = None,
-                    deadline_s: float = 3.0):  # fmt: skip
+async def link_pair(
+    tmp_path: Path,
+    *,
+    escaped: bool = False,
+    channel: RfChannel | None = None,
+    deadline_s: float = 3.0,
+):
     clock = LoopClock()
     channel = channel or RfChannel()
     air_module = EmulatedXBee("air", AIR_ADDR, tmp_path, channel, clock, escaped=escaped)
@@ -50,19 +55,33 @@ async def link_pair(tmp_path: Path, *, escaped: bool = False, channel: RfChannel
     ]
     await asyncio.sleep(0.05)
     ends = {}
-    for name, role, module, peer in (("air", AIRCRAFT, air_module, GROUND_ADDR),
-                                      ("ground", GROUND, ground_module, AIR_ADDR)):  # fmt: skip
+    for name, role, module, peer in (
+        ("air", AIRCRAFT, air_module, GROUND_ADDR),
+        ("ground", GROUND, ground_module, AIR_ADDR),
+    ):
         inbox: list = []
-        codec = LinkCodec(KEY, role, {peer}, counter=CounterStore(tmp_path / f"{name}.counter"),
-                          seen=tmp_path / f"{name}.seen")  # fmt: skip
+        codec = LinkCodec(
+            KEY,
+            role,
+            {peer},
+            counter=CounterStore(tmp_path / f"{name}.counter"),
+            seen=tmp_path / f"{name}.seen",
+        )
         holder: list[LinkSession] = []
-        radio = XBeeRadio(str(module.path), 115200, clock,
-                          lambda s, p, t, h=holder: h[0].receive(s, p, t))  # fmt: skip
+        radio = XBeeRadio(
+            str(module.path), 115200, clock, lambda s, p, t, h=holder: h[0].receive(s, p, t)
+        )
         await radio.open()
         codec.max_payload = radio.max_payload
         codec.address = radio.address
-        session = LinkSession(codec, radio, peer, clock, lambda m, _seq, box=inbox: box.append(m),
-                              deadline_s=deadline_s)  # fmt: skip
+        session = LinkSession(
+            codec,
+            radio,
+            peer,
+            clock,
+            lambda m, _seq, box=inbox: box.append(m),
+            deadline_s=deadline_s,
+        )
         holder.append(session)
         tasks.append(asyncio.create_task(session.run(), name=f"session-{name}"))
         tasks.append(asyncio.create_task(radio.watch(), name=f"radio-{name}"))

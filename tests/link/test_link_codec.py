@@ -26,10 +26,22 @@ AIR, GROUND_ADDR, INTRUDER = b"A" * 8, b"G" * 8, b"X" * 8
 
 
 def ends(tmp_path, max_payload: int = 256):
-    ground = LinkCodec(KEY, GROUND, {AIR}, counter=CounterStore(tmp_path / "g"),
-                       max_payload=max_payload, address=GROUND_ADDR)  # fmt: skip
-    air = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(tmp_path / "a"),
-                    max_payload=max_payload, address=AIR)  # fmt: skip
+    ground = LinkCodec(
+        KEY,
+        GROUND,
+        {AIR},
+        counter=CounterStore(tmp_path / "g"),
+        max_payload=max_payload,
+        address=GROUND_ADDR,
+    )
+    air = LinkCodec(
+        KEY,
+        AIRCRAFT,
+        {GROUND_ADDR},
+        counter=CounterStore(tmp_path / "a"),
+        max_payload=max_payload,
+        address=AIR,
+    )
     return ground, air
 
 

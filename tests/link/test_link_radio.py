@@ -24,18 +24,38 @@ pytestmark = pytest.mark.usefixtures("no_leaked_tasks")
 def full_result(model_id: str = "m1") -> messages.Result:
     """A full-model result: eight states, four inputs, eight outputs."""
     rng = np.random.default_rng(0)
-    mode = messages.ModeReport(name="Dutch roll", real=-0.6, imag=2.2, frequency_hz=0.36,
-                               damping=0.26, time_constant_s=None, msv=0.3, mci=0.8, moi=0.7,
-                               emac=0.95, mpc=0.3, cmi=0.7)  # fmt: skip
+    mode = messages.ModeReport(
+        name="Dutch roll",
+        real=-0.6,
+        imag=2.2,
+        frequency_hz=0.36,
+        damping=0.26,
+        time_constant_s=None,
+        msv=0.3,
+        mci=0.8,
+        moi=0.7,
+        emac=0.95,
+        mpc=0.3,
+        cmi=0.7,
+    )
     m = lambda r, c: rng.normal(size=(r, c)).tolist()  # noqa: E731
     return messages.Result(
-        model_id=model_id, axes="full", dt=0.04,
+        model_id=model_id,
+        axes="full",
+        dt=0.04,
         inputs=["throttle", "elevator", "aileron", "rudder"],
         outputs=["Vt", "alpha", "q", "theta", "beta", "p", "r", "phi"],
-        modes=[mode] * 5, tic=[0.1] * 8, tic_avg=0.1, stable=True, suggest_update=True,
-        reasons=["TIC 0.10 better than nominal 0.14"], A=m(8, 8), B=m(8, 4), C=m(8, 8),
+        modes=[mode] * 5,
+        tic=[0.1] * 8,
+        tic_avg=0.1,
+        stable=True,
+        suggest_update=True,
+        reasons=["TIC 0.10 better than nominal 0.14"],
+        A=m(8, 8),
+        B=m(8, 4),
+        C=m(8, 8),
         D=m(8, 4),
-    )  # fmt: skip
+    )
 
 
 @pytest.mark.parametrize("escaped", [False, True], ids=["AP=1", "AP=2"])
@@ -154,8 +174,13 @@ async def test_a_restarted_receiver_takes_the_senders_next_message(tmp_path):
         codec = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(tmp_path / "a2"))
         codec.max_payload = pair.air.radio.max_payload
         codec.address = pair.air.radio.address
-        session = LinkSession(codec, pair.air.radio, GROUND_ADDR, pair.air.session._clock,
-                              lambda m, _seq: inbox.append(m))  # fmt: skip
+        session = LinkSession(
+            codec,
+            pair.air.radio,
+            GROUND_ADDR,
+            pair.air.session._clock,
+            lambda m, _seq: inbox.append(m),
+        )
         pair.air.session = session
         pair.air.radio._on_frame = session.receive
         task = asyncio.create_task(session.run(), name="session-air-restarted")
@@ -198,16 +223,27 @@ async def test_an_agent_whose_radio_does_not_answer_at_start_records_and_links_l
         recorder=Recorder(log_dir=str(tmp_path / "logs"), capacity_s=60.0),
         sensors=Sensors(vn200=off, airdata=off, surfaces=off),
         autopilot=Autopilot(url="udpout://127.0.0.1:9", connect_timeout_s=0.5),
-        link=Link(port=str(air.path), peer=GROUND_ADDR.hex(), key_file="link.key",
-                  counter_file="air.counter", seen_file="air.seen"),
-    )  # fmt: skip
+        link=Link(
+            port=str(air.path),
+            peer=GROUND_ADDR.hex(),
+            key_file="link.key",
+            counter_file="air.counter",
+            seen_file="air.seen",
+        ),
+    )
     agent = Agent(config, base=tmp_path, clock=clock)
     running = asyncio.create_task(agent.run(), name="agent")
     inbox: list = []
-    ground_link = Link(port=str(ground_module.path), peer=AIR_ADDR.hex(), key_file="link.key",
-                       counter_file="ground.counter", seen_file="ground.seen")  # fmt: skip
-    radio, session = await open_endpoint(ground_link, GROUND, tmp_path, clock,
-                                         lambda m, _seq: inbox.append(m))  # fmt: skip
+    ground_link = Link(
+        port=str(ground_module.path),
+        peer=AIR_ADDR.hex(),
+        key_file="link.key",
+        counter_file="ground.counter",
+        seen_file="ground.seen",
+    )
+    radio, session = await open_endpoint(
+        ground_link, GROUND, tmp_path, clock, lambda m, _seq: inbox.append(m)
+    )
     ground = [asyncio.create_task(session.run(), name="ground-session")]
     try:
         assert await wait_for(lambda: agent.radio is not None)
@@ -298,8 +334,14 @@ async def test_a_command_acted_on_is_refused_when_replayed_after_a_reboot(tmp_pa
         pair.ground.session.send_reliable(messages.Revert())
         assert await wait_for(lambda: any(isinstance(m, messages.Revert) for m in pair.air.inbox))
         # The reboot, at once: a new end from the files the old one left.
-        rebooted = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(tmp_path / "r"),
-                             seen=tmp_path / "air.seen", address=AIR_ADDR)  # fmt: skip
+        rebooted = LinkCodec(
+            KEY,
+            AIRCRAFT,
+            {GROUND_ADDR},
+            counter=CounterStore(tmp_path / "r"),
+            seen=tmp_path / "air.seen",
+            address=AIR_ADDR,
+        )
         replayed = [rebooted.decode(source, payload, 0.0) for source, payload in heard]
     assert heard
     assert replayed == [None] * len(heard)
@@ -320,8 +362,13 @@ def test_a_missing_or_damaged_replay_state_refuses_the_link(tmp_path):
     (tmp_path / "link.key").write_text(KEY.hex())
 
     (tmp_path / "link.key").chmod(0o600)
-    cfg = Link(port=str(tmp_path / "nowhere"), peer=GROUND_ADDR.hex(), key_file="link.key",
-               counter_file="air.counter", seen_file="air.seen")  # fmt: skip
+    cfg = Link(
+        port=str(tmp_path / "nowhere"),
+        peer=GROUND_ADDR.hex(),
+        key_file="link.key",
+        counter_file="air.counter",
+        seen_file="air.seen",
+    )
     build_endpoint(cfg, AIRCRAFT, tmp_path, LoopClock(), lambda *_: None)  # a first start
     assert (tmp_path / "air.seen").read_text() == "{}"  # its state starts saved
     (tmp_path / "air.seen").unlink()
@@ -360,8 +407,9 @@ async def test_a_frame_of_an_older_session_reordered_behind_a_new_one_is_dropped
 
     # The ground's codec under both of its sessions (a session restarted on the same codec):
     # consecutive frame counters, so the old frame is inside the replay window.
-    ground = LinkCodec(KEY, GROUND, {AIR_ADDR}, counter=CounterStore(tmp_path / "gc"),
-                       address=GROUND_ADDR)  # fmt: skip
+    ground = LinkCodec(
+        KEY, GROUND, {AIR_ADDR}, counter=CounterStore(tmp_path / "gc"), address=GROUND_ADDR
+    )
 
     def reliable(text: str, epoch: int) -> dict:
         return messages.to_dict(messages.Notice(text=text)) | {"e": epoch, "s": 1, "b": 1}
@@ -397,14 +445,16 @@ async def test_a_radio_with_its_encryption_off_is_reported_or_refused(tmp_path):
         assert plain.encrypted is False
         assert plain.counters["unencrypted_opens"] == 1
         await plain.close()
-        strict = XBeeRadio(str(module.path), 115200, clock, lambda *_: None,
-                           require_encryption=True)  # fmt: skip
+        strict = XBeeRadio(
+            str(module.path), 115200, clock, lambda *_: None, require_encryption=True
+        )
         with pytest.raises(RadioError, match=r"encryption is off \(EE = 0\)"):
             await strict.open()
         await strict.close()
         module.encryption = True
-        secured = XBeeRadio(str(module.path), 115200, clock, lambda *_: None,
-                            require_encryption=True)  # fmt: skip
+        secured = XBeeRadio(
+            str(module.path), 115200, clock, lambda *_: None, require_encryption=True
+        )
         await secured.open()
         assert secured.encrypted is True
         assert secured.counters["unencrypted_opens"] == 0
@@ -432,9 +482,14 @@ async def test_an_agent_whose_link_is_refused_flies_and_records(tmp_path):
         recorder=Recorder(log_dir=str(tmp_path / "logs"), capacity_s=60.0),
         sensors=Sensors(vn200=off, airdata=off, surfaces=off),
         autopilot=Autopilot(url="udpout://127.0.0.1:9", connect_timeout_s=0.5),
-        link=Link(port=str(tmp_path / "nowhere"), peer=GROUND_ADDR.hex(), key_file="link.key",
-                  counter_file="air.counter", seen_file="air.seen"),
-    )  # fmt: skip
+        link=Link(
+            port=str(tmp_path / "nowhere"),
+            peer=GROUND_ADDR.hex(),
+            key_file="link.key",
+            counter_file="air.counter",
+            seen_file="air.seen",
+        ),
+    )
     agent = Agent(config, base=tmp_path, clock=LoopClock())
     running = asyncio.create_task(agent.run(), name="agent")
     try:

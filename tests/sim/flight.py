@@ -27,12 +27,19 @@ class Flight:
 
 
 @contextlib.asynccontextmanager
-async def flight(tmp_path: Path, *, params: Params | None = None, system_id: int = 255,
-                 noise: bool = True, sensor_rate_hz: float = 100.0,
-                 **link_options):  # fmt: skip
+async def flight(
+    tmp_path: Path,
+    *,
+    params: Params | None = None,
+    system_id: int = 255,
+    noise: bool = True,
+    sensor_rate_hz: float = 100.0,
+    **link_options,
+):
     clock = LoopClock()
-    options = AircraftOptions(params=params or Params(switch_channel=SWITCH), noise=noise,
-                              sensor_rate_hz=sensor_rate_hz)  # fmt: skip
+    options = AircraftOptions(
+        params=params or Params(switch_channel=SWITCH), noise=noise, sensor_rate_hz=sensor_rate_hz
+    )
     aircraft = SimAircraft(options, clock, tmp_path)
     sim_task = asyncio.create_task(aircraft.run(), name="sim-aircraft")
     while aircraft.mavlink_address is None:
@@ -41,11 +48,13 @@ async def flight(tmp_path: Path, *, params: Params | None = None, system_id: int
     config = AutopilotConfig(url=f"udpout://{host}:{port}", system_id=system_id, **link_options)
     holder: list[Flight] = []
     link = AutopilotLink(
-        config, clock, switch_channel=SWITCH,
+        config,
+        clock,
+        switch_channel=SWITCH,
         on_switch=lambda pwm, t: holder[0].switch.append((pwm, t)),
         on_state=lambda s: holder[0].states.append(s),
         on_link=lambda up, why: holder[0].links.append((up, why, clock.now())),
-    )  # fmt: skip
+    )
     f = Flight(aircraft, link, [sim_task])
     holder.append(f)
     f.tasks.append(asyncio.create_task(link.run(), name="autopilot-link"))

@@ -19,8 +19,13 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def _run(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"}
-    return subprocess.run([sys.executable, "-m", "agent", "sim-aircraft", *args], env=env,
-                          capture_output=True, text=True, timeout=timeout)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-m", "agent", "sim-aircraft", *args],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
 
 
 def test_announces_the_mavlink_url_and_sensor_ports_then_stops(tmp_path):
@@ -40,8 +45,9 @@ def test_unknown_aircraft_is_a_clear_error(tmp_path):
 
 
 def test_sensor_rate_is_announced_and_checked(tmp_path):
-    result = _run("--duration", "1", "--pty-dir", str(tmp_path), "--mavlink-port", "0",
-                  "--sensor-rate", "400")  # fmt: skip
+    result = _run(
+        "--duration", "1", "--pty-dir", str(tmp_path), "--mavlink-port", "0", "--sensor-rate", "400"
+    )
     assert result.returncode == 0, result.stderr
     assert "VN-200 (binary, 400 Hz)" in result.stdout
     for rate in ("250", "0", "-100", "1200", "30"):

@@ -84,8 +84,9 @@ def test_jsbsims_banner_stays_off_stdout():
     import sys
 
     code = "from agent.sim.plant import Plant; Plant(); print('{\"ok\": 1}')"
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=120, check=True)  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True
+    )
     assert done.stdout == '{"ok": 1}\n'
     assert "JSBSim" in done.stderr  # moved, not lost
 
@@ -101,8 +102,11 @@ def test_sim_json_on_an_aircraft_jsbsim_does_not_have_is_one_error_object():
     assert done.returncode == 2
     assert done.stdout.count("\n") == 1  # one line: JSBSim's banner and errors went to stderr
     error = json.loads(done.stdout)["error"]
-    assert error == {"kind": "error", "exit": 2,
-                     "message": "JSBSim has no aircraft 'no-such-aircraft'"}  # fmt: skip
+    assert error == {
+        "kind": "error",
+        "exit": 2,
+        "message": "JSBSim has no aircraft 'no-such-aircraft'",
+    }
 
 
 def test_the_attitude_keeps_step_with_the_body_rates():
@@ -113,8 +117,12 @@ def test_the_attitude_keeps_step_with_the_body_rates():
     t = np.arange(2000) * plant.dt
     theta, q, r, phi = (np.empty(len(t)) for _ in range(4))
     for k, time in enumerate(t):
-        plant.command({"elevator": 0.05 * np.sin(2 * np.pi * 1.1 * time),
-                       "aileron": 0.05 * np.sin(2 * np.pi * 0.7 * time)})  # fmt: skip
+        plant.command(
+            {
+                "elevator": 0.05 * np.sin(2 * np.pi * 1.1 * time),
+                "aileron": 0.05 * np.sin(2 * np.pi * 0.7 * time),
+            }
+        )
         plant.step()
         s = plant.state()
         theta[k], q[k], r[k], phi[k] = s["theta"], s["q"], s["r"], s["phi"]

@@ -44,8 +44,7 @@ async def test_operator_flies_the_lateral_preset_from_the_console(tmp_path):
             app.save_screenshot("console-results.svg", path=save)
         await pilot.press("y")
         await pilot.press("y")
-        await until(pilot, lambda: f"accept {model_id}: acknowledged" in log_text(app),
-                    "accept")  # fmt: skip
+        await until(pilot, lambda: f"accept {model_id}: acknowledged" in log_text(app), "accept")
         await until(pilot, lambda: f"nominal {model_id}" in text_of(app, "#top"), "nominal")
     assert sim.agent.models.nominal_id("lateral") == model_id
     assert not sim.aircraft.pilot.switch_high  # the pilot took the switch back after the run

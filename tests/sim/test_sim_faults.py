@@ -90,10 +90,14 @@ async def test_switch_dropped_mid_run_trims_within_one_period_then_releases(tmp_
     }
     assert set(trim) == {1, 4}
     # The first report of the low switch to go out on the wire after the drop.
-    reported = next(t for t, kind, *rest in wire if kind == "switch" and t >= dropped
-                    and rest[0] < 1500)  # fmt: skip
-    after = [(t, values) for t, kind, values, accepted in
-             (e for e in wire if e[1] == "override") if t >= reported]  # fmt: skip
+    reported = next(
+        t for t, kind, *rest in wire if kind == "switch" and t >= dropped and rest[0] < 1500
+    )
+    after = [
+        (t, values)
+        for t, kind, values, accepted in (e for e in wire if e[1] == "override")
+        if t >= reported
+    ]
     trims = [k for k, (_, values) in enumerate(after) if values == trim]
     assert trims, f"no trim override after the switch report: {after[:5]}"
     first_trim = trims[0]

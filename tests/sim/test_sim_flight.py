@@ -63,8 +63,14 @@ def post_flight(directory, report) -> None:
         env["OPENBLAS_NUM_THREADS"] = os.environ["OPENBLAS_NUM_THREADS"]
 
     def sysid(*args):
-        done = subprocess.run([sys.executable, "-m", "agent", *map(str, args)], cwd=directory,
-                              capture_output=True, text=True, timeout=120, env=env)  # fmt: skip
+        done = subprocess.run(
+            [sys.executable, "-m", "agent", *map(str, args)],
+            cwd=directory,
+            capture_output=True,
+            text=True,
+            timeout=120,
+            env=env,
+        )
         assert done.returncode == 0, (args, done.stderr)
         return done.stdout
 
@@ -104,6 +110,14 @@ def post_flight(directory, report) -> None:
     header = (directory / "ardupilot.csv").read_text().split("\n")
     columns = next(line for line in header if line.startswith("time,")).split(",")
     assert {"phi", "p", "r", "beta", "Vt", "aileron", "rudder"} <= set(columns)
-    sysid("report", logs, "--axes", "lateral", "--out", directory / "report",
-          "--nominal", directory / "models" / "lateral_nominal.json")  # fmt: skip
+    sysid(
+        "report",
+        logs,
+        "--axes",
+        "lateral",
+        "--out",
+        directory / "report",
+        "--nominal",
+        directory / "models" / "lateral_nominal.json",
+    )
     assert (directory / "report" / "s_plane.png").stat().st_size > 10_000

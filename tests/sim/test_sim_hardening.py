@@ -87,13 +87,17 @@ def trim_of(started: messages.ExcitationEvent) -> dict[int, int]:
     }
 
 
-def assert_trimmed_then_released(sim: SimFlight, started: messages.ExcitationEvent,
-                                 since: float) -> None:  # fmt: skip
+def assert_trimmed_then_released(
+    sim: SimFlight, started: messages.ExcitationEvent, since: float
+) -> None:
     """After `since`: an override holding the trim of the excited channels, then the release of
     exactly those channels, and the ArduPlane holding no override any more."""
     ap, trim = sim.aircraft.autopilot, trim_of(started)
-    after = [values for t, kind, values, accepted in (e for e in ap.wire if e[1] == "override")
-             if t >= since and accepted]  # fmt: skip
+    after = [
+        values
+        for t, kind, values, accepted in (e for e in ap.wire if e[1] == "override")
+        if t >= since and accepted
+    ]
     assert trim in after, f"no trim override after the fault: {after[:5]}"
     rest = after[after.index(trim) + 1 :]
     release = {ch: RELEASE_LOW for ch in trim}
@@ -126,10 +130,12 @@ async def test_a_hostile_transmitter_and_half_the_frames_lost_change_nothing(tmp
         sim.channel.loss = 0.5  # every over-the-air attempt, both ways, the intruder's too
         seen = await start_run(sim, "under-attack")
         started = received(sim, messages.ExcitationEvent, seen, event="started")[0]
-        dropped_before = sum(codec.counters.values()) - codec.counters["frames"] - codec.counters[
-            "messages"]  # fmt: skip
-        uplink = [p for s, d, p in sim.channel.heard
-                  if s == GROUND_ADDR and d == AIR and p not in early]  # fmt: skip
+        dropped_before = (
+            sum(codec.counters.values()) - codec.counters["frames"] - codec.counters["messages"]
+        )
+        uplink = [
+            p for s, d, p in sim.channel.heard if s == GROUND_ADDR and d == AIR and p not in early
+        ]
         assert uplink, "the eavesdropper heard no uplink frame to replay"
         rng = np.random.default_rng(7)
         body = msgpack.packb(messages.to_dict(messages.Abort(reason="forged")))
@@ -155,8 +161,9 @@ async def test_a_hostile_transmitter_and_half_the_frames_lost_change_nothing(tmp
         result = await answer(sim, seen)
         assert isinstance(result, messages.Result), result
         delivered = intruder.counters["delivered"]
-        dropped = sum(codec.counters.values()) - codec.counters["frames"] - codec.counters[
-            "messages"]  # fmt: skip
+        dropped = (
+            sum(codec.counters.values()) - codec.counters["frames"] - codec.counters["messages"]
+        )
         counters = Counter(codec.counters)
         released = sim.clock.now()
         sim.aircraft.pilot.set_switch(False)
@@ -254,15 +261,17 @@ def _dead(pid: int) -> bool:
 
 
 async def test_kill_9_mid_run_lets_the_pilot_back_and_loses_no_logged_byte(tmp_path):
-    async with simulated(SimOptions(preset="lateral", directory=tmp_path),
-                         agent_process=True) as sim:  # fmt: skip
+    async with simulated(
+        SimOptions(preset="lateral", directory=tmp_path), agent_process=True
+    ) as sim:
         ap, agent = sim.aircraft.autopilot, sim.agent
         await start_run(sim, "kill-9")
         await asyncio.sleep(1.5)  # inside the aileron doublet: overrides held
         assert ap._overrides
         children = Path(f"/proc/{agent.pid}/task/{agent.pid}/children").read_text().split()
-        worker = next(int(c) for c in children
-                      if b"spawn_main" in Path(f"/proc/{c}/cmdline").read_bytes())  # fmt: skip
+        worker = next(
+            int(c) for c in children if b"spawn_main" in Path(f"/proc/{c}/cmdline").read_bytes()
+        )
         killed = sim.clock.now()
         agent.kill(signal.SIGKILL)
         # Nothing of ours can act now: ArduPilot's RC_OVERRIDE_TIME hands every channel back
@@ -357,8 +366,11 @@ async def test_an_autopilot_reboot_mid_run_aborts_to_trim_and_the_agent_reconnec
         await asyncio.sleep(0.5)
         ack = await sim.ground.command(messages.Arm(plan=preset("lateral", plan_id="again")))
         assert ack.ok, ack.reason  # and takes a new plan
-        after = [values for t, kind, values, accepted in (e for e in ap.wire
-                 if e[1] == "override") if t >= rebooted and accepted]  # fmt: skip
+        after = [
+            values
+            for t, kind, values, accepted in (e for e in ap.wire if e[1] == "override")
+            if t >= rebooted and accepted
+        ]
         overrides = dict(ap._overrides)
     assert ap.counters["reboots"] == 1
     assert "autopilot" in end.detail or "stale" in end.detail, end.detail

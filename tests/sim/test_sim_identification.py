@@ -103,8 +103,10 @@ async def test_sensors_at_400_hz_subdivide_the_autopilot_tick(tmp_path):
             surfaces=SurfacePort(port=str(tmp_path / "surfaces"), rate_hz=400.0),
         )
         recorder = Recorder(RecorderConfig(rate_hz=400.0), clock)
-        drivers = [make(sensors, clock, recorder.push)
-                   for make in (vn200_driver, airdata_driver, surfaces_driver)]  # fmt: skip
+        drivers = [
+            make(sensors, clock, recorder.push)
+            for make in (vn200_driver, airdata_driver, surfaces_driver)
+        ]
         f.tasks += [asyncio.create_task(d.run(), name=d.name) for d in drivers]
         f.tasks.append(asyncio.create_task(recorder.run(), name="recorder"))
         await asyncio.sleep(1.0)

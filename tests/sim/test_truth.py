@@ -15,8 +15,12 @@ from agent.sim.truth import CHECK_TIC, check, linear_truth
 
 BENCHMARK = [("J3Cub", 60.0), ("c182", 90.0), ("pa28", 90.0)]
 # The outputs each test is mainly for.
-PRIMARY = {"throttle": ("Vt", "theta"), "elevator": ("alpha", "q"), "aileron": ("p", "phi"),
-           "rudder": ("beta", "r")}  # fmt: skip
+PRIMARY = {
+    "throttle": ("Vt", "theta"),
+    "elevator": ("alpha", "q"),
+    "aileron": ("p", "phi"),
+    "rudder": ("beta", "r"),
+}
 
 
 @pytest.fixture(scope="module", params=BENCHMARK, ids=[a for a, _ in BENCHMARK])

@@ -46,8 +46,18 @@ def window() -> dict[str, np.ndarray]:
 
 
 def _job(values: dict[str, np.ndarray]) -> dict:
-    job = Job("ful-1", "full", 0.01, INPUTS, OUTPUTS, ROLES, (), Settings(held_inputs=False),
-              window=values, navigation=CHANNELS.navigation())  # fmt: skip
+    job = Job(
+        "ful-1",
+        "full",
+        0.01,
+        INPUTS,
+        OUTPUTS,
+        ROLES,
+        (),
+        Settings(held_inputs=False),
+        window=values,
+        navigation=CHANNELS.navigation(),
+    )
     outcome = run(job)
     assert outcome["ok"], outcome.get("reason")
     return outcome["result"]["aircraft"]
@@ -98,8 +108,9 @@ def test_sysid_identify_on_a_csv_record_uses_the_trim_and_the_wind(tmp_path, cap
     assert report["wind"]["measured"]
     assert report["wind"]["gust_rms"] == pytest.approx(onboard["wind"]["gust_rms"], rel=1e-6)
     # Without the INS columns the same record is identified without the wind, not refused.
-    _csv(tmp_path / "no_ins.csv", {k: v for k, v in window.items()
-                                   if k not in CHANNELS.navigation()})  # fmt: skip
+    _csv(
+        tmp_path / "no_ins.csv", {k: v for k, v in window.items() if k not in CHANNELS.navigation()}
+    )
     report = _identify(capsys, tmp_path / "no_ins.csv")
     assert report["kinematics"]
     assert not report["wind"]["measured"]
@@ -131,8 +142,9 @@ def test_sysid_analyze_replays_an_agent_log_with_the_trim_and_the_wind(tmp_path,
     config = Config().identification
     request = Request((path,), INPUTS, OUTPUTS, navigation=config.channels.navigation())
     settings = settings_from(config, None, None)
-    cases, dt = an.build_cases(request, ROLES, settings, batch=False, sweep=None,
-                               input_roles=CHANNELS_ROLES)  # fmt: skip
+    cases, dt = an.build_cases(
+        request, ROLES, settings, batch=False, sweep=None, input_roles=CHANNELS_ROLES
+    )
     assert dt == pytest.approx(DT)
     (outcome,) = an.run_cases(cases)
     assert outcome["ok"], outcome.get("reason")
