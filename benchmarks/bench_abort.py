@@ -35,18 +35,15 @@ os.environ.setdefault("JSBSIM_DEBUG", "0")  # no JSBSim banner on stdout
 from agent.excitation.plan import preset
 from agent.link import messages
 from agent.sim.ardupilot import Params
-from agent.sim.flight import SimOptions, simulated
+from agent.sim.flight import SimOptions, simulated, until
 
 CHANNEL = {"aileron": 1, "elevator": 2, "throttle": 3, "rudder": 4}
 
 
 async def _until(predicate, timeout: float, what: str):
-    loop = asyncio.get_running_loop()
-    end = loop.time() + timeout
-    while not (found := predicate()):
-        if loop.time() > end:
-            raise TimeoutError(f"no {what} in {timeout:g} s")
-        await asyncio.sleep(0.01)
+    found = await until(predicate, timeout, poll_s=0.01)
+    if found is None:
+        raise TimeoutError(f"no {what} in {timeout:g} s")
     return found
 
 

@@ -105,19 +105,21 @@ class Ground:
 
     async def command(self, message) -> messages.Ack:
         seq = self.session.send_reliable(message)
-        if not await _until(lambda: seq in self.acks, ACK_S):
+        if not await until(lambda: seq in self.acks, ACK_S):
             raise SimError(f"no acknowledgement of {message.kind} in {ACK_S:g} s")
         return self.acks[seq]
 
 
-async def _until(predicate, timeout: float) -> bool:
+async def until(predicate, timeout: float, poll_s: float = 0.05):
+    """predicate()'s first truthy value, polled every `poll_s`; None after `timeout` seconds
+    (the simulator's and the benchmarks' waits: each has its own reason for its bound)."""
     loop = asyncio.get_running_loop()
     end = loop.time() + timeout
-    while not predicate():
+    while not (found := predicate()):
         if loop.time() > end:
-            return False
-        await asyncio.sleep(0.05)
-    return True
+            return None
+        await asyncio.sleep(poll_s)
+    return found
 
 
 # The simulated aircraft's envelope around its trim, as an operator would set it for that
@@ -301,7 +303,7 @@ async def _parts(
     ]
     ground = agent = None
     try:
-        if not await _until(
+        if not await until(
             lambda: (
                 aircraft.mavlink_address is not None
                 and air.port.plugged
@@ -329,7 +331,7 @@ async def _parts(
                 return ground is not None and ground.flight_mode() is not None
             return agent.autopilot.connected and (ground is None or ground.session.link_up)
 
-        if not await _until(connected, CONNECT_S):
+        if not await until(connected, CONNECT_S):
             if agent_process:
                 missing = "the autopilot and the ground (no status with a flight mode)"
             else:
@@ -398,7 +400,7 @@ async def one_run(options: SimOptions, aircraft: SimAircraft, ground: Ground, ru
     def answered() -> bool:
         return any(isinstance(m, messages.Result | messages.Failure) for m in ground.inbox[seen:])
 
-    if not await _until(answered, 60.0 + RESULT_S):
+    if not await until(answered, 60.0 + RESULT_S):
         raise SimError(f"no identification result for {plan.id}")
     aircraft.pilot.set_switch(False)
     answer = next(
