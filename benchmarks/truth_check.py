@@ -18,27 +18,16 @@ import numpy as np
 import scipy.linalg
 
 from agent.sim import truth as T  # noqa: N812 — T for truth, as in the docs
-from agent.sim.plant import FT, INPUTS, Plant
+from agent.sim.plant import FT, INPUTS, LINEAR_INPUTS, LINEAR_STATES, Plant
 
 BENCHMARK = [("J3Cub", 60.0), ("c182", 90.0), ("pa28", 90.0)]
-FG_STATES = {
-    "Vt": "Vt",
-    "alpha": "Alpha",
-    "q": "Q",
-    "theta": "Theta",
-    "beta": "Beta",
-    "p": "P",
-    "r": "R",
-    "phi": "Phi",
-}
-FG_INPUTS = {"throttle": "ThtlCmd", "elevator": "DeCmd", "aileron": "DaCmd", "rudder": "DrCmd"}
 
 
 def fg_worst(aircraft: str, speed: float, ours: list[T.Check]) -> dict[str, float]:
     """FGLinearization's worst TIC per test, over the outputs our check counted."""
     lin = Plant(aircraft, airspeed_kts=speed).linearisation
     names = list(lin.state_names)
-    B = lin.B[:, [lin.input_names.index(FG_INPUTS[i]) for i in INPUTS]]
+    B = lin.B[:, [lin.input_names.index(LINEAR_INPUTS[i]) for i in INPUTS]]
     rate = 200.0
     block = np.zeros((len(names) + len(INPUTS),) * 2)
     block[: len(names), : len(names)], block[: len(names), len(names) :] = lin.A, B
@@ -52,7 +41,7 @@ def fg_worst(aircraft: str, speed: float, ours: list[T.Check]) -> dict[str, floa
         predicted = np.empty((len(commands), len(T.OUTPUTS)))
         for k, row in enumerate(commands):
             state = Ad @ state + Bd @ row
-            predicted[k] = [state[names.index(FG_STATES[o])] for o in T.OUTPUTS]
+            predicted[k] = [state[names.index(LINEAR_STATES[o])] for o in T.OUTPUTS]
         predicted[:, 0] *= FT  # Vt: ft/s → m/s, as the truth's states
         tic = T.theil(x[:, :8], predicted)
         worst[name] = max(tic[T.OUTPUTS.index(o)] for o in check.counted)

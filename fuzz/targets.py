@@ -30,6 +30,7 @@ from drivers.airdata.codec import MAX_LINE, AirData, AirDataCodec
 from drivers.codec import StreamDecoder
 from drivers.surfaces.codec import LENGTH, SurfaceCodec, SurfaceFrame
 from drivers.vectornav.codec import (
+    ASCII_FIELDS,
     MAX_ASCII,
     MAX_PACKET,
     AsciiCodec,
@@ -198,23 +199,7 @@ def seeds(name: str) -> list[bytes]:
                 AsciiCodec().encode(
                     VnAscii(
                         "VNYMR",
-                        dict.fromkeys(
-                            (
-                                "yaw",
-                                "pitch",
-                                "roll",
-                                "mag_x",
-                                "mag_y",
-                                "mag_z",
-                                "accel_x",
-                                "accel_y",
-                                "accel_z",
-                                "gyro_x",
-                                "gyro_y",
-                                "gyro_z",
-                            ),
-                            1.5,
-                        ),
+                        dict.fromkeys(ASCII_FIELDS["VNYMR"], 1.5),
                     ),
                     crc=crc,
                 )

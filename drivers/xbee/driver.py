@@ -190,7 +190,7 @@ class XBeeRadio:
                 return False
             opened = os.fstat(device.serial_port.fileno()).st_rdev
             return os.stat(self.port).st_rdev == opened
-        except Exception:  # the path gone, or a half-torn-down device
+        except (OSError, AttributeError, ValueError):  # the path gone, a half-torn-down device
             return False
 
     async def watch(self) -> None:

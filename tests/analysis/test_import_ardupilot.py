@@ -120,13 +120,8 @@ def test_the_imported_record_identifies_the_known_pole(tmp_path):
         timeout=120,
         env={"PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1", "PATH": "/usr/bin:/bin"},
     )
-    done = run("import", str(tmp_path / "sid.bin"), "--out", str(csv))
-    assert done.returncode == 0, done.stderr
-    assert "1 rows" not in done.stdout
-    assert "note: ArduPilot SystemID run" in done.stdout
-    done = run(
-        "identify",
-        str(csv),
+    # The SystemID run's roll axis, as `sysid identify` and `sysid analyze` are told it.
+    window = (
         "--inputs",
         "aileron",
         "--outputs",
@@ -137,6 +132,15 @@ def test_the_imported_record_identifies_the_known_pole(tmp_path):
         "27",
         "--order",
         "1",
+    )
+    done = run("import", str(tmp_path / "sid.bin"), "--out", str(csv))
+    assert done.returncode == 0, done.stderr
+    assert "1 rows" not in done.stdout
+    assert "note: ArduPilot SystemID run" in done.stdout
+    done = run(
+        "identify",
+        str(csv),
+        *window,
         "--json",
     )
     assert done.returncode == 0, done.stderr
@@ -146,16 +150,7 @@ def test_the_imported_record_identifies_the_known_pole(tmp_path):
     done = run(
         "analyze",
         str(csv),
-        "--inputs",
-        "aileron",
-        "--outputs",
-        "p",
-        "--start",
-        "4",
-        "--end",
-        "27",
-        "--order",
-        "1",
+        *window,
         "--sweep",
         "markov=1:3",
         "--json",
@@ -167,16 +162,7 @@ def test_the_imported_record_identifies_the_known_pole(tmp_path):
     done = run(
         "report",
         str(csv),
-        "--inputs",
-        "aileron",
-        "--outputs",
-        "p",
-        "--start",
-        "4",
-        "--end",
-        "27",
-        "--order",
-        "1",
+        *window,
         "--out",
         str(tmp_path / "report"),
     )

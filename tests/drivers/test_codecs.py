@@ -21,7 +21,7 @@ import pytest
 from drivers.airdata.codec import AirData, AirDataCodec
 from drivers.codec import StreamDecoder, crc16_xmodem
 from drivers.surfaces.codec import SurfaceCodec, SurfaceFrame
-from drivers.vectornav.codec import AsciiCodec, BinaryCodec, VnAscii, VnPacket
+from drivers.vectornav.codec import ASCII_FIELDS, AsciiCodec, BinaryCodec, VnAscii, VnPacket
 from drivers.xbee import codec as xbee
 
 
@@ -50,20 +50,7 @@ ASCII = [
         "VNYMR",
         dict(
             zip(
-                (
-                    "yaw",
-                    "pitch",
-                    "roll",
-                    "mag_x",
-                    "mag_y",
-                    "mag_z",
-                    "accel_x",
-                    "accel_y",
-                    "accel_z",
-                    "gyro_x",
-                    "gyro_y",
-                    "gyro_z",
-                ),
+                ASCII_FIELDS["VNYMR"],
                 [12.5 + k, 1.25, -3.5, 0.25, 0.5, 0.75, 0.125, -0.25, -9.75, 0.0625, -0.03125, 0.5],
                 strict=True,
             )

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from agent.excitation.plan import preset, render
-from agent.ident import Experiment, Settings, identify
+from agent.ident import Experiment, Identification, Settings, identify
 from agent.ident.aircraft import (
     COUPLED,
     SMOOTH_BINS,
@@ -53,10 +53,10 @@ def full_preset_record(A, B, C):
     return Experiment(u, simulate(model, u))
 
 
-def test_noise_free_aircraft_is_recovered_with_its_engine_lag_and_no_coupling():
-    A, B, C = aircraft_with_engine_lag()
-    record = full_preset_record(A, B, C)
-    result = identify(
+def aircraft_identify(record) -> Identification:
+    """The whole record identified as the agent does for `--axes full`: every channel named
+    by its role, the inputs sampled (not held)."""
+    return identify(
         record,
         DT,
         input_names=INPUTS,
@@ -64,6 +64,12 @@ def test_noise_free_aircraft_is_recovered_with_its_engine_lag_and_no_coupling():
         output_roles=OUTPUTS,
         settings=Settings(held_inputs=False),
     )
+
+
+def test_noise_free_aircraft_is_recovered_with_its_engine_lag_and_no_coupling():
+    A, B, C = aircraft_with_engine_lag()
+    record = full_preset_record(A, B, C)
+    result = aircraft_identify(record)
     assert result.method == "aircraft"  # chosen by "auto" for both axes' outputs
     report = result.aircraft
     assert report["model"] == "decoupled"
@@ -94,14 +100,7 @@ def test_the_same_identification_in_one_bin_set_per_record_batches_records():
     half = one.u.shape[0] // 2
     # Two records of one flight (a cut anywhere: each has its own transient).
     batch = [Experiment(one.u[:half], one.y[:half]), Experiment(one.u[half:], one.y[half:])]
-    result = identify(
-        batch,
-        DT,
-        input_names=INPUTS,
-        output_names=OUTPUTS,
-        output_roles=OUTPUTS,
-        settings=Settings(held_inputs=False),
-    )
+    result = aircraft_identify(batch)
     found = np.sort_complex(np.linalg.eigvals(result.continuous.A[:8, :8]))
     true = np.sort_complex(np.linalg.eigvals(A[:8, :8]))
     # A cut mid-flight leaves each record a large jump between its ends; the rectangle rule
@@ -227,14 +226,8 @@ def test_the_measured_wind_turns_the_gust_from_bias_into_excitation():
         found = np.linalg.eigvals(result.continuous.A[:8, :8])
         return max(np.min(np.abs(found - t)) / max(abs(t), 1.0) for t in true)
 
-    common = dict(
-        input_names=INPUTS,
-        output_names=OUTPUTS,
-        output_roles=OUTPUTS,
-        settings=Settings(held_inputs=False),
-    )
-    blind = identify(Experiment(u, air), DT, **common)
-    measured = identify(Experiment(u, air, operating_point=op, navigation=navigation), DT, **common)
+    blind = aircraft_identify(Experiment(u, air))
+    measured = aircraft_identify(Experiment(u, air, operating_point=op, navigation=navigation))
     report = measured.aircraft
     assert report["wind"]["measured"]
     assert report["kinematics"]
@@ -254,14 +247,7 @@ def test_the_pitch_rate_gust_is_modelled_from_the_alpha_gusts_rate():
     GUST_RATES emptied, 32 % off and a lateral coupling that is not there)."""
     u, air, op, navigation, A = gusty_record(seed=5, tau_q=0.4)
     true = np.linalg.eigvals(A[:8, :8])
-    result = identify(
-        Experiment(u, air, operating_point=op, navigation=navigation),
-        DT,
-        input_names=INPUTS,
-        output_names=OUTPUTS,
-        output_roles=OUTPUTS,
-        settings=Settings(held_inputs=False),
-    )
+    result = aircraft_identify(Experiment(u, air, operating_point=op, navigation=navigation))
     found = np.linalg.eigvals(result.continuous.A[:8, :8])
     worst = max(np.min(np.abs(found - t)) / max(abs(t), 1.0) for t in true)
     longitudinal = next(a for a in result.aircraft["axes"] if a["name"] == "longitudinal")
@@ -297,14 +283,7 @@ def test_a_propellers_gyroscopic_coupling_is_found_as_a_coupling_block_of_a():
     A, B, C = aircraft_with_engine_lag()
     A[2, 6] = -0.5
     record = full_preset_record(A, B, C)
-    result = identify(
-        record,
-        DT,
-        input_names=INPUTS,
-        output_names=OUTPUTS,
-        output_roles=OUTPUTS,
-        settings=Settings(held_inputs=False),
-    )
+    result = aircraft_identify(record)
     report = result.aircraft
     assert "longitudinal" in report["model"]
     assert "coupled" in report["model"]
@@ -325,14 +304,7 @@ def test_the_other_axis_joins_by_its_controls_or_its_states_not_both():
     A, B, C = aircraft_with_engine_lag()
     A[5:7, 9] = [0.04, -0.02]  # thrust state → ṗ, ṙ
     record = full_preset_record(A, B, C)
-    result = identify(
-        record,
-        DT,
-        input_names=INPUTS,
-        output_names=OUTPUTS,
-        output_roles=OUTPUTS,
-        settings=Settings(held_inputs=False),
-    )
+    result = aircraft_identify(record)
     report = result.aircraft
     coupling = report["coupling"]["lateral"]
     assert coupling["response_by_inputs"] > COUPLED
