@@ -25,9 +25,9 @@ from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
 from agent.clock import VirtualClock
 from agent.config import Config, Recorder
-from agent.health import GcWatch
 from agent.logs import JsonLinesHandler, LogWriter
 from agent.runtime import Agent
+from agent.runtime.health import GcWatch
 from drivers.autopilot.driver import _Seam
 from drivers.xbee.driver import XBeeRadio
 
@@ -225,14 +225,14 @@ async def test_the_autopilot_callback_takes_no_lock_and_does_not_log(tracked_loc
 async def test_slow_collections_are_reported_from_the_loop(tmp_path, caplog):
     config = Config(recorder=Recorder(log_dir=str(tmp_path / "logs"), capacity_s=60.0))
     agent = Agent(config, base=tmp_path, clock=VirtualClock(100.0))
-    agent.gc_watch.slow_s = 0.0  # every full pass is slow
-    monitor = asyncio.create_task(agent._lag_monitor(), name="lag")
+    agent.health.gc_watch.slow_s = 0.0  # every full pass is slow
+    monitor = asyncio.create_task(agent.health.probe(), name="lag")
     try:
         await asyncio.sleep(0)  # the monitor registers its gc callback
         thread = threading.Thread(target=gc.collect, name="a-thread-collecting")
         thread.start()
         thread.join()
-        with caplog.at_level(logging.WARNING, logger="agent.runtime"):
+        with caplog.at_level(logging.WARNING, logger="agent.runtime.health"):
             for _ in range(1000):
                 reports = [r for r in caplog.records if "garbage collection" in r.getMessage()]
                 if reports:
@@ -241,12 +241,11 @@ async def test_slow_collections_are_reported_from_the_loop(tmp_path, caplog):
     finally:
         monitor.cancel()
         await asyncio.gather(monitor, return_exceptions=True)
-        agent.writer.close()
-        agent._store.shutdown()
+        agent.close()
     assert reports, "the loop never reported the slow collection"
     assert reports[0].threadName == threading.current_thread().name  # the loop's thread
-    assert agent.gc_watch not in gc.callbacks
-    assert agent.health_record(1.0, 0.0)["gc"]["slow"] >= 1
+    assert agent.health.gc_watch not in gc.callbacks
+    assert agent.health.record(1.0, 0.0)["gc"]["slow"] >= 1
 
 
 def test_a_gc_callback_that_logs_cannot_deadlock_the_execution_log(execution_log):

@@ -12,30 +12,50 @@ from __future__ import annotations
 import asyncio
 import signal
 import time
+from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from agent import runtime
 from agent.clock import VirtualClock
 from agent.config import Config, Recorder
 from agent.excitation.plan import Doublet, Plan, Segment, preset
 from agent.link import messages
 from agent.runtime import Agent, lag_histogram, lag_percentile
+from agent.runtime.worker import new_worker, processes, stop_worker
+from tests.waiting import until
+
+
+def thread_worker() -> ThreadPoolExecutor:
+    """The worker's jobs on a thread here: the same job functions, without a process spawn."""
+    return ThreadPoolExecutor(1, thread_name_prefix="worker")
 
 
 @pytest.fixture
 def agent(tmp_path):
     config = Config(recorder=Recorder(log_dir=str(tmp_path / "logs"), capacity_s=60.0))
-    a = Agent(config, base=tmp_path, clock=VirtualClock(100.0))
-    sent = []
-    a._downlink = lambda message, reliable=True: sent.append(message)
-    a.sent = sent
+    a = Agent(config, base=tmp_path, clock=VirtualClock(100.0), worker=thread_worker)
+    a.sent = []
+    a.downlink.subscribe(a.sent.append)
     yield a
-    a.writer.close()
-    a._store.shutdown()
+    a.close()
+
+
+def acks_of(agent) -> dict[int, messages.Ack]:
+    return {m.ref: m for m in agent.sent if isinstance(m, messages.Ack)}
+
+
+async def command_task_answers(agent, count: int) -> dict[int, messages.Ack]:
+    """Run the command task until `count` commands are acknowledged."""
+    task = asyncio.create_task(agent.commands.run())
+    try:
+        await until(lambda: len(acks_of(agent)) >= count, f"{count} acknowledgements")
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+    return acks_of(agent)
 
 
 async def test_ground_commands_are_acknowledged_with_the_reason(agent):
@@ -55,11 +75,9 @@ async def test_ground_commands_are_acknowledged_with_the_reason(agent):
         messages.IdentSettings(axes="lateral", markov=1000, order=500),
     ]
     for seq, command in enumerate(commands, start=1):
-        agent._on_ground(command, seq)  # queued for the command task, in order
+        agent.commands.receive(command, seq)  # queued for the command task, in order
     assert not agent.sent  # nothing answered before the command task runs
-    while not agent._commands.empty():
-        await agent.handle(*agent._commands.get_nowait())
-    acks = {m.ref: m for m in agent.sent if isinstance(m, messages.Ack)}
+    acks = await command_task_answers(agent, len(commands))
     assert acks[1].ok
     assert not acks[2].ok
     assert "max_amplitude" in acks[2].reason
@@ -73,7 +91,18 @@ async def test_ground_commands_are_acknowledged_with_the_reason(agent):
     assert not acks[7].ok
     assert "p 1000 is outside 1…" in acks[7].reason
     assert "order 500 is outside 1…" in acks[7].reason
-    assert agent.ident.axes == "full"  # the refused settings did not replace the last
+    assert agent.identification.settings.axes == "full"  # the refused ones did not replace it
+
+
+async def test_a_message_that_is_not_a_command_is_refused_by_name(agent):
+    # Bad input tried: a status and a result sent up from the ground.
+    agent.commands.receive(messages.Status(time=1.0), 1)
+    agent.commands.receive(messages.Notice(text="hello"), 2)
+    answered = await command_task_answers(agent, 2)
+    assert not answered[1].ok
+    assert answered[1].reason == "not a command: Status"
+    assert answered[2].reason == "not a command: Notice"
+    assert agent.counters["commands_unknown"] == 2
 
 
 def test_every_update_period_queues_the_latest_data(agent):
@@ -82,8 +111,7 @@ def test_every_update_period_queues_the_latest_data(agent):
         row = np.zeros(1 + 2 * n)
         row[0] = 100.0 + k * 0.01
         agent.recorder.ring.append(row)
-    assert agent.periodic_window(130.0, 20.0)
-    window, rows = agent._jobs.get_nowait()
+    window, rows = agent.identification.periodic_window(130.0, 20.0)
     assert window.end - window.start == pytest.approx(20.0)
     assert rows[0, 0] >= window.start
     assert rows[-1, 0] <= window.end
@@ -98,27 +126,19 @@ async def test_an_unusable_window_gives_a_failure_result_and_the_agent_goes_on(a
     rows[:, 0] = 100.0 + np.arange(1500) * 0.01
     aileron = 1 + agent.recorder.channels.index("aileron")
     rows[600:700, aileron] = np.nan  # the surface box was silent for 1 s mid-window
-    import asyncio
-    from concurrent.futures import ThreadPoolExecutor
-
-    with ThreadPoolExecutor(1) as pool:  # the worker's job, here on a thread
-        await agent._identify(
-            asyncio.get_running_loop(),
-            pool,
-            Window("lat", "lateral", 100.0, 115.0, "finished"),
-            rows,
-        )
+    await agent.identification.identify(Window("lat", "lateral", 100.0, 115.0, "finished"), rows)
     failures = [m for m in agent.sent if isinstance(m, messages.Failure)]
     assert len(failures) == 1
     assert "1.00 s gap" in failures[0].reason
     assert agent.counters["identification_failures"] == 1
-    assert agent.results[-1]["failure"] == failures[0].reason
+    assert agent.identification.results[-1]["failure"] == failures[0].reason
 
 
 async def test_health_record_separates_the_lag_while_identifying(agent):
     # What the lag monitor collected over a period: 10 ms of lag once, while identifying.
-    agent._period_lags = [(0.0001, False)] * 99 + [(0.010, True), (0.0002, True)]
-    record = agent.health_record(wall_s=60.0, cpu_s=6.0)
+    for lag, identifying in [(0.0001, False)] * 99 + [(0.010, True), (0.0002, True)]:
+        agent.health.add_lag(lag, identifying)
+    record = agent.health.record(wall_s=60.0, cpu_s=6.0)
     assert record["lag"]["n"] == 101
     assert record["lag"]["max_ms"] == pytest.approx(10.0)
     assert record["lag"]["p50_ms"] == pytest.approx(0.1)
@@ -131,18 +151,16 @@ async def test_health_record_separates_the_lag_while_identifying(agent):
     assert record["lag"]["hist"] == {"0.15": 99, "0.25": 1, "11": 1}
     assert record["lag_identifying"]["hist"] == {"0.25": 1, "11": 1}
     # The period starts afresh; an empty period is reported as such, not as zeros.
-    empty = agent.health_record(wall_s=60.0, cpu_s=0.0)
+    empty = agent.health.record(wall_s=60.0, cpu_s=0.0)
     assert empty["lag"] == {"n": 0}
     assert empty["lag_identifying"] == {"n": 0}
 
 
 async def test_an_abort_cancels_an_arm_still_waiting_its_turn(agent):
-    agent._on_ground(messages.Arm(plan=preset("full")), 1)  # rendering would take 0.1 s
-    agent._on_ground(messages.IdentSettings(axes="full"), 2)
-    agent._on_ground(messages.Abort(), 3)
-    while not agent._commands.empty():
-        await agent.handle(*agent._commands.get_nowait())
-    acks = {m.ref: m for m in agent.sent if isinstance(m, messages.Ack)}
+    agent.commands.receive(messages.Arm(plan=preset("full")), 1)  # rendering would take 0.1 s
+    agent.commands.receive(messages.IdentSettings(axes="full"), 2)
+    agent.commands.receive(messages.Abort(), 3)
+    acks = await command_task_answers(agent, 3)
     assert not acks[1].ok
     assert "cancelled by an abort" in acks[1].reason
     assert acks[2].ok  # not a run: still carried out
@@ -154,10 +172,7 @@ async def test_a_new_nominal_that_predicts_worse_is_rolled_back(tmp_path):
     """Requirement 6.3.1: lat-2 is accepted but is wrong (its B negated); on the next
     excitation it predicts the data far worse than lat-1 did, so lat-1 is nominal again and
     the ground is told."""
-    import asyncio
     import csv
-    from concurrent.futures import ThreadPoolExecutor
-    from pathlib import Path
 
     from agent.config import Identification
     from agent.excitation.scheduler import Window
@@ -169,30 +184,26 @@ async def test_a_new_nominal_that_predicts_worse_is_rolled_back(tmp_path):
         recorder=Recorder(log_dir=str(tmp_path / "logs"), rate_hz=50.0),
         identification=Identification(refine=False),
     )
-    agent = Agent(config, base=tmp_path)
+    agent = Agent(config, base=tmp_path, worker=thread_worker)
     sent = []
-    agent._downlink = lambda message, reliable=True: sent.append(message)
+    agent.downlink.subscribe(sent.append)
     channels = agent.recorder.channels
     rows = np.full((len(table), 1 + 2 * len(channels)), np.nan)
     rows[:, 0] = [float(r["time"]) for r in table]
     for name in ("aileron", "rudder", "beta", "p", "r", "phi"):
         rows[:, 1 + channels.index(name)] = [float(r[name]) for r in table]
     window = Window("run", "lateral", rows[0, 0], rows[-1, 0], "finished")
-    pool = ThreadPoolExecutor(1)
-    loop = asyncio.get_running_loop()
     try:
-        await agent._identify(loop, pool, window, rows)
-        await agent.handle(messages.Decision(model_id="lat-1", accept=True), 1)
-        await agent._identify(loop, pool, window, rows)
+        await agent.identification.identify(window, rows)
+        await agent.commands.handle(messages.Decision(model_id="lat-1", accept=True), 1)
+        await agent.identification.identify(window, rows)
         wrong = agent.models.candidates["lat-2"]
         wrong.result["B"] = (-np.asarray(wrong.result["B"])).tolist()
-        await agent.handle(messages.Decision(model_id="lat-2", accept=True), 2)
+        await agent.commands.handle(messages.Decision(model_id="lat-2", accept=True), 2)
         assert agent.models.nominal_id("lateral") == "lat-2"
-        await agent._identify(loop, pool, window, rows)
+        await agent.identification.identify(window, rows)
     finally:
-        pool.shutdown()
-        agent.writer.close()
-        agent._store.shutdown()
+        agent.close()
     assert agent.models.nominal_id("lateral") == "lat-1"
     notices = [m.text for m in sent if isinstance(m, messages.Notice)]
     assert any(
@@ -228,13 +239,13 @@ async def test_stopping_a_worker_stuck_in_a_job_kills_it_instead_of_waiting_for_
     # Bad input: the worker busy with a job that would take an hour (as a worker starved of
     # CPU, or one deep in a long identification, is) when the agent shuts down.
     loop = asyncio.get_running_loop()
-    pool = Agent._new_worker()  # the real worker: spawned, with its initializer
+    pool = new_worker()  # the real worker: spawned, with its initializer
     started = tmp_path / "started"
     stuck = loop.run_in_executor(pool, _say_then_sleep, str(started))
     while not started.exists():  # the worker has warmed up and is in the job
         await asyncio.sleep(0.05)
-    (process,) = pool._processes.values()
-    await runtime._stop_worker(pool)
+    (process,) = processes(pool)
+    await stop_worker(pool)
     assert not process.is_alive()
     assert process.exitcode == -signal.SIGKILL  # killed, not finished
     with pytest.raises(BrokenProcessPool):  # the job is reported lost, not left pending

@@ -23,6 +23,7 @@ from agent.analysis.records import RecordError
 from agent.ident import Experiment, Settings
 from agent.ident import job as jobs
 from agent.ident.errors import DataError
+from agent.ident.job import Outcome
 from agent.logs import read_log
 
 # A setting is "within" the best if its mean TIC_avg is at most this much worse (relative).
@@ -260,7 +261,7 @@ def run_cases(
     workers: int = 1,
     scheduler: str | None = None,
     progress: Callable[[int, int], None] | None = None,
-) -> list[dict]:
+) -> list[Outcome]:
     """Run every case's job; results in case order. `scheduler`: a Dask cluster address."""
     done = 0
 
@@ -295,13 +296,13 @@ def run_cases(
         return [f.result() for f in futures]
 
 
-def named_modes(outcome: dict) -> dict[str, complex]:
-    if not outcome["ok"]:
+def named_modes(outcome: Outcome) -> dict[str, complex]:
+    if not outcome.ok:
         return {}
-    return {m["name"]: complex(*m["eigenvalue"]) for m in outcome["result"]["modes"] if m["name"]}
+    return {m["name"]: complex(*m["eigenvalue"]) for m in outcome.result["modes"] if m["name"]}
 
 
-def sweep_table(cases: Sequence[Case], outcomes: Sequence[dict]) -> list[dict]:
+def sweep_table(cases: Sequence[Case], outcomes: Sequence[Outcome]) -> list[dict]:
     """One row per swept value: mean TIC_avg over the excitations, the modes named in every
     excitation, and each mode's worst relative deviation from its median across them. With
     one excitation the spread is instead each mode's deviation from its median over the whole
@@ -312,8 +313,8 @@ def sweep_table(cases: Sequence[Case], outcomes: Sequence[dict]) -> list[dict]:
     single = all(len(g) == 1 for g in rows.values())
     table = []
     for key, group in rows.items():
-        ok = [o for o in group if o["ok"]]
-        tics = [o["result"]["tic_avg"] for o in ok]
+        ok = [o for o in group if o.ok]
+        tics = [o.result["tic_avg"] for o in ok]
         modes = [named_modes(o) for o in ok]
         common = sorted(set.intersection(*(set(m) for m in modes))) if modes else []
         spread = {}
@@ -326,10 +327,10 @@ def sweep_table(cases: Sequence[Case], outcomes: Sequence[dict]) -> list[dict]:
             {
                 "setting": dict(key),
                 "identified": len(ok),
-                "failed": [o["reason"] for o in group if not o["ok"]],
+                "failed": [o.reason for o in group if not o.ok],
                 "tic_avg": float(np.mean(tics)) if tics else None,
-                "orders": sorted({o["result"]["order"] for o in ok}),
-                "markov": sorted({o["result"]["markov"] for o in ok}),
+                "orders": sorted({o.result["order"] for o in ok}),
+                "markov": sorted({o.result["markov"] for o in ok}),
                 "modes": {n: [[m[n].real, m[n].imag] for m in modes] for n in common},
                 "spread": spread,
             }
@@ -369,20 +370,22 @@ def recommend(table: Sequence[dict], excitations: int) -> dict | None:
     return next(r for r in near if consistent(r) == most)
 
 
-def cross_validation(cases: Sequence[Case], outcomes: Sequence[dict]) -> list[list[float | None]]:
+def cross_validation(
+    cases: Sequence[Case], outcomes: Sequence[Outcome]
+) -> list[list[float | None]]:
     """TIC_avg of the model of excitation i on excitation j's data (rows i, columns j); the
     diagonal is each model on its own data."""
     matrix: list[list[float | None]] = []
     for case, outcome in zip(cases, outcomes, strict=True):
         row: list[float | None] = []
         for other in cases:
-            if not outcome["ok"]:
+            if not outcome.ok:
                 row.append(None)
                 continue
             row.append(
                 jobs.cross_tic(
-                    outcome["result"],
-                    outcome["preprocessing"],
+                    outcome.result,
+                    outcome.preprocessing,
                     case.job.record_dt,
                     other.job.experiments,
                 )
@@ -391,11 +394,11 @@ def cross_validation(cases: Sequence[Case], outcomes: Sequence[dict]) -> list[li
     return matrix
 
 
-def case_summary(outcome: dict) -> dict:
+def case_summary(outcome: Outcome) -> dict:
     """What `sysid analyze` reports of one case's outcome."""
-    if not outcome["ok"]:
-        return {"ok": False, "reason": outcome["reason"]}
-    r = outcome["result"]
+    if not outcome.ok:
+        return {"ok": False, "reason": outcome.reason}
+    r = outcome.result
     modes = [{"name": m["name"], "eigenvalue": m["eigenvalue"]} for m in r["modes"]]
     refinement = r.get("refinement")
     return {

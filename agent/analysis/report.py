@@ -32,14 +32,15 @@ from agent.excitation.signals import relative_peak_factor
 from agent.ident import Experiment
 from agent.ident.convert import StateSpace
 from agent.ident.fit import fit
+from agent.ident.job import Outcome
 from agent.ident.preprocess import preprocess
 
 DPI = 90
 COLOURS = plt.rcParams["axes.prop_cycle"].by_key()["color"]
 
 
-def _prepared(case: Case, outcome: dict) -> tuple[list[Experiment], float]:
-    p = outcome["preprocessing"]
+def _prepared(case: Case, outcome: Outcome) -> tuple[list[Experiment], float]:
+    p = outcome.preprocessing
     batch, prep = preprocess(
         [Experiment(u, y) for u, y in case.job.experiments],
         case.job.record_dt,
@@ -51,12 +52,12 @@ def _prepared(case: Case, outcome: dict) -> tuple[list[Experiment], float]:
     return batch, prep.dt
 
 
-def _model(outcome: dict) -> StateSpace:
-    r = outcome["result"]
+def _model(outcome: Outcome) -> StateSpace:
+    r = outcome.result
     return StateSpace(*(np.asarray(r[k], dtype=float) for k in ("A", "B", "C", "D")))
 
 
-def time_histories(case: Case, outcome: dict, path: Path) -> None:
+def time_histories(case: Case, outcome: Outcome, path: Path) -> None:
     batch, dt = _prepared(case, outcome)
     result = fit(_model(outcome), batch)
     outputs = case.job.outputs
@@ -94,13 +95,13 @@ def time_histories(case: Case, outcome: dict, path: Path) -> None:
 
 
 def s_plane(
-    cases: Sequence[Case], outcomes: Sequence[dict], nominal: dict | None, path: Path
+    cases: Sequence[Case], outcomes: Sequence[Outcome], nominal: dict | None, path: Path
 ) -> None:
     fig, ax = plt.subplots(figsize=(7, 5))
     for k, (case, outcome) in enumerate(zip(cases, outcomes, strict=True)):
-        if not outcome["ok"]:
+        if not outcome.ok:
             continue
-        lam = np.array([complex(*m["eigenvalue"]) for m in outcome["result"]["modes"]])
+        lam = np.array([complex(*m["eigenvalue"]) for m in outcome.result["modes"]])
         lam = np.concatenate([lam, lam[lam.imag != 0].conj()])
         ax.plot(
             lam.real,
@@ -135,13 +136,13 @@ def s_plane(
     plt.close(fig)
 
 
-def hankel(cases: Sequence[Case], outcomes: Sequence[dict], path: Path) -> None:
+def hankel(cases: Sequence[Case], outcomes: Sequence[Outcome], path: Path) -> None:
     fig, ax = plt.subplots(figsize=(7, 3.5))
     for k, (case, outcome) in enumerate(zip(cases, outcomes, strict=True)):
-        if not outcome["ok"]:
+        if not outcome.ok:
             continue
-        sv = np.asarray(outcome["result"]["singular_values"], dtype=float)
-        n = outcome["result"]["order"]
+        sv = np.asarray(outcome.result["singular_values"], dtype=float)
+        n = outcome.result["order"]
         colour = COLOURS[k % len(COLOURS)]
         ax.semilogy(
             np.arange(1, sv.size + 1),
@@ -160,7 +161,7 @@ def hankel(cases: Sequence[Case], outcomes: Sequence[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def bode(case: Case, outcome: dict, path: Path) -> None:
+def bode(case: Case, outcome: Outcome, path: Path) -> None:
     """Each input → output pair: the model's FRF against the data's H1 estimate."""
     batch, dt = _prepared(case, outcome)
     model = _model(outcome)
@@ -228,10 +229,10 @@ def _fmt(value, spec: str = "{:.2f}") -> str:
     return "–" if value is None else spec.format(value)
 
 
-def mode_table(outcome: dict) -> str:
+def mode_table(outcome: Outcome) -> str:
     head = ("mode", "eigenvalue", "f (Hz)", "ζ", "τ (s)", "MSV", "MCI", "MOI", "EMAC", "MPC", "CMI")
     rows = []
-    for m in outcome["result"]["modes"]:
+    for m in outcome.result["modes"]:
         lam = complex(*m["eigenvalue"])
         cells = (
             m["name"] or "–",
@@ -261,7 +262,7 @@ def write(
     directory: Path,
     logs: Sequence[Path],
     cases: Sequence[Case],
-    outcomes: Sequence[dict],
+    outcomes: Sequence[Outcome],
     nominal: dict | None = None,
 ) -> Path:
     """The report in `directory` (index.html and its PNGs); returns the page's path."""
@@ -280,12 +281,12 @@ def write(
     for case, outcome in zip(cases, outcomes, strict=True):
         tag = f"excitation_{case.label}"
         parts.append(f"<h2>Excitation {html.escape(case.label)}</h2>")
-        if not outcome["ok"]:
+        if not outcome.ok:
             parts.append(
-                f'<p class="fail">identification failed: {html.escape(outcome["reason"])}</p>'
+                f'<p class="fail">identification failed: {html.escape(outcome.reason)}</p>'
             )
             continue
-        r = outcome["result"]
+        r = outcome.result
         parts.append(
             f"<p>p = {r['markov']}, n = {r['order']}, TIC_avg = {r['tic_avg']:.3f}, "
             f"{'stable' if r['stable'] else 'not stable'}</p>"

@@ -93,4 +93,4 @@ def run(args: argparse.Namespace) -> int:
         print_json(report)
     else:
         print(an.analysis_text(report, paths))
-    return EXIT_OK if any(o["ok"] for o in outcomes) else EXIT_FAILED
+    return EXIT_OK if any(o.ok for o in outcomes) else EXIT_FAILED

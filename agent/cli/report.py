@@ -53,9 +53,9 @@ def run(args: argparse.Namespace) -> int:
         page = write(args.out, paths, cases, outcomes, nominal)
     except OSError as exc:
         raise failed(f"{args.out}: cannot be written ({exc.strerror or exc})") from None
-    identified = sum(o["ok"] for o in outcomes)
+    identified = sum(o.ok for o in outcomes)
     if args.json:
         print_json({"page": str(page), "identified": identified, "excitations": len(outcomes)})
     else:
         print(f"{page}: {identified} of {len(outcomes)} excitation(s) identified")
-    return EXIT_OK if any(o["ok"] for o in outcomes) else EXIT_FAILED
+    return EXIT_OK if any(o.ok for o in outcomes) else EXIT_FAILED

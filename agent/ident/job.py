@@ -150,9 +150,28 @@ def _bridge(x: np.ndarray, dt: float, name: str) -> np.ndarray:
     return np.interp(t, t[~bad], x[~bad])
 
 
-def run(job: Job) -> dict:
-    """Identify; never raises for bad data: {"ok": False, "reason": …} instead. With a
-    `window`, the outcome also carries the experiment made of it and the trim removed."""
+@dataclass(frozen=True)
+class Outcome:
+    """What a job gives back: the identification, or why there is none."""
+
+    model_id: str
+    ok: bool
+    reason: str = ""
+    """Why it failed ("" when ok)."""
+    axes: str = ""
+    result: dict | None = None
+    """The identification as plain data (`agent.ident.summary.to_dict`) when ok."""
+    preprocessing: dict | None = None
+    """How its data were preprocessed (factor, band_hz, held_inputs, smoothing_s), so other
+    data can be prepared the same way (`cross_tic`)."""
+    experiment: tuple[np.ndarray, np.ndarray] | None = None
+    """With a `window`: the experiment made of it (u, y), trim removed."""
+    trim: dict | None = None
+    """With a `window`: the trim removed, by channel (`window_and_trim`)."""
+
+
+def run(job: Job) -> Outcome:
+    """Identify; never raises for bad data: an Outcome with ok False and the reason instead."""
     contexts = job.contexts or ((None, None),) * len(job.experiments)
     pairs = zip(job.experiments, contexts, strict=True)
     experiments = [
@@ -165,7 +184,7 @@ def run(job: Job) -> dict:
                 job.window, job.inputs, job.outputs, job.record_dt, job.trim_s
             )
         except (DataError, KeyError) as exc:
-            return {"ok": False, "model_id": job.model_id, "reason": f"window unusable: {exc}"}
+            return Outcome(job.model_id, False, f"window unusable: {exc}", job.axes)
         extra = {"experiment": (u, y), "trim": trim}
         # Its absolute trim and navigation, for the aircraft method's kinematics and wind.
         op = np.array([trim["outputs"][n] for n in job.outputs])
@@ -182,21 +201,21 @@ def run(job: Job) -> dict:
             settings=job.settings,
         )
     except (DataError, IdentificationFailed, np.linalg.LinAlgError, ValueError) as exc:
-        return {**extra, "ok": False, "model_id": job.model_id, "reason": str(exc)}
+        return Outcome(job.model_id, False, str(exc), job.axes, **extra)
     prep = result.preprocessing
-    return {
-        **extra,
-        "ok": True,
-        "model_id": job.model_id,
-        "axes": job.axes,
-        "result": to_dict(result),
-        "preprocessing": {
+    return Outcome(
+        job.model_id,
+        True,
+        axes=job.axes,
+        result=to_dict(result),
+        preprocessing={
             "factor": prep.factor,
             "band_hz": prep.band_hz,
             "held_inputs": prep.held_inputs,
             "smoothing_s": prep.smoothing_s,
         },
-    }
+        **extra,
+    )
 
 
 def _input_roles(job: Job) -> tuple[str | None, ...] | None:

@@ -568,7 +568,7 @@ def _report(options: SimOptions, aircraft: SimAircraft, agent: Agent, outcomes: 
         ],
         "recorder": dict(agent.recorder.counters),
         "sensor_gaps": {d.name: d.health().gaps for d in agent.drivers},
-        "worker_identifications": len(agent.results),
+        "worker_identifications": len(agent.identification.results),
     }
 
 

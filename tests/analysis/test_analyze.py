@@ -68,7 +68,7 @@ def test_per_excitation_sweep_and_recommendation(tmp_path):
     cases = cases_for(paths, batch=False, sweep=("markov", [1, 2, 3, 4]))
     assert len(cases) == 12
     outcomes = an.run_cases(cases, workers=2)  # two spawned processes
-    assert all(o["ok"] for o in outcomes)
+    assert all(o.ok for o in outcomes)
     table = an.sweep_table(cases, outcomes)
     assert [row["setting"] for row in table] == [{"markov": p} for p in (1, 2, 3, 4)]
     assert all(row["identified"] == 3 for row in table)
@@ -91,11 +91,11 @@ def test_cross_validation_and_batch(tmp_path):
     assert len(matrix) == 3
     assert all(len(row) == 3 for row in matrix)
     for i in range(3):  # each model on its own data is what its result says
-        assert matrix[i][i] == pytest.approx(outcomes[i]["result"]["tic_avg"], rel=0.05)
+        assert matrix[i][i] == pytest.approx(outcomes[i].result["tic_avg"], rel=0.05)
     assert max(max(row) for row in matrix) < 0.3  # same aircraft: every model fits all data
     (batch,) = cases_for(paths, batch=True, sweep=None)
     assert len(batch.job.experiments) == 3
-    assert an.run_cases([batch])[0]["ok"]
+    assert an.run_cases([batch])[0].ok
 
 
 def test_command_line_with_a_dask_cluster(tmp_path):

@@ -1,6 +1,6 @@
 """`sysid export`: the agent's identified models to MATLAB .mat and JSON, and back.
 
-The models come from the agent's own identification path (`Agent._identify` on the bundled
+The models come from the agent's own identification path (`Identification.identify` on the bundled
 A.2 lateral record, the worker job run on a thread pool), its result log and its model store.
 
 Bad input tried: a file with no identified model, a damaged store file, an unknown model id,
@@ -24,6 +24,7 @@ from scipy.io import loadmat
 from agent.analysis.export import ExportError, load_models, to_json, to_mat, variable_name
 from agent.config import Config, Identification, Recorder
 from agent.excitation.scheduler import Window
+from agent.link import messages
 from agent.runtime import Agent
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -38,8 +39,7 @@ def flight(tmp_path):
         recorder=Recorder(log_dir=str(tmp_path / "logs"), rate_hz=50.0),
         identification=Identification(trim_seconds=0.5),
     )
-    agent = Agent(config, base=tmp_path)
-    agent._downlink = lambda message, reliable=True: None
+    agent = Agent(config, base=tmp_path, worker=lambda: ThreadPoolExecutor(1))
     channels = agent.recorder.channels
     rows = np.full((len(table), 1 + 2 * len(channels)), np.nan)
     rows[:, 0] = [float(r["time"]) for r in table]
@@ -48,20 +48,16 @@ def flight(tmp_path):
         rows[:, 1 + channels.index(name)] = [float(r[name]) + offset for r in table]
 
     async def fly():
-        pool = ThreadPoolExecutor(1)
-        loop = asyncio.get_running_loop()
-        try:
-            for k in range(2):
-                window = Window(f"run{k}", "lateral", rows[0, 0], rows[-1, 0], "finished")
-                await agent._identify(loop, pool, window, rows)
-                if k == 0:
-                    await loop.run_in_executor(agent._store, agent.models.accept, "lat-1")
-        finally:
-            pool.shutdown()
+        for k in range(2):
+            window = Window(f"run{k}", "lateral", rows[0, 0], rows[-1, 0], "finished")
+            await agent.identification.identify(window, rows)
+            if k == 0:
+                await agent.commands.handle(messages.Decision(model_id="lat-1", accept=True), 1)
 
-    asyncio.run(fly())
-    agent.writer.close()
-    agent._store.shutdown()
+    try:
+        asyncio.run(fly())
+    finally:
+        agent.close()
     return tmp_path, agent
 
 

@@ -252,7 +252,7 @@ async def test_an_agent_whose_radio_does_not_answer_at_start_records_and_links_l
         await asyncio.sleep(0.5)
         assert not running.done()  # the agent flies on
         assert agent.recorder.ring.count > frames  # and records
-        health = agent.health_record(wall_s=1.0, cpu_s=0.1)
+        health = agent.health.record(wall_s=1.0, cpu_s=0.1)
         assert health["radio"]["open_failures"] >= 2  # the health log says why there is no link
         assert not session.link_up
         air.plug()
@@ -352,7 +352,7 @@ def test_a_missing_or_damaged_replay_state_refuses_the_link(tmp_path):
     """Bad input tried: the seen file deleted while the counter file is there (the key was
     used: every recorded frame would be accepted again), and a seen file of garbage (it used
     to stop the agent at start-up). build_endpoint refuses with the reason; the agent then
-    flies and records without a link (runtime._build_link)."""
+    flies and records without a link (the agent's `_build_link`)."""
     from agent.clock import LoopClock
     from agent.config import Link
     from agent.link.codec import AIRCRAFT

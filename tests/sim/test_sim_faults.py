@@ -164,14 +164,14 @@ async def test_sensor_replugged_and_result_delivered_after_radio_outage(tmp_path
         seen = await start_run(sim, "outage")
         await until(lambda: received(sim, messages.ExcitationEvent, seen, event="finished"), "end")
         sim.channel.outage = True  # the radio is out while the worker identifies
-        await until(lambda: agent.results, "the identification")
+        await until(lambda: agent.identification.results, "the identification")
         await asyncio.sleep(2.0)
         assert not received(sim, messages.Result, seen)  # nothing got through
         sim.channel.outage = False
         restored = sim.clock.now()
         result = await answer(sim, seen)
         assert isinstance(result, messages.Result), result
-        assert result.model_id == agent.results[-1]["model_id"]
+        assert result.model_id == agent.identification.results[-1]["model_id"]
         delivered = sim.clock.now()
         retransmissions = agent.session.counters["retransmissions"]
     assert delivered >= restored

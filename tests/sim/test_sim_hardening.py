@@ -189,8 +189,8 @@ async def test_the_worker_killed_while_identifying_gives_a_failure_and_a_new_wor
     async with simulated(SimOptions(preset="lateral", directory=tmp_path)) as sim:
         agent = sim.agent
         seen = await start_run(sim, "killed")
-        await until(lambda: agent.identifying, "the identification")
-        (pid,) = agent._pool._processes  # the one worker process
+        await until(lambda: agent.identification.busy, "the identification")
+        pid = agent.identification.worker_pid
         os.kill(pid, signal.SIGKILL)
         failure = await answer(sim, seen)
         assert isinstance(failure, messages.Failure), failure
@@ -201,7 +201,7 @@ async def test_the_worker_killed_while_identifying_gives_a_failure_and_a_new_wor
         seen = await start_run(sim, "after")  # the agent flies on with a new worker
         result = await answer(sim, seen)
         assert isinstance(result, messages.Result), result
-        assert pid not in agent._pool._processes
+        assert agent.identification.worker_pid not in (None, pid)
     sizes = assert_logs_whole(tmp_path)
     results = next(n for n in sizes if "_results_" in n)
     lines = (tmp_path / "logs" / results).read_text().splitlines()

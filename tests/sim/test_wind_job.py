@@ -59,8 +59,8 @@ def _job(values: dict[str, np.ndarray]) -> dict:
         navigation=CHANNELS.navigation(),
     )
     outcome = run(job)
-    assert outcome["ok"], outcome.get("reason")
-    return outcome["result"]["aircraft"]
+    assert outcome.ok, outcome.reason
+    return outcome.result["aircraft"]
 
 
 def test_the_job_measures_the_wind_from_the_ins_channels_in_its_window(window):
@@ -147,8 +147,8 @@ def test_sysid_analyze_replays_an_agent_log_with_the_trim_and_the_wind(tmp_path,
     )
     assert dt == pytest.approx(DT)
     (outcome,) = an.run_cases(cases)
-    assert outcome["ok"], outcome.get("reason")
-    report = outcome["result"]["aircraft"]
+    assert outcome.ok, outcome.reason
+    report = outcome.result["aircraft"]
     assert report["kinematics"]
     assert report["wind"]["measured"]
     assert report["wind"]["gust_rms"] == pytest.approx(_job(window)["wind"]["gust_rms"], rel=1e-6)

@@ -1,0 +1,127 @@
+"""Commands from the ground: each carried out in order and acknowledged, or refused with the
+reason.
+
+An abort acts at once, in the link's callback (and cancels any arm or start still waiting its
+turn); the others wait in a bounded queue for the command task, which keeps plan rendering and
+model-store files off the link's path. Each message type has one handler (`Commands.handlers`):
+it returns "" when done, or the reason it was not; a refusal the handler raises
+(`PlanRefused`, no such model, no previous nominal) is a reason too.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections import Counter
+from collections.abc import Awaitable, Callable
+
+from agent.excitation.plan import PlanRefused
+from agent.excitation.scheduler import Scheduler
+from agent.link import messages
+from agent.runtime.downlink import Downlink
+from agent.runtime.identification import Identification
+
+log = logging.getLogger(__name__)
+
+# Ground commands waiting to be handled (more are refused as busy).
+COMMAND_QUEUE = 16
+
+Handler = Callable[[messages.Message], Awaitable[str]]
+
+
+class Commands:
+    def __init__(
+        self,
+        scheduler: Scheduler,
+        identification: Identification,
+        downlink: Downlink,
+        counters: Counter[str],
+    ):
+        self.scheduler, self.identification = scheduler, identification
+        self.downlink, self.counters = downlink, counters
+        self._queue: asyncio.Queue[tuple[messages.Message, int | None]] = asyncio.Queue(
+            COMMAND_QUEUE
+        )
+        self.handlers: dict[type[messages.Message], Handler] = {
+            messages.Arm: self._arm,
+            messages.Start: self._start,
+            messages.Abort: self._abort,
+            messages.IdentSettings: self._settings,
+            messages.Decision: self._decision,
+            messages.Revert: self._revert,
+        }
+
+    def receive(self, message: messages.Message, seq: int | None) -> None:
+        """A command from the link (`seq`: its sequence number to acknowledge, None when sent
+        unreliably). An abort acts here; the others are queued for `run`."""
+        if isinstance(message, messages.Abort):
+            self.scheduler.abort(message.reason)
+            self._cancel_queued_runs()
+            self._ack(seq, "")
+            return
+        try:
+            self._queue.put_nowait((message, seq))
+        except asyncio.QueueFull:
+            self.counters["commands_dropped"] += 1
+            self._ack(seq, "busy: too many commands waiting; send it again")
+
+    def _cancel_queued_runs(self) -> None:
+        """An abort also cancels an arm or start still waiting its turn (else a plan armed a
+        moment before the abort would be armed after it)."""
+        kept = []
+        while not self._queue.empty():
+            message, seq = self._queue.get_nowait()
+            if isinstance(message, messages.Arm | messages.Start):
+                self.counters["commands_cancelled"] += 1
+                self._ack(seq, "cancelled by an abort that arrived before it was carried out")
+            else:
+                kept.append((message, seq))
+        for item in kept:
+            self._queue.put_nowait(item)
+
+    async def run(self) -> None:
+        """The command task: each queued command in turn."""
+        while True:
+            message, seq = await self._queue.get()
+            await self.handle(message, seq)
+
+    async def handle(self, message: messages.Message, seq: int | None) -> None:
+        """Carry out one ground command and acknowledge it (or say why not)."""
+        handler = self.handlers.get(type(message))
+        if handler is None:  # a message the ground has no business sending up
+            self.counters["commands_unknown"] += 1
+            self._ack(seq, f"not a command: {type(message).__name__}")
+            return
+        try:
+            reason = await handler(message)
+        except (PlanRefused, KeyError, LookupError) as exc:
+            reason = str(exc).strip("'")
+        self._ack(seq, reason)
+
+    def _ack(self, seq: int | None, reason: str) -> None:
+        if seq is not None:
+            self.downlink.send(messages.Ack(ref=seq, ok=not reason, reason=reason))
+
+    # -- the handlers: "" when done, else the reason -----------------------------------------
+
+    async def _arm(self, message: messages.Arm) -> str:
+        await self.scheduler.arm_checked(message.plan)
+        return ""
+
+    async def _start(self, message: messages.Start) -> str:
+        return self.scheduler.request_start()
+
+    async def _abort(self, message: messages.Abort) -> str:
+        self.scheduler.abort(message.reason)
+        return ""
+
+    async def _settings(self, message: messages.IdentSettings) -> str:
+        return self.identification.apply(message)
+
+    async def _decision(self, message: messages.Decision) -> str:
+        await self.identification.decide(message)
+        return ""
+
+    async def _revert(self, message: messages.Revert) -> str:
+        await self.identification.revert()
+        return ""

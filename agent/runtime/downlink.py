@@ -1,0 +1,27 @@
+"""Messages from the agent to the ground, in one place."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from agent.link import messages
+
+
+class Downlink:
+    """Sends through the link session when there is one (none: the agent flies without a
+    link) and hands every message to each subscriber (a test, a local display)."""
+
+    def __init__(self) -> None:
+        self.session = None  # the link session, once the radio is built
+        self._subscribers: list[Callable[[messages.Message], None]] = []
+
+    def subscribe(self, subscriber: Callable[[messages.Message], None]) -> None:
+        self._subscribers.append(subscriber)
+
+    def send(self, message: messages.Message, reliable: bool = True) -> None:
+        """Reliable: delivered exactly once and in order (events, results, acks). Not
+        reliable: best effort, the newest replacing any not yet on air (status)."""
+        for subscriber in self._subscribers:
+            subscriber(message)
+        if self.session is not None:
+            (self.session.send_reliable if reliable else self.session.send_status)(message)

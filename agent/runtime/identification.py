@@ -1,0 +1,358 @@
+"""Onboard identification: the queue of windows to identify, the worker that identifies them,
+the result log, the model store and the nominal's self-check (thesis 5.3, requirement 6.3.1).
+
+Each window is a job for the worker process (`agent.ident.job.run`): the loop only hands it
+over and waits, so it never waits on numerics. The model store's files are read and written on
+one thread of their own, in order: a save (rename) can wait on the disk for a long time, and
+the loop must not.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+from collections import Counter, deque
+from collections.abc import Callable
+from concurrent.futures import Executor, ThreadPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+
+import numpy as np
+
+from agent.channels import AXIS_SETS
+from agent.clock import Clock
+from agent.config import Config
+from agent.excitation.scheduler import Window
+from agent.ident import Settings
+from agent.ident import job as jobs
+from agent.ident.job import settings_from
+from agent.link import messages
+from agent.logs import LogWriter, log_name
+from agent.models import SELF_CHECK_RATIO, Candidate, ModelStore, Suggestion, suggest
+from agent.recorder import Recorder
+from agent.runtime.downlink import Downlink
+from agent.runtime.worker import new_worker, processes, stop_worker
+
+log = logging.getLogger(__name__)
+
+# Identification jobs waiting (more are dropped and counted: the operator can re-fly).
+JOB_QUEUE = 4
+# The latest results kept in memory (all of them are in the result log).
+RESULTS_KEPT = 100
+# With no update period set, how often the periodic task looks again (s).
+PERIODIC_IDLE_S = 1.0
+
+
+class Identification:
+    """Identifies each finished excitation window (and, with an update period set from the
+    ground, the data of every period) in the worker; sends each result or failure down."""
+
+    def __init__(
+        self,
+        config: Config,
+        clock: Clock,
+        recorder: Recorder,
+        models: ModelStore,
+        writer: LogWriter,
+        downlink: Downlink,
+        counters: Counter[str],
+        worker: Callable[[], Executor] = new_worker,
+    ):
+        self.config, self.clock, self.recorder = config, clock, recorder
+        self.models, self.writer, self.downlink = models, writer, downlink
+        self.counters = counters
+        self.settings = messages.IdentSettings(axes=config.identification.axes)
+        self.busy = False  # a window is in the worker
+        self.results: deque[dict] = deque(maxlen=RESULTS_KEPT)
+        # The result log: one JSON object per identification (thesis 2.2.1).
+        self._log = writer.open(log_name(writer.next_number(), "results", "jsonl"))
+        self._queue: asyncio.Queue[tuple[Window, np.ndarray]] = asyncio.Queue(JOB_QUEUE)
+        self._store = ThreadPoolExecutor(1, thread_name_prefix="model-store")
+        self._new_worker = worker
+        self._pool: Executor | None = None  # the worker; replaced if it dies
+        self._batch: dict[str, list] = {}  # by axes: the experiments of a batch so far
+        self._self_check: dict[str, str] = {}  # by axes: a new nominal to check next run
+
+    # -- windows in ----------------------------------------------------------------------
+
+    def submit(self, window: Window, rows: np.ndarray) -> bool:
+        """Queue a window for identification; False (counted, the ground told) when full."""
+        try:
+            self._queue.put_nowait((window, rows))
+        except asyncio.QueueFull:
+            self.counters["jobs_dropped"] += 1
+            return False
+        return True
+
+    def periodic_window(self, now: float, period: float) -> tuple[Window, np.ndarray] | None:
+        """Queue the last `period` seconds of frames for identification: the window and its
+        rows, or None when there are none or the queue is full."""
+        end = now - self.config.recorder.delay_s
+        rows = self.recorder.ring.between(end - period, end)
+        if len(rows) < 2:
+            return None
+        window = Window(f"periodic@{end:.0f}", self.settings.axes, end - period, end, "finished")
+        return (window, rows) if self.submit(window, rows) else None
+
+    async def periodic(self) -> None:
+        """Thesis B.2 4.1: identify every update period set from the ground, on the data
+        recorded over that period (nothing when no period is set)."""
+        while True:
+            period = self.settings.update_period_s
+            await asyncio.sleep(period or PERIODIC_IDLE_S)
+            if period:
+                self.periodic_window(self.clock.now(), period)
+
+    # -- the ground's settings and decisions -----------------------------------------------
+
+    def apply(self, settings: messages.IdentSettings) -> str:
+        """Use settings from the ground; why not ("" when used): an explicit p or order beyond
+        the configured markov_max / order_max (the automatic search keeps within them; an
+        explicit value skipped the bounds)."""
+        cfg, reasons = self.config.identification, []
+        if isinstance(settings.markov, int) and not 1 <= settings.markov <= cfg.markov_max:
+            reasons.append(f"p {settings.markov} is outside 1…{cfg.markov_max} (markov_max)")
+        if isinstance(settings.order, int) and not 1 <= settings.order <= cfg.order_max:
+            reasons.append(f"order {settings.order} is outside 1…{cfg.order_max} (order_max)")
+        if not reasons:
+            self.settings = settings
+        return "; ".join(reasons)
+
+    async def decide(self, decision: messages.Decision) -> None:
+        """The operator accepts a model as nominal or rejects it (KeyError: no such model)."""
+        accepted = await self._in_store(self._decide, decision)
+        if accepted is not None:  # a new nominal replacing one: self-check it next run
+            self._self_check[accepted[0]] = accepted[1]
+
+    def _decide(self, decision: messages.Decision) -> tuple[str, str] | None:
+        """On the model-store thread; (axes, model id) when the accepted model replaced a
+        nominal, for the self-check."""
+        if not decision.accept:
+            self.models.reject(decision.model_id)
+            return None
+        accepted = self.models.accept(decision.model_id)
+        if self.models.previous(accepted.axes) is None:
+            return None
+        return accepted.axes, accepted.model_id
+
+    async def revert(self) -> None:
+        """The previous nominal of the current axes is nominal again (LookupError: none)."""
+        await self._in_store(self.models.revert, self.settings.axes)
+
+    async def _in_store(self, function, *args):
+        return await asyncio.get_running_loop().run_in_executor(self._store, function, *args)
+
+    # -- the worker ------------------------------------------------------------------------
+
+    def start_worker(self) -> None:
+        """Start the worker (with the agent, so it is warm before the first window)."""
+        if self._pool is None:
+            self._pool = self._new_worker()
+
+    @property
+    def worker_pid(self) -> int | None:
+        """The worker process's id (None: not started, or a thread pool)."""
+        running = processes(self._pool) if self._pool is not None else []
+        return running[0].pid if running else None
+
+    async def run(self) -> None:
+        """Identify each queued window in turn. A worker that dies is replaced and the window
+        reported as failed; a fault in one identification is a failure result; both go on."""
+        self.start_worker()
+        loop = asyncio.get_running_loop()
+        await loop.run_in_executor(self._pool, jobs.warm)  # up before the first window
+        while True:
+            window, rows = await self._queue.get()
+            self.busy = True
+            try:
+                await self.identify(window, rows)
+            except BrokenProcessPool as exc:  # the worker died (killed, out of memory): anew
+                self.counters["worker_restarts"] += 1
+                log.error("the identification worker died (%s); starting a new one", exc)
+                self._pool.shutdown(wait=False, cancel_futures=True)
+                self._pool = self._new_worker()
+                self._failed(
+                    window.plan_id,
+                    self.settings.axes,
+                    "the identification worker process died; a new one is started "
+                    "for the next window",
+                )
+            except Exception as exc:  # a fault in one identification: a failure result, go on
+                log.exception("identification of %s failed", window.plan_id)
+                self._failed(window.plan_id, self.settings.axes, f"internal error: {exc!r}")
+            finally:
+                self.busy = False
+
+    async def stop(self) -> None:
+        """Stop the worker (`stop_worker`) and the model-store thread."""
+        try:
+            if self._pool is not None:
+                await stop_worker(self._pool)
+        finally:
+            self._store.shutdown(wait=True)
+
+    def close(self) -> None:
+        """Release without a loop (an agent that never ran): the worker, if one was started,
+        is told to stop; the model-store thread ends."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+        self._store.shutdown(wait=True)
+
+    # -- one identification ------------------------------------------------------------------
+
+    async def identify(self, window: Window, rows: np.ndarray) -> None:
+        """Identify one window in the worker, compare it with the nominal, store it, log it and
+        send the result (or the failure, with its reason) down."""
+        self.start_worker()
+        loop = asyncio.get_running_loop()
+        axes, ident = self.settings.axes, self.settings
+        channels = self.config.identification.channels
+        inputs, outputs = channels.axis_set(axes)
+        # Numbered across boots (the model store's file): an id never names two models.
+        number = await self._in_store(self.models.reserve_number)
+        model_id = f"{axes[:3]}-{number}"
+        navigation = channels.navigation()
+        needed = {*inputs, *outputs, *navigation}
+        columns = {c: rows[:, 1 + k] for k, c in enumerate(self.recorder.channels) if c in needed}
+        dt = 1.0 / self.config.recorder.rate_hz
+        batch = self._batch.setdefault(axes, []) if ident.batch else []
+        job = jobs.Job(
+            model_id,
+            axes,
+            dt,
+            inputs,
+            outputs,
+            AXIS_SETS[axes][1],
+            tuple(batch),
+            onboard_settings(self.config, ident),
+            window=columns,
+            trim_s=self.config.identification.trim_seconds,
+            navigation=navigation,
+        )
+        outcome = await loop.run_in_executor(self._pool, jobs.run, job)
+        if not outcome.ok:
+            return self._failed(model_id, axes, outcome.reason)
+        if ident.batch:
+            batch.append(outcome.experiment)
+        candidate = Candidate(
+            model_id,
+            axes,
+            dt,
+            outcome.result,
+            outcome.preprocessing,
+            (*job.experiments, outcome.experiment),
+            extra={"record_s": len(outcome.experiment[0]) * dt, "trim": outcome.trim},
+        )
+        suggestion = await self._compare(candidate)
+        await self._in_store(self.models.add, candidate)
+        record = {
+            "model_id": model_id,
+            "axes": axes,
+            "window": [window.start, window.end],
+            "trim": outcome.trim,
+            "suggestion": suggestion.__dict__,
+            "result": outcome.result,
+        }
+        self.results.append(record)
+        self.counters["identifications"] += 1
+        self.writer.write(self._log, (json.dumps(record) + "\n").encode())
+        self.downlink.send(result_message(candidate, suggestion))
+
+    async def _compare(self, candidate: Candidate) -> Suggestion:
+        """The figure 5.2 suggestion: against the nominal (if any), each model's TIC on the
+        other's data (TIC_jN, TIC_Nj), computed in the worker."""
+        axes = candidate.axes
+        nominal = await self._in_store(self.models.nominal, axes)
+        if nominal is None:
+            return suggest(candidate, None, None, None)
+        tic_jn = await self._cross_tic(candidate, nominal)
+        tic_nj = await self._cross_tic(nominal, candidate)
+        await self._check_new_nominal(axes, nominal, tic_nj, candidate)
+        return suggest(candidate, nominal, tic_jn, tic_nj)
+
+    async def _cross_tic(self, model: Candidate, data: Candidate) -> float:
+        """TIC_avg of `model` on `data`'s experiments."""
+        return await asyncio.get_running_loop().run_in_executor(
+            self._pool,
+            jobs.cross_tic,
+            model.result,
+            model.preprocessing,
+            data.record_dt,
+            data.experiments,
+        )
+
+    async def _check_new_nominal(self, axes, nominal, tic_nj, candidate) -> None:
+        """Requirement 6.3.1: a just-accepted nominal predicting this new excitation much worse
+        than the model it replaced is rolled back, and the ground is told."""
+        if self._self_check.pop(axes, None) != nominal.model_id:
+            return
+        previous = await self._in_store(self.models.previous, axes)
+        tic_previous = await self._cross_tic(previous, candidate)
+        if tic_nj > SELF_CHECK_RATIO * tic_previous:
+            await self._in_store(self.models.revert, axes)
+            text = (
+                f"self-check: nominal {nominal.model_id} predicts the new data with TIC "
+                f"{tic_nj:.2f} against {tic_previous:.2f} for {previous.model_id}: reverted"
+            )
+            self.downlink.send(messages.Notice(text=text))
+
+    def _failed(self, model_id: str, axes: str, reason: str) -> None:
+        self.counters["identification_failures"] += 1
+        log.warning("identification %s failed: %s", model_id, reason)
+        self.results.append({"model_id": model_id, "axes": axes, "failure": reason})
+        self.writer.write(self._log, (json.dumps(self.results[-1]) + "\n").encode())
+        self.downlink.send(messages.Failure(model_id=model_id, axes=axes, reason=reason[:300]))
+
+
+def onboard_settings(config: Config, ident: messages.IdentSettings) -> Settings:
+    """The identification settings onboard: the config's, with the ground's p and order."""
+    markov = None if ident.markov == "auto" else ident.markov
+    order = None if ident.order == "auto" else ident.order
+    settings = settings_from(config.identification, markov, order)
+    # The surface pots sample continuously moving surfaces: not held inputs.
+    return Settings(**{**settings.__dict__, "held_inputs": False})
+
+
+def result_message(c: Candidate, s: Suggestion) -> messages.Result:
+    """A result as the link carries it."""
+    r = c.result
+    modes = []
+    for m in r["modes"]:
+        re, im = m["eigenvalue"]
+        modes.append(
+            messages.ModeReport(
+                name=m["name"],
+                real=re,
+                imag=im,
+                frequency_hz=m["frequency_rad_s"] / (2 * np.pi),
+                damping=m["damping"],
+                time_constant_s=m["time_constant_s"],
+                msv=m["msv"],
+                mci=m["mci"],
+                moi=m["moi"],
+                emac=m["emac"],
+                mpc=m["mpc"],
+                cmi=m["cmi"],
+            )
+        )
+    return messages.Result(
+        model_id=c.model_id,
+        axes=c.axes,
+        dt=r["dt"],
+        inputs=r["inputs"],
+        outputs=r["outputs"],
+        modes=modes,
+        tic=[float(r["tic"][o]) for o in r["outputs"]],
+        tic_avg=r["tic_avg"],
+        stable=r["stable"],
+        suggest_update=s.update,
+        reasons=s.steps,
+        checks=s.checks,
+        tic_jn=s.tic_jn,
+        tic_nn=s.tic_nn,
+        tic_nj=s.tic_nj,
+        A=r["A"],
+        B=r["B"],
+        C=r["C"],
+        D=r["D"],
+    )
