@@ -1,0 +1,168 @@
+"""Results (4): every identification heard, newest first; the selected one's TIC, suggestion,
+modes, the nominal's modes and the s-plane; accept, reject, revert."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from rich.text import Text
+from textual import on
+from textual.app import ComposeResult
+from textual.containers import Horizontal, VerticalScroll
+from textual.widgets import Button, DataTable, Static
+
+from agent.ground.splane import Point, SPlane
+from agent.ground.station import GroundStation
+from agent.ground.widgets import MODE_COLUMNS, Confirm, mode_row
+from agent.link import messages
+
+
+class ResultsTab(Horizontal):
+    def __init__(self, station: GroundStation, send: Callable, **kwargs):
+        super().__init__(**kwargs)
+        self.station, self.send = station, send
+        self.selected: str | None = None  # the result shown; None: the newest
+        self._shown: list[str] = []  # the results in the table
+        self._detail_key: tuple | None = None  # what the detail shows now
+
+    def compose(self) -> ComposeResult:
+        yield DataTable(id="results", cursor_type="row")
+        with VerticalScroll(id="detail"):
+            yield Static(id="summary")
+            yield DataTable(id="modes", cursor_type="none")
+            yield Static(id="nominal-title")
+            yield DataTable(id="nominal-modes", cursor_type="none")
+            yield SPlane(id="splane")
+            with Horizontal(id="decision"):
+                yield Button("Accept y", id="accept", variant="success", compact=True)
+                yield Button("Reject n", id="reject", variant="warning", compact=True)
+                yield Button("Revert r", id="revert", compact=True)
+
+    def on_mount(self) -> None:
+        for table in ("#modes", "#nominal-modes"):
+            self.query_one(table, DataTable).add_columns(*MODE_COLUMNS)
+        self.query_one("#results", DataTable).add_columns("model", "TIC", "sugg.")
+
+    def show(self) -> None:
+        results = self.station.heard.results
+        ids = list(results)
+        table = self.query_one("#results", DataTable)
+        if ids != self._shown:
+            table.clear()
+            for model_id in reversed(ids):
+                r = results[model_id]
+                table.add_row(
+                    model_id,
+                    f"{r.tic_avg:.3f}",
+                    Text("update", "green") if r.suggest_update else Text("no", "red"),
+                    key=model_id,
+                )
+            self._shown = ids
+        if self.selected is None and ids:
+            self.selected = ids[-1]
+        self._detail()
+
+    def _detail(self) -> None:
+        result = self.station.heard.results.get(self.selected or "")
+        nominal = self.station.nominal(result.axes) if result is not None else None
+        key = (
+            self.selected,
+            nominal.model_id if nominal else None,
+            len(self.station.heard.results),
+        )
+        if key == self._detail_key:
+            return  # nothing new: keep the tables (and where the operator scrolled) as they are
+        self._detail_key = key
+        summary_w = self.query_one("#summary", Static)
+        modes = self.query_one("#modes", DataTable)
+        if result is None:
+            summary_w.update("no identification result yet")
+            return
+        summary_w.update(_summary(result))
+        modes.clear()
+        for m in result.modes:
+            modes.add_row(*mode_row(m))
+        title = self.query_one("#nominal-title", Static)
+        table = self.query_one("#nominal-modes", DataTable)
+        table.clear()
+        table.display = nominal is not None
+        if nominal is None:
+            title.update(Text(f"nominal ({result.axes}): none known here", "grey70"))
+        else:
+            title.update(Text(f"nominal {nominal.model_id}: TIC {nominal.tic_avg:.3f}", "bold"))
+            for m in nominal.modes:
+                table.add_row(*mode_row(m))
+        points = [
+            point
+            for r in self.station.heard.results.values()
+            if r.axes == result.axes
+            for point in _points(r, "history")
+        ]
+        for kind, r in (("candidate", result), ("nominal", nominal)):
+            if r is not None:
+                points += _points(r, kind)
+        self.query_one("#splane", SPlane).show(points)
+
+    @on(DataTable.RowHighlighted, "#results")
+    def _select(self, event: DataTable.RowHighlighted) -> None:
+        if event.row_key is not None and event.row_key.value in self.station.heard.results:
+            self.selected = event.row_key.value
+            self._detail()
+
+    # -- decisions: each asks first --------------------------------------------------------
+
+    def decide(self, accept: bool) -> None:
+        model_id = self.selected
+        if model_id is None:
+            self.station.note("warning", "no result selected")
+            return
+        verb = "ACCEPT as nominal" if accept else "REJECT"
+        self.app.push_screen(
+            Confirm(f"{verb} {model_id}?"),
+            lambda yes: yes and self.send(lambda: self.station.decide(model_id, accept)),
+        )
+
+    def revert(self) -> None:
+        self.app.push_screen(
+            Confirm("REVERT to the previous nominal model?"),
+            lambda yes: yes and self.send(self.station.revert),
+        )
+
+    @on(Button.Pressed, "#accept")
+    def _accept_pressed(self) -> None:
+        self.decide(True)
+
+    @on(Button.Pressed, "#reject")
+    def _reject_pressed(self) -> None:
+        self.decide(False)
+
+    @on(Button.Pressed, "#revert")
+    def _revert_pressed(self) -> None:
+        self.revert()
+
+
+def _summary(result: messages.Result) -> Text:
+    tic = ", ".join(f"{o} {t:.3f}" for o, t in zip(result.outputs, result.tic, strict=False))
+    text = Text()
+    text.append(f"{result.model_id} · {result.axes} · ", "bold")
+    text.append(
+        "stable" if result.stable else "has a divergent mode",
+        "green" if result.stable else "yellow",
+    )
+    text.append(f"\nTIC {tic}; average {result.tic_avg:.3f}\n")
+    text.append(
+        "suggestion: UPDATE\n" if result.suggest_update else "suggestion: do not update\n",
+        "bold green" if result.suggest_update else "bold yellow",
+    )
+    for step in result.reasons:
+        text.append(f"  {step}\n")
+    return text
+
+
+def _points(result: messages.Result, kind: str) -> list[Point]:
+    """A result's poles on the s-plane (both of a complex pair)."""
+    return [
+        Point(complex(m.real, s * m.imag), kind)
+        for m in result.modes
+        for s in ((1, -1) if m.imag else (1,))
+    ]

@@ -1,0 +1,66 @@
+"""What more than one tab of the console draws: numbers, mode rows, the yes-or-no dialog."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+from textual import on
+from textual.app import ComposeResult
+from textual.containers import Horizontal, Vertical
+from textual.screen import ModalScreen
+from textual.widgets import Button, Label
+
+from agent.link import messages
+
+MODE_COLUMNS = ("mode", "eigenvalue", "f Hz", "ζ", "τ s", "MSV", "MCI", "MOI", "EMAC", "MPC", "CMI")
+
+
+def num(value: float | None, fmt: str = "{:.2f}") -> str:
+    """A number, or "–" for none."""
+    return "–" if value is None else fmt.format(value)
+
+
+def mode_row(m: messages.ModeReport) -> tuple[str, ...]:
+    """A mode as a row under MODE_COLUMNS."""
+    lam = f"{m.real:+.3f}{m.imag:+.3f}j" if m.imag else f"{m.real:+.3f}"
+    return (
+        m.name or "–",
+        lam,
+        num(m.frequency_hz, "{:.3f}"),
+        num(m.damping),
+        num(m.time_constant_s, "{:.2f}"),
+        num(m.msv, "{:.2g}"),
+        num(m.mci, "{:.2g}"),
+        num(m.moi, "{:.2g}"),
+        num(m.emac, "{:.0f}"),
+        num(m.mpc, "{:.0f}"),
+        num(m.cmi, "{:.0f}"),
+    )
+
+
+class Confirm(ModalScreen[bool]):
+    """Yes or no, on one key."""
+
+    BINDINGS: ClassVar = [
+        ("y", "answer(True)", "yes"),
+        ("n", "answer(False)", "no"),
+        ("escape", "answer(False)", "no"),
+    ]
+
+    def __init__(self, question: str):
+        super().__init__()
+        self.question = question
+
+    def compose(self) -> ComposeResult:
+        with Vertical():
+            yield Label(self.question)
+            with Horizontal():
+                yield Button("Yes (y)", id="yes", variant="warning")
+                yield Button("No (n)", id="no")
+
+    def action_answer(self, answer: bool) -> None:
+        self.dismiss(answer)
+
+    @on(Button.Pressed)
+    def _pressed(self, event: Button.Pressed) -> None:
+        self.dismiss(event.button.id == "yes")
