@@ -139,7 +139,7 @@ class Agent:
         # waits up to this long for the holder to let go, and with the log writer formatting
         # an excitation log (as the worker starts identifying) the loop thread waited that long
         # at every wake-up, a convoy that stalled it for 50 ms and more. The measurements are
-        # in docs/agent.md, *Measured resource use* (benchmarks/bench_agent.py).
+        # in benchmarks/README.md, *The agent's resource use* (benchmarks/bench_agent.py).
         switch = sys.getswitchinterval()
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         handler = self._log_handler = self.logbook.handler(self.clock)
