@@ -1,4 +1,5 @@
-"""Identified models (and their data) to MATLAB .mat and JSON (`sysid export`).
+"""Identified models (and their data) to MATLAB .mat and JSON, and their stability and control
+derivatives to CSV (`sysid export`).
 
 Sources: the agent's result log (`NNNN_results_DATE.jsonl`: every identification of a flight),
 a model store file (`models/<axes>_nominal.json` or `_previous.json`, with the data set it was
@@ -16,6 +17,8 @@ name, the later ones `lat_3_2`, `lat_3_3`…), `model_ids`, a cell array of the 
 | inputs, outputs | channel names (cell arrays of strings), in matrix order |
 | A, B, C, D | discrete-time model x[k+1] = A x[k] + B u[k], y[k] = C x[k] + D u[k] |
 | Ac, Bc, Cc, Dc | continuous-time model (empty when the log has none) |
+| coordinates | "outputs" (the states are the outputs: Ac, Bc are the derivatives) or "era" |
+| Ac_std, Bc_std | Cramér–Rao standard errors of Ac, Bc in output coordinates (empty without) |
 | u0, y0 | trim: the input and output values removed before identification (empty if unknown) |
 | eigenvalues | continuous-time eigenvalues (complex column) |
 | mode_names | aircraft mode names ('' when not named) |
@@ -35,6 +38,8 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
+
+from agent.analysis import derivatives
 
 TWO_PI = 2 * np.pi
 
@@ -123,6 +128,7 @@ def _trim(trim: dict | None, inputs, outputs) -> dict:
 
 def _from_result(model_id: str, axes: str, r: dict, trim: dict | None) -> dict:
     continuous = r.get("continuous") or {}
+    refinement = r.get("refinement") or {}
     return {
         "id": model_id,
         "axes": axes,
@@ -131,6 +137,8 @@ def _from_result(model_id: str, axes: str, r: dict, trim: dict | None) -> dict:
         "outputs": list(r["outputs"]),
         **{k: _matrix(r[k]) for k in ("A", "B", "C", "D")},
         **{f"{k}c": _matrix(continuous.get(k)) for k in ("A", "B", "C", "D")},
+        "coordinates": r.get("coordinates", "outputs"),
+        **{f"{k}c_std": _matrix(refinement.get(f"{k}c_std")) for k in ("A", "B")},
         **_trim(trim, r["inputs"], r["outputs"]),
         **_modes(r["modes"]),
         "tic": _tic(r["tic"], r["outputs"]),
@@ -157,6 +165,8 @@ def _from_message(m: dict) -> dict:
         "outputs": list(m["outputs"]),
         **{k: _matrix(m[k]) for k in ("A", "B", "C", "D")},
         **{f"{k}c": np.zeros((0, 0)) for k in ("A", "B", "C", "D")},
+        "coordinates": "",
+        **{f"{k}c_std": np.zeros((0, 0)) for k in ("A", "B")},
         **_trim(None, m["inputs"], m["outputs"]),
         **_modes(modes),
         "tic": np.asarray(m["tic"], dtype=float),
@@ -236,3 +246,24 @@ def to_json(models: list[dict]) -> str:
         return value
 
     return json.dumps([{k: plain(v) for k, v in m.items()} for m in models])
+
+
+def to_csv(models: list[dict]) -> str:
+    """The derivatives with their standard errors (`agent.analysis.derivatives`) of every
+    model in output coordinates; ExportError when none is."""
+    tables = [
+        (
+            m["id"],
+            derivatives.from_matrices(
+                m["outputs"], m["inputs"], m["Ac"], m["Bc"], m["Ac_std"], m["Bc_std"]
+            ),
+        )
+        for m in models
+        if m["coordinates"] == "outputs" and m["Ac"].size
+    ]
+    if not tables:
+        raise ExportError(
+            "no model in output coordinates: derivatives need the continuous model whose "
+            "states are the outputs (a ground log holds discrete matrices only)"
+        )
+    return derivatives.to_csv(tables)

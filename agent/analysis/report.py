@@ -3,12 +3,16 @@ logs — thesis figures 6.2–6.5 and 6.13 and what a flight-test engineer check
 
 - measured against identified time histories per output, each with its TIC (figs. 6.2–6.4);
 - the eigenvalues of every excitation's model in the s-plane, the nominal model's highlighted
-  (fig. 6.5);
+  (fig. 6.5), and per excitation its modes with their Cramér–Rao ellipses against the nominal
+  and the earlier excitations (`splane`: inline SVG, each mode's row on hover);
 - the Hankel singular values with the chosen order;
-- FRFs (Bode) of each identified model against the data's own estimate (H1: cross-spectrum
-  over input auto-spectrum, Welch averaging), per input–output pair;
+- frequency responses of every input–output pair: the measured response at the frequencies
+  the input excited, with its coherence, and the identified model's over it
+  (`agent.ident.frf`: averaged over periods or Welch segments, H = S_yu S_uu⁻¹ per bin);
 - the input spectra and their relative peak factors;
-- the mode table with the quality indexes.
+- the mode table with the quality indexes;
+- the stability and control derivatives with their standard errors (`derivatives`), and
+  their CSV.
 
 The identification is the agent's worker job, so the page shows what the aircraft computed.
 """
@@ -17,6 +21,7 @@ from __future__ import annotations
 
 import html
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import matplotlib
@@ -27,11 +32,13 @@ import matplotlib.pyplot as plt
 import numpy as np
 import scipy.signal
 
+from agent.analysis import derivatives, splane
 from agent.analysis.analyze import Case
 from agent.excitation.signals import relative_peak_factor
-from agent.ident import Experiment
+from agent.ident import Experiment, frf
 from agent.ident.convert import StateSpace
 from agent.ident.fit import fit
+from agent.ident.frf import MeasuredResponse
 from agent.ident.job import Outcome
 from agent.ident.preprocess import preprocess
 
@@ -94,46 +101,45 @@ def time_histories(case: Case, outcome: Outcome, path: Path) -> None:
     plt.close(fig)
 
 
-def s_plane(
-    cases: Sequence[Case], outcomes: Sequence[Outcome], nominal: dict | None, path: Path
-) -> None:
-    fig, ax = plt.subplots(figsize=(7, 5))
+def s_plane(cases: Sequence[Case], outcomes: Sequence[Outcome], nominal: dict | None) -> str:
+    """Every excitation's modes, one colour each, and the nominal's: an inline SVG."""
+    marks = []
     for k, (case, outcome) in enumerate(zip(cases, outcomes, strict=True)):
-        if not outcome.ok:
-            continue
-        lam = np.array([complex(*m["eigenvalue"]) for m in outcome.result["modes"]])
-        lam = np.concatenate([lam, lam[lam.imag != 0].conj()])
-        ax.plot(
-            lam.real,
-            lam.imag,
-            "x",
-            color=COLOURS[k % len(COLOURS)],
-            ms=7,
-            label=f"excitation {case.label}",
-        )
+        if outcome.ok:
+            colour = splane.COLOURS[k % len(splane.COLOURS)]
+            marks += [
+                replace(m, colour=colour)
+                for m in splane.marks_of(
+                    outcome.result["modes"], "this", f"excitation {case.label}", _anchor(case)
+                )
+            ]
     if nominal is not None:
-        lam = np.array([complex(*m["eigenvalue"]) for m in nominal["modes"]])
-        lam = np.concatenate([lam, lam[lam.imag != 0].conj()])
-        ax.plot(
-            lam.real,
-            lam.imag,
-            "o",
-            mfc="none",
-            mec="k",
-            ms=12,
-            mew=2,
-            label=f"nominal {nominal['model_id']}",
-        )
-    ax.axvline(0, color="0.5", lw=0.8)
-    ax.axhline(0, color="0.5", lw=0.8)
-    ax.set_xlabel("real (1/s)")
-    ax.set_ylabel("imaginary (rad/s)")
-    ax.set_title("eigenvalues of every excitation")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=DPI)
-    plt.close(fig)
+        marks += splane.marks_of(nominal["modes"], "nominal", f"nominal {nominal['model_id']}")
+    return splane.svg(marks, "eigenvalues of every excitation")
+
+
+def excitation_s_plane(
+    k: int, cases: Sequence[Case], outcomes: Sequence[Outcome], nominal: dict | None
+) -> str:
+    """Excitation k's modes with their ellipses, the nominal's, and the earlier excitations'
+    faded."""
+    case, outcome = cases[k], outcomes[k]
+    marks = []
+    for earlier, done in zip(cases[:k], outcomes[:k], strict=True):
+        if done.ok:
+            marks += splane.marks_of(
+                done.result["modes"], "earlier", f"excitation {earlier.label}", _anchor(earlier)
+            )
+    if nominal is not None:
+        marks += splane.marks_of(nominal["modes"], "nominal", f"nominal {nominal['model_id']}")
+    marks += splane.marks_of(
+        outcome.result["modes"], "this", f"excitation {case.label}", _anchor(case)
+    )
+    return splane.svg(marks, f"excitation {case.label}: its modes, the nominal's, earlier ones")
+
+
+def _anchor(case: Case) -> str:
+    return f"mode-{case.label}"
 
 
 def hankel(cases: Sequence[Case], outcomes: Sequence[Outcome], path: Path) -> None:
@@ -161,47 +167,88 @@ def hankel(cases: Sequence[Case], outcomes: Sequence[Outcome], path: Path) -> No
     plt.close(fig)
 
 
-def bode(case: Case, outcome: Outcome, path: Path) -> None:
-    """Each input → output pair: the model's FRF against the data's H1 estimate."""
+def _phase_line(f: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(f, phase in degrees) with the phase in (−180°, 180°] and a gap where it wraps, so the
+    line is not drawn across the plot."""
+    wrapped = np.degrees(np.angle(h))
+    jumps = np.flatnonzero(np.abs(np.diff(wrapped)) > 180.0) + 1
+    return np.insert(f, jumps, np.nan), np.insert(wrapped, jumps, np.nan)
+
+
+def frequency_responses(case: Case, outcome: Outcome, path: Path) -> tuple[MeasuredResponse, list]:
+    """Each input → output pair at the frequencies the input excited: the measured response
+    (magnitude in dB, phase) and its coherence, the identified model's response over it.
+    Points below COHERENCE_MIN are drawn apart (×). Returns the measured response and the
+    pairs whose coherence is low at most of their input's frequencies."""
     batch, dt = _prepared(case, outcome)
+    measured = frf.measured(batch, dt)
     model = _model(outcome)
     inputs, outputs = case.job.inputs, case.job.outputs
-    u = np.vstack([e.u for e in batch])
-    y = np.vstack([e.y for e in batch])
-    nper = min(512, u.shape[0] // 4)
-    size = (2.6 * len(outputs), 2.6 * len(inputs))
-    fig, axes = plt.subplots(2 * len(inputs), len(outputs), figsize=size, squeeze=False)
-    eye = np.eye(model.A.shape[0])
+    size = (2.4 * len(outputs), 2.9 * len(inputs))
+    fig, axes = plt.subplots(
+        3 * len(inputs),
+        len(outputs),
+        figsize=size,
+        squeeze=False,
+        sharex="col",
+        gridspec_kw={"height_ratios": [3, 2, 1] * len(inputs)},
+    )
+    if measured.freqs.size:
+        grid = np.logspace(np.log10(measured.freqs.min()), np.log10(measured.freqs.max()), 300)
+    else:
+        grid = np.logspace(-1, np.log10(0.45 / dt), 300)
+    hm = frf.model_response(model.A, model.B, model.C, model.D, dt, grid)
+    low = []
     for i, iname in enumerate(inputs):
-        f, puu = scipy.signal.welch(u[:, i], fs=1 / dt, nperseg=nper)
-        grid = np.logspace(np.log10(f[1]), np.log10(f[-1]), 200)
-        z = np.exp(2j * np.pi * grid * dt)
+        excited = measured.excited(i)
+        f = measured.freqs[excited]
         for j, oname in enumerate(outputs):
-            _, puy = scipy.signal.csd(u[:, i], y[:, j], fs=1 / dt, nperseg=nper)
-            h1 = puy / np.where(puu > 0, puu, np.nan)
-            hm = np.array(
-                [
-                    model.C[j] @ np.linalg.solve(zk * eye - model.A, model.B[:, i]) + model.D[j, i]
-                    for zk in z
-                ]
-            )
-            band = puu > 1e-3 * puu.max()  # where the input put power: the estimate means something
-            mag, ph = axes[2 * i, j], axes[2 * i + 1, j]
-            mag.loglog(f[band], np.abs(h1[band]), ".", color="0.4", ms=3, label="data (H1)")
-            mag.loglog(grid, np.abs(hm), color=COLOURS[0], label="model")
-            ph.semilogx(f[band], np.degrees(np.angle(h1[band])), ".", color="0.4", ms=3)
-            ph.semilogx(grid, np.degrees(np.angle(hm)), color=COLOURS[0])
+            mag, ph, coh = axes[3 * i, j], axes[3 * i + 1, j], axes[3 * i + 2, j]
             mag.set_title(f"{iname} → {oname}", fontsize=8)
-            ph.set_xlabel("Hz", fontsize=8)
-            ph.set_ylabel("°", fontsize=8)
-            for ax in (mag, ph):
+            mag.semilogx(grid, 20 * np.log10(np.abs(hm[:, j, i])), color=COLOURS[0], lw=1.2)
+            ph.semilogx(*_phase_line(grid, hm[:, j, i]), color=COLOURS[0], lw=1.2)
+            if f.size:
+                h = measured.H[excited, j, i]
+                g = measured.coherence[excited, j, i]
+                good = ~(g < frf.COHERENCE_MIN)
+                for keep, marker, colour in ((good, ".", "0.25"), (~good, "x", "0.65")):
+                    mag.semilogx(
+                        f[keep], 20 * np.log10(np.abs(h[keep])), marker, color=colour, ms=3
+                    )
+                    ph.semilogx(f[keep], np.degrees(np.angle(h[keep])), marker, color=colour, ms=3)
+                    coh.semilogx(f[keep], g[keep], marker, color=colour, ms=3)
+                share = measured.low_coherence(i, j)
+                if share is not None and share > 0.5:
+                    low.append((iname, oname, share))
+            else:
+                mag.text(0.5, 0.5, "not excited", transform=mag.transAxes, ha="center", fontsize=8)
+            coh.axhline(frf.COHERENCE_MIN, color="tab:red", lw=0.8, ls="--")
+            coh.set_ylim(0, 1.05)
+            if j == 0:
+                mag.set_ylabel("dB", fontsize=8)
+                ph.set_ylabel("°", fontsize=8)
+                coh.set_ylabel("γ²", fontsize=8)
+            if i == len(inputs) - 1:
+                coh.set_xlabel("Hz", fontsize=8)
+            for ax in (mag, ph, coh):
                 ax.tick_params(labelsize=7)
-                ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+                ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
                 ax.grid(alpha=0.3, which="both")
-    axes[0, 0].legend(fontsize=7)
+    fig.suptitle(
+        f"excitation {case.label}: measured (·; × where γ² < {frf.COHERENCE_MIN}) and model (—); "
+        + _averaging(measured),
+        fontsize=9,
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=DPI)
     plt.close(fig)
+    return measured, low
+
+
+def _averaging(measured: MeasuredResponse) -> str:
+    if measured.averaging == "periods":
+        return f"averaged over {measured.segments} periods of {measured.segment_s:.1f} s"
+    return f"{measured.segments} half-overlapping Hann segments of {measured.segment_s:.1f} s"
 
 
 def input_spectra(case: Case, dt: float, path: Path) -> list[tuple[str, float]]:
@@ -225,14 +272,54 @@ def input_spectra(case: Case, dt: float, path: Path) -> list[tuple[str, float]]:
     return rpf
 
 
+def _derivatives(case: Case, outcome: Outcome, directory: Path, tag: str) -> str:
+    """The stability and control derivatives with their standard errors, and their CSV."""
+    table = derivatives.from_result(outcome.result)
+    if table is None:
+        return (
+            "<h3>Derivatives</h3><p>None: the model is not in output coordinates (the outputs "
+            "do not determine its state).</p>"
+        )
+    name = f"{tag}_derivatives.csv"
+    (directory / name).write_text(derivatives.to_csv([(case.label, table)]))
+    known = "" if np.isfinite(table.std).any() else " (no standard errors: not refined)"
+    return (
+        f"<h3>Derivatives</h3><p>Row: the output whose rate; column: the state or input; "
+        f"value ± Cramér–Rao standard error, in % below; grey: fixed, not estimated; red: "
+        f"σ over {100 * derivatives.POOR:.0f} % of the value{known}. "
+        f'<a href="{name}">CSV</a></p>{derivatives.to_html(table)}'
+    )
+
+
+def _frf_note(measured: MeasuredResponse, low: list) -> str:
+    """What the frequency-response figure shows, and where its coherence is low."""
+    text = (
+        f"<p>Measured at the frequencies each input excited ({_averaging(measured)}), the "
+        f"identified model's response over it. Coherence γ² below {frf.COHERENCE_MIN} "
+        "(×): the measured response is not to be trusted there.</p>"
+    )
+    if low:
+        pairs = ", ".join(
+            f"{html.escape(i)} → {html.escape(o)} ({100 * share:.0f} %)" for i, o, share in low
+        )
+        text += (
+            f'<p class="warn">Low coherence at most of the input\'s frequencies: {pairs}. '
+            "These pairs do not judge the model: the output there is noise, turbulence or "
+            "another input's response.</p>"
+        )
+    return text
+
+
 def _fmt(value, spec: str = "{:.2f}") -> str:
     return "–" if value is None else spec.format(value)
 
 
-def mode_table(outcome: Outcome) -> str:
+def mode_table(outcome: Outcome, anchor: str = "mode") -> str:
+    """The modes with their quality indexes; row k has the id `{anchor}-{k}` (the s-plane
+    links to it)."""
     head = ("mode", "eigenvalue", "f (Hz)", "ζ", "τ (s)", "MSV", "MCI", "MOI", "EMAC", "MPC", "CMI")
     rows = []
-    for m in outcome.result["modes"]:
+    for k, m in enumerate(outcome.result["modes"]):
         lam = complex(*m["eigenvalue"])
         cells = (
             m["name"] or "–",
@@ -247,7 +334,8 @@ def mode_table(outcome: Outcome) -> str:
             _fmt(m["mpc"], "{:.0f}"),
             _fmt(m["cmi"], "{:.0f}"),
         )
-        rows.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
+        cells_html = "".join(f"<td>{html.escape(c)}</td>" for c in cells)
+        rows.append(f'<tr id="{anchor}-{k}">{cells_html}</tr>')
     header = "<tr>" + "".join(f"<th>{h}</th>" for h in head) + "</tr>"
     return f"<table>{header}{''.join(rows)}</table>"
 
@@ -255,7 +343,9 @@ def mode_table(outcome: Outcome) -> str:
 CSS = """body{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}
 table{border-collapse:collapse;margin:0.5em 0 1.5em}td,th{border:1px solid #bbb;padding:2px 6px;
 font-size:0.85em;text-align:right}th{background:#eee}img{max-width:100%;display:block;
-margin:0.5em 0}h2{border-bottom:2px solid #ccc;margin-top:2em}.fail{color:#b00}"""
+margin:0.5em 0}h2{border-bottom:2px solid #ccc;margin-top:2em}.fail{color:#b00}.warn{color:#a60}
+.fixed{color:#999;font-style:italic}.poor{color:#b00}tr:target{background:#ffe9a0}
+svg.splane{display:block;margin:0.5em 0}svg.splane a:hover{opacity:0.7}"""
 
 
 def write(
@@ -272,13 +362,12 @@ def write(
         + ", ".join(html.escape(Path(p).name) for p in logs)
         + "</p>"
     ]
-    s_plane(cases, outcomes, nominal, directory / "s_plane.png")
     hankel(cases, outcomes, directory / "hankel.png")
     parts.append(
-        '<h2>Eigenvalues</h2><img src="s_plane.png" alt="s-plane">'
+        f"<h2>Eigenvalues</h2>{s_plane(cases, outcomes, nominal)}"
         '<h2>Hankel singular values</h2><img src="hankel.png" alt="Hankel">'
     )
-    for case, outcome in zip(cases, outcomes, strict=True):
+    for k, (case, outcome) in enumerate(zip(cases, outcomes, strict=True)):
         tag = f"excitation_{case.label}"
         parts.append(f"<h2>Excitation {html.escape(case.label)}</h2>")
         if not outcome.ok:
@@ -291,13 +380,16 @@ def write(
             f"<p>p = {r['markov']}, n = {r['order']}, TIC_avg = {r['tic_avg']:.3f}, "
             f"{'stable' if r['stable'] else 'not stable'}</p>"
         )
-        parts.append(mode_table(outcome))
+        parts.append(mode_table(outcome, _anchor(case)))
+        parts.append(excitation_s_plane(k, cases, outcomes, nominal))
+        parts.append(_derivatives(case, outcome, directory, tag))
         time_histories(case, outcome, directory / f"{tag}_time.png")
-        bode(case, outcome, directory / f"{tag}_bode.png")
+        measured, low = frequency_responses(case, outcome, directory / f"{tag}_bode.png")
         rpf = input_spectra(case, case.job.record_dt, directory / f"{tag}_inputs.png")
         rpf_text = ", ".join(f"{n} {v:.2f}" for n, v in rpf)
         parts.append(
             f'<img src="{tag}_time.png" alt="time histories {tag}">'
+            f"<h3>Frequency responses</h3>{_frf_note(measured, low)}"
             f'<img src="{tag}_bode.png" alt="Bode {tag}">'
             f"<p>Relative peak factors: {rpf_text}</p>"
             f'<img src="{tag}_inputs.png" alt="input spectra {tag}">'

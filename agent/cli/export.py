@@ -1,4 +1,4 @@
-"""`sysid export`: identified models (and data) to MATLAB .mat or JSON."""
+"""`sysid export`: identified models (and data) to MATLAB .mat or JSON; derivatives to CSV."""
 
 from __future__ import annotations
 
@@ -12,22 +12,27 @@ from agent.cli.common import EXIT_OK, failed, refused
 def add_parser(sub) -> None:
     parser = sub.add_parser(
         "export",
-        help="identified models (and data) to MATLAB .mat or JSON",
+        help="identified models (and data) to MATLAB .mat or JSON; derivatives to CSV",
         description="Export the models of a result log, a model store file "
         "(models/<axes>_nominal.json) or a ground log; variable names in docs/post-flight.md.",
     )
     parser.add_argument("source", type=Path, metavar="SOURCE")
-    parser.add_argument("--out", type=Path, required=True, help="FILE.mat or FILE.json")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        help="FILE.mat or FILE.json (models), FILE.csv (derivatives with standard errors)",
+    )
     parser.add_argument("--model", action="append", metavar="ID", help="only these model ids")
     parser.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from agent.analysis.export import ExportError, load_models, to_json, to_mat
+    from agent.analysis.export import ExportError, load_models, to_csv, to_json, to_mat
 
     suffix = args.out.suffix.lower()
-    if suffix not in (".mat", ".json"):
-        raise refused(f"{args.out}: give a .mat or .json file to write")
+    if suffix not in (".mat", ".json", ".csv"):
+        raise refused(f"{args.out}: give a .mat, .json or .csv file to write")
     try:
         models = load_models(args.source)
     except ExportError as exc:
@@ -48,8 +53,12 @@ def run(args: argparse.Namespace) -> int:
     try:
         if suffix == ".mat":
             to_mat(models, args.out)
+        elif suffix == ".csv":
+            args.out.write_text(to_csv(models))
         else:
             args.out.write_text(to_json(models))
+    except ExportError as exc:
+        raise refused(str(exc)) from None
     except OSError as exc:
         raise failed(f"{args.out}: cannot be written ({exc.strerror or exc})") from None
     print(f"{args.out}: {len(models)} model(s): {', '.join(m['id'] for m in models)}")

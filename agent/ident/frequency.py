@@ -51,6 +51,7 @@ class Spectra:
     freqs: np.ndarray  # (F,) Hz
     Suu: np.ndarray  # (F, r, r)
     Syu: np.ndarray  # (F, m, r)
+    Syy: np.ndarray  # (F, m) the outputs' auto-spectra (coherence)
     segments: int
     segment_length: int
     periodic: bool  # whole periods (True) or Hann-windowed Welch segments
@@ -122,6 +123,7 @@ def averaged_spectra(batch: Sequence[Experiment], period: int | None) -> Spectra
     F = length // 2 + 1
     Suu = np.zeros((F, r, r), dtype=complex)
     Syu = np.zeros((F, m, r), dtype=complex)
+    Syy = np.zeros((F, m))
     count, leak_num, leak_den = 0, 0.0, 0.0
     for exp in batch:
         for start, stop in _segments(exp, length, periodic):
@@ -129,6 +131,7 @@ def averaged_spectra(batch: Sequence[Experiment], period: int | None) -> Spectra
             Y = np.fft.rfft(exp.y[start:stop] * window[:, None], axis=0)
             Suu += np.einsum("fi,fj->fij", U, U.conj())
             Syu += np.einsum("fi,fj->fij", Y, U.conj())
+            Syy += np.abs(Y) ** 2
             count += 1
             if periodic and start >= length:
                 # Appendix A.1: the input over the segment against the period before it.
@@ -139,6 +142,7 @@ def averaged_spectra(batch: Sequence[Experiment], period: int | None) -> Spectra
         freqs=np.fft.rfftfreq(length),
         Suu=Suu / count,
         Syu=Syu / count,
+        Syy=Syy / count,
         segments=count,
         segment_length=length,
         periodic=periodic,

@@ -124,7 +124,37 @@ def test_json_and_the_command_line(flight, tmp_path):
         or loadmat(tmp_path / "one.mat", simplify_cells=True)["model_ids"] == "lat-2"
     )
     assert "no model lat-9" in run(str(log), "--out", "x.mat", "--model", "lat-9").stderr
-    assert "give a .mat or .json" in run(str(log), "--out", "x.csv").stderr
+    assert "give a .mat, .json or .csv" in run(str(log), "--out", "x.txt").stderr
+    # The derivatives with their standard errors: one line per model, equation and variable.
+    done = run(str(log), "--out", "derivatives.csv")
+    assert done.returncode == 0, done.stderr
+    with (tmp_path / "derivatives.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    assert {r["model"] for r in rows} == {"lat-1", "lat-2"}
+    assert len(rows) == 2 * 4 * 6  # β̇, ṗ, ṙ, φ̇ over β, p, r, φ, aileron, rudder
+    model = load_models(log)[0]
+    lp = next(
+        r
+        for r in rows
+        if r["model"] == "lat-1" and r["equation"] == "dp/dt" and r["variable"] == "p"
+    )
+    p = model["outputs"].index("p")
+    assert float(lp["value"]) == pytest.approx(model["Ac"][p, p], rel=1e-5)
+    assert float(lp["std"]) == pytest.approx(model["Ac_std"][p, p], rel=1e-2)
+
+
+def test_derivatives_need_a_model_in_output_coordinates(tmp_path):
+    # Bad input tried: a ground log, whose results carry the discrete model only.
+    from agent.analysis.export import to_csv
+    from agent.link import messages
+    from tests.ground.aircraft import result
+
+    log = tmp_path / "0001_ground_20261122.jsonl"
+    log.write_text(
+        json.dumps({"dir": "rx", "seq": 4, "message": messages.to_dict(result("lat-7"))})
+    )
+    with pytest.raises(ExportError, match="no model in output coordinates"):
+        to_csv(load_models(log))
 
 
 @pytest.mark.parametrize("bad", ["no models", "damaged store"])

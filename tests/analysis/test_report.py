@@ -1,11 +1,16 @@
-"""`sysid report` renders in a browser: the page is made from three noisy flights of the A.2
-model, opened in headless Chromium, and the screenshot is checked for the figures.
+"""`sysid report` renders in a browser: the page is made from two noisy flights of the A.2
+model, opened in headless Chromium, and the screenshot is checked for the figures. The page's
+parts are checked for what a flight-test engineer reads off them: the s-planes' modes with
+their rows (hover and click), the frequency responses with coherence, the derivative table
+and its CSV.
 
 Bad input tried: a nominal model file that is not one (exit 2).
 """
 
 from __future__ import annotations
 
+import csv
+import re
 import shutil
 import subprocess
 import sys
@@ -40,7 +45,6 @@ def test_the_report_renders_in_headless_chromium(tmp_path):
             str(logs),
             "--axes",
             "lateral",
-            "--no-refine",
             "--out",
             str(out),
         ],
@@ -53,13 +57,33 @@ def test_the_report_renders_in_headless_chromium(tmp_path):
     page = (out / "index.html").read_text()
     images = sorted(p.name for p in out.glob("*.png"))
     assert images == sorted(
-        ["s_plane.png", "hankel.png"]
+        ["hankel.png"]
         + [f"excitation_{k}_{kind}.png" for k in (1, 2) for kind in ("time", "bode", "inputs")]
     )
     for name in images:
         assert f'src="{name}"' in page
     assert "Dutch roll" in page
     assert "Relative peak factors: aileron" in page
+    # The s-planes: one of every excitation, then one per excitation; each mode a group with
+    # its row as a tooltip and a link to that row, which exists.
+    assert page.count('<svg class="splane"') == 3
+    assert page.count('<g class="mode this"') == 3 * 3 + 3  # overview: 2 × 3; sections: 3 + 3
+    assert page.count('<g class="mode earlier"') == 3  # excitation 2's plane: excitation 1's
+    assert re.search(r"<title>excitation 1: Dutch roll: λ [-+]\d", page)
+    for k in range(3):
+        assert f'id="mode-1-{k}"' in page and f'href="#mode-1-{k}"' in page
+    assert page.count('class="omega"') >= 6 and page.count('class="zeta"') == 3 * 10
+    # The frequency responses, with their coherence, and the derivatives with their CSV.
+    assert page.count("<h3>Frequency responses</h3>") == 2
+    assert "Coherence γ² below 0.6" in page
+    for k in (1, 2):
+        with (out / f"excitation_{k}_derivatives.csv").open() as handle:
+            rows = list(csv.DictReader(handle))
+        assert len(rows) == 4 * 6  # β̇, ṗ, ṙ, φ̇ over β, p, r, φ, aileron, rudder
+        lp = next(r for r in rows if r["equation"] == "dp/dt" and r["variable"] == "p")
+        assert float(lp["value"]) < 0  # roll damping
+        assert 0 < float(lp["std"]) < abs(float(lp["value"])) / 5
+        assert f'href="excitation_{k}_derivatives.csv"' in page
     shot = tmp_path / "shot.png"
     subprocess.run(
         [
@@ -86,8 +110,11 @@ def test_the_report_renders_in_headless_chromium(tmp_path):
     assert len(colours) > 30
     blue = np.abs(pixels - np.array([0x1F, 0x77, 0xB4]) / 255).max(axis=2) < 0.06
     assert blue.sum() > 2000
-    # The s-plane figure (the first image) drew: its region has ink in many rows.
-    assert ink[200:700].any(axis=1).mean() > 0.5
+    # The overview s-plane (the first figure, an inline SVG) drew: its region has ink in most
+    # rows, its unstable half shaded pink.
+    assert ink[220:640].any(axis=1).mean() > 0.8
+    pink = np.abs(pixels - np.array([0xFB, 0xEC, 0xEC]) / 255).max(axis=2) < 0.02
+    assert pink[220:640].sum() > 5000
 
 
 def test_a_bad_nominal_file_is_refused(tmp_path):
