@@ -144,15 +144,20 @@ class Recorder:
 
     def push(self, sample: Sample) -> None:
         """A sample from a driver (called on the event loop; O(channels in the sample))."""
+        late = False
         for name, value in sample.values.items():
             history = self._histories.get(name)
             if history is None:
                 continue
             if history.times and sample.time <= history.times[-1]:
-                self.counters["out_of_order"] += 1  # a duplicate or late sample: keep order
+                late = True  # a duplicate, or stamped before one already held: keep order
                 continue
             history.times.append(sample.time)
             history.values.append(value)
+        if late:
+            # Once per sample, whatever its channel count: a device's clock estimate settling
+            # (its first samples arrive late, so are stamped late) sends a few back in time.
+            self.counters["late_samples"] += 1
 
     def mark(self, event: object) -> None:
         """A scheduler event; a Window (plan id, axes, start, end, outcome) is kept, and its

@@ -52,6 +52,8 @@ class Health:
     name: str
     state: str
     rate_hz: float
+    """Samples over the last second by their own (device-clock) times: the sensor's rate,
+    whatever bursts the serial path delivers them in."""
     frames: int
     crc_errors: int
     resyncs: int
@@ -129,7 +131,7 @@ class SensorDriver:
                 self._gap_log.append((self._last_time, time))
                 log.warning("%s: %.3f s gap in samples", self.name, time - self._last_time)
             self._last_time = time
-            self._recent.append(arrival)
+            self._recent.append(time)
             self._publish(Sample(self.name, time, reading.values))
 
     def health(self) -> Health:

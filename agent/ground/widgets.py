@@ -20,6 +20,16 @@ def num(value: float | None, fmt: str = "{:.2f}") -> str:
     return "–" if value is None else fmt.format(value)
 
 
+def percent(value: float | None) -> str:
+    """A percentage (MSV, MCI, MOI run 0–100): whole numbers from 10, two digits below, never
+    an exponent (100 printed as "1e+02" read as a fault)."""
+    if value is None:
+        return "–"
+    if abs(value) >= 9.95:
+        return f"{value:.0f}"
+    return f"{value:.2g}" if abs(value) >= 0.01 or value == 0 else "<0.01"
+
+
 def mode_row(m: messages.ModeReport) -> tuple[str, ...]:
     """A mode as a row under MODE_COLUMNS."""
     lam = f"{m.real:+.3f}{m.imag:+.3f}j" if m.imag else f"{m.real:+.3f}"
@@ -29,9 +39,9 @@ def mode_row(m: messages.ModeReport) -> tuple[str, ...]:
         num(m.frequency_hz, "{:.3f}"),
         num(m.damping),
         num(m.time_constant_s, "{:.2f}"),
-        num(m.msv, "{:.2g}"),
-        num(m.mci, "{:.2g}"),
-        num(m.moi, "{:.2g}"),
+        percent(m.msv),
+        percent(m.mci),
+        percent(m.moi),
         num(m.emac, "{:.0f}"),
         num(m.mpc, "{:.0f}"),
         num(m.cmi, "{:.0f}"),

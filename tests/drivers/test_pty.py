@@ -11,8 +11,10 @@ import asyncio
 import numpy as np
 import pytest
 
+from agent.clock import VirtualClock
 from drivers.surfaces.codec import LENGTH
 from tests.drivers.rig import RATE, Rig
+from tests.waiting import until
 
 pytestmark = pytest.mark.usefixtures("no_leaked_tasks")
 PERIOD = 1 / RATE
@@ -150,3 +152,34 @@ async def test_vn200_ascii_protocol(tmp_path):
 
     for s in samples:
         assert s.values["phi"] == pytest.approx(state(s.time)["phi"], abs=0.0063)
+
+
+async def test_the_rate_shown_is_the_sensors_own_when_frames_arrive_in_bursts(tmp_path):
+    """Bad input tried: the µADC's frames held back for 0.3 s (a USB adapter's buffer, a busy
+    reader) and then delivered at once. Counted by arrival, the last second then held 126
+    frames of a 100 Hz sensor; counted by the sensor's own sample times it holds 100."""
+    clock = VirtualClock(100.0)
+    rig = Rig(tmp_path, clock=clock)
+    await rig.start(names=("airdata",), emit=False)
+    emitter, samples = rig.emitters["airdata"], rig.samples["airdata"]
+    start = clock.now()
+
+    async def deliver(frames: range, arrival: float) -> None:
+        """Frames sampled at start + k/RATE, arriving 2 ms after `arrival`."""
+        clock.advance(arrival + 0.002 - clock.now())
+        for k in frames:
+            emitter.emit(start + k / RATE, k)
+        await until(lambda: len(samples) == frames.stop, f"frame {frames.stop - 1}")
+
+    try:
+        for k in range(100):  # a second on time
+            await deliver(range(k, k + 1), start + k / RATE)
+        await deliver(range(100, 130), start + 1.30)  # 0.3 s held back, then at once
+        for k in range(130, 226):
+            await deliver(range(k, k + 1), start + k / RATE)
+        health = rig.drivers["airdata"].health()
+    finally:
+        await rig.stop()
+    arrivals = [s for s in samples if s.time > clock.now() - 1.0]
+    assert health.rate_hz == pytest.approx(RATE, abs=1)
+    assert len(arrivals) == pytest.approx(RATE, abs=1)  # the samples' own times, spaced 10 ms

@@ -176,3 +176,18 @@ async def test_a_silent_link_is_shown_as_lost_and_status_as_stale(console):
     await until(pilot, lambda: "STALE" in text_of(app, "#flight"), "stale")
     r.channel.outage = False
     await until(pilot, lambda: "LINK UP" in text_of(app, "#top"), "back")
+
+
+def test_percentages_never_print_as_exponents():
+    from agent.ground.widgets import percent
+
+    assert [percent(v) for v in (100.0, 99.96, 10.0, 9.9, 0.35, 0.0, 1e-5, None)] == [
+        "100",
+        "100",
+        "10",
+        "9.9",
+        "0.35",
+        "0",
+        "<0.01",
+        "–",
+    ]

@@ -54,7 +54,7 @@ class StatusTab(Horizontal):
             ("yaw", angle(s.yaw)),
             ("excitation", s.excitation),
             ("identifying", "yes" if s.identifying else "no"),
-            ("loop lag", num(s.loop_lag_ms, "{:.1f} ms")),
+            ("loop lag", num(s.loop_lag_ms, "{:.1f} ms, worst of 1 s")),
         ]
         head.append("\n".join(f"{k:<11} {v}" for k, v in rows))
         flight.update(head)
@@ -71,8 +71,10 @@ class StatusTab(Horizontal):
                 num(h.get("age_s"), "{:.2f}"),
             )
         r = s.recorder
+        # Each number is what its label says: frames recorded (of them, assembled after a
+        # late wake-up), samples dropped as stamped before one already held, log lines lost.
         self.query_one("#health", Static).update(
-            f"recorder: {int(r.get('frames', 0))} frames, "
-            f"{int(r.get('catch_up_frames', 0))} caught up, "
-            f"{int(r.get('out_of_order', 0))} out of order"
+            f"frames     {int(r.get('frames', 0))} ({int(r.get('catch_up_frames', 0))} late)\n"
+            f"dropped    {int(r.get('late_samples', 0))} late samples\n"
+            f"log lost   {int(r.get('log_lost_lines', 0))} lines"
         )
