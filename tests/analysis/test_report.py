@@ -71,8 +71,10 @@ def test_the_report_renders_in_headless_chromium(tmp_path):
     assert page.count('<g class="mode earlier"') == 3  # excitation 2's plane: excitation 1's
     assert re.search(r"<title>excitation 1: Dutch roll: λ [-+]\d", page)
     for k in range(3):
-        assert f'id="mode-1-{k}"' in page and f'href="#mode-1-{k}"' in page
-    assert page.count('class="omega"') >= 6 and page.count('class="zeta"') == 3 * 10
+        assert f'id="mode-1-{k}"' in page
+        assert f'href="#mode-1-{k}"' in page
+    assert page.count('class="omega"') >= 6
+    assert page.count('class="zeta"') == 3 * 10
     # The frequency responses, with their coherence, and the derivatives with their CSV.
     assert page.count("<h3>Frequency responses</h3>") == 2
     assert "Coherence γ² below 0.6" in page
