@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from agent.cli.common import EXIT_OK, port, refused
+from agent.cli import common
 
 
 def add_parser(sub) -> None:
@@ -27,7 +27,7 @@ def add_parser(sub) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
         "--mavlink-port",
-        type=port,
+        type=common.port,
         default=14555,
         help="UDP port the emulated autopilot listens on (0: any)",
     )
@@ -76,16 +76,16 @@ def run(args: argparse.Namespace) -> int:
     try:
         check_sensor_rate(args.sensor_rate)
     except ValueError as exc:
-        raise refused(str(exc)) from None
+        raise common.refused(str(exc)) from None
     announce = lambda text: print(text, flush=True)  # noqa: E731
     try:
         asyncio.run(
             serve(options, args.pty_dir, args.duration, tuple(args.switch_at), announce=announce)
         )
     except PlantError as exc:
-        raise refused(str(exc)) from None
+        raise common.refused(str(exc)) from None
     except OSError as exc:
-        raise refused(f"cannot start: {exc}") from None
+        raise common.refused(f"cannot start: {exc}") from None
     except KeyboardInterrupt:
         pass
-    return EXIT_OK
+    return common.EXIT_OK
