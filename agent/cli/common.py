@@ -212,6 +212,20 @@ def service_options(parser: argparse.ArgumentParser, config: Path, base_holds: s
     )
 
 
+def aircraft_options(args: argparse.Namespace, **more):
+    """The simulated aircraft's options (agent.sim.aircraft) from the --aircraft, --speed-kts,
+    --turbulence and --seed that `sysid sim` and `sim-aircraft` each define, and `more`."""
+    from agent.sim.aircraft import AircraftOptions
+
+    return AircraftOptions(
+        aircraft=args.aircraft,
+        speed_kts=args.speed_kts,
+        turbulence=args.turbulence,
+        seed=args.seed,
+        **more,
+    )
+
+
 def read_config(path: Path, model=None):
     """The config file at `path`, validated as `model` (the agent's Config if None); a bad
     file is refused (exit 2)."""

@@ -47,12 +47,8 @@ def run(args: argparse.Namespace) -> int:
     from agent.sim.plant import PlantError
 
     progress = None if args.json else (lambda text: print(text, flush=True))
-    # Option by option, not **vars(args): the namespace holds more, and --keep is `directory`.
     options = SimOptions(
-        aircraft=args.aircraft,
-        speed_kts=args.speed_kts,
-        turbulence=args.turbulence,
-        seed=args.seed,
+        plane=common.aircraft_options(args),
         preset=args.preset,
         runs=args.runs,
         directory=args.keep,

@@ -60,15 +60,12 @@ def add_parser(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     import asyncio
 
-    from agent.sim.aircraft import AircraftOptions, check_sensor_rate, serve
+    from agent.sim.aircraft import check_sensor_rate, serve
     from agent.sim.plant import PlantError
 
-    options = AircraftOptions(
-        aircraft=args.aircraft,
-        speed_kts=args.speed_kts,
+    options = common.aircraft_options(
+        args,
         altitude_ft=args.altitude_ft,
-        turbulence=args.turbulence,
-        seed=args.seed,
         noise=not args.no_noise,
         mavlink_port=args.mavlink_port,
         sensor_rate_hz=args.sensor_rate,
