@@ -1,4 +1,5 @@
-"""What the `sysid` commands share: exit codes, errors, JSON output, argument types, options.
+"""What the `sysid` commands share: exit codes, errors, JSON output, argument types, options,
+config loading.
 
 Light on purpose: `sysid --help` imports this and every command's `add_parser`, so anything
 heavy (numpy, scipy, pydantic, the simulator) is imported inside a command's `run`.
