@@ -1,4 +1,4 @@
-"""What every sans-I/O codec shares: counters, checksums, and a stream wrapper.
+"""What every sans-I/O codec shares: counters, checksums, resynchronising, a stream wrapper.
 
 A codec's `decode(buffer) -> (consumed, message | None)` never touches a port: 0 consumed means
 "need more bytes"; consumed > 0 with no message means bytes were discarded (garbage before a
@@ -60,6 +60,27 @@ def skip(stats: CodecStats, count: int, *, crc: bool = False, rejected: bool = F
     stats.crc_errors += crc
     stats.rejected += rejected
     return count
+
+
+def hunt(stats: CodecStats, buffer: bytes | bytearray, sync: int | bytes) -> int:
+    """Bytes before the first one-byte `sync` (all of them when there is none), discarded as one
+    resync; 0 when the buffer starts with it."""
+    start = buffer.find(sync)
+    return 0 if start == 0 else skip(stats, len(buffer) if start < 0 else start)
+
+
+def resync(
+    stats: CodecStats,
+    buffer: bytes | bytearray,
+    sync: int | bytes,
+    *,
+    crc: bool = False,
+    rejected: bool = False,
+) -> int:
+    """A bad frame at the start of `buffer` discarded up to the next `sync` after its first
+    byte (all of it when there is none); `crc` or `rejected` says why, for the stats."""
+    following = buffer.find(sync, 1)
+    return skip(stats, len(buffer) if following < 0 else following, crc=crc, rejected=rejected)
 
 
 class StreamDecoder:

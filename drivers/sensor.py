@@ -54,6 +54,7 @@ class Health:
     rate_hz: float
     """Samples over the last second by their own (device-clock) times: the sensor's rate,
     whatever bursts the serial path delivers them in."""
+    # The codec's counters (CodecStats), each under its own name.
     frames: int
     crc_errors: int
     resyncs: int
@@ -137,16 +138,12 @@ class SensorDriver:
     def health(self) -> Health:
         now = self._clock.now()
         window = [t for t in self._recent if now - t <= 1.0]
-        s, link = self._decoder.stats, self.link.stats
+        link = self.link.stats
         return Health(
             name=self.name,
             state=link.state,
             rate_hz=float(len(window)),
-            frames=s.frames,
-            crc_errors=s.crc_errors,
-            resyncs=s.resyncs,
-            bytes_skipped=s.bytes_skipped,
-            rejected=s.rejected,
+            **self._decoder.stats.as_dict(),
             gaps=self._gaps,
             last_sample_age=None if self._last_time is None else now - self._last_time,
             opens=link.opens,

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from agent.analysis.identify import Request, load_experiments
-from agent.analysis.records import RecordError
+from agent.analysis.records import RecordError, time_steps
 from agent.ident import Experiment, Settings
 from agent.ident import job as jobs
 from agent.ident.errors import DataError
@@ -246,13 +246,10 @@ def _check_time(path: Path, time: np.ndarray) -> None:
     missing = np.flatnonzero(~np.isfinite(time))
     if missing.size:
         raise AnalyzeError(f"{path}: data row {missing[0] + 1} has no time")
-    steps = np.diff(time)
-    if np.any(steps <= 0):
-        k = int(np.argmax(steps <= 0))
-        raise AnalyzeError(
-            f"{path}: time does not increase at data row {k + 2} "
-            f"({time[k]:.6f} s → {time[k + 1]:.6f} s)"
-        )
+    try:
+        time_steps(path, time, ".6f")  # monotonic clock seconds: to the µs, not 6 digits
+    except RecordError as exc:
+        raise AnalyzeError(str(exc)) from None
 
 
 def run_cases(

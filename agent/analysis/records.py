@@ -258,14 +258,21 @@ def _numbered(path: Path, reader, first: int):
         line_no += 1
 
 
-def _sample_time(path: Path, time: np.ndarray) -> float:
+def time_steps(path: Path, time: np.ndarray, spec: str = ".6g") -> np.ndarray:
+    """The steps between successive times; a RecordError names the first data row whose time
+    does not increase (its times formatted with `spec`)."""
     steps = np.diff(time)
     if np.any(steps <= 0):
         k = int(np.argmax(steps <= 0))
         raise RecordError(
             f"{path}: time does not increase at data row {k + 2} "
-            f"({time[k]:.6g} s → {time[k + 1]:.6g} s)"
+            f"({time[k]:{spec}} s → {time[k + 1]:{spec}} s)"
         )
+    return steps
+
+
+def _sample_time(path: Path, time: np.ndarray) -> float:
+    steps = time_steps(path, time)
     dt = float(np.median(steps))
     jitter = np.abs(steps - dt) / dt
     if jitter.max() > MAX_JITTER:

@@ -4,6 +4,8 @@ One module per command, each with `add_parser(sub)` (its options; `set_defaults(
 `run(args) -> exit code`, importing what it needs only when it runs, so that `sysid --help`
 stays quick. A command stops with `common.CommandError` (or `refused`, `failed`); `main`
 turns that, a usage error and, under `--json`, a bug into its message and exit code, once.
+Every `add_parser` opens alike (name, help, description) on purpose: a command's words stay
+in its own module; what commands share (options, config loading) is in `common`.
 """
 
 from __future__ import annotations

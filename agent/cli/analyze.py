@@ -5,15 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from agent.cli.common import (
-    EXIT_FAILED,
-    EXIT_OK,
-    identification_request,
-    print_json,
-    refused,
-    replay_options,
-    run_cases,
-)
+from agent.cli import common
 
 
 def add_parser(sub) -> None:
@@ -24,7 +16,7 @@ def add_parser(sub) -> None:
         description="Re-run the agent's identification job on excitation logs (or any "
         "records) with changed settings (thesis 6.2.3).",
     )
-    replay_options(parser)
+    common.replay_options(parser)
     parser.add_argument("--batch", action="store_true", help="one identification of all")
     parser.add_argument(
         "--sweep", metavar="NAME=RANGE", help="markov=1:20 or order=2:12:2 or markov=1,2,5"
@@ -42,7 +34,7 @@ def select(args: argparse.Namespace):
     try:
         return an.select_logs(args.data, args.excitation)
     except an.AnalyzeError as exc:
-        raise refused(str(exc)) from None
+        raise common.refused(str(exc)) from None
 
 
 def cases_for(args: argparse.Namespace, paths, batch: bool, sweep, prepared=None):
@@ -51,9 +43,9 @@ def cases_for(args: argparse.Namespace, paths, batch: bool, sweep, prepared=None
     when the caller has it."""
     from agent.analysis import analyze as an
 
-    config, request, settings = prepared or identification_request(args, paths)
+    config, request, settings = prepared or common.identification_request(args, paths)
     if getattr(args, "cross", False) and batch:
-        raise refused("--cross needs one model per excitation: drop --batch")
+        raise common.refused("--cross needs one model per excitation: drop --batch")
     roles = [config.channels.role_of(n) for n in request.outputs]
     input_roles = [config.channels.role_of(n) for n in request.inputs]
     try:
@@ -61,7 +53,7 @@ def cases_for(args: argparse.Namespace, paths, batch: bool, sweep, prepared=None
             request, roles, settings, batch=batch, sweep=sweep, input_roles=input_roles
         )
     except an.AnalyzeError as exc:
-        raise refused(str(exc)) from None
+        raise common.refused(str(exc)) from None
     return cases
 
 
@@ -72,9 +64,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         sweep = an.parse_sweep(args.sweep) if args.sweep else None
     except an.AnalyzeError as exc:
-        raise refused(str(exc)) from None
+        raise common.refused(str(exc)) from None
     cases = cases_for(args, paths, args.batch, sweep)
-    outcomes = run_cases(cases, args, quiet=args.json)
+    outcomes = common.run_cases(cases, args, quiet=args.json)
     report = {
         "logs": [str(p) for p in paths],
         "cases": [
@@ -90,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
     if args.cross:
         report["cross_tic"] = an.cross_validation(cases, outcomes)
     if args.json:
-        print_json(report)
+        common.print_json(report)
     else:
         print(an.analysis_text(report, paths))
-    return EXIT_OK if any(o.ok for o in outcomes) else EXIT_FAILED
+    return common.EXIT_OK if any(o.ok for o in outcomes) else common.EXIT_FAILED

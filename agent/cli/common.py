@@ -1,4 +1,5 @@
-"""What the `sysid` commands share: exit codes, errors, JSON output, argument types, options.
+"""What the `sysid` commands share: exit codes, errors, JSON output, argument types, options,
+config loading.
 
 Light on purpose: `sysid --help` imports this and every command's `add_parser`, so anything
 heavy (numpy, scipy, pydantic, the simulator) is imported inside a command's `run`.
@@ -201,17 +202,50 @@ def replay_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def service_options(parser: argparse.ArgumentParser, config: Path, base_holds: str) -> None:
+    """The config file and the state directory of the long-running commands (agent, console)."""
+    parser.add_argument("--config", type=Path, default=config)
+    parser.add_argument(
+        "--base",
+        type=Path,
+        default=Path("."),
+        help=f"directory for {base_holds} (default .)",
+    )
+
+
+def aircraft_options(args: argparse.Namespace, **more):
+    """The simulated aircraft's options (agent.sim.aircraft) from the --aircraft, --speed-kts,
+    --turbulence and --seed that `sysid sim` and `sim-aircraft` each define, and `more`."""
+    from agent.sim.aircraft import AircraftOptions
+
+    return AircraftOptions(
+        aircraft=args.aircraft,
+        speed_kts=args.speed_kts,
+        turbulence=args.turbulence,
+        seed=args.seed,
+        **more,
+    )
+
+
+def read_config(path: Path, model=None):
+    """The config file at `path`, validated as `model` (the agent's Config if None); a bad
+    file is refused (exit 2)."""
+    from agent.config import ConfigError, load_config
+
+    try:
+        return load_config(path) if model is None else load_config(path, model)
+    except ConfigError as exc:
+        raise refused(str(exc)) from None
+
+
 def load_optional_config(path: Path | None):
     """The config at `path`, else ./config.toml if there is one, else the defaults; a bad
     file is refused (exit 2)."""
-    from agent.config import Config, ConfigError, load_config
+    if path is None and not DEFAULT_CONFIG.exists():
+        from agent.config import Config
 
-    try:
-        if path is not None:
-            return load_config(path)
-        return load_config(DEFAULT_CONFIG) if DEFAULT_CONFIG.exists() else Config()
-    except ConfigError as exc:
-        raise refused(str(exc)) from None
+        return Config()
+    return read_config(DEFAULT_CONFIG if path is None else path)
 
 
 def identification_request(args: argparse.Namespace, paths):

@@ -6,14 +6,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from agent.cli.common import DEFAULT_CONFIG, EXIT_OK, refused
+from agent.cli import common
 
 
 def add_parser(sub) -> None:
     parser = sub.add_parser("config", help="configuration tools")
     config_sub = parser.add_subparsers(dest="config_command", required=True)
     check = config_sub.add_parser("check", help="validate a config file")
-    check.add_argument("file", nargs="?", type=Path, default=DEFAULT_CONFIG)
+    check.add_argument("file", nargs="?", type=Path, default=common.DEFAULT_CONFIG)
     check.add_argument("--ground", action="store_true", help="the file is a ground console config")
     check.set_defaults(run=run, name="config check")
     ref = config_sub.add_parser(
@@ -24,20 +24,16 @@ def add_parser(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from agent.config import Config, ConfigError, load_config
     from agent.ground.config import GroundConfig
 
-    try:
-        load_config(args.file, GroundConfig if args.ground else Config)
-    except ConfigError as exc:
-        raise refused(str(exc)) from None
+    common.read_config(args.file, GroundConfig if args.ground else None)
     print(f"{args.file}: ok")
-    return EXIT_OK
+    return common.EXIT_OK
 
 
 def run_reference(args: argparse.Namespace) -> int:
     print(configuration_reference(), end="")
-    return EXIT_OK
+    return common.EXIT_OK
 
 
 def configuration_reference() -> str:

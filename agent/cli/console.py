@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from agent.cli.common import EXIT_OK, failed, refused
+from agent.cli import common
 
 
 def add_parser(sub) -> None:
@@ -15,13 +15,7 @@ def add_parser(sub) -> None:
         description="Vehicle status, excitation, identification settings, results and the "
         "model-update decision; everything received is also in the ground log.",
     )
-    parser.add_argument("--config", type=Path, default=Path("ground.toml"))
-    parser.add_argument(
-        "--base",
-        type=Path,
-        default=Path("."),
-        help="directory for the ground log, key and link state (default .)",
-    )
+    common.service_options(parser, Path("ground.toml"), "the ground log, key and link state")
     parser.set_defaults(run=run)
 
 
@@ -29,16 +23,12 @@ def run(args: argparse.Namespace) -> int:
     import asyncio
 
     from agent.clock import LoopClock
-    from agent.config import ConfigError, load_config
     from agent.ground.app import Console
     from agent.ground.config import GroundConfig
     from agent.ground.station import GroundStation
     from drivers.xbee.driver import RadioError
 
-    try:
-        config = load_config(args.config, GroundConfig)
-    except ConfigError as exc:
-        raise refused(str(exc)) from None
+    config = common.read_config(args.config, GroundConfig)
 
     async def console() -> None:
         station = GroundStation(config, LoopClock(), base=args.base)
@@ -52,5 +42,5 @@ def run(args: argparse.Namespace) -> int:
     try:
         asyncio.run(console())
     except (OSError, ValueError, RadioError) as exc:
-        raise failed(str(exc)) from None
-    return EXIT_OK
+        raise common.failed(str(exc)) from None
+    return common.EXIT_OK

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from agent.cli.common import EXIT_OK, print_json, refused
+from agent.cli import common
 
 # The codecs' names (drivers.decode.CODECS, which imports every codec: kept out of `--help`;
 # tests/test_cli_decode.py checks the two agree).
@@ -33,15 +33,17 @@ def run(args: argparse.Namespace) -> int:
     try:
         args.file.open("rb").close()
     except OSError as exc:
-        raise refused(f"{args.file}: cannot be read ({exc.strerror or exc})") from None
+        raise common.refused(f"{args.file}: cannot be read ({exc.strerror or exc})") from None
     messages, stats = decode_file(args.device, args.file)
     try:
         if args.json:  # one object: the messages and the stream's statistics
-            print_json({"messages": [as_json(m) for m in messages], "stats": stats.as_dict()})
+            common.print_json(
+                {"messages": [as_json(m) for m in messages], "stats": stats.as_dict()}
+            )
         else:
             for message in messages:
                 print(as_text(message))
             print("stats: " + ", ".join(f"{k} {v}" for k, v in stats.as_dict().items()))
     except BrokenPipeError:  # the reader (head, less) went away: nothing more to say
         sys.stdout = None
-    return EXIT_OK
+    return common.EXIT_OK

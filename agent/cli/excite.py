@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from agent.cli.common import EXIT_OK, load_optional_config, print_json, refused
+from agent.cli import common
 from agent.excitation.names import PRESETS
 
 
@@ -38,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
     from agent.excitation import plan as plans
     from agent.excitation.preview import PreviewError, csv_text, load_plan, parse_amplitudes, plot
 
-    config = load_optional_config(args.config)
+    config = common.load_optional_config(args.config)
     try:
         rate = config.excitation.rate_hz if args.rate is None else args.rate
         if not 1.0 <= rate <= 1000.0:
@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
             plan = plans.preset(args.preset, parse_amplitudes(args.amplitude))
         timeline = plans.check(plan, rate, config.excitation.surfaces, config.excitation.envelope)
     except (PreviewError, plans.PlanRefused, ValueError) as exc:
-        raise refused(str(exc)) from None
+        raise common.refused(str(exc)) from None
     columns = {n: getattr(config.identification.channels, n) for n in timeline.values}
     report = plans.summary(timeline, config.excitation.surfaces)
     for warning in report["warnings"]:
@@ -58,9 +58,9 @@ def run(args: argparse.Namespace) -> int:
         try:
             plot(timeline, report, columns, args.plot)
         except ValueError as exc:  # PreviewError, or matplotlib's unknown file format
-            raise refused(str(exc)) from None
+            raise common.refused(str(exc)) from None
     if args.json:
-        print_json(report)
+        common.print_json(report)
     elif args.csv or args.plot is None:
         sys.stdout.write(csv_text(timeline, columns))
-    return EXIT_OK
+    return common.EXIT_OK

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from agent.cli.common import EXIT_OK, failed, refused
+from agent.cli import common
 
 
 def add_parser(sub) -> None:
@@ -32,11 +32,11 @@ def run(args: argparse.Namespace) -> int:
 
     suffix = args.out.suffix.lower()
     if suffix not in (".mat", ".json", ".csv"):
-        raise refused(f"{args.out}: give a .mat, .json or .csv file to write")
+        raise common.refused(f"{args.out}: give a .mat, .json or .csv file to write")
     try:
         models = load_models(args.source)
     except ExportError as exc:
-        raise refused(str(exc)) from None
+        raise common.refused(str(exc)) from None
     if models.skipped:
         more = " …" if len(models.skipped) > 10 else ""
         lines = ", ".join(map(str, models.skipped[:10])) + more
@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     if args.model:
         unknown = sorted(set(args.model) - {m["id"] for m in models})
         if unknown:
-            raise refused(f"{args.source}: no model {', '.join(unknown)}")
+            raise common.refused(f"{args.source}: no model {', '.join(unknown)}")
         models = [m for m in models if m["id"] in args.model]
     try:
         if suffix == ".mat":
@@ -58,8 +58,8 @@ def run(args: argparse.Namespace) -> int:
         else:
             args.out.write_text(to_json(models))
     except ExportError as exc:
-        raise refused(str(exc)) from None
+        raise common.refused(str(exc)) from None
     except OSError as exc:
-        raise failed(f"{args.out}: cannot be written ({exc.strerror or exc})") from None
+        raise common.failed(f"{args.out}: cannot be written ({exc.strerror or exc})") from None
     print(f"{args.out}: {len(models)} model(s): {', '.join(m['id'] for m in models)}")
-    return EXIT_OK
+    return common.EXIT_OK

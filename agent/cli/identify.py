@@ -5,15 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from agent.cli.common import (
-    EXIT_BAD_INPUT,
-    EXIT_FAILED,
-    EXIT_OK,
-    CommandError,
-    identification_options,
-    identification_request,
-    print_json,
-)
+from agent.cli import common
 
 
 def add_parser(sub) -> None:
@@ -23,7 +15,7 @@ def add_parser(sub) -> None:
         description="Identify one linear model from one or more CSV records (a batch).",
     )
     parser.add_argument("data", nargs="+", type=Path, metavar="DATA.csv")
-    identification_options(parser)
+    common.identification_options(parser)
     parser.set_defaults(run=run)
 
 
@@ -33,15 +25,15 @@ def run(args: argparse.Namespace) -> int:
     from agent.ident import DataError, IdentificationFailed
     from agent.ident.summary import format_text, to_dict
 
-    config, request, settings = identification_request(args, args.data)
+    config, request, settings = common.identification_request(args, args.data)
     try:
         outcome = identify_cmd.run(request, config, settings)
     except (RecordError, DataError) as exc:
-        raise CommandError(str(exc), EXIT_BAD_INPUT, "bad input") from None
+        raise common.CommandError(str(exc), common.EXIT_BAD_INPUT, "bad input") from None
     except IdentificationFailed as exc:
-        raise CommandError(str(exc), EXIT_FAILED, "identification failed") from None
+        raise common.CommandError(str(exc), common.EXIT_FAILED, "identification failed") from None
     if args.json:
-        print_json(to_dict(outcome.result, outcome.trim))
+        common.print_json(to_dict(outcome.result, outcome.trim))
     else:
         print(format_text(outcome.result, outcome.records, outcome.samples))
-    return EXIT_OK
+    return common.EXIT_OK

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from agent.cli.common import EXIT_OK, failed, load_optional_config, refused
+from agent.cli import common
 
 
 def add_parser(sub) -> None:
@@ -28,18 +28,18 @@ def add_parser(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from agent.analysis.importers import LogImportError, import_log
 
-    config = load_optional_config(args.config)
+    config = common.load_optional_config(args.config)
     if not 1.0 <= args.rate <= 1000.0:
-        raise refused(f"--rate {args.rate:g}: give 1 to 1000 Hz")
+        raise common.refused(f"--rate {args.rate:g}: give 1 to 1000 Hz")
     if args.out.exists() and args.out.resolve() == args.file.resolve():
-        raise refused(f"{args.out}: that is the log being imported; give another --out")
+        raise common.refused(f"{args.out}: that is the log being imported; give another --out")
     try:
         imported = import_log(args.file, config.excitation.surfaces, args.rate)
         args.out.write_text(imported.csv())
     except LogImportError as exc:
-        raise refused(str(exc)) from None
+        raise common.refused(str(exc)) from None
     except OSError as exc:
-        raise failed(f"{args.out}: cannot be written ({exc.strerror or exc})") from None
+        raise common.failed(f"{args.out}: cannot be written ({exc.strerror or exc})") from None
     span = imported.time[-1] if len(imported.time) else 0.0
     print(
         f"{args.out}: {len(imported.time)} rows over {span:.1f} s at {args.rate:g} Hz; "
@@ -49,4 +49,4 @@ def run(args: argparse.Namespace) -> int:
         print(f"note: {note}")
     if imported.missing:
         print(f"not in the log: {', '.join(imported.missing)}")
-    return EXIT_OK
+    return common.EXIT_OK

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
-from agent.cli.common import DEFAULT_CONFIG, EXIT_OK, failed, refused
+from agent.cli import common
 
 
 def add_parser(sub) -> None:
@@ -16,36 +15,26 @@ def add_parser(sub) -> None:
         description="The onboard agent: sensors, autopilot, recorder, "
         "excitation, identification, radio link; stop with Ctrl-C.",
     )
-    parser.add_argument("--config", type=Path, default=DEFAULT_CONFIG)
-    parser.add_argument(
-        "--base",
-        type=Path,
-        default=Path("."),
-        help="directory for logs, models and link state (default .)",
-    )
+    common.service_options(parser, common.DEFAULT_CONFIG, "logs, models and link state")
     parser.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     import asyncio
 
-    from agent.config import ConfigError, load_config
     from agent.runtime import serve
     from drivers.xbee.driver import RadioError
 
-    try:
-        config = load_config(args.config)
-        text = args.config.read_text()
-    except ConfigError as exc:
-        raise refused(str(exc)) from None
+    config = common.read_config(args.config)
+    text = args.config.read_text()
     listener = log_to_stderr_off_the_loop()
     try:
         asyncio.run(serve(config, text, args.base))
     except (OSError, ValueError, RadioError) as exc:  # a port that cannot open, a bad key file
-        raise failed(str(exc)) from None
+        raise common.failed(str(exc)) from None
     finally:
         listener.stop()
-    return EXIT_OK
+    return common.EXIT_OK
 
 
 def log_to_stderr_off_the_loop():

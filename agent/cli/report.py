@@ -5,17 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from agent.cli import common
 from agent.cli.analyze import cases_for, select
-from agent.cli.common import (
-    EXIT_FAILED,
-    EXIT_OK,
-    failed,
-    identification_request,
-    print_json,
-    refused,
-    replay_options,
-    run_cases,
-)
 
 
 def add_parser(sub) -> None:
@@ -26,7 +17,7 @@ def add_parser(sub) -> None:
         "the s-plane, Hankel singular values, Bode plots against the data, input spectra "
         "and RPF, mode tables.",
     )
-    replay_options(parser)
+    common.replay_options(parser)
     parser.add_argument("--out", type=Path, required=True, metavar="DIR")
     parser.add_argument(
         "--nominal", type=Path, metavar="MODEL.json", help="a model store file to highlight"
@@ -36,7 +27,7 @@ def add_parser(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     paths = select(args)
-    prepared = identification_request(args, paths)
+    prepared = common.identification_request(args, paths)
     nominal = None
     if args.nominal is not None:
         from agent.models import model_summary
@@ -44,18 +35,20 @@ def run(args: argparse.Namespace) -> int:
         try:
             nominal = model_summary(args.nominal)
         except ValueError as exc:
-            raise refused(str(exc)) from None
+            raise common.refused(str(exc)) from None
     cases = cases_for(args, paths, batch=False, sweep=None, prepared=prepared)
-    outcomes = run_cases(cases, args, quiet=False)
+    outcomes = common.run_cases(cases, args, quiet=False)
     from agent.analysis.report import write
 
     try:
         page = write(args.out, paths, cases, outcomes, nominal)
     except OSError as exc:
-        raise failed(f"{args.out}: cannot be written ({exc.strerror or exc})") from None
+        raise common.failed(f"{args.out}: cannot be written ({exc.strerror or exc})") from None
     identified = sum(o.ok for o in outcomes)
     if args.json:
-        print_json({"page": str(page), "identified": identified, "excitations": len(outcomes)})
+        common.print_json(
+            {"page": str(page), "identified": identified, "excitations": len(outcomes)}
+        )
     else:
         print(f"{page}: {identified} of {len(outcomes)} excitation(s) identified")
-    return EXIT_OK if any(o.ok for o in outcomes) else EXIT_FAILED
+    return common.EXIT_OK if any(o.ok for o in outcomes) else common.EXIT_FAILED

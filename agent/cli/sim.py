@@ -5,15 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from agent.cli.common import (
-    EXIT_BAD_INPUT,
-    EXIT_FAILED,
-    EXIT_OK,
-    CommandError,
-    failed,
-    positive_int,
-    print_json,
-)
+from agent.cli import common
 from agent.excitation.names import PRESETS
 
 
@@ -33,7 +25,7 @@ def add_parser(sub) -> None:
     parser.add_argument("--preset", choices=PRESETS, default="full")
     parser.add_argument(
         "--runs",
-        type=positive_int,
+        type=common.positive_int,
         default=1,
         help="excitations in a row (from the second on: TIC against the nominal)",
     )
@@ -56,10 +48,7 @@ def run(args: argparse.Namespace) -> int:
 
     progress = None if args.json else (lambda text: print(text, flush=True))
     options = SimOptions(
-        aircraft=args.aircraft,
-        speed_kts=args.speed_kts,
-        turbulence=args.turbulence,
-        seed=args.seed,
+        plane=common.aircraft_options(args),
         preset=args.preset,
         runs=args.runs,
         directory=args.keep,
@@ -69,15 +58,15 @@ def run(args: argparse.Namespace) -> int:
         try:
             asyncio.run(interactive(options))
         except (PlantError, SimError) as exc:
-            raise failed(str(exc)) from None
-        return EXIT_OK
+            raise common.failed(str(exc)) from None
+        return common.EXIT_OK
     try:
         report = asyncio.run(fly(options))
     except (PlantError, SimError) as exc:
-        code = EXIT_BAD_INPUT if isinstance(exc, PlantError) else EXIT_FAILED
-        raise CommandError(str(exc), code) from None
+        code = common.EXIT_BAD_INPUT if isinstance(exc, PlantError) else common.EXIT_FAILED
+        raise common.CommandError(str(exc), code) from None
     if args.json:
-        print_json(report)
+        common.print_json(report)
     else:
         print(format_report(report))
-    return EXIT_OK if not report["failure"] else EXIT_FAILED
+    return common.EXIT_OK if not report["failure"] else common.EXIT_FAILED

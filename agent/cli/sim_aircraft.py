@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from agent.cli.common import EXIT_OK, port, refused
+from agent.cli import common
 
 
 def add_parser(sub) -> None:
@@ -27,7 +27,7 @@ def add_parser(sub) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
         "--mavlink-port",
-        type=port,
+        type=common.port,
         default=14555,
         help="UDP port the emulated autopilot listens on (0: any)",
     )
@@ -60,15 +60,12 @@ def add_parser(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     import asyncio
 
-    from agent.sim.aircraft import AircraftOptions, check_sensor_rate, serve
+    from agent.sim.aircraft import check_sensor_rate, serve
     from agent.sim.plant import PlantError
 
-    options = AircraftOptions(
-        aircraft=args.aircraft,
-        speed_kts=args.speed_kts,
+    options = common.aircraft_options(
+        args,
         altitude_ft=args.altitude_ft,
-        turbulence=args.turbulence,
-        seed=args.seed,
         noise=not args.no_noise,
         mavlink_port=args.mavlink_port,
         sensor_rate_hz=args.sensor_rate,
@@ -76,16 +73,16 @@ def run(args: argparse.Namespace) -> int:
     try:
         check_sensor_rate(args.sensor_rate)
     except ValueError as exc:
-        raise refused(str(exc)) from None
+        raise common.refused(str(exc)) from None
     announce = lambda text: print(text, flush=True)  # noqa: E731
     try:
         asyncio.run(
             serve(options, args.pty_dir, args.duration, tuple(args.switch_at), announce=announce)
         )
     except PlantError as exc:
-        raise refused(str(exc)) from None
+        raise common.refused(str(exc)) from None
     except OSError as exc:
-        raise refused(f"cannot start: {exc}") from None
+        raise common.refused(f"cannot start: {exc}") from None
     except KeyboardInterrupt:
         pass
-    return EXIT_OK
+    return common.EXIT_OK

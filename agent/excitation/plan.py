@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Annotated, Literal
+from typing import Annotated, ClassVar, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
@@ -41,40 +41,38 @@ class _Signal(_Model):
         return value
 
 
-class Doublet(_Signal):
+class _Pulses(_Signal):
+    """A `pattern` of pulses (`signals.pulses`) in units of `pulse_s`, which each subclass
+    declares with its own bound."""
+
+    pattern: ClassVar[tuple[int, ...]]
+
+    def samples(self, dt: float) -> np.ndarray:
+        return signals.pulses(dt, self.pulse_s, self.amplitude, self.pattern)
+
+    @property
+    def duration_s(self) -> float:
+        return sum(abs(n) for n in self.pattern) * self.pulse_s
+
+    @property
+    def shortest_s(self) -> float:
+        return self.pulse_s
+
+
+class Doublet(_Pulses):
     """+A then −A, each for `pulse_s` seconds."""
 
+    pattern = signals.DOUBLET
     kind: Literal["doublet"] = "doublet"
     pulse_s: float = Field(gt=0.0, le=30.0)
 
-    def samples(self, dt: float) -> np.ndarray:
-        return signals.doublet(dt, self.pulse_s, self.amplitude)
 
-    @property
-    def duration_s(self) -> float:
-        return 2 * self.pulse_s
-
-    @property
-    def shortest_s(self) -> float:
-        return self.pulse_s
-
-
-class ThreeTwoOneOne(_Signal):
+class ThreeTwoOneOne(_Pulses):
     """3-2-1-1 with unit pulse `pulse_s` (7 units in all)."""
 
+    pattern = signals.THREE_TWO_ONE_ONE
     kind: Literal["3211"] = "3211"
     pulse_s: float = Field(gt=0.0, le=10.0)
-
-    def samples(self, dt: float) -> np.ndarray:
-        return signals.three_two_one_one(dt, self.pulse_s, self.amplitude)
-
-    @property
-    def duration_s(self) -> float:
-        return 7 * self.pulse_s
-
-    @property
-    def shortest_s(self) -> float:
-        return self.pulse_s
 
 
 class Sweep(_Signal):

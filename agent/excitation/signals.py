@@ -25,6 +25,9 @@ THESIS_HARMONICS = {
     "rudder": (5, 10, 15, 20),
     "elevator": (7, 14, 21, 28),
 }
+# Pulse patterns for `pulses`, in units of the pulse length: the doublet and the 3-2-1-1.
+DOUBLET = (1, -1)
+THREE_TWO_ONE_ONE = (3, -2, 1, -1)
 
 # Phase optimisation grid: samples per period of the highest harmonic. Fine enough that the
 # optimised peak holds at any command rate (the peak between grid points is < 0.1 % higher).
@@ -214,7 +217,7 @@ def doublet(dt: float, pulse: float, amplitude: float, lead: float = 0.0, tail: 
     return np.concatenate(
         [
             np.zeros(_samples(lead, dt)),
-            pulses(dt, pulse, amplitude, (1, -1)),
+            pulses(dt, pulse, amplitude, DOUBLET),
             np.zeros(_samples(tail, dt)),
         ]
     )
@@ -239,7 +242,7 @@ def three_two_one_one(dt: float, unit: float, amplitude: float) -> np.ndarray:
     The 2Δt pulse is aimed at the mode of interest (period ≈ 4Δt … 5Δt); the others widen the
     excited band.
     """
-    return pulses(dt, unit, amplitude, (3, -2, 1, -1))
+    return pulses(dt, unit, amplitude, THREE_TWO_ONE_ONE)
 
 
 def sweep_frequency(

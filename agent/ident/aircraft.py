@@ -117,6 +117,7 @@ NOISE_TOLERANCE = 0.02
 COUPLED = 0.01
 
 
+# Not frequency.Spectra: transforms at the analysis bins, not densities averaged over segments.
 @dataclass(frozen=True)
 class Spectra:
     """Finite Fourier transforms of the batch at the analysis bins (bins of all records)."""

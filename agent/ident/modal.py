@@ -48,6 +48,7 @@ REAL_TOLERANCE = 1e-10
 MAX_EIGENVECTOR_COND = 1e12
 
 
+# Not era.EraResult: its two factors alone, to transform along with a StateSpace.
 @dataclass(frozen=True)
 class HankelFactors:
     """ERA's data factors P_n Σ^{1/2} (α·m × n) and Σ^{1/2} Q_nᵀ (n × β·r), model coordinates."""

@@ -146,6 +146,7 @@ def simulate(
     return y
 
 
+# Shaped like convert.StateSpace only: the samples of a flight, not a model.
 @dataclass(frozen=True)
 class Record:
     """A synthetic flight record: time, inputs and outputs in absolute (trim + deviation) units."""

@@ -57,6 +57,7 @@ NOISE = {
 }
 
 
+# Shaped like drivers/serialio.py's LinkStats only: how to fly, not what a link has seen.
 @dataclass
 class AircraftOptions:
     aircraft: str = "J3Cub"

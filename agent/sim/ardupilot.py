@@ -57,6 +57,7 @@ WIRE_LOG = 4096
 OUTPUTS = {1: "aileron", 2: "elevator", 3: "throttle", 4: "rudder"}
 
 
+# Shaped like RfChannel and drivers/codec.py's CodecStats only: ArduPlane's own parameters.
 @dataclass
 class Params:
     """The ArduPlane parameters the emulation honours."""
@@ -278,6 +279,7 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
             Pitch=s["theta"] * deg,
             Yaw=(s["psi"] * deg) % 360.0,
         )
+        # Column by column, like ATT above: ArduPlane's IMU names are not our channel names.
         log.write(
             "IMU",
             TimeUS=us,

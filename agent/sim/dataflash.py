@@ -14,8 +14,10 @@ from pathlib import Path
 
 from pymavlink.DFReader import DFFormat
 
+from agent.sim.logfile import LogFile
+
 FMT_TYPE = 0x80
-# name: (format characters, columns)
+# name: (format characters, columns), ArduPilot's; shaped like agent.channels.SENSOR_CHANNELS only.
 MESSAGES: dict[str, tuple[str, str]] = {
     "PARM": ("QNf", "TimeUS,Name,Value"),
     "MODE": ("QMBB", "TimeUS,Mode,ModeNum,Rsn"),
@@ -30,12 +32,11 @@ MESSAGES: dict[str, tuple[str, str]] = {
 }
 
 
-class DataFlashWriter:
+class DataFlashWriter(LogFile):
     """Append ArduPilot messages to a .bin file; `write("ATT", TimeUS=…, Roll=…)`."""
 
     def __init__(self, path: str | Path):
-        self.path = Path(path)
-        self._file = self.path.open("wb")
+        super().__init__(path)
         self._fmt = DFFormat(FMT_TYPE, "FMT", 89, "BBnNZ", "Type,Length,Name,Format,Columns")
         self._formats: dict[str, DFFormat] = {}
         self.counts: dict[str, int] = {}
@@ -76,12 +77,3 @@ class DataFlashWriter:
             values.append(value)
         self._file.write(bytes([0xA3, 0x95, fmt.type]) + struct.pack(fmt.msg_struct, *values))
         self.counts[name] = self.counts.get(name, 0) + 1
-
-    def close(self) -> None:
-        self._file.close()
-
-    def __enter__(self) -> DataFlashWriter:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()

@@ -15,7 +15,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -65,10 +65,8 @@ class SimError(RuntimeError):
 
 @dataclass
 class SimOptions:
-    aircraft: str = "J3Cub"
-    speed_kts: float = 60.0
-    turbulence: float = 0.0
-    seed: int = 0
+    plane: AircraftOptions = field(default_factory=AircraftOptions)
+    """The simulated aircraft (the flight sets its ArduPlane parameters and DataFlash log)."""
     preset: str = "full"
     runs: int = 1
     directory: Path | None = None
@@ -281,18 +279,8 @@ async def _parts(
     key = secrets.token_bytes(32)
     (tmp / "link.key").write_text(key.hex())
     (tmp / "link.key").chmod(0o600)
-    aircraft = SimAircraft(
-        AircraftOptions(
-            aircraft=options.aircraft,
-            speed_kts=options.speed_kts,
-            turbulence=options.turbulence,
-            seed=options.seed,
-            params=params,
-            dataflash=tmp / "ardupilot.bin",
-        ),
-        clock,
-        ports,
-    )
+    plane = replace(options.plane, params=params, dataflash=tmp / "ardupilot.bin")
+    aircraft = SimAircraft(plane, clock, ports)
     channel, air, ground_module = module_pair(
         ports, clock, ("xbee-air", AIR), ("xbee-ground", GROUND_ADDR)
     )
@@ -314,7 +302,7 @@ async def _parts(
             raise SimError("the simulated aircraft did not start")
         axes = preset(options.preset).axes
         config = _config(
-            tmp, ports, aircraft.mavlink_address, axes, options.realtime_priority, options.speed_kts
+            tmp, ports, aircraft.mavlink_address, axes, options.realtime_priority, plane.speed_kts
         )
         if agent_process:
             agent = AgentProcess(tmp, config)
@@ -324,7 +312,7 @@ async def _parts(
             tasks.append(asyncio.create_task(agent.run(), name="agent"))
         if operator:
             ground = await ground_station(ground_module, tmp, clock, tasks)
-        say(f"simulated {options.aircraft} at {options.speed_kts:g} kt; agent up")
+        say(f"simulated {plane.aircraft} at {plane.speed_kts:g} kt; agent up")
 
         def connected() -> bool:
             if agent_process:  # the agent's status names the autopilot's flight mode
@@ -539,7 +527,7 @@ def _report(options: SimOptions, aircraft: SimAircraft, agent: Agent, outcomes: 
         for k, v in truth.items()
     }
     return {
-        "aircraft": options.aircraft,
+        "aircraft": options.plane.aircraft,
         "preset": options.preset,
         "runs": len(outcomes),
         "events": last["events"],

@@ -28,15 +28,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from agent.channels import INPUT_ROLES
+
 FT = 0.3048
 KT = 0.514444
-INPUTS = ("throttle", "elevator", "aileron", "rudder")
-COMMAND_PROPERTY = {
-    "throttle": "fcs/throttle-cmd-norm",
-    "elevator": "fcs/elevator-cmd-norm",
-    "aileron": "fcs/aileron-cmd-norm",
-    "rudder": "fcs/rudder-cmd-norm",
-}
+# The inputs are agent.channels's input roles, each on JSBSim's normalised command of its name.
+INPUTS = INPUT_ROLES
+COMMAND_PROPERTY = {name: f"fcs/{name}-cmd-norm" for name in INPUTS}
 # Output channel → (JSBSim property, scale to SI).
 OUTPUT_PROPERTY = {
     "Vt": ("velocities/vt-fps", FT),

@@ -29,6 +29,7 @@ VR_DIGIMESH = b"\x80\x75"
 AIR_OVERHEAD = 30
 
 
+# Shaped like drivers/codec.py's CodecStats only: settings of the simulated air, not counters.
 @dataclass
 class RfChannel:
     """The air between the modules."""

@@ -10,6 +10,8 @@ from __future__ import annotations
 import struct
 from pathlib import Path
 
+from agent.sim.logfile import LogFile
+
 MAGIC = b"ULog\x01\x12\x35"
 TYPES = {
     "uint64_t": "Q",
@@ -51,12 +53,11 @@ def _struct(fields: str) -> tuple[str, list[tuple[str, int]]]:
     return fmt, names
 
 
-class ULogWriter:
+class ULogWriter(LogFile):
     """`write(topic, timestamp=µs, q=[w, x, y, z], …)`; fields not given are zero."""
 
     def __init__(self, path: str | Path, start_us: int = 0, sys_name: str = "PX4"):
-        self.path = Path(path)
-        self._file = self.path.open("wb")
+        super().__init__(path)
         self._file.write(MAGIC + bytes([1]) + struct.pack("<Q", start_us))
         self._message("B", bytes(8) + bytes(8) + struct.pack("<3Q", 0, 0, 0))
         self._structs = {}
@@ -83,12 +84,3 @@ class ULogWriter:
             else:
                 flat.append(values.get(name, 0))
         self._message("D", struct.pack("<H", self._ids[topic]) + struct.pack(fmt, *flat))
-
-    def close(self) -> None:
-        self._file.close()
-
-    def __enter__(self) -> ULogWriter:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()

@@ -231,8 +231,6 @@ class AutopilotLink:
         }
         for name, hz in rates.items():
             fields = {
-                "target_system": cfg.target_system,
-                "target_component": 1,
                 "command": SET_MESSAGE_INTERVAL,
                 "confirmation": 0,
                 "param1": MESSAGES[name],
@@ -243,14 +241,7 @@ class AutopilotLink:
                 "param6": 0,
                 "param7": 0,
             }
-            command = MavlinkMessage(
-                message_name="COMMAND_LONG",
-                system_id=cfg.system_id,
-                component_id=cfg.component_id,
-                target_system_id=cfg.target_system,
-                target_component_id=1,
-                fields_json=json.dumps(fields),
-            )
+            command = self._message("COMMAND_LONG", fields)
             try:
                 ack = await loop.run_in_executor(executor, self._direct.send_command, command)
                 result = json.loads(ack.fields_json or "{}").get("result")
@@ -347,22 +338,26 @@ class AutopilotLink:
         self.counters["releases"] += 1
 
     def _send_override(self, values: Mapping[int, int]) -> None:
-
         if self._direct is None or not self.connected:
             raise AutopilotError(f"no autopilot link ({self.status})")
+        fields = {
+            f"chan{ch}_raw": values.get(ch, IGNORE if ch <= 8 else RELEASE_LOW)
+            for ch in range(1, 19)
+        }
+        self._direct.send_message(self._message("RC_CHANNELS_OVERRIDE", fields))
+
+    def _message(self, name: str, fields: dict) -> MavlinkMessage:
+        """Message `name` from us to the autopilot (component 1), addressed in `fields` too."""
         cfg = self._cfg
-        fields = {"target_system": cfg.target_system, "target_component": 1}
-        for ch in range(1, 19):
-            fields[f"chan{ch}_raw"] = values.get(ch, IGNORE if ch <= 8 else RELEASE_LOW)
-        self._direct.send_message(
-            MavlinkMessage(
-                message_name="RC_CHANNELS_OVERRIDE",
-                system_id=cfg.system_id,
-                component_id=cfg.component_id,
-                target_system_id=cfg.target_system,
-                target_component_id=1,
-                fields_json=json.dumps(fields),
-            )
+        return MavlinkMessage(
+            message_name=name,
+            system_id=cfg.system_id,
+            component_id=cfg.component_id,
+            target_system_id=cfg.target_system,
+            target_component_id=1,
+            fields_json=json.dumps(
+                {"target_system": cfg.target_system, "target_component": 1, **fields}
+            ),
         )
 
 

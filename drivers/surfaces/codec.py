@@ -19,7 +19,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 
-from drivers.codec import CodecStats, crc16_xmodem, skip
+from drivers.codec import CodecStats, crc16_xmodem, resync, skip
 
 SYNC = b"\xaa\x55"
 VERSION = 1
@@ -67,19 +67,13 @@ class SurfaceCodec:
         if len(buffer) < LENGTH:
             return 0, None
         if crc16_xmodem(memoryview(buffer)[2:LENGTH]) != 0:
-            return self._resync(buffer, crc=True), None
+            return resync(self.stats, buffer, SYNC, crc=True), None
         version, seq, millis, *rest = _BODY.unpack_from(buffer, 2)
         counts, rpm = tuple(rest[:7]), rest[7]
         if version != VERSION or max(counts) > ADC_MAX:
-            return self._resync(buffer, rejected=True), None
+            return resync(self.stats, buffer, SYNC, rejected=True), None
         self.stats.frames += 1
         return LENGTH, SurfaceFrame(seq, millis, counts, rpm)
-
-    def _resync(self, buffer: bytes | bytearray, *, crc=False, rejected=False) -> int:
-        following = buffer.find(SYNC, 1)
-        return skip(
-            self.stats, len(buffer) if following < 0 else following, crc=crc, rejected=rejected
-        )
 
     def encode(self, frame: SurfaceFrame) -> bytes:
         body = _BODY.pack(

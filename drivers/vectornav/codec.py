@@ -14,7 +14,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass, field
 
-from drivers.codec import CodecStats, crc16_xmodem, skip, xor8
+from drivers.codec import CodecStats, crc16_xmodem, hunt, resync, xor8
 
 SYNC = 0xFA
 # (name, struct format) per group, by field bit. Sizes follow from the formats.
@@ -159,14 +159,13 @@ class BinaryCodec:
         self.stats = CodecStats()
 
     def decode(self, buffer: bytes | bytearray) -> tuple[int, VnPacket | None]:
-        start = buffer.find(SYNC)
-        if start != 0:
-            return skip(self.stats, len(buffer) if start < 0 else start), None
+        if skipped := hunt(self.stats, buffer, SYNC):
+            return skipped, None
         if len(buffer) < 2:
             return 0, None
         groups = buffer[1]
         if groups & 0x80 or groups == 0:  # extension bit, or no group at all
-            return self._reject(buffer, crc=False, rejected=True), None
+            return resync(self.stats, buffer, SYNC, rejected=True), None
         present = [g for g in range(len(GROUPS)) if groups >> g & 1]
         header = 2 + 2 * len(present)
         if len(buffer) < header:
@@ -175,7 +174,7 @@ class BinaryCodec:
         for k, g in enumerate(present):
             (mask,) = struct.unpack_from("<H", buffer, 2 + 2 * k)
             if mask & 0x8000 or mask >> len(GROUPS[g][1]) or mask == 0:
-                return self._reject(buffer, crc=False, rejected=True), None
+                return resync(self.stats, buffer, SYNC, rejected=True), None
             bits = [b for b in range(len(GROUPS[g][1])) if mask >> b & 1]
             layout.append((g, bits))
             payload += sum(_STRUCTS[g][b].size for b in bits)
@@ -183,7 +182,7 @@ class BinaryCodec:
         if len(buffer) < length:
             return 0, None
         if crc16_xmodem(memoryview(buffer)[1:length]) != 0:
-            return self._reject(buffer, crc=True, rejected=False), None
+            return resync(self.stats, buffer, SYNC, crc=True), None
         values: dict[str, int | float | tuple] = {}
         offset = header
         for g, bits in layout:
@@ -194,13 +193,6 @@ class BinaryCodec:
                 values[f"{GROUPS[g][0]}.{GROUPS[g][1][b][0]}"] = raw[0] if len(raw) == 1 else raw
         self.stats.frames += 1
         return length, VnPacket(values)
-
-    def _reject(self, buffer: bytes | bytearray, *, crc: bool, rejected: bool) -> int:
-        """Skip to the next possible sync after this one."""
-        following = buffer.find(SYNC, 1)
-        return skip(
-            self.stats, len(buffer) if following < 0 else following, crc=crc, rejected=rejected
-        )
 
     def encode(self, packet: VnPacket) -> bytes:
         masks = masks_for(list(packet.fields))
@@ -270,24 +262,19 @@ class AsciiCodec:
         self.stats = CodecStats()
 
     def decode(self, buffer: bytes | bytearray) -> tuple[int, VnAscii | None]:
-        start = buffer.find(b"$")
-        if start != 0:
-            return skip(self.stats, len(buffer) if start < 0 else start), None
+        if skipped := hunt(self.stats, buffer, b"$"):
+            return skipped, None
         end = buffer.find(b"\n", 0, MAX_ASCII)
         if end < 0:
             if len(buffer) >= MAX_ASCII:
-                return self._resync(buffer), None
+                return resync(self.stats, buffer, b"$"), None
             return 0, None
         line = bytes(buffer[: end + 1])
         message = self._parse(line.rstrip(b"\r\n"))
         if message is None:
-            return self._resync(buffer), None
+            return resync(self.stats, buffer, b"$"), None
         self.stats.frames += 1
         return end + 1, message
-
-    def _resync(self, buffer: bytes | bytearray) -> int:
-        following = buffer.find(b"$", 1)
-        return skip(self.stats, len(buffer) if following < 0 else following)
 
     def _parse(self, line: bytes) -> VnAscii | None:
         body, star, check = line[1:].partition(b"*")

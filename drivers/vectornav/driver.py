@@ -19,6 +19,33 @@ SECONDS_PER_WEEK = 604_800
 # The register 75 rate divisor divides this base rate (PROTOCOLS.md).
 BASE_RATE_HZ = 800
 DEG = math.pi / 180
+# Three-axis outputs taken as they are: their channels, then the binary field in the common
+# group and in its own group (a packet carries one or the other).
+BINARY_VECTORS = (
+    (("p", "q", "r"), ("common.angular_rate", "imu.angular_rate")),
+    (("ax", "ay", "az"), ("common.accel", "imu.accel")),
+    (("lat", "lon", "alt_gps"), ("common.position", "ins.pos_lla")),
+    (("vn", "ve", "vd"), ("common.vel_ned", "ins.vel_ned")),
+)
+# ASCII fields taken as they are: channel → field, per sentence.
+ASCII_COPIED = {
+    "VNYMR": {
+        "p": "gyro_x",
+        "q": "gyro_y",
+        "r": "gyro_z",
+        "ax": "accel_x",
+        "ay": "accel_y",
+        "az": "accel_z",
+    },
+    "VNINS": {
+        "lat": "lat",
+        "lon": "lon",
+        "alt_gps": "alt",
+        "vn": "vel_n",
+        "ve": "vel_e",
+        "vd": "vel_d",
+    },
+}
 
 
 def quaternion_to_euler(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
@@ -61,18 +88,10 @@ def convert_binary(leap_seconds: int) -> Callable[[VnPacket], Reading | None]:
             values["phi"], values["theta"], values["psi"] = quaternion_to_euler(*quaternion)
         elif ypr is not None:
             values["psi"], values["theta"], values["phi"] = (a * DEG for a in ypr)
-        rates = _first(f, "common.angular_rate", "imu.angular_rate")
-        if rates is not None:
-            values["p"], values["q"], values["r"] = rates
-        accel = _first(f, "common.accel", "imu.accel")
-        if accel is not None:
-            values["ax"], values["ay"], values["az"] = accel
-        position = _first(f, "common.position", "ins.pos_lla")
-        if position is not None:
-            values["lat"], values["lon"], values["alt_gps"] = position
-        velocity = _first(f, "common.vel_ned", "ins.vel_ned")
-        if velocity is not None:
-            values["vn"], values["ve"], values["vd"] = velocity
+        for channels, fields in BINARY_VECTORS:
+            vector = _first(f, *fields)
+            if vector is not None:
+                values.update(zip(channels, vector, strict=True))
         status = _first(f, "common.ins_status", "ins.ins_status")
         if status is not None:
             values["ins_status"] = float(status)
@@ -94,28 +113,11 @@ def convert_ascii(leap_seconds: int) -> Callable[[VnAscii], Reading | None]:
         v = message.values
         values = {"psi": v["yaw"] * DEG, "theta": v["pitch"] * DEG, "phi": v["roll"] * DEG}
         device_time = None
-        if message.kind == "VNYMR":
-            values.update(
-                p=v["gyro_x"],
-                q=v["gyro_y"],
-                r=v["gyro_z"],
-                ax=v["accel_x"],
-                ay=v["accel_y"],
-                az=v["accel_z"],
-            )
-        else:
+        values.update((channel, v[name]) for channel, name in ASCII_COPIED[message.kind].items())
+        if message.kind == "VNINS":
             gps = v["week"] * SECONDS_PER_WEEK + v["tow"]
             device_time = gps
-            values.update(
-                lat=v["lat"],
-                lon=v["lon"],
-                alt_gps=v["alt"],
-                vn=v["vel_n"],
-                ve=v["vel_e"],
-                vd=v["vel_d"],
-                ins_status=float(v["status"]),
-                utc=gps_to_unix(gps, leap_seconds),
-            )
+            values.update(ins_status=float(v["status"]), utc=gps_to_unix(gps, leap_seconds))
         if not all(math.isfinite(x) for x in values.values()):
             return None
         return Reading(device_time, values)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 
-from drivers.codec import CodecStats, skip
+from drivers.codec import CodecStats, hunt, resync
 
 START = 0x7E
 ESCAPE = 0x7D
@@ -70,21 +70,20 @@ class ApiCodec:
         return bytes([START]) + (escape(body) if self.escaped else body)
 
     def decode(self, buffer: bytes | bytearray) -> tuple[int, ApiFrame | None]:
-        start = buffer.find(START)
-        if start != 0:
-            return skip(self.stats, len(buffer) if start < 0 else start), None
+        if skipped := hunt(self.stats, buffer, START):
+            return skipped, None
         raw, used, interrupted = self._unescape(buffer)
         if len(raw) < 2:
-            return (self._resync(buffer), None) if interrupted else (0, None)
+            return (resync(self.stats, buffer, START), None) if interrupted else (0, None)
         (length,) = struct.unpack_from(">H", raw)
         if length == 0 or length > MAX_DATA:
-            return self._resync(buffer, rejected=True), None
+            return resync(self.stats, buffer, START, rejected=True), None
         if len(raw) < 2 + length + 1:
             # A start byte inside an escaped frame means the frame was cut short.
-            return (self._resync(buffer), None) if interrupted else (0, None)
+            return (resync(self.stats, buffer, START), None) if interrupted else (0, None)
         data = bytes(raw[2 : 2 + length])
         if checksum(data) != raw[2 + length]:
-            return self._resync(buffer, crc=True), None
+            return resync(self.stats, buffer, START, crc=True), None
         self.stats.frames += 1
         return used[2 + length], ApiFrame(data)
 
@@ -108,12 +107,6 @@ class ApiCodec:
             i += 1
             ends.append(i)
         return raw, ends, False
-
-    def _resync(self, buffer: bytes | bytearray, *, crc: bool = False, rejected: bool = False):
-        following = buffer.find(START, 1)
-        return skip(
-            self.stats, len(buffer) if following < 0 else following, crc=crc, rejected=rejected
-        )
 
 
 def transmit_request(
