@@ -48,6 +48,24 @@ def mode_row(m: messages.ModeReport) -> tuple[str, ...]:
     )
 
 
+def mode_line(m: messages.ModeReport) -> str:
+    """A mode's row as one line: name, eigenvalue with its σ, ωn, ζ with its σ, τ."""
+    lam = f"{m.real:+.3f}{m.imag:+.3f}j" if m.imag else f"{m.real:+.3f}"
+    if m.real_std is not None and m.imag_std is not None:
+        lam += f" (σ {m.real_std:.2g}, {m.imag_std:.2g})"
+    parts = [f"{m.name or 'unnamed'}: λ {lam}"]
+    if m.frequency_hz is not None:
+        parts.append(f"f {m.frequency_hz:.3g} Hz")
+    if m.imag and m.damping is not None:
+        zeta = f"ζ {m.damping:.3f}"
+        if m.damping_std is not None:
+            zeta += f" ± {m.damping_std:.2g}"
+        parts.append(zeta)
+    if m.time_constant_s is not None:
+        parts.append(f"τ {m.time_constant_s:.3g} s")
+    return "; ".join(parts)
+
+
 class Confirm(ModalScreen[bool]):
     """Yes or no, on one key."""
 

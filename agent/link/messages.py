@@ -132,6 +132,11 @@ class ModeReport(BaseModel):
     emac: float | None
     mpc: float | None
     cmi: float | None
+    real_std: float | None = None
+    """Cramér–Rao 1-σ of the eigenvalue's real and imaginary parts and of the damping (None
+    without refinement)."""
+    imag_std: float | None = None
+    damping_std: float | None = None
 
 
 class Result(Message):

@@ -333,6 +333,9 @@ def result_message(c: Candidate, s: Suggestion) -> messages.Result:
                 emac=m["emac"],
                 mpc=m["mpc"],
                 cmi=m["cmi"],
+                real_std=None if m.get("eigenvalue_std") is None else m["eigenvalue_std"][0],
+                imag_std=None if m.get("eigenvalue_std") is None else m["eigenvalue_std"][1],
+                damping_std=m.get("damping_std"),
             )
         )
     return messages.Result(

@@ -23,7 +23,7 @@ AIR = bytes.fromhex("0013A20040000001")
 GROUND = bytes.fromhex("0013A20040000002")
 
 
-def mode(name, real, imag=0.0, emac=95.0) -> messages.ModeReport:
+def mode(name, real, imag=0.0, emac=95.0, std=None) -> messages.ModeReport:
     w = abs(complex(real, imag))
     return messages.ModeReport(
         name=name,
@@ -38,12 +38,15 @@ def mode(name, real, imag=0.0, emac=95.0) -> messages.ModeReport:
         emac=emac,
         mpc=60.0,
         cmi=76.0,
+        real_std=None if std is None else std[0],
+        imag_std=None if std is None else std[1],
+        damping_std=None if std is None else 0.03,
     )
 
 
 def result(model_id: str, shift: float = 0.0, update: bool = True) -> messages.Result:
     modes = [
-        mode("Dutch roll", -0.8 + shift, 3.1 + shift),
+        mode("Dutch roll", -0.8 + shift, 3.1 + shift, std=(0.12, 0.25)),
         mode("roll", -9.5 + shift),
         mode("spiral", 0.004, emac=30.0),
     ]

@@ -10,6 +10,7 @@ settings with a non-numeric p (not sent), the radio link going silent (shown as 
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
@@ -107,8 +108,16 @@ async def test_a_result_renders_and_accept_reject_revert_round_trip(console, tmp
     assert app.query_one("#modes").row_count == 3
     assert "UPDATE" in text_of(app, "#summary")
     splane = app.query_one("#splane", SPlane)
-    assert {p.kind for p in splane.points} == {"history", "candidate"}
-    assert "◆" in text_of(app, "#splane")
+    assert {p.kind for p in splane.points} == {"candidate"}
+    assert re.search(r"✕.?Dutch roll", text_of(app, "#splane"))  # named beside its mark
+    # The mode picked in the table: reversed on the plane, its row (with σ) beneath.
+    await until(
+        pilot,
+        lambda: "Dutch roll: λ -0.800+3.100j (σ 0.12, 0.25)" in text_of(app, "#splane"),
+        "row",
+    )
+    app.query_one("#modes").move_cursor(row=1)
+    await until(pilot, lambda: "roll: λ -9.500" in text_of(app, "#splane"), "the roll's row")
     # Accept, confirmed: the aircraft gets the decision; its status then names the nominal.
     await pilot.press("y")
     await pilot.press("y")
@@ -119,7 +128,9 @@ async def test_a_result_renders_and_accept_reject_revert_round_trip(console, tmp
     await until(pilot, lambda: "lat-2" in text_of(app, "#summary"), "second result")
     assert "nominal lat-1" in text_of(app, "#nominal-title")
     assert app.query_one("#nominal-modes").row_count == 3
-    assert "●" in text_of(app, "#splane")
+    assert {p.kind for p in splane.points} == {"history", "nominal", "candidate"}
+    assert "◇" in text_of(app, "#splane")
+    assert "∘" in text_of(app, "#splane")  # the Dutch roll's 2σ ellipse
     # Reject it, but first say no to the confirmation: nothing is sent.
     await pilot.press("n")
     await pilot.press("n")

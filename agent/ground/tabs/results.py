@@ -13,7 +13,7 @@ from textual.widgets import Button, DataTable, Static
 
 from agent.ground.splane import Point, SPlane
 from agent.ground.station import GroundStation
-from agent.ground.widgets import MODE_COLUMNS, Confirm, mode_row
+from agent.ground.widgets import MODE_COLUMNS, Confirm, mode_line, mode_row
 from agent.link import messages
 
 
@@ -29,7 +29,7 @@ class ResultsTab(Horizontal):
         yield DataTable(id="results", cursor_type="row")
         with VerticalScroll(id="detail"):
             yield Static(id="summary")
-            yield DataTable(id="modes", cursor_type="none")
+            yield DataTable(id="modes", cursor_type="row")
             yield Static(id="nominal-title")
             yield DataTable(id="nominal-modes", cursor_type="none")
             yield SPlane(id="splane")
@@ -95,13 +95,19 @@ class ResultsTab(Horizontal):
         points = [
             point
             for r in self.station.heard.results.values()
-            if r.axes == result.axes
+            if r.axes == result.axes and r.model_id != result.model_id
             for point in _points(r, "history")
         ]
-        for kind, r in (("candidate", result), ("nominal", nominal)):
+        for kind, r in (("nominal", nominal), ("candidate", result)):
             if r is not None:
                 points += _points(r, kind)
-        self.query_one("#splane", SPlane).show(points)
+        plane = self.query_one("#splane", SPlane)
+        plane.show(points)
+        plane.select(None)
+
+    @on(DataTable.RowHighlighted, "#modes")
+    def _mode_picked(self, event: DataTable.RowHighlighted) -> None:
+        self.query_one("#splane", SPlane).select(event.cursor_row)
 
     @on(DataTable.RowHighlighted, "#results")
     def _select(self, event: DataTable.RowHighlighted) -> None:
@@ -160,9 +166,20 @@ def _summary(result: messages.Result) -> Text:
 
 
 def _points(result: messages.Result, kind: str) -> list[Point]:
-    """A result's poles on the s-plane (both of a complex pair)."""
-    return [
-        Point(complex(m.real, s * m.imag), kind)
-        for m in result.modes
-        for s in ((1, -1) if m.imag else (1,))
-    ]
+    """A result's poles on the s-plane (both of a complex pair), with their names, ellipses and
+    rows."""
+    points = []
+    for k, m in enumerate(result.modes):
+        std = None if m.real_std is None or m.imag_std is None else (m.real_std, m.imag_std)
+        for sign in (1, -1) if m.imag else (1,):
+            points.append(
+                Point(
+                    complex(m.real, sign * m.imag),
+                    kind,
+                    name=m.name,
+                    std=std,
+                    row=f"{result.model_id} {mode_line(m)}",
+                    index=k,
+                )
+            )
+    return points
