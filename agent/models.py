@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from agent.channels import AXIS_SETS
+
 log = logging.getLogger(__name__)
 
 TIC_LIMIT = 0.3
@@ -201,6 +203,18 @@ class ModelStore:
 
     def previous(self, axes: str) -> Candidate | None:
         return self._load(axes, "previous")
+
+    def find(self, model_id: str) -> Candidate:
+        """A model by its id: an undecided candidate, or a nominal or previous one (KeyError
+        when none has it)."""
+        if model_id in self.candidates:
+            return self.candidates[model_id]
+        for axes in AXIS_SETS:
+            for slot in ("nominal", "previous"):
+                found = self._load(axes, slot)
+                if found is not None and found.model_id == model_id:
+                    return found
+        raise KeyError(f"no model {model_id} here (the latest candidates, nominal, previous)")
 
     def accept(self, model_id: str) -> Candidate:
         """Make a candidate nominal (the old nominal becomes previous)."""

@@ -168,10 +168,9 @@ async def test_an_abort_cancels_an_arm_still_waiting_its_turn(agent):
     assert agent.scheduler.status == "idle"
 
 
-async def test_a_new_nominal_that_predicts_worse_is_rolled_back(tmp_path):
-    """Requirement 6.3.1: lat-2 is accepted but is wrong (its B negated); on the next
-    excitation it predicts the data far worse than lat-1 did, so lat-1 is nominal again and
-    the ground is told."""
+def a2_flight(tmp_path, refine: bool = False):
+    """An agent (its worker on a thread) and the thesis's A.2 lateral record as a window of
+    recorded rows."""
     import csv
 
     from agent.config import Identification
@@ -182,17 +181,24 @@ async def test_a_new_nominal_that_predicts_worse_is_rolled_back(tmp_path):
         table = list(csv.DictReader(handle))
     config = Config(
         recorder=Recorder(log_dir=str(tmp_path / "logs"), rate_hz=50.0),
-        identification=Identification(refine=False),
+        identification=Identification(refine=refine),
     )
     agent = Agent(config, base=tmp_path, worker=thread_worker)
-    sent = []
-    agent.downlink.subscribe(sent.append)
     channels = agent.recorder.channels
     rows = np.full((len(table), 1 + 2 * len(channels)), np.nan)
     rows[:, 0] = [float(r["time"]) for r in table]
     for name in ("aileron", "rudder", "beta", "p", "r", "phi"):
         rows[:, 1 + channels.index(name)] = [float(r[name]) for r in table]
-    window = Window("run", "lateral", rows[0, 0], rows[-1, 0], "finished")
+    return agent, Window("run", "lateral", rows[0, 0], rows[-1, 0], "finished"), rows
+
+
+async def test_a_new_nominal_that_predicts_worse_is_rolled_back(tmp_path):
+    """Requirement 6.3.1: lat-2 is accepted but is wrong (its B negated); on the next
+    excitation it predicts the data far worse than lat-1 did, so lat-1 is nominal again and
+    the ground is told."""
+    agent, window, rows = a2_flight(tmp_path)
+    sent = []
+    agent.downlink.subscribe(sent.append)
     try:
         await agent.identification.identify(window, rows)
         await agent.commands.handle(messages.Decision(model_id="lat-1", accept=True), 1)
@@ -250,3 +256,46 @@ async def test_stopping_a_worker_stuck_in_a_job_kills_it_instead_of_waiting_for_
     assert process.exitcode == -signal.SIGKILL  # killed, not finished
     with pytest.raises(BrokenProcessPool):  # the job is reported lost, not left pending
         await stuck
+
+
+async def test_the_frequency_response_of_a_pair_is_sent_when_asked(tmp_path):
+    """Bad input tried: a pair the model does not have, a model that does not exist."""
+    from agent.ident.frf import model_response
+
+    agent, window, rows = a2_flight(tmp_path, refine=True)
+    agent.sent = []
+    agent.downlink.subscribe(agent.sent.append)
+    worker = asyncio.create_task(agent.identification.run())
+    try:
+        await agent.identification.identify(window, rows)
+        for seq, (model, i, o) in enumerate(
+            [("lat-1", "aileron", "p"), ("lat-1", "elevator", "q"), ("lat-9", "aileron", "p")],
+            start=1,
+        ):
+            agent.commands.receive(messages.FrfRequest(model_id=model, input=i, output=o), seq)
+        answered = await command_task_answers(agent, 3)
+        await until(lambda: any(isinstance(m, messages.FrfReport) for m in agent.sent), "FRF")
+    finally:
+        worker.cancel()
+        await asyncio.gather(worker, return_exceptions=True)
+        agent.close()
+    assert answered[1].ok
+    assert "no pair elevator → q" in answered[2].reason
+    assert "no model lat-9" in answered[3].reason
+    (report,) = [m for m in agent.sent if isinstance(m, messages.FrfReport)]
+    assert (report.model_id, report.input, report.output) == ("lat-1", "aileron", "p")
+    assert 10 <= len(report.freq_hz) <= messages.FRF_POINTS
+    assert np.all(np.diff(report.freq_hz) > 0)
+    assert all(g is not None and 0 <= g <= 1 for g in report.coherence)
+    # The measured response is the model's own data's: the identified model lies on it.
+    result = agent.identification.results[-1]["result"]
+    model = model_response(
+        result["A"], result["B"], result["C"], result["D"], result["dt"], report.freq_hz
+    )
+    i, j = result["inputs"].index("aileron"), result["outputs"].index("p")
+    model_db = 20 * np.log10(np.abs(model[:, j, i]))
+    assert np.median(np.abs(model_db - np.array(report.mag_db))) < 1.0
+    # What goes on air: the codec's own MessagePack, within the seven frames it was sized for.
+    import msgpack
+
+    assert len(msgpack.packb(messages.to_dict(report))) < 2000

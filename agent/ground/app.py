@@ -46,6 +46,7 @@ class Console(App):
         Binding("y", "decide(True)", "accept", show=False),
         Binding("n", "decide(False)", "reject", show=False),
         Binding("r", "revert", "revert", show=False),
+        Binding("f", "frf", "frequency response", show=False),
         Binding("q", "quit", "quit"),
     ]
 
@@ -167,6 +168,10 @@ class Console(App):
     def action_revert(self) -> None:
         if self._tabs().active == "results-tab":
             self.results_tab.revert()
+
+    def action_frf(self) -> None:
+        if self._tabs().active == "results-tab":
+            self.results_tab.ask_frf()
 
     def _tabs(self) -> TabbedContent:
         return self._main_screen().query_one("#tabs", TabbedContent)

@@ -62,6 +62,8 @@ class Heard:
     events: deque[Line] = field(default_factory=lambda: deque(maxlen=EVENTS_KEPT))
     results: OrderedDict[str, messages.Result] = field(default_factory=OrderedDict)
     failures: list[messages.Failure] = field(default_factory=list)
+    frfs: dict[tuple[str, str, str], messages.FrfReport] = field(default_factory=dict)
+    """Frequency responses asked for, by (model id, input, output)."""
     excitation: messages.ExcitationEvent | None = None
     noted: int = 0  # event lines ever noted (the deque keeps the latest)
 
@@ -169,6 +171,14 @@ class GroundStation:
                 f"result {message.model_id} ({message.axes}): TIC {message.tic_avg:.3f}, {verdict}",
             )
             self._tell("result")
+        elif isinstance(message, messages.FrfReport):
+            h.frfs[(message.model_id, message.input, message.output)] = message
+            self.note(
+                "info",
+                f"frequency response {message.model_id} {message.input} → {message.output}: "
+                f"{len(message.freq_hz)} frequencies",
+            )
+            self._tell("frf")
         elif isinstance(message, messages.Failure):
             h.failures.append(message)
             self.note("error", f"identification {message.model_id} failed: {message.reason}")
@@ -225,6 +235,10 @@ class GroundStation:
 
     def revert(self) -> Command:
         return self.send(messages.Revert(), "revert to the previous nominal")
+
+    def frequency_response(self, model_id: str, input_: str, output: str) -> Command:
+        request = messages.FrfRequest(model_id=model_id, input=input_, output=output)
+        return self.send(request, f"frequency response {model_id} {input_} → {output}")
 
     # -- views ------------------------------------------------------------------------------
 

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from agent.channels import AXIS_SETS
-from agent.ident import Experiment, Settings, identify
+from agent.ident import Experiment, Settings, frf, identify
 from agent.ident.convert import StateSpace
 from agent.ident.errors import DataError, IdentificationFailed
 from agent.ident.fit import fit
@@ -242,6 +242,43 @@ def cross_tic(
     )
     model = StateSpace(*(np.asarray(result[k], dtype=float) for k in ("A", "B", "C", "D")))
     return fit(model, batch).tic_avg
+
+
+def frequency_response(
+    preprocessing: dict,
+    record_dt: float,
+    experiments: tuple[tuple[np.ndarray, np.ndarray], ...],
+    input_index: int,
+    output_index: int,
+    points: int,
+) -> dict:
+    """A model's measured frequency response for one pair on its own data, preprocessed as the
+    model's was (`agent.ident.frf.measured`), at most `points` of the input's excited
+    frequencies (log-spaced): {averaging, segments, freq_hz, mag_db, phase_deg, coherence}."""
+    batch, prep = preprocess(
+        [Experiment(u, y) for u, y in experiments],
+        record_dt,
+        decimation=preprocessing["factor"],
+        band_hz=preprocessing["band_hz"],
+        held_inputs=preprocessing["held_inputs"],
+        smoothing_s=preprocessing["smoothing_s"],
+    )
+    measured = frf.measured(batch, prep.dt)
+    excited = np.flatnonzero(measured.excited(input_index))
+    if excited.size > points:  # log-spaced: as many per decade
+        f = np.log(measured.freqs[excited])
+        wanted = np.linspace(f[0], f[-1], points)
+        excited = excited[np.unique(np.abs(f[None, :] - wanted[:, None]).argmin(axis=1))]
+    h = measured.H[excited, output_index, input_index]
+    gamma = measured.coherence[excited, output_index, input_index]
+    return {
+        "averaging": measured.averaging,
+        "segments": measured.segments,
+        "freq_hz": [round(float(x), 5) for x in measured.freqs[excited]],
+        "mag_db": [round(float(x), 2) for x in 20 * np.log10(np.abs(h))],
+        "phase_deg": [round(float(x), 1) for x in np.degrees(np.angle(h))],
+        "coherence": [None if not np.isfinite(g) else round(float(g), 3) for g in gamma],
+    }
 
 
 # The worker's scheduling below the agent's: on a small flight computer the identification takes

@@ -74,6 +74,16 @@ class Revert(Message):
     kind: Literal["revert"] = "revert"
 
 
+class FrfRequest(Message):
+    """Ask for a model's measured frequency response for one input → output pair (answered
+    with an Ack, then a FrfReport once the worker has computed it)."""
+
+    kind: Literal["frf-request"] = "frf-request"
+    model_id: str = Field(max_length=32)
+    input: str = Field(max_length=32)
+    output: str = Field(max_length=32)
+
+
 class Ping(Message):
     kind: Literal["ping"] = "ping"
 
@@ -166,6 +176,27 @@ class Result(Message):
     D: list[list[float]]
 
 
+# The most frequency points a FrfReport carries (log-spaced among the excited ones): about
+# 1.8 kB of MessagePack, seven frames.
+FRF_POINTS = 48
+
+
+class FrfReport(Message):
+    """A model's measured frequency response for one pair, at the frequencies its input
+    excited in the model's own data (`agent.ident.frf`): magnitude, phase and coherence."""
+
+    kind: Literal["frf"] = "frf"
+    model_id: str = Field(max_length=32)
+    input: str = Field(max_length=32)
+    output: str = Field(max_length=32)
+    averaging: str = Field(max_length=16)
+    segments: int
+    freq_hz: list[float] = Field(max_length=FRF_POINTS)
+    mag_db: list[float] = Field(max_length=FRF_POINTS)
+    phase_deg: list[float] = Field(max_length=FRF_POINTS)
+    coherence: list[float | None] = Field(max_length=FRF_POINTS)
+
+
 class Failure(Message):
     """An identification that failed, and why (the agent keeps flying)."""
 
@@ -191,8 +222,8 @@ class Notice(Message):
     text: str = Field(max_length=200)
 
 
-Uplink = Arm | Start | Abort | IdentSettings | Decision | Revert | Ping
-Downlink = Status | ExcitationEvent | Result | Failure | Ack | Notice | Ping
+Uplink = Arm | Start | Abort | IdentSettings | Decision | Revert | FrfRequest | Ping
+Downlink = Status | ExcitationEvent | Result | FrfReport | Failure | Ack | Notice | Ping
 Message = Annotated[
     Arm
     | Start
@@ -200,10 +231,12 @@ Message = Annotated[
     | IdentSettings
     | Decision
     | Revert
+    | FrfRequest
     | Ping
     | Status
     | ExcitationEvent
     | Result
+    | FrfReport
     | Failure
     | Ack
     | Notice,

@@ -49,6 +49,7 @@ class Commands:
             messages.IdentSettings: self._settings,
             messages.Decision: self._decision,
             messages.Revert: self._revert,
+            messages.FrfRequest: self._frf,
         }
 
     def receive(self, message: messages.Message, seq: int | None) -> None:
@@ -125,3 +126,6 @@ class Commands:
     async def _revert(self, message: messages.Revert) -> str:
         await self.identification.revert()
         return ""
+
+    async def _frf(self, message: messages.FrfRequest) -> str:
+        return await self.identification.request_frf(message)

@@ -16,6 +16,7 @@ from collections import Counter, deque
 from collections.abc import Callable
 from concurrent.futures import Executor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -25,6 +26,7 @@ from agent.config import Config
 from agent.excitation.scheduler import Window
 from agent.ident import Settings
 from agent.ident import job as jobs
+from agent.ident.errors import DataError
 from agent.ident.job import settings_from
 from agent.link import messages
 from agent.logs import LogWriter, log_name
@@ -66,7 +68,8 @@ class Identification:
         self.results: deque[dict] = deque(maxlen=RESULTS_KEPT)
         # The result log: one JSON object per identification (thesis 2.2.1).
         self._log = writer.open(log_name(writer.next_number(), "results", "jsonl"))
-        self._queue: asyncio.Queue[tuple[Window, np.ndarray]] = asyncio.Queue(JOB_QUEUE)
+        # Windows to identify and frequency responses asked for: one worker, in order.
+        self._queue: asyncio.Queue[tuple[Window, np.ndarray] | _FrfJob] = asyncio.Queue(JOB_QUEUE)
         self._store = ThreadPoolExecutor(1, thread_name_prefix="model-store")
         self._new_worker = worker
         self._pool: Executor | None = None  # the worker; replaced if it dies
@@ -162,7 +165,11 @@ class Identification:
         loop = asyncio.get_running_loop()
         await loop.run_in_executor(self._pool, jobs.warm)  # up before the first window
         while True:
-            window, rows = await self._queue.get()
+            item = await self._queue.get()
+            if isinstance(item, _FrfJob):
+                await self._frequency_response(item)
+                continue
+            window, rows = item
             self.busy = True
             try:
                 await self.identify(window, rows)
@@ -197,6 +204,51 @@ class Identification:
         if self._pool is not None:
             self._pool.shutdown(wait=False, cancel_futures=True)
         self._store.shutdown(wait=True)
+
+    # -- a frequency response asked for --------------------------------------------------
+
+    async def request_frf(self, request: messages.FrfRequest) -> str:
+        """Queue a model's measured frequency response for one pair; why not ("" when queued:
+        the FrfReport follows once the worker is free)."""
+        candidate = await self._in_store(self.models.find, request.model_id)
+        inputs, outputs = candidate.result["inputs"], candidate.result["outputs"]
+        if request.input not in inputs or request.output not in outputs:
+            return (
+                f"{request.model_id} has no pair {request.input} → {request.output} "
+                f"(inputs {', '.join(inputs)}; outputs {', '.join(outputs)})"
+            )
+        i, j = inputs.index(request.input), outputs.index(request.output)
+        job = _FrfJob(request, candidate, i, j)
+        try:
+            self._queue.put_nowait(job)
+        except asyncio.QueueFull:
+            return "busy: the identification queue is full; ask again after the next result"
+        return ""
+
+    async def _frequency_response(self, job: _FrfJob) -> None:
+        c, r = job.candidate, job.request
+        loop = asyncio.get_running_loop()
+        try:
+            answer = await loop.run_in_executor(
+                self._pool,
+                jobs.frequency_response,
+                c.preprocessing,
+                c.record_dt,
+                c.experiments,
+                job.input_index,
+                job.output_index,
+                messages.FRF_POINTS,
+            )
+        except BrokenProcessPool:
+            raise  # the worker died: `run` replaces it
+        except (ValueError, np.linalg.LinAlgError, DataError) as exc:
+            self.counters["frf_failures"] += 1
+            text = f"frequency response {r.model_id} {r.input} → {r.output} not computed: {exc}"
+            self.downlink.send(messages.Notice(text=text[:200]))
+            return
+        self.downlink.send(
+            messages.FrfReport(model_id=r.model_id, input=r.input, output=r.output, **answer)
+        )
 
     # -- one identification ------------------------------------------------------------------
 
@@ -302,6 +354,14 @@ class Identification:
         self.results.append({"model_id": model_id, "axes": axes, "failure": reason})
         self.writer.write(self._log, (json.dumps(self.results[-1]) + "\n").encode())
         self.downlink.send(messages.Failure(model_id=model_id, axes=axes, reason=reason[:300]))
+
+
+@dataclass(frozen=True)
+class _FrfJob:
+    request: messages.FrfRequest
+    candidate: Candidate
+    input_index: int
+    output_index: int
 
 
 def onboard_settings(config: Config, ident: messages.IdentSettings) -> Settings:

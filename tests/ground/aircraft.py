@@ -9,9 +9,14 @@ import contextlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from agent.clock import LoopClock
 from agent.config import Link
 from agent.ground.config import GroundConfig
+from agent.ident.convert import discretize
+from agent.ident.frf import model_response
+from agent.ident.reference import LATERAL
 from agent.link import messages
 from agent.link.codec import AIRCRAFT, CounterStore, LinkCodec
 from agent.link.session import LinkSession
@@ -50,7 +55,8 @@ def result(model_id: str, shift: float = 0.0, update: bool = True) -> messages.R
         mode("roll", -9.5 + shift),
         mode("spiral", 0.004, emac=30.0),
     ]
-    eye = [[1.0 if i == j else 0.0 for j in range(4)] for i in range(4)]
+    # The thesis's A.2 lateral model at 25 Hz: a real response for the frequency-response view.
+    A, B = discretize(LATERAL.A, LATERAL.B, 0.04)
     return messages.Result(
         model_id=model_id,
         axes="lateral",
@@ -68,10 +74,31 @@ def result(model_id: str, shift: float = 0.0, update: bool = True) -> messages.R
             "3 TIC_jj 0.028 < 0.3",
             "4–7 no nominal model yet",
         ],
-        A=eye,
-        B=[[0.0, 0.0]] * 4,
-        C=eye,
-        D=[[0.0, 0.0]] * 4,
+        A=A.tolist(),
+        B=B.tolist(),
+        C=np.eye(4).tolist(),
+        D=np.zeros((4, 2)).tolist(),
+    )
+
+
+def frequency_response(request: messages.FrfRequest) -> messages.FrfReport:
+    """What the aircraft would measure for `result(model_id)`'s pair: its model's response at
+    30 frequencies with a little error, the coherence low below 0.2 Hz (turbulence there)."""
+    model = result(request.model_id)
+    i, j = model.inputs.index(request.input), model.outputs.index(request.output)
+    f = np.logspace(-1, np.log10(5.0), 30)
+    h = model_response(model.A, model.B, model.C, model.D, model.dt, f)[:, j, i]
+    h *= 1 + 0.05 * np.sin(7 * f)
+    return messages.FrfReport(
+        model_id=request.model_id,
+        input=request.input,
+        output=request.output,
+        averaging="welch",
+        segments=7,
+        freq_hz=f.tolist(),
+        mag_db=(20 * np.log10(np.abs(h))).tolist(),
+        phase_deg=np.degrees(np.angle(h)).tolist(),
+        coherence=np.where(f < 0.2, 0.4, 0.95).tolist(),
     )
 
 
@@ -102,6 +129,8 @@ class ScriptedAircraft:
                 else:
                     self.nominal.append(self.nominal[-2])
         self.session.send_reliable(messages.Ack(ref=seq, ok=not reason, reason=reason))
+        if isinstance(message, messages.FrfRequest) and not reason:
+            self.session.send_reliable(frequency_response(message))
 
     def status(self, t: float) -> messages.Status:
         return messages.Status(

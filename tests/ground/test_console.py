@@ -131,6 +131,18 @@ async def test_a_result_renders_and_accept_reject_revert_round_trip(console, tmp
     assert {p.kind for p in splane.points} == {"history", "nominal", "candidate"}
     assert "◇" in text_of(app, "#splane")
     assert "∘" in text_of(app, "#splane")  # the Dutch roll's 2σ ellipse
+    # A pair's frequency response, asked of the aircraft: measured points over the model's
+    # line, the low-coherence ones counted.
+    app.query_one("#frf-pair").value = "aileron → p"
+    await pilot.press("f")
+    await until(pilot, lambda: "lat-2  aileron → p" in text_of(app, "#bode"), "the response")
+    request = next(m for m in r.aircraft.inbox if isinstance(m, messages.FrfRequest))
+    assert (request.model_id, request.input, request.output) == ("lat-2", "aileron", "p")
+    bode = text_of(app, "#bode")
+    assert "30 frequencies, 7 Welch segments" in bode
+    assert bode.count("●") + bode.count("×") >= 25  # measured points (some share a cell)
+    assert "·" in bode  # the model's line
+    assert "γ² low at 6 of 30: not to be trusted there" in bode
     # Reject it, but first say no to the confirmation: nothing is sent.
     await pilot.press("n")
     await pilot.press("n")
@@ -152,7 +164,7 @@ async def test_a_result_renders_and_accept_reject_revert_round_trip(console, tmp
     records = [json.loads(line) for line in log]
     results = [x for x in records if x["dir"] == "rx" and x["message"]["kind"] == "result"]
     assert [x["message"]["model_id"] for x in results] == ["lat-1", "lat-2"]
-    assert results[0]["message"]["A"][0][0] == 1.0
+    assert results[0]["message"]["A"] == result("lat-1").A  # the matrices in full
     assert any(x["dir"] == "tx" and x["message"]["kind"] == "decision" for x in records)
 
 

@@ -67,3 +67,22 @@ async def test_screen(tmp_path, tab, size):
                 f"console-{app.query_one('#tabs').active}-{size[0]}x{size[1]}",
                 app.export_screenshot(),
             )
+
+
+async def test_frequency_response_view(tmp_path):
+    """The Results tab scrolled to a pair's frequency response, asked of the aircraft."""
+    async with rig(tmp_path) as r:
+        station = GroundStation(r.config, VirtualClock(1000.0), base=tmp_path)
+        app = Console(station)
+        async with app.run_test(size=(120, 44)) as pilot:
+            await until(pilot, lambda: station.heard.status is not None, "status")
+            r.aircraft.session.send_reliable(result("lat-1"))
+            await until(pilot, lambda: len(station.heard.results) == 1, "result")
+            await pilot.press("4")
+            app.query_one("#frf-pair").value = "aileron → p"
+            await pilot.press("f")
+            await until(pilot, lambda: station.heard.frfs, "the frequency response")
+            await pilot.pause(0.3)
+            app.query_one("#bode").scroll_visible(animate=False)
+            await pilot.pause(0.3)
+            matches("console-results-frf-120x44", app.export_screenshot())

@@ -1,5 +1,6 @@
 """Results (4): every identification heard, newest first; the selected one's TIC, suggestion,
-modes, the nominal's modes and the s-plane; accept, reject, revert."""
+modes, the nominal's modes, the s-plane, and a pair's measured frequency response with the
+model's over it (asked of the aircraft); accept, reject, revert."""
 
 from __future__ import annotations
 
@@ -9,8 +10,9 @@ from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
 from textual.containers import Horizontal, VerticalScroll
-from textual.widgets import Button, DataTable, Static
+from textual.widgets import Button, DataTable, Select, Static
 
+from agent.ground.bode import Bode
 from agent.ground.splane import Point, SPlane
 from agent.ground.station import GroundStation
 from agent.ground.widgets import MODE_COLUMNS, Confirm, mode_line, mode_row
@@ -24,6 +26,7 @@ class ResultsTab(Horizontal):
         self.selected: str | None = None  # the result shown; None: the newest
         self._shown: list[str] = []  # the results in the table
         self._detail_key: tuple | None = None  # what the detail shows now
+        self._pairs: list[str] = []  # the input → output pairs offered
 
     def compose(self) -> ComposeResult:
         yield DataTable(id="results", cursor_type="row")
@@ -33,6 +36,10 @@ class ResultsTab(Horizontal):
             yield Static(id="nominal-title")
             yield DataTable(id="nominal-modes", cursor_type="none")
             yield SPlane(id="splane")
+            with Horizontal(id="frf-row"):
+                yield Select([], prompt="input → output", id="frf-pair", compact=True)
+                yield Button("Frequency response f", id="frf-ask", compact=True)
+            yield Bode(id="bode")
             with Horizontal(id="decision"):
                 yield Button("Accept y", id="accept", variant="success", compact=True)
                 yield Button("Reject n", id="reject", variant="warning", compact=True)
@@ -71,6 +78,7 @@ class ResultsTab(Horizontal):
             len(self.station.heard.results),
         )
         if key == self._detail_key:
+            self._show_frf()  # a frequency response may have arrived
             return  # nothing new: keep the tables (and where the operator scrolled) as they are
         self._detail_key = key
         summary_w = self.query_one("#summary", Static)
@@ -104,6 +112,46 @@ class ResultsTab(Horizontal):
         plane = self.query_one("#splane", SPlane)
         plane.show(points)
         plane.select(None)
+        pairs = [f"{i} → {o}" for i in result.inputs for o in result.outputs]
+        if pairs != self._pairs:
+            self.query_one("#frf-pair", Select).set_options([(p, p) for p in pairs])
+            self._pairs = pairs
+        self._show_frf()
+
+    def _pair(self) -> tuple[str, str] | None:
+        value = self.query_one("#frf-pair", Select).value
+        if not isinstance(value, str):
+            return None
+        i, o = value.split(" → ")
+        return i, o
+
+    def _show_frf(self) -> None:
+        result = self.station.heard.results.get(self.selected or "")
+        pair = self._pair()
+        report = None
+        if result is not None and pair is not None:
+            report = self.station.heard.frfs.get((result.model_id, *pair))
+        self.query_one("#bode", Bode).show(report, result)
+
+    def ask_frf(self) -> None:
+        """Ask the aircraft for the selected result's measured response of the chosen pair."""
+        pair = self._pair()
+        if self.selected is None or pair is None:
+            self.station.note("warning", "pick a result and an input → output pair first")
+            return
+        model_id = self.selected
+        self.send(lambda: self.station.frequency_response(model_id, *pair))
+        self.query_one("#bode", Bode).show(
+            None, None, f"asked the aircraft for {model_id} {pair[0]} → {pair[1]}: waiting"
+        )
+
+    @on(Select.Changed, "#frf-pair")
+    def _pair_changed(self) -> None:
+        self._show_frf()
+
+    @on(Button.Pressed, "#frf-ask")
+    def _ask_pressed(self) -> None:
+        self.ask_frf()
 
     @on(DataTable.RowHighlighted, "#modes")
     def _mode_picked(self, event: DataTable.RowHighlighted) -> None:
