@@ -120,4 +120,7 @@ def post_flight(directory, report) -> None:
         "--nominal",
         directory / "models" / "lateral_nominal.json",
     )
-    assert (directory / "report" / "s_plane.png").stat().st_size > 10_000
+    page = (directory / "report" / "index.html").read_text()
+    assert page.count('<svg class="splane"') == 3  # every excitation's, then one each
+    assert page.count('<g class="mode nominal"') >= 3  # the nominal's modes on each plane
+    assert (directory / "report" / "excitation_2_bode.png").stat().st_size > 10_000
