@@ -387,6 +387,18 @@ class Runtime(Section):
     scheduling. Unset: normal scheduling."""
 
 
+class Live(Section):
+    """The live view sent to the ground while a plan plays and its window is identified: the
+    plan's progress, the identification's stage, and strip-chart samples of the commanded and
+    measured surfaces and the responses the plan's axis identifies. Best effort: it goes out
+    only when no command answer or result is waiting to be sent."""
+
+    period_s: float = Field(1.0, ge=0.0, le=10.0)
+    """How often a live message goes out (s); 0: no live view."""
+    rate_hz: float = Field(10.0, gt=0.0, le=50.0)
+    """Strip-chart samples per second (each message holds those of one period)."""
+
+
 class Config(Section):
     """The whole configuration file."""
 
@@ -404,6 +416,8 @@ class Config(Section):
     """The XBee air–ground link."""
     runtime: Runtime = Runtime()
     """The agent process's scheduling."""
+    live: Live = Live()
+    """The live view downlinked during a run."""
 
 
 def reference(model: type[BaseModel], file: str) -> str:

@@ -168,6 +168,11 @@ class Recorder:
         self.marks.append(window)
         self._pending.append(window)
 
+    @property
+    def waiting(self) -> Window | None:
+        """The window whose margin is being recorded (its log and identification follow)."""
+        return self._pending[0] if self._pending else None
+
     def _flush_excitations(self, latest: float) -> None:
         margin = self._config.excitation_margin_s
         while self._pending and self._pending[0].end + margin <= latest:

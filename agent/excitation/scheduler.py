@@ -57,6 +57,24 @@ class Event:
     fraction: float | None = None
 
 
+@dataclass(frozen=True)
+class Playing:
+    """The plan being played: how far it is, and what it commands now (for the live view)."""
+
+    plan: Plan
+    start: float
+    timeline: Timeline
+
+    def fraction(self, now: float) -> float:
+        """The share of the plan played by `now` (0 to 1)."""
+        return float(np.clip((now - self.start) / self.timeline.duration, 0.0, 1.0))
+
+    def commanded(self, now: float) -> dict[str, float]:
+        """Each control's commanded deflection from trim at `now` (its unit)."""
+        i = int(np.clip((now - self.start) // self.timeline.dt, 0, self.timeline.count - 1))
+        return {name: float(values[i]) for name, values in self.timeline.values.items()}
+
+
 def envelope_violation(s: FlightState, env: Envelope, altitude_ref: float | None) -> str:
     """Which envelope limit the state is outside ("" when inside)."""
     if not all(np.isfinite([s.bank_deg, s.pitch_deg, s.airspeed, s.alpha_deg, s.altitude_m])):
@@ -91,6 +109,7 @@ class Scheduler:
         self._listeners: list[Callable[[Event | Window], None]] = []
         self._armed: tuple[Plan, Timeline] | None = None
         self._running: Plan | None = None
+        self.playing: Playing | None = None  # the plan being played, with its timeline
         self._seen_low = False
         self._switch: tuple[float, bool] | None = None
         self._state: FlightState | None = None
@@ -258,6 +277,7 @@ class Scheduler:
         trim_pwm = {surfaces[n].channel: round(trim[n]) for n in plan.controls()}
         self._running, self._abort_request = plan, None
         start = self._clock.now()
+        self.playing = Playing(plan, start, timeline)
         altitude_ref = self._state.altitude_m if self._state else None
         self.counters["runs"] += 1
         detail = ", ".join(f"{n} {trim[n]:.0f} µs" for n in plan.controls())
@@ -340,7 +360,7 @@ class Scheduler:
 
     def _finish(self, plan: Plan, start: float, outcome: str, reason: str) -> None:
         end = self._clock.now()
-        self._running = None
+        self._running, self.playing = None, None
         self.counters[outcome] += 1
         if outcome == "aborted":
             log.warning("plan %s aborted: %s", plan.id, reason)

@@ -1,6 +1,7 @@
 """`sysid console`: the operator's terminal app (Textual) on the XBee link.
 
-Tabs: Status (1), Excite (2), Identify (3), Results (4), one widget each (`agent/ground/tabs/`);
+Tabs: Status (1), Excite (2), Identify (3), Results (4), Live (5), one widget each
+(`agent/ground/tabs/`);
 an event log along the bottom; the link state, flight mode, excitation state and nominal model
 in the top line. F5 aborts a run from anywhere (x too, outside a text field). Every decision
 asks for confirmation, is sent reliably, and its acknowledgement (or the aircraft's reason for
@@ -22,6 +23,7 @@ from textual.worker import Worker, WorkerState
 from agent.ground.station import GroundStation, Line
 from agent.ground.tabs.excite import ExciteTab
 from agent.ground.tabs.identify import IdentifyTab
+from agent.ground.tabs.live import LiveTab
 from agent.ground.tabs.results import ResultsTab
 from agent.ground.tabs.status import StatusTab
 from agent.ground.widgets import num
@@ -42,6 +44,7 @@ class Console(App):
         Binding("2", "tab('excite')", "excite"),
         Binding("3", "tab('identify')", "identify"),
         Binding("4", "tab('results')", "results"),
+        Binding("5", "tab('live')", "live"),
         Binding("f2", "arm", "arm plan", priority=True),
         Binding("y", "decide(True)", "accept", show=False),
         Binding("n", "decide(False)", "reject", show=False),
@@ -60,6 +63,7 @@ class Console(App):
         self.excite_tab = ExciteTab(station, self.send)
         self.identify_tab = IdentifyTab(station, self.send, id="settings")
         self.results_tab = ResultsTab(station, self.send)
+        self.live_tab = LiveTab(station)
 
     @property
     def selected(self) -> str | None:
@@ -77,6 +81,8 @@ class Console(App):
                 yield self.identify_tab
             with TabPane("Results 4", id="results-tab"):
                 yield self.results_tab
+            with TabPane("Live 5", id="live"):
+                yield self.live_tab
         yield RichLog(id="log", max_lines=500, wrap=True)
         yield Footer()
 
@@ -109,6 +115,7 @@ class Console(App):
             self.status_tab.show()
             self._events()
             self.results_tab.show()
+            self.live_tab.show()
         except NoMatches:  # the screen is being taken down (quit): nothing left to draw
             return
 

@@ -33,6 +33,8 @@ from drivers.xbee.driver import XBeeRadio
 log = logging.getLogger(__name__)
 
 EVENTS_KEPT = 500
+# The live view's strip charts keep this many seconds.
+STRIP_S = 30.0
 
 
 @dataclass
@@ -64,6 +66,13 @@ class Heard:
     failures: list[messages.Failure] = field(default_factory=list)
     frfs: dict[tuple[str, str, str], messages.FrfReport] = field(default_factory=dict)
     """Frequency responses asked for, by (model id, input, output)."""
+    live: messages.Live | None = None
+    """The latest live view (progress, stage) of the run."""
+    live_at: float | None = None
+    strips: dict[str, deque[tuple[float, float | None]]] = field(default_factory=dict)
+    """The run's strip charts: per channel, (time, value in display units), STRIP_S long."""
+    durations: deque[float] = field(default_factory=lambda: deque(maxlen=5))
+    """How long the last identifications took in the worker (s), from the live view."""
     excitation: messages.ExcitationEvent | None = None
     noted: int = 0  # event lines ever noted (the deque keeps the latest)
 
@@ -156,6 +165,10 @@ class GroundStation:
             h.status, h.status_at = message, now
             self._tell("status")
             return
+        if isinstance(message, messages.Live):
+            self._live(message, now)
+            self._tell("live")
+            return
         if isinstance(message, messages.Ack):
             self._answered(message)
         elif isinstance(message, messages.ExcitationEvent):
@@ -164,6 +177,7 @@ class GroundStation:
             detail = f": {message.detail}" if message.detail else ""
             self.note(level, f"excitation {message.plan_id} {message.event}{detail}")
         elif isinstance(message, messages.Result):
+            self._run_over()
             self._keep(message)
             verdict = "update suggested" if message.suggest_update else "no update suggested"
             self.note(
@@ -180,11 +194,33 @@ class GroundStation:
             )
             self._tell("frf")
         elif isinstance(message, messages.Failure):
+            self._run_over()
             h.failures.append(message)
             self.note("error", f"identification {message.model_id} failed: {message.reason}")
             self._tell("result")
         elif isinstance(message, messages.Notice):
             self.note("warning", message.text)
+
+    def _live(self, live: messages.Live, now: float) -> None:
+        h = self.heard
+        previous = h.live
+        if live.plan_id is not None and (previous is None or previous.plan_id != live.plan_id):
+            h.strips.clear()  # a new run: new charts
+        h.live, h.live_at = live, now
+        for name, values in live.tenths.items():
+            strip = h.strips.setdefault(name, deque())
+            for k, value in enumerate(values):
+                strip.append((live.time + k * live.dt, None if value is None else value / 10))
+            while strip and strip[-1][0] - strip[0][0] > STRIP_S:
+                strip.popleft()
+
+    def _run_over(self) -> None:
+        """A result or failure ends the live view (its charts stay for a look back); how long
+        the worker took, as last seen live, sets the next identification's expectation."""
+        h = self.heard
+        if h.live is not None and h.live.stage == "identifying" and h.live.stage_s is not None:
+            h.durations.append(h.live.stage_s)
+        h.live = None
 
     def _answered(self, ack: messages.Ack) -> None:
         command = self.commands.get(ack.ref)

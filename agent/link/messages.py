@@ -176,6 +176,28 @@ class Result(Message):
     D: list[list[float]]
 
 
+class Live(Message):
+    """While a plan plays and its window is identified: the plan's progress, the
+    identification's stage, and strip-chart samples. Samples are whole tenths of the display
+    unit — degrees for angles and surfaces, degrees per second for rates, m/s, µs, % — so
+    MessagePack carries each in one to three bytes; None: no data. A commanded surface is
+    `<control>_cmd` (its deflection from trim)."""
+
+    kind: Literal["live"] = "live"
+    time: float
+    """Of the first sample."""
+    dt: float
+    plan_id: str | None = Field(None, max_length=32)
+    plan_fraction: float | None = None
+    """The share of the plan played (None: none playing)."""
+    plan_s: float | None = None
+    stage: str = Field("", max_length=24)
+    """The identification's: "recording margin", "queued", "identifying" ("" none)."""
+    stage_s: float | None = None
+    """Time in that stage so far."""
+    tenths: dict[str, list[int | None]] = Field(default_factory=dict, max_length=16)
+
+
 # The most frequency points a FrfReport carries (log-spaced among the excited ones): about
 # 1.8 kB of MessagePack, seven frames.
 FRF_POINTS = 48
@@ -223,7 +245,7 @@ class Notice(Message):
 
 
 Uplink = Arm | Start | Abort | IdentSettings | Decision | Revert | FrfRequest | Ping
-Downlink = Status | ExcitationEvent | Result | FrfReport | Failure | Ack | Notice | Ping
+Downlink = Status | Live | ExcitationEvent | Result | FrfReport | Failure | Ack | Notice | Ping
 Message = Annotated[
     Arm
     | Start
@@ -234,6 +256,7 @@ Message = Annotated[
     | FrfRequest
     | Ping
     | Status
+    | Live
     | ExcitationEvent
     | Result
     | FrfReport

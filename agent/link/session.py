@@ -82,6 +82,7 @@ class LinkSession:
         self._ahead: dict[int, dict] = {}
         self._acks_due = False
         self._status: dict | None = None
+        self._live: dict | None = None  # best effort, after every reliable message
         self._last_heard: float | None = None
         self._last_sent = -1e9
         self._wake = asyncio.Event()
@@ -110,6 +111,12 @@ class LinkSession:
     def send_status(self, message: messages.Message) -> None:
         """Best effort, latest wins."""
         self._status = messages.to_dict(message)
+        self._wake.set()
+
+    def send_live(self, message: messages.Message) -> None:
+        """Best effort, latest wins, and last: it goes out only when no reliable message is
+        waiting or unacknowledged, so commands' answers and results are never behind it."""
+        self._live = messages.to_dict(message)
         self._wake.set()
 
     @property
@@ -264,6 +271,9 @@ class LinkSession:
         if self._status is not None:
             status, self._status = self._status, None
             await self._send(status)
+        if self._live is not None and not self._outbox and not self._flight:
+            live, self._live = self._live, None
+            await self._send(live)
         if self._clock.now() - self._last_sent >= self._heartbeat_s:
             await self._send(messages.to_dict(messages.Ping()))
 

@@ -7,8 +7,9 @@ each: a part that fails is logged, counted and restarted after a backoff, never 
 others down); `identification` identifies windows in a worker process, so the loop never waits
 on numerics, and keeps the results and the model store; `commands` carries out the ground's
 commands, one handler per message type; `health` measures the loop's lag and the collector
-and writes the health records; `status` sends the vehicle status down; `downlink` is the one
-way out to the ground; `worker` starts and stops the worker process. On SIGINT/SIGTERM
+and writes the health records; `status` sends the vehicle status down, and `live` the live
+view during a run (progress and strip charts); `downlink` is the one way out to the ground;
+`worker` starts and stops the worker process. On SIGINT/SIGTERM
 (`serve`) a running excitation is aborted (trim, then release), logs are flushed and closed,
 the worker is stopped.
 """

@@ -31,6 +31,7 @@ from agent.runtime.commands import Commands
 from agent.runtime.downlink import Downlink
 from agent.runtime.health import Health
 from agent.runtime.identification import Identification
+from agent.runtime.live import Live
 from agent.runtime.status import Status
 from agent.runtime.worker import new_worker
 from drivers.airdata.driver import make_driver as airdata
@@ -102,6 +103,14 @@ class Agent:
         self.health = Health(
             self.clock, self.counters, lambda: self.identification.busy, self._health_sections
         )
+        self.live = Live(
+            config,
+            self.clock,
+            self.scheduler,
+            self.recorder,
+            self.identification,
+            self.downlink,
+        )
         self._log_handler = None  # the execution log's handler while running
         sensors = config.sensors
         self.drivers = [
@@ -165,6 +174,7 @@ class Agent:
                     "recorder": self.recorder.run,
                     "scheduler": self.scheduler.run,
                     "status": self.status.run,
+                    "live": self.live.run,
                     "periodic": self.identification.periodic,
                     "identification": self.identification.run,
                     "commands": self.commands.run,

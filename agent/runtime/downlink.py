@@ -25,3 +25,10 @@ class Downlink:
             subscriber(message)
         if self.session is not None:
             (self.session.send_reliable if reliable else self.session.send_status)(message)
+
+    def send_live(self, message: messages.Live) -> None:
+        """The live view: best effort, and only when nothing reliable is waiting to go."""
+        for subscriber in self._subscribers:
+            subscriber(message)
+        if self.session is not None:
+            self.session.send_live(message)

@@ -65,6 +65,8 @@ class Identification:
         self.counters = counters
         self.settings = messages.IdentSettings(axes=config.identification.axes)
         self.busy = False  # a window is in the worker
+        self._since = 0.0  # when the window in the worker went in
+        self._windows = 0  # windows waiting in the queue
         self.results: deque[dict] = deque(maxlen=RESULTS_KEPT)
         # The result log: one JSON object per identification (thesis 2.2.1).
         self._log = writer.open(log_name(writer.next_number(), "results", "jsonl"))
@@ -85,7 +87,15 @@ class Identification:
         except asyncio.QueueFull:
             self.counters["jobs_dropped"] += 1
             return False
+        self._windows += 1
         return True
+
+    def stage(self, now: float) -> tuple[str, float] | None:
+        """What the identification is doing for the live view: ("identifying", seconds in
+        the worker) or ("queued", 0) when a window waits; None when idle."""
+        if self.busy:
+            return "identifying", now - self._since
+        return ("queued", 0.0) if self._windows else None
 
     def periodic_window(self, now: float, period: float) -> tuple[Window, np.ndarray] | None:
         """Queue the last `period` seconds of frames for identification: the window and its
@@ -170,7 +180,8 @@ class Identification:
                 await self._frequency_response(item)
                 continue
             window, rows = item
-            self.busy = True
+            self._windows -= 1
+            self.busy, self._since = True, self.clock.now()
             try:
                 await self.identify(window, rows)
             except BrokenProcessPool as exc:  # the worker died (killed, out of memory): anew

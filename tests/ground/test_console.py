@@ -10,6 +10,7 @@ settings with a non-numeric p (not sent), the radio link going silent (shown as 
 from __future__ import annotations
 
 import json
+import math
 import re
 
 import pytest
@@ -214,3 +215,49 @@ def test_percentages_never_print_as_exponents():
         "<0.01",
         "–",
     ]
+
+
+def live(k: int, stage: str = "", stage_s: float | None = None) -> messages.Live:
+    """The k-th second of a lateral run as the aircraft sends it (tenths of degrees)."""
+    t = [k + 0.1 * i for i in range(10)]
+    playing = not stage
+    return messages.Live(
+        time=100.0 + k,
+        dt=0.1,
+        plan_id="lateral-1" if playing else None,
+        plan_fraction=(k + 1) / 41 if playing else None,
+        plan_s=41.0 if playing else None,
+        stage=stage,
+        stage_s=stage_s,
+        tenths={
+            "aileron_cmd": [30 if (x % 2) < 1 else -30 for x in t],
+            "aileron": [28 if (x % 2) < 1 else -28 for x in t],
+            "p": [int(100 * math.sin(x)) for x in t],
+            "phi": [None] * 10,  # no data yet: shown as such
+        },
+    )
+
+
+async def test_the_live_view_shows_the_run_its_identification_and_strip_charts(console):
+    app, pilot, r, station = console
+    await pilot.press("5")
+    for k in range(3):
+        r.aircraft.session.send_live(live(k))
+        await until(
+            pilot, lambda k=k: len(station.heard.strips.get("p", ())) == 10 * (k + 1), "live"
+        )
+    await until(pilot, lambda: "lateral-1: 3 of 41 s" in text_of(app, "#plan-text"), "progress")
+    assert app.query_one("#plan-progress").progress == pytest.approx(100 * 3 / 41)
+    assert list(station.heard.strips) == ["aileron_cmd", "aileron", "p", "phi"]
+    await until(pilot, lambda: len(app.query_one("#strip-p").data) == 30, "the strip")
+    assert text_of(app, "#value-aileron_cmd") == "+3.0 °"
+    assert text_of(app, "#value-phi") == "–"  # no data, not a made-up zero
+    # After the plan: the identification's stage, then the result ends the live view and
+    # sets what the next identification is measured against.
+    r.aircraft.session.send_live(live(3, "identifying", 2.5))
+    await until(pilot, lambda: "identifying 2.5 s" in text_of(app, "#ident-text"), "stage")
+    r.aircraft.session.send_reliable(result("lat-1"))
+    await until(pilot, lambda: "idle" in text_of(app, "#ident-text"), "the run over")
+    r.aircraft.session.send_live(live(4, "identifying", 1.0))
+    await until(pilot, lambda: "the last took 2.5 s" in text_of(app, "#ident-text"), "expected")
+    assert app.query_one("#ident-progress").progress == pytest.approx(40.0)

@@ -86,3 +86,24 @@ async def test_frequency_response_view(tmp_path):
             app.query_one("#bode").scroll_visible(animate=False)
             await pilot.pause(0.3)
             matches("console-results-frf-120x44", app.export_screenshot())
+
+
+async def test_live_view(tmp_path):
+    """The Live tab three seconds into a lateral run."""
+    from tests.ground.test_console import live
+
+    async with rig(tmp_path) as r:
+        station = GroundStation(r.config, VirtualClock(1000.0), base=tmp_path)
+        app = Console(station)
+        async with app.run_test(size=(100, 30)) as pilot:
+            await until(pilot, lambda: station.heard.status is not None, "status")
+            await pilot.press("5")
+            for k in range(3):
+                r.aircraft.session.send_live(live(k))
+                await until(
+                    pilot,
+                    lambda k=k: len(station.heard.strips.get("p", ())) == 10 * (k + 1),
+                    "live",
+                )
+            await pilot.pause(1.2)  # two refreshes: the strips mounted, then drawn
+            matches("console-live-100x30", app.export_screenshot())

@@ -37,6 +37,9 @@ def full_result(model_id: str = "m1") -> messages.Result:
         emac=0.95,
         mpc=0.3,
         cmi=0.7,
+        real_std=0.021,
+        imag_std=0.048,
+        damping_std=0.012,
     )
     m = lambda r, c: rng.normal(size=(r, c)).tolist()  # noqa: E731
     return messages.Result(
@@ -90,6 +93,24 @@ async def test_twenty_percent_loss_delivers_everything_once_in_order(tmp_path):
     assert [m.text for m in pair.ground.inbox] == [f"down {k}" for k in range(30)]
     assert lost > 5  # the channel did lose frames
     assert pair.air.session.counters["retransmissions"] > 0
+
+
+async def test_the_live_view_goes_after_every_reliable_message(tmp_path):
+    """Over a lossy slow channel, a result, an ack and a live view handed over together: the
+    live view waits until both are delivered and acknowledged, and only the newest live view
+    goes (best effort, latest wins)."""
+    channel = RfChannel(data_rate_bps=10_000.0, loss=0.2, retries=0, seed=5)
+    async with link_pair(tmp_path, channel=channel) as pair:
+        session = pair.air.session
+        session.send_reliable(full_result("lat-1"))
+        session.send_reliable(messages.Ack(ref=1, ok=True))
+        for k in range(3):
+            session.send_live(messages.Live(time=float(k), dt=0.1, tenths={"p": [k] * 10}))
+        done = await wait_for(lambda: any(isinstance(m, messages.Live) for m in pair.ground.inbox))
+    assert done
+    kinds = [m.kind for m in pair.ground.inbox]
+    assert kinds == ["result", "ack", "live"]
+    assert pair.ground.inbox[-1].time == 2.0  # the newest
 
 
 async def test_results_queued_during_a_30_s_outage_are_delivered_after_it(tmp_path):

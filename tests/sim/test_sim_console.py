@@ -9,6 +9,7 @@ and docs/console.md: `make screenshot`).
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
@@ -34,6 +35,25 @@ async def test_operator_flies_the_lateral_preset_from_the_console(tmp_path):
         await pilot.press("f2")
         await until(pilot, lambda: "arm lateral: acknowledged" in log_text(app), "ack")
         await until(pilot, lambda: "lateral started" in log_text(app), "start")
+        # The live view while the plan plays: its progress, and strip charts of the commands,
+        # the surfaces and the lateral responses, in display units.
+        await pilot.press("5")
+        await until(
+            pilot,
+            lambda: (
+                station.heard.live is not None and (station.heard.live.plan_fraction or 0) > 0.1
+            ),
+            "the plan's progress",
+        )
+        strips = station.heard.strips
+        assert {"aileron_cmd", "rudder_cmd", "aileron", "rudder", "beta", "p", "r", "phi"} <= set(
+            strips
+        )
+        command = [v for _, v in strips["aileron_cmd"] if v is not None]
+        assert max(abs(v) for v in command) > 1.0  # degrees: the plan's doublets are playing
+        await until(pilot, lambda: "lateral" in text_of(app, "#plan-text"), "the progress text")
+        if save:
+            app.save_screenshot("console-live.svg", path=save)
         await until(pilot, lambda: station.heard.results, "the result")
         await pilot.press("4")
         await pilot.pause(0.5)
@@ -51,3 +71,7 @@ async def test_operator_flies_the_lateral_preset_from_the_console(tmp_path):
     ground_logs = list((tmp_path / "ground-logs").glob("*_ground_*.jsonl"))
     assert ground_logs
     assert model_id in ground_logs[0].read_text()
+    # The live view went on after the plan: the margin recorded, then the identification.
+    records = [json.loads(line) for line in ground_logs[0].read_text().splitlines()]
+    stages = {r["message"].get("stage") for r in records if r["message"].get("kind") == "live"}
+    assert "recording margin" in stages

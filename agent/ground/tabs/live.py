@@ -1,0 +1,108 @@
+"""Live (5): while a plan plays and its window is identified — the plan's progress, the
+identification's stage and progress, and strip charts of the last STRIP_S seconds: each
+control's command (`_cmd`) beside the surface as measured, then the responses the plan's axis
+identifies, each with its latest value (the station keeps `STRIP_S` of them)."""
+
+from __future__ import annotations
+
+from rich.text import Text
+from textual.app import ComposeResult
+from textual.containers import Horizontal, Vertical, VerticalScroll
+from textual.widgets import Label, ProgressBar, Sparkline, Static
+
+from agent.channels import UNITS
+from agent.ground.station import GroundStation
+
+# Display units of the live view (`messages.Live`): angles in degrees.
+DISPLAY_UNITS = {"rad": "°", "deg": "°", "rad/s": "°/s"}
+
+
+class LiveTab(Vertical):
+    def __init__(self, station: GroundStation, **kwargs):
+        super().__init__(**kwargs)
+        self.station = station
+        self._channels: list[str] = []  # the strips shown, in order
+
+    def compose(self) -> ComposeResult:
+        with Horizontal(classes="progress-row"):
+            yield Label("plan", classes="progress-label")
+            yield ProgressBar(total=100, show_eta=False, id="plan-progress")
+            yield Static(id="plan-text")
+        with Horizontal(classes="progress-row"):
+            yield Label("identification", classes="progress-label")
+            yield ProgressBar(total=100, show_eta=False, id="ident-progress")
+            yield Static(id="ident-text")
+        yield VerticalScroll(id="strips")
+
+    def show(self) -> None:
+        h = self.station.heard
+        live = h.live
+        plan_bar = self.query_one("#plan-progress", ProgressBar)
+        ident_bar = self.query_one("#ident-progress", ProgressBar)
+        if live is None or live.plan_fraction is None:
+            plan_bar.update(progress=0 if live is None else 100)
+            self.query_one("#plan-text", Static).update(
+                "no plan playing" if live is None else "played"
+            )
+        else:
+            plan_bar.update(progress=100 * live.plan_fraction)
+            self.query_one("#plan-text", Static).update(
+                f"{live.plan_id}: {live.plan_fraction * live.plan_s:.0f} of {live.plan_s:.0f} s"
+            )
+        ident_bar.update(progress=self._ident_progress(live))
+        self.query_one("#ident-text", Static).update(self._ident_text(live))
+        self._strips()
+
+    def _ident_progress(self, live) -> float:
+        if live is None or not live.stage:
+            return 0.0
+        if live.stage == "identifying" and self.station.heard.durations:
+            last = self.station.heard.durations[-1]
+            return min(99.0, 100 * (live.stage_s or 0.0) / max(last, 0.1))
+        return 0.0
+
+    def _ident_text(self, live) -> Text:
+        if live is None or not live.stage:
+            return Text("idle", "grey50")
+        text = Text(f"{live.stage} {live.stage_s or 0:.1f} s", "bold cyan")
+        if live.stage == "identifying" and self.station.heard.durations:
+            text.append(f" (the last took {self.station.heard.durations[-1]:.1f} s)", "grey70")
+        return text
+
+    def _strips(self) -> None:
+        strips = self.station.heard.strips
+        box = self.query_one("#strips", VerticalScroll)
+        names = sorted(strips, key=_order)
+        if names != self._channels:
+            box.remove_children()
+            for name in names:
+                box.mount(
+                    Horizontal(
+                        Label(name, classes="strip-label"),
+                        Sparkline([], id=f"strip-{name}", classes="strip"),
+                        Static(id=f"value-{name}", classes="strip-value"),
+                        classes="strip-row",
+                    )
+                )
+            self._channels = names
+            return  # drawn on the next refresh, once mounted
+        for name in names:
+            values = [v for _, v in strips[name] if v is not None]
+            self.query_one(f"#strip-{name}", Sparkline).data = values  # none: drawn empty
+            latest = values[-1] if values else None
+            unit = _unit(name)
+            self.query_one(f"#value-{name}", Static).update(
+                "–" if latest is None else f"{latest:+.1f} {unit}"
+            )
+
+
+def _order(name: str) -> tuple[int, str]:
+    """Commands and surfaces first (each command beside its surface), then the responses."""
+    base = name.removesuffix("_cmd")
+    surface = base in ("throttle", "elevator", "aileron", "rudder")
+    return (0 if surface else 1, base + ("0" if name.endswith("_cmd") else "1"))
+
+
+def _unit(name: str) -> str:
+    unit = UNITS.get(name.removesuffix("_cmd"), "")
+    return DISPLAY_UNITS.get(unit, unit)

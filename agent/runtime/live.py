@@ -1,0 +1,112 @@
+"""The live view: while a plan plays and its window is recorded and identified, a `Live`
+message every `[live] period_s` — the plan's progress, the identification's stage, and
+strip-chart samples at `[live] rate_hz` of what the plan commands, the surfaces as measured and
+the responses its axis identifies. It is best effort and goes last (`Downlink.send_live`):
+the radio carries commands' answers and results first.
+
+The samples come from the recorder's frames (so they lag real time by the recorder's delay)
+and the commanded deflections from the plan's own timeline at the same times. Each is a whole
+number of tenths of its display unit (`messages.Live`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+
+import numpy as np
+
+from agent.channels import SENSOR_CHANNELS
+from agent.clock import Clock
+from agent.config import Config
+from agent.excitation.scheduler import Scheduler
+from agent.link import messages
+from agent.recorder import Recorder
+from agent.runtime.downlink import Downlink
+from agent.runtime.identification import Identification
+
+# A channel's display unit: its recorded unit, angles in degrees.
+TO_DISPLAY = {"rad": math.degrees(1.0), "rad/s": math.degrees(1.0)}
+
+
+class Live:
+    def __init__(
+        self,
+        config: Config,
+        clock: Clock,
+        scheduler: Scheduler,
+        recorder: Recorder,
+        identification: Identification,
+        downlink: Downlink,
+    ):
+        self.config, self.clock = config, clock
+        self.scheduler, self.recorder = scheduler, recorder
+        self.identification, self.downlink = identification, downlink
+        self._axes = config.identification.axes  # of the last plan played
+        self._columns = {c: 1 + k for k, c in enumerate(recorder.channels)}
+
+    async def run(self) -> None:
+        period = self.config.live.period_s
+        if period <= 0:
+            return  # no live view configured
+        while True:
+            await asyncio.sleep(period)
+            message = self.message(self.clock.now())
+            if message is not None:
+                self.downlink.send_live(message)
+
+    def message(self, now: float) -> messages.Live | None:
+        """The live view now, or None when there is nothing live to show."""
+        playing = self.scheduler.playing
+        if playing is not None:
+            self._axes = playing.plan.axes
+        waiting = self.recorder.waiting
+        stage = self.identification.stage(now)
+        if stage is None and waiting is not None:
+            stage = ("recording margin", now - waiting.end)
+        if playing is None and stage is None:
+            return None
+        live = self.config.live
+        dt = 1.0 / live.rate_hz
+        count = max(1, round(live.period_s * live.rate_hz))
+        end = now - self.config.recorder.delay_s  # the newest frame assembled
+        times = end - dt * np.arange(count)[::-1]
+        tenths: dict[str, list[int | None]] = {}
+        if playing is not None:
+            for control in playing.plan.controls():
+                tenths[f"{control}_cmd"] = [
+                    _tenths(playing.commanded(t)[control]) if t >= playing.start else None
+                    for t in times
+                ]
+        inputs, outputs = self.config.identification.channels.axis_set(self._axes)
+        rows = self.recorder.ring.between(times[0] - dt, times[-1])
+        for name in (*inputs, *outputs):
+            column = self._columns.get(name)
+            if column is None:
+                continue
+            scale = TO_DISPLAY.get(SENSOR_CHANNELS.get(name, ("", ""))[0], 1.0)
+            tenths[name] = [_nearest(rows, column, t, dt, scale) for t in times]
+        return messages.Live(
+            time=float(times[0]),
+            dt=dt,
+            plan_id=None if playing is None else playing.plan.id,
+            plan_fraction=None if playing is None else round(playing.fraction(now), 3),
+            plan_s=None if playing is None else round(playing.timeline.duration, 1),
+            stage="" if stage is None else stage[0],
+            stage_s=None if stage is None else round(stage[1], 1),
+            tenths=tenths,
+        )
+
+
+def _tenths(value: float) -> int | None:
+    return round(value * 10) if math.isfinite(value) else None
+
+
+def _nearest(rows: np.ndarray, column: int, t: float, dt: float, scale: float) -> int | None:
+    """The channel's value in the frame nearest `t` (within half a sample), in tenths."""
+    if not len(rows):
+        return None
+    k = int(np.argmin(np.abs(rows[:, 0] - t)))
+    if abs(rows[k, 0] - t) > dt / 2:
+        return None
+    return _tenths(float(rows[k, column]) * scale)
