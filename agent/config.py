@@ -397,6 +397,10 @@ class Live(Section):
     """How often a live message goes out (s); 0: no live view."""
     rate_hz: float = Field(10.0, gt=0.0, le=50.0)
     """Strip-chart samples per second (each message holds those of one period)."""
+    max_air_share: float = Field(0.5, gt=0.0, le=1.0)
+    """The live view is withheld while this end's radio spent more than this share of the
+    last 10 s transmitting, and resumes below 0.8 of it (the ground is told each time): the
+    ground's commands share the same air, and an abort waits for whatever is on it."""
 
 
 class Config(Section):

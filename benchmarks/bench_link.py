@@ -26,6 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from agent.config import Live
 from agent.link import messages
 from agent.sim.radio import RfChannel
 from tests.link.pair import link_pair, wait_for
@@ -33,6 +34,7 @@ from tests.link.test_link_radio import full_result
 
 RUNS = 5
 RUN_S = 20.0  # a run's length for the live-view budget
+LIVE_SHARE = Live().max_air_share  # the agent's default gate
 
 
 def lateral_live(k: int) -> messages.Live:
@@ -80,9 +82,10 @@ def status(t: float) -> messages.Status:
     )
 
 
-async def measure_run(rate: float, live: bool) -> tuple[float, float]:
+async def measure_run(rate: float, live: bool) -> tuple[float, float, float, int]:
     """Bytes on air per second over a RUN_S run (status every second, and the live view every
-    second if `live`), and the delivery time of a full-model result handed over mid-run."""
+    second if `live`), the delivery time of a full-model result handed over mid-run, and the
+    median delivery time of an abort sent from the ground at five moments of the run."""
     channel = RfChannel(data_rate_bps=rate, loss=0.0, retries=3, seed=1)
     with tempfile.TemporaryDirectory() as tmp:
         async with link_pair(Path(tmp), channel=channel) as pair:
@@ -95,20 +98,30 @@ async def measure_run(rate: float, live: bool) -> tuple[float, float]:
                 await wait_for(lambda: any(m.kind == "result" for m in pair.ground.inbox))
                 arrived.append(loop.time())
 
-            watcher = None
+            async def abort(n: int) -> float:  # from the ground to the aircraft
+                sent = loop.time()
+                pair.ground.session.send_reliable(messages.Abort(reason=f"bench {n}"))
+                await wait_for(lambda: len(pair.air.inbox) > n)
+                return loop.time() - sent
+
+            watcher, aborts, sent_live = None, [], 0
             for k in range(int(RUN_S)):
                 session.send_status(status(float(k)))
-                if live:
+                if live and session.air_share() <= LIVE_SHARE:  # as agent/runtime/live.py
                     session.send_live(lateral_live(k))
+                    sent_live += 1
                 if k == RUN_S // 2:
                     handed = loop.time()
                     session.send_reliable(full_result("mid-run"))
                     watcher = asyncio.create_task(watch())
-                await asyncio.sleep(start + k + 1 - loop.time())
+                if k % 4 == 1:  # 0.3 s into the second: status and live on air or just sent
+                    await asyncio.sleep(0.3)
+                    aborts.append(await abort(len(aborts)))
+                await asyncio.sleep(max(0.0, start + k + 1 - loop.time()))
             await watcher
             delivered = arrived[0] - handed
             per_second = (channel.air_bytes - before) / (loop.time() - start)
-    return per_second, delivered
+    return per_second, delivered, statistics.median(aborts), sent_live
 
 
 async def measure(rate: float, loss: float) -> tuple[int, int, float, float]:
@@ -138,13 +151,16 @@ def main() -> None:
         f"\nduring a {RUN_S:g} s run: status {status_size} B/s of MessagePack, live view "
         f"{live_size} B/s (8 channels × 10 samples)"
     )
-    print(f"{'RF rate':>10}{'live':>6}{'on air (B/s)':>14}{'result delivered (s)':>22}")
+    print(
+        f"{'RF rate':>10}{'live':>6}{'on air (B/s)':>14}{'result delivered (s)':>22}"
+        f"{'abort delivered (s)':>21}{'live views sent':>17}"
+    )
     for rate in (200_000.0, 10_000.0):
         for live in (False, True):
-            per_second, delivered = asyncio.run(measure_run(rate, live))
+            per_second, delivered, abort, sent = asyncio.run(measure_run(rate, live))
             print(
                 f"{rate / 1000:>8g}k{'on' if live else 'off':>6}{per_second:>14.0f}"
-                f"{delivered:>22.2f}",
+                f"{delivered:>22.2f}{abort:>21.3f}{sent:>17}",
                 flush=True,
             )
 

@@ -39,6 +39,8 @@ RETRY_FIRST_S, RETRY_MAX_S = 0.5, 4.0
 TICK_S = 0.05
 # How often the highest counters accepted are written (the replay bound after a crash).
 SAVE_SEEN_S = 1.0
+# The air share (`air_share`) is measured over this long.
+AIR_WINDOW_S = 10.0
 
 
 class Transport(Protocol):
@@ -83,6 +85,8 @@ class LinkSession:
         self._acks_due = False
         self._status: dict | None = None
         self._live: dict | None = None  # best effort, after every reliable message
+        self._air: deque[tuple[float, float]] = deque()  # (end, seconds) of recent sends
+        self._first_send: float | None = None
         self._last_heard: float | None = None
         self._last_sent = -1e9
         self._wake = asyncio.Event()
@@ -277,11 +281,27 @@ class LinkSession:
         if self._clock.now() - self._last_sent >= self._heartbeat_s:
             await self._send(messages.to_dict(messages.Ping()))
 
+    def air_share(self) -> float:
+        """The share of the last AIR_WINDOW_S this end spent sending frames (each send lasts
+        until the radio reports the transmission done: the air time, retries included)."""
+        now = self._clock.now()
+        while self._air and self._air[0][0] < now - AIR_WINDOW_S:
+            self._air.popleft()
+        if self._first_send is None:
+            return 0.0
+        span = min(AIR_WINDOW_S, now - self._first_send)  # shorter at first: not diluted
+        return min(1.0, sum(seconds for _, seconds in self._air) / span) if span > 0 else 0.0
+
     async def _send(self, data: dict) -> None:
         self._last_sent = self._clock.now()
         for frame in self._codec.encode(data):
+            began = self._clock.now()
+            if self._first_send is None:
+                self._first_send = began
             try:
                 result = await self._transport.send(self._peer, frame)
+                ended = self._clock.now()
+                self._air.append((ended, ended - began))
             except Exception as exc:  # a radio error: counted; reliable messages retry
                 self.counters["transport_errors"] += 1
                 log.debug("link: send failed: %s", exc)

@@ -110,6 +110,7 @@ class Agent:
             self.recorder,
             self.identification,
             self.downlink,
+            self.counters,
         )
         self._log_handler = None  # the execution log's handler while running
         sensors = config.sensors

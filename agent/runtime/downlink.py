@@ -26,6 +26,10 @@ class Downlink:
         if self.session is not None:
             (self.session.send_reliable if reliable else self.session.send_status)(message)
 
+    def air_share(self) -> float:
+        """The share of the last seconds this end's radio spent transmitting (0: no link)."""
+        return 0.0 if self.session is None else self.session.air_share()
+
     def send_live(self, message: messages.Live) -> None:
         """The live view: best effort, and only when nothing reliable is waiting to go."""
         for subscriber in self._subscribers:

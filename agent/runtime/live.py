@@ -2,7 +2,9 @@
 message every `[live] period_s` — the plan's progress, the identification's stage, and
 strip-chart samples at `[live] rate_hz` of what the plan commands, the surfaces as measured and
 the responses its axis identifies. It is best effort and goes last (`Downlink.send_live`):
-the radio carries commands' answers and results first.
+the radio carries commands' answers and results first. And it is withheld while the radio is
+busier than `[live] max_air_share`: the ground's commands share the same air (an abort from the
+ground waits for whatever the aircraft is sending), so on a slow link the live view gives way.
 
 The samples come from the recorder's frames (so they lag real time by the recorder's delay)
 and the commanded deflections from the plan's own timeline at the same times. Each is a whole
@@ -13,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+from collections import Counter
 
 import numpy as np
 
@@ -25,6 +28,8 @@ from agent.recorder import Recorder
 from agent.runtime.downlink import Downlink
 from agent.runtime.identification import Identification
 
+# Withheld above `[live] max_air_share`, the live view resumes below this fraction of it.
+RESUME_FRACTION = 0.8
 # A channel's display unit: its recorded unit, angles in degrees.
 TO_DISPLAY = {"rad": math.degrees(1.0), "rad/s": math.degrees(1.0)}
 
@@ -38,11 +43,13 @@ class Live:
         recorder: Recorder,
         identification: Identification,
         downlink: Downlink,
+        counters: Counter[str],
     ):
         self.config, self.clock = config, clock
         self.scheduler, self.recorder = scheduler, recorder
-        self.identification, self.downlink = identification, downlink
+        self.identification, self.downlink, self.counters = identification, downlink, counters
         self._axes = config.identification.axes  # of the last plan played
+        self._withheld = False  # the live view is held back: the radio is busy
         self._columns = {c: 1 + k for k, c in enumerate(recorder.channels)}
 
     async def run(self) -> None:
@@ -52,8 +59,28 @@ class Live:
         while True:
             await asyncio.sleep(period)
             message = self.message(self.clock.now())
-            if message is not None:
+            if message is not None and self._air_allows():
                 self.downlink.send_live(message)
+
+    def _air_allows(self) -> bool:
+        """Whether the radio has air to spare for the live view; the ground is told when it
+        stops (and starts again)."""
+        share, limit = self.downlink.air_share(), self.config.live.max_air_share
+        # Resumed only well below the limit, so a share near it does not flap (each change is
+        # a notice to the ground).
+        withheld = share > (RESUME_FRACTION * limit if self._withheld else limit)
+        if withheld != self._withheld:
+            self._withheld = withheld
+            text = (
+                f"live view withheld: the radio was {100 * share:.0f} % busy "
+                f"(limit {100 * limit:.0f} %); commands and results go first"
+                if withheld
+                else "live view resumed"
+            )
+            self.downlink.send(messages.Notice(text=text))
+        if withheld:
+            self.counters["live_withheld"] += 1
+        return not withheld
 
     def message(self, now: float) -> messages.Live | None:
         """The live view now, or None when there is nothing live to show."""

@@ -119,6 +119,54 @@ def test_the_report_renders_in_headless_chromium(tmp_path):
     assert pink[220:640].sum() > 5000
 
 
+def screenshot(tmp_path: Path, uri: str, size: tuple[int, int]) -> np.ndarray:
+    """What headless Chromium draws of `uri` in a window of `size` (RGB, 0–1)."""
+    shot = tmp_path / f"shot-{size[0]}x{size[1]}.png"
+    subprocess.run(
+        [
+            chromium(),
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--hide-scrollbars",
+            f"--screenshot={shot}",
+            f"--window-size={size[0]},{size[1]}",
+            uri,
+        ],
+        capture_output=True,
+        timeout=120,
+        check=True,
+    )
+    return imread(shot)[..., :3]
+
+
+def test_the_frequency_response_figure_renders_in_headless_chromium(tmp_path):
+    """Every pair's magnitude, phase and coherence panel, the model's line in each, the
+    measured points in grey and the coherence threshold in red."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    excitation_logs(logs, count=1)
+    out = tmp_path / "report"
+    command = [sys.executable, "-m", "agent", "report", str(logs), "--axes", "lateral"]
+    done = subprocess.run(
+        [*command, "--out", str(out)], capture_output=True, text=True, timeout=180, env=ENV
+    )
+    assert done.returncode == 0, done.stderr
+    figure = imread(out / "excitation_1_bode.png")[..., :3]
+    pixels = screenshot(tmp_path, (out / "excitation_1_bode.png").as_uri(), figure.shape[1::-1])
+    blue = np.abs(pixels - np.array([0x1F, 0x77, 0xB4]) / 255).max(axis=2) < 0.08
+    red = (pixels[..., 0] > 0.7) & (pixels[..., 1] < 0.35) & (pixels[..., 2] < 0.35)
+    grey = np.abs(pixels - 0.25).max(axis=2) < 0.08
+    # Two inputs × four outputs × three panels: the model's line across each panel's columns,
+    # the threshold across each coherence panel, the measured points everywhere.
+    columns = np.array_split(np.arange(pixels.shape[1]), 4)
+    for cols in columns:
+        assert blue[:, cols].any(axis=1).sum() > 40
+        assert red[:, cols].any(axis=0).mean() > 0.3
+    assert grey.sum() > 500
+    assert "Frequency responses" in (out / "index.html").read_text()
+
+
 def test_a_bad_nominal_file_is_refused(tmp_path):
     excitation_logs(tmp_path, count=1)
     (tmp_path / "nominal.json").write_text("{}")

@@ -96,10 +96,11 @@ async def test_twenty_percent_loss_delivers_everything_once_in_order(tmp_path):
 
 
 async def test_the_live_view_goes_after_every_reliable_message(tmp_path):
-    """Over a lossy slow channel, a result, an ack and a live view handed over together: the
-    live view waits until both are delivered and acknowledged, and only the newest live view
-    goes (best effort, latest wins)."""
-    channel = RfChannel(data_rate_bps=10_000.0, loss=0.2, retries=0, seed=5)
+    """Over the slow 10 kb/s air (the result takes 3.5 s of it), a result, an ack and live
+    views handed over together: the live view waits until both are delivered and acknowledged,
+    and only the newest goes (best effort, latest wins). No loss: a lost live view is not
+    resent, by design."""
+    channel = RfChannel(data_rate_bps=10_000.0, loss=0.0, retries=0, seed=5)
     async with link_pair(tmp_path, channel=channel) as pair:
         session = pair.air.session
         session.send_reliable(full_result("lat-1"))
@@ -111,6 +112,28 @@ async def test_the_live_view_goes_after_every_reliable_message(tmp_path):
     kinds = [m.kind for m in pair.ground.inbox]
     assert kinds == ["result", "ack", "live"]
     assert pair.ground.inbox[-1].time == 2.0  # the newest
+
+
+async def test_the_air_share_is_the_time_spent_sending(tmp_path):
+    """On the long-range 10 kb/s air, two full results keep the aircraft's radio busy for at
+    least their air time (about 7 s of the 10 s window); the live view's gate reads that
+    share (agent/runtime/live.py)."""
+    from agent.link.session import AIR_WINDOW_S
+    from agent.sim.radio import AIR_OVERHEAD
+
+    channel = RfChannel(data_rate_bps=10_000.0, loss=0.0, retries=0, seed=6)
+    async with link_pair(tmp_path, channel=channel) as pair:
+        session = pair.air.session
+        idle = session.air_share()
+        frames = pair.air.codec.encode(messages.to_dict(full_result()))
+        for k in range(2):
+            session.send_reliable(full_result(f"m{k}"))
+        assert await wait_for(lambda: len(pair.ground.inbox) >= 2)
+        busy = session.air_share()
+    air_time = 2 * sum((len(f) + AIR_OVERHEAD) * 8 / 10_000.0 for f in frames)
+    assert idle < 0.05
+    assert air_time / AIR_WINDOW_S <= busy < 1.0
+    assert busy > 0.5  # the live view would be withheld here
 
 
 async def test_results_queued_during_a_30_s_outage_are_delivered_after_it(tmp_path):
