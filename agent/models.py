@@ -108,9 +108,13 @@ def suggest(
     if quality:
         text = f"named modes EMAC ≥ {EMAC_MIN:.0f} %"
     else:
-        text = f"weak {weak}" if weak else "no named mode resolved"
+        text = (
+            f"weak: {', '.join(weak)} (EMAC below {EMAC_MIN:.0f} % or none)"
+            if weak
+            else "no named mode resolved"
+        )
     if slow:
-        text += f"; {slow} slower than the record, not judged"
+        text += f"; {', '.join(slow)} slower than the record, not judged"
     steps.append("2 quality: " + text)
     ok &= quality
     tic_jj = candidate.tic_jj

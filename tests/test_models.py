@@ -32,7 +32,7 @@ def test_first_candidate_steps_and_the_slow_spiral_is_not_judged():
     s = suggest(candidate("a"), None, None, None)
     assert s.update
     assert s.steps[0].startswith("1 stability: slowly divergent")  # spiral +0.004 1/s
-    assert "['spiral'] slower than the record, not judged" in s.steps[1]
+    assert "; spiral slower than the record, not judged" in s.steps[1]
     assert s.steps[2] == "3 TIC_jj 0.100 < 0.3"
     assert s.steps[3] == "4–7 no nominal model yet"
 
@@ -67,7 +67,7 @@ def test_a_divergence_the_record_cannot_resolve_is_reported_not_judged():
         (
             {"modes": [{"name": "roll", "eigenvalue": [-9.0, 0.0], "emac": 30.0}]},
             1,
-            "weak",
+            "weak: roll (EMAC below 50 % or none)",
             "quality",
         ),
         ({"tic": 0.45}, 2, "≥ 0.3", "fit"),

@@ -62,7 +62,7 @@ def tooltip(m: dict) -> str:
     lam = f"{re:+.3f} ± {abs(im):.3f}j" if im else f"{re:+.3f}"
     std = m.get("eigenvalue_std")
     if std is not None:
-        lam += f" (σ {std[0]:.2g}, {std[1]:.2g})"
+        lam += f" (σ {std[0]:.2g}, {std[1]:.2g})" if im else f" (σ {std[0]:.2g})"
     parts = [f"{m.get('name') or 'unnamed'}: λ {lam} 1/s"]
     omega = m.get("frequency_rad_s")
     if omega:

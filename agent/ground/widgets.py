@@ -52,7 +52,7 @@ def mode_line(m: messages.ModeReport) -> str:
     """A mode's row as one line: name, eigenvalue with its σ, ωn, ζ with its σ, τ."""
     lam = f"{m.real:+.3f}{m.imag:+.3f}j" if m.imag else f"{m.real:+.3f}"
     if m.real_std is not None and m.imag_std is not None:
-        lam += f" (σ {m.real_std:.2g}, {m.imag_std:.2g})"
+        lam += f" (σ {m.real_std:.2g}, {m.imag_std:.2g})" if m.imag else f" (σ {m.real_std:.2g})"
     parts = [f"{m.name or 'unnamed'}: λ {lam}"]
     if m.frequency_hz is not None:
         parts.append(f"f {m.frequency_hz:.3g} Hz")

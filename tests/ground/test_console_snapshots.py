@@ -81,8 +81,7 @@ async def test_frequency_response_view(tmp_path):
             await pilot.press("4")
             app.query_one("#frf-pair").value = "aileron → p"
             await pilot.press("f")
-            await until(pilot, lambda: station.heard.frfs, "the frequency response")
-            await pilot.pause(0.3)
+            await until(pilot, lambda: app.query_one("#bode").report, "the frequency response")
             app.query_one("#bode").scroll_visible(animate=False)
             await pilot.pause(0.3)
             matches("console-results-frf-120x44", app.export_screenshot())
@@ -105,5 +104,14 @@ async def test_live_view(tmp_path):
                     lambda k=k: len(station.heard.strips.get("p", ())) == 10 * (k + 1),
                     "live",
                 )
-            await pilot.pause(1.2)  # two refreshes: the strips mounted, then drawn
+            await until(pilot, lambda: drawn(app, 30), "the strips drawn")
+            await pilot.pause(0.1)
             matches("console-live-100x30", app.export_screenshot())
+
+
+def drawn(app, samples: int) -> bool:
+    """Every strip of the Live tab mounted and holding its samples (phi has none)."""
+    strips = app.query(".strip")
+    return len(strips) == 4 and all(
+        len(s.data) == (0 if s.id == "strip-phi" else samples) for s in strips
+    )
