@@ -33,6 +33,11 @@ TIC_LIMIT = 0.3
 # seconds (JSBSim's J-3 Cub: +0.004 1/s). Faster divergence (time to double < 10 s) fails.
 DIVERGENCE_LIMIT = np.log(2) / 10.0
 EMAC_MIN = 50.0
+# A mode without EMAC (the whole-aircraft method's: no ERA realisation to measure it in) is
+# judged by its Cramér–Rao bound instead: weak when the natural frequency's standard error is
+# more than this share of it (CIFER's guideline for an identified parameter, CR ≤ 20 %:
+# Tischler & Remple, Aircraft and Rotorcraft System Identification, 2nd ed., 2012, ch. 11).
+CR_MAX = 0.2
 # Self-check (requirement 6.3.1): a new nominal predicting the next excitation this much worse
 # (TIC_avg ratio) than the model it replaced is rolled back.
 SELF_CHECK_RATIO = 1.5
@@ -66,6 +71,15 @@ class Suggestion:
     tic_jn: float | None = None
     tic_nn: float | None = None
     tic_nj: float | None = None
+
+
+def _weak(mode: dict) -> bool:
+    """A mode poorly identified: its EMAC below EMAC_MIN, or, without EMAC, its natural
+    frequency's Cramér–Rao standard error above CR_MAX of it (no error either: weak)."""
+    if mode.get("emac") is not None:
+        return mode["emac"] < EMAC_MIN
+    sigma, omega = mode.get("frequency_std_rad_s"), mode.get("frequency_rad_s")
+    return sigma is None or not omega or sigma / omega > CR_MAX
 
 
 def _resolved(mode: dict, span: float) -> bool:
@@ -103,13 +117,14 @@ def suggest(
     named = [m for m in modes if m["name"]]
     resolved = [m for m in named if _resolved(m, span)]
     slow = [m["name"] for m in named if m not in resolved]
-    weak = [m["name"] for m in resolved if (m["emac"] or 0.0) < EMAC_MIN]
+    weak = [m["name"] for m in resolved if _weak(m)]
     quality = bool(resolved) and not weak
     if quality:
-        text = f"named modes EMAC ≥ {EMAC_MIN:.0f} %"
+        text = f"named modes EMAC ≥ {EMAC_MIN:.0f} % or Cramér–Rao σ(ωn) ≤ {CR_MAX:.0%}"
     else:
         text = (
-            f"weak: {', '.join(weak)} (EMAC below {EMAC_MIN:.0f} % or none)"
+            f"weak: {', '.join(weak)} (EMAC below {EMAC_MIN:.0f} %, or without EMAC "
+            f"σ(ωn) above {CR_MAX:.0%} of ωn)"
             if weak
             else "no named mode resolved"
         )

@@ -67,7 +67,7 @@ def test_a_divergence_the_record_cannot_resolve_is_reported_not_judged():
         (
             {"modes": [{"name": "roll", "eigenvalue": [-9.0, 0.0], "emac": 30.0}]},
             1,
-            "weak: roll (EMAC below 50 % or none)",
+            "weak: roll (EMAC below 50 %",
             "quality",
         ),
         ({"tic": 0.45}, 2, "≥ 0.3", "fit"),
@@ -185,3 +185,34 @@ def test_model_numbers_are_never_given_twice_across_boots(tmp_path):
     assert rebooted.reserve_number() == 4
     (tmp_path / "numbering").write_text("garbage")
     assert ModelStore(tmp_path).reserve_number() > 1_700_000_000
+
+
+def test_a_mode_without_emac_is_judged_by_its_cramer_rao_bound():
+    """The whole-aircraft method has no ERA realisation, so no EMAC: its modes pass the quality
+    step when their natural frequency's standard error is within 20 % of it. Bad input tried:
+    a mode with neither EMAC nor a standard error (weak: nothing says it is identified)."""
+
+    def modes(sigma_dutch_roll):
+        return [
+            {
+                "name": "Dutch roll",
+                "eigenvalue": [-0.66, 2.19],
+                "emac": None,
+                "frequency_rad_s": 2.29,
+                "frequency_std_rad_s": sigma_dutch_roll,
+            },
+            {
+                "name": "roll",
+                "eigenvalue": [-12.1, 0.0],
+                "emac": None,
+                "frequency_rad_s": 12.1,
+                "frequency_std_rad_s": 0.4,
+            },
+        ]
+
+    assert suggest(candidate("a", modes=modes(0.05)), None, None, None).checks["quality"]
+    weak = suggest(candidate("a", modes=modes(0.6)), None, None, None)
+    assert not weak.checks["quality"]
+    assert "weak: Dutch roll" in weak.steps[1]
+    unknown = suggest(candidate("a", modes=modes(None)), None, None, None)
+    assert not unknown.checks["quality"]
