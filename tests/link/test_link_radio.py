@@ -13,6 +13,7 @@ import asyncio
 import numpy as np
 import pytest
 
+from agent.clock import LoopClock
 from agent.excitation.plan import preset
 from agent.link import messages
 from agent.sim.radio import EmulatedXBee, RfChannel
@@ -222,7 +223,7 @@ async def test_a_restarted_receiver_takes_the_senders_next_message(tmp_path):
             codec,
             pair.air.radio,
             GROUND_ADDR,
-            pair.air.session._clock,
+            LoopClock(),  # the pair's clock: the event loop's
             lambda m, _seq: inbox.append(m),
         )
         pair.air.session = session
@@ -461,7 +462,7 @@ async def test_a_frame_of_an_older_session_reordered_behind_a_new_one_is_dropped
     (old,) = ground.encode(reliable("from the old session", 111))
     (new,) = ground.encode(reliable("from the new session", 222))
     async with link_pair(tmp_path) as pair:
-        session, now = pair.air.session, pair.air.session._clock.now
+        session, now = pair.air.session, LoopClock().now
         session.receive(GROUND_ADDR, new, now())
         session.receive(GROUND_ADDR, old, now())  # reordered behind it
         assert await wait_for(lambda: pair.air.inbox)
