@@ -249,9 +249,15 @@ async def test_the_live_view_shows_the_run_its_identification_and_strip_charts(c
     await until(pilot, lambda: "lateral-1: 3 of 41 s" in text_of(app, "#plan-text"), "progress")
     assert app.query_one("#plan-progress").progress == pytest.approx(100 * 3 / 41)
     assert list(station.heard.strips) == ["aileron_cmd", "aileron", "p", "phi"]
-    await until(pilot, lambda: len(app.query_one("#strip-p").data) == 30, "the strip")
-    assert text_of(app, "#value-aileron_cmd") == "+3.0 °"
-    assert text_of(app, "#value-phi") == "–"  # no data, not a made-up zero
+    await until(pilot, lambda: len(app.query_one("#strip-p").traces) == 1, "the strips")
+    # The aileron's chart: its command (yellow) and the surface (cyan) as lines on one scale.
+    aileron = app.query_one("#strip-aileron")
+    assert [colour for _, colour in aileron.traces] == ["yellow", "cyan"]
+    assert len(aileron.traces[0][0]) == 30
+    drawn = text_of(app, "#strip-aileron")
+    assert any("\u2801" <= ch <= "\u28ff" for ch in drawn)  # braille dots
+    assert text_of(app, "#value-aileron") == "+3.0 +2.8 °\n-3.0 … +3.0"
+    assert text_of(app, "#value-phi") == "– °"  # no data, not a made-up zero
     # After the plan: the identification's stage, then the result ends the live view and
     # sets what the next identification is measured against.
     r.aircraft.session.send_live(live(3, "identifying", 2.5))

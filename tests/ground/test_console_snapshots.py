@@ -110,8 +110,7 @@ async def test_live_view(tmp_path):
 
 
 def drawn(app, samples: int) -> bool:
-    """Every strip of the Live tab mounted and holding its samples (phi has none)."""
+    """Every chart of the Live tab mounted and holding its samples (the aileron's command and
+    surface on one chart)."""
     strips = app.query(".strip")
-    return len(strips) == 4 and all(
-        len(s.data) == (0 if s.id == "strip-phi" else samples) for s in strips
-    )
+    return len(strips) == 3 and all(len(trace) == samples for s in strips for trace, _ in s.traces)

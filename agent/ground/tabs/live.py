@@ -1,18 +1,21 @@
 """Live (5): while a plan plays and its window is identified — the plan's progress, the
-identification's stage and progress, and strip charts of the last STRIP_S seconds: each
-control's command (`_cmd`) beside the surface as measured, then the responses the plan's axis
-identifies, each with its latest value (the station keeps `STRIP_S` of them)."""
+identification's stage and progress, and strip charts of the last STRIP_S seconds as lines
+(`agent.ground.strip`): each surface as measured (cyan) with its command (yellow, from trim)
+on the same chart, then the responses the plan's axis identifies, each with its latest values
+and the chart's range."""
 
 from __future__ import annotations
 
 from rich.text import Text
 from textual.app import ComposeResult
 from textual.containers import Horizontal, Vertical, VerticalScroll
-from textual.widgets import Label, ProgressBar, Sparkline, Static
+from textual.widgets import Label, ProgressBar, Static
 
 from agent.channels import UNITS
-from agent.ground.station import GroundStation
+from agent.ground.station import STRIP_S, GroundStation
+from agent.ground.strip import Strip, scale_of
 
+COMMANDED, MEASURED = "yellow", "cyan"
 # Display units of the live view (`messages.Live`): angles in degrees.
 DISPLAY_UNITS = {"rad": "°", "deg": "°", "rad/s": "°/s"}
 
@@ -72,14 +75,14 @@ class LiveTab(Vertical):
     def _strips(self) -> None:
         strips = self.station.heard.strips
         box = self.query_one("#strips", VerticalScroll)
-        names = sorted(strips, key=_order)
+        names = sorted({n.removesuffix("_cmd") for n in strips}, key=_order)
         if names != self._channels:
             box.remove_children()
             for name in names:
                 box.mount(
                     Horizontal(
                         Label(name, classes="strip-label"),
-                        Sparkline([], id=f"strip-{name}", classes="strip"),
+                        Strip(STRIP_S, id=f"strip-{name}", classes="strip"),
                         Static(id=f"value-{name}", classes="strip-value"),
                         classes="strip-row",
                     )
@@ -87,20 +90,34 @@ class LiveTab(Vertical):
             self._channels = names
             return  # drawn on the next refresh, once mounted
         for name in names:
-            values = [v for _, v in strips[name] if v is not None]
-            self.query_one(f"#strip-{name}", Sparkline).data = values  # none: drawn empty
-            latest = values[-1] if values else None
-            unit = _unit(name)
-            self.query_one(f"#value-{name}", Static).update(
-                "–" if latest is None else f"{latest:+.1f} {unit}"
-            )
+            traces = [
+                (strips[key], colour)
+                for key, colour in ((f"{name}_cmd", COMMANDED), (name, MEASURED))
+                if key in strips
+            ]
+            self.query_one(f"#strip-{name}", Strip).show(traces)
+            self.query_one(f"#value-{name}", Static).update(_values(name, strips))
+
+
+def _values(name: str, strips) -> Text:
+    """The latest commanded (yellow) and measured (cyan) values, and the chart's range."""
+    unit = _unit(name)
+    text = Text()
+    for key, colour in ((f"{name}_cmd", COMMANDED), (name, MEASURED)):
+        if key in strips:
+            latest = next((v for _, v in reversed(strips[key]) if v is not None), None)
+            text.append("–" if latest is None else f"{latest:+.1f}", colour)
+            text.append(" ")
+    text.append(unit)
+    scale = scale_of([(strips[k], "") for k in (f"{name}_cmd", name) if k in strips])
+    if scale is not None:
+        text.append(f"\n{scale[0]:+.1f} … {scale[1]:+.1f}", "grey50")
+    return text
 
 
 def _order(name: str) -> tuple[int, str]:
-    """Commands and surfaces first (each command beside its surface), then the responses."""
-    base = name.removesuffix("_cmd")
-    surface = base in ("throttle", "elevator", "aileron", "rudder")
-    return (0 if surface else 1, base + ("0" if name.endswith("_cmd") else "1"))
+    """The surfaces first (each with its command on the same chart), then the responses."""
+    return (0 if name in ("throttle", "elevator", "aileron", "rudder") else 1, name)
 
 
 def _unit(name: str) -> str:
