@@ -132,7 +132,7 @@ async def test_the_air_share_is_the_time_spent_sending(tmp_path):
         assert await wait_for(lambda: len(pair.ground.inbox) >= 2)
         busy = session.air_share()
     air_time = 2 * sum((len(f) + AIR_OVERHEAD) * 8 / 10_000.0 for f in frames)
-    assert idle < 0.05
+    assert idle < busy / 5  # heartbeats only
     assert air_time / AIR_WINDOW_S <= busy < 1.0
     assert busy > 0.5  # the live view would be withheld here
 
