@@ -181,7 +181,8 @@ class Live(Message):
     identification's stage, and strip-chart samples. Samples are whole tenths of the display
     unit — degrees for angles and surfaces, degrees per second for rates, m/s, µs, % — so
     MessagePack carries each in one to three bytes; None: no data. A commanded surface is
-    `<control>_cmd` (its deflection from trim)."""
+    `<control>_cmd` (its deflection from trim); while a plan plays, the surfaces it commands
+    are shown from their trim too (their mean over the 0.5 s before it started)."""
 
     kind: Literal["live"] = "live"
     time: float

@@ -28,6 +28,8 @@ from agent.recorder import Recorder
 from agent.runtime.downlink import Downlink
 from agent.runtime.identification import Identification
 
+# A surface's trim for the live view: its mean over this long before the plan started.
+TRIM_S = 0.5
 # Withheld above `[live] max_air_share`, the live view resumes below this fraction of it.
 RESUME_FRACTION = 0.8
 # A channel's display unit: its recorded unit, angles in degrees.
@@ -50,6 +52,7 @@ class Live:
         self.identification, self.downlink, self.counters = identification, downlink, counters
         self._axes = config.identification.axes  # of the last plan played
         self._withheld = False  # the live view is held back: the radio is busy
+        self._trim: tuple[str, dict[str, float]] = ("", {})  # (plan id, surface → trim)
         self._columns = {c: 1 + k for k, c in enumerate(recorder.channels)}
 
     async def run(self) -> None:
@@ -61,6 +64,22 @@ class Live:
             message = self.message(self.clock.now())
             if message is not None and self._air_allows():
                 self.downlink.send_live(message)
+
+    def _trim_of(self, playing) -> dict[str, float]:
+        """The surfaces the plan commands, as measured over TRIM_S before it started: a surface
+        is shown from its trim, as its command is (cached per plan)."""
+        if playing is None:
+            return self._trim[1] if self._trim[0] else {}
+        if self._trim[0] != playing.plan.id:
+            rows = self.recorder.ring.between(playing.start - TRIM_S, playing.start)
+            trim = {}
+            for control in playing.plan.controls():
+                column = self._columns.get(control)
+                value = None if column is None else _trim_value(rows, column)
+                if value is not None:
+                    trim[control] = value
+            self._trim = (playing.plan.id, trim)
+        return self._trim[1]
 
     def _air_allows(self) -> bool:
         """Whether the radio has air to spare for the live view; the ground is told when it
@@ -107,12 +126,14 @@ class Live:
                 ]
         inputs, outputs = self.config.identification.channels.axis_set(self._axes)
         rows = self.recorder.ring.between(times[0] - dt, times[-1])
+        trim = self._trim_of(playing)
         for name in (*inputs, *outputs):
             column = self._columns.get(name)
             if column is None:
                 continue
             scale = TO_DISPLAY.get(SENSOR_CHANNELS.get(name, ("", ""))[0], 1.0)
-            tenths[name] = [_nearest(rows, column, t, dt, scale) for t in times]
+            offset = trim.get(name, 0.0)
+            tenths[name] = [_nearest(rows, column, t, dt, scale, offset) for t in times]
         return messages.Live(
             time=float(times[0]),
             dt=dt,
@@ -125,15 +146,24 @@ class Live:
         )
 
 
+def _trim_value(rows: np.ndarray, column: int) -> float | None:
+    values = rows[:, column] if len(rows) else np.empty(0)
+    values = values[np.isfinite(values)]
+    return float(values.mean()) if values.size else None
+
+
 def _tenths(value: float) -> int | None:
     return round(value * 10) if math.isfinite(value) else None
 
 
-def _nearest(rows: np.ndarray, column: int, t: float, dt: float, scale: float) -> int | None:
-    """The channel's value in the frame nearest `t` (within half a sample), in tenths."""
+def _nearest(
+    rows: np.ndarray, column: int, t: float, dt: float, scale: float, offset: float = 0.0
+) -> int | None:
+    """The channel's value less `offset` in the frame nearest `t` (within half a sample), in
+    tenths of its display unit."""
     if not len(rows):
         return None
     k = int(np.argmin(np.abs(rows[:, 0] - t)))
     if abs(rows[k, 0] - t) > dt / 2:
         return None
-    return _tenths(float(rows[k, column]) * scale)
+    return _tenths((float(rows[k, column]) - offset) * scale)

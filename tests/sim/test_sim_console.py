@@ -51,6 +51,9 @@ async def test_operator_flies_the_lateral_preset_from_the_console(tmp_path):
         )
         command = [v for _, v in strips["aileron_cmd"] if v is not None]
         assert max(abs(v) for v in command) > 1.0  # degrees: the plan's doublets are playing
+        # The surface is shown from its trim, as its command is: it starts near zero.
+        surface = [v for _, v in strips["aileron"] if v is not None]
+        assert abs(surface[0]) < 1.0, surface[:5]
         await until(pilot, lambda: "lateral" in text_of(app, "#plan-text"), "the progress text")
         if save:
             app.save_screenshot("console-live.svg", path=save)
