@@ -39,23 +39,14 @@ from agent.ident import Experiment, frf
 from agent.ident.convert import StateSpace
 from agent.ident.fit import fit
 from agent.ident.frf import MeasuredResponse
-from agent.ident.job import Outcome
-from agent.ident.preprocess import preprocess
+from agent.ident.job import Outcome, prepared
 
 DPI = 90
 COLOURS = plt.rcParams["axes.prop_cycle"].by_key()["color"]
 
 
 def _prepared(case: Case, outcome: Outcome) -> tuple[list[Experiment], float]:
-    p = outcome.preprocessing
-    batch, prep = preprocess(
-        [Experiment(u, y) for u, y in case.job.experiments],
-        case.job.record_dt,
-        decimation=p["factor"],
-        band_hz=p["band_hz"],
-        held_inputs=p["held_inputs"],
-        smoothing_s=p["smoothing_s"],
-    )
+    batch, prep = prepared(outcome.preprocessing, case.job.record_dt, case.job.experiments)
     return batch, prep.dt
 
 

@@ -224,6 +224,22 @@ def _input_roles(job: Job) -> tuple[str | None, ...] | None:
     return AXIS_SETS[job.axes][0] if job.axes in AXIS_SETS else None
 
 
+def prepared(
+    preprocessing: dict,
+    record_dt: float,
+    experiments: tuple[tuple[np.ndarray, np.ndarray], ...],
+):
+    """Other data (or the model's own) preprocessed as a model's data was: (batch, prep)."""
+    return preprocess(
+        [Experiment(u, y) for u, y in experiments],
+        record_dt,
+        decimation=preprocessing["factor"],
+        band_hz=preprocessing["band_hz"],
+        held_inputs=preprocessing["held_inputs"],
+        smoothing_s=preprocessing["smoothing_s"],
+    )
+
+
 def cross_tic(
     result: dict,
     preprocessing: dict,
@@ -232,14 +248,7 @@ def cross_tic(
 ) -> float:
     """TIC_avg of an identified model (its discrete A, B, C, D) on other data, preprocessed
     as the model's own data was (thesis 5.3: TIC_jN, TIC_Nj)."""
-    batch, _ = preprocess(
-        [Experiment(u, y) for u, y in experiments],
-        record_dt,
-        decimation=preprocessing["factor"],
-        band_hz=preprocessing["band_hz"],
-        held_inputs=preprocessing["held_inputs"],
-        smoothing_s=preprocessing["smoothing_s"],
-    )
+    batch, _ = prepared(preprocessing, record_dt, experiments)
     model = StateSpace(*(np.asarray(result[k], dtype=float) for k in ("A", "B", "C", "D")))
     return fit(model, batch).tic_avg
 
@@ -255,14 +264,7 @@ def frequency_response(
     """A model's measured frequency response for one pair on its own data, preprocessed as the
     model's was (`agent.ident.frf.measured`), at most `points` of the input's excited
     frequencies (log-spaced): {averaging, segments, freq_hz, mag_db, phase_deg, coherence}."""
-    batch, prep = preprocess(
-        [Experiment(u, y) for u, y in experiments],
-        record_dt,
-        decimation=preprocessing["factor"],
-        band_hz=preprocessing["band_hz"],
-        held_inputs=preprocessing["held_inputs"],
-        smoothing_s=preprocessing["smoothing_s"],
-    )
+    batch, prep = prepared(preprocessing, record_dt, experiments)
     measured = frf.measured(batch, prep.dt)
     excited = np.flatnonzero(measured.excited(input_index))
     if excited.size > points:  # log-spaced: as many per decade

@@ -37,6 +37,8 @@ TO_DISPLAY = {"rad": math.degrees(1.0), "rad/s": math.degrees(1.0)}
 
 
 class Live:
+    # Its constructor takes the parts it reads, as Commands' and Status' do: alike in shape,
+    # each the wiring of its own part (agent.py builds them).
     def __init__(
         self,
         config: Config,
