@@ -20,6 +20,7 @@ from agent.clock import LoopClock, VirtualClock
 from agent.config import Config
 from agent.excitation.plan import Doublet, Multisine, Plan, PlanRefused, Segment, preset, render
 from agent.excitation.scheduler import Event, FlightState, Scheduler, Window
+from tests.waiting import until
 
 pytestmark = pytest.mark.usefixtures("no_leaked_tasks")
 
@@ -99,10 +100,10 @@ async def fly(s: Scheduler, sink, plan: Plan, *, timeout=5.0, state=CRUISE):
         s.arm(plan)
         before = _ends(s)
         feed(s, sink.clock.now(), HIGH, state)
-        for _ in range(1_000_000):
-            await asyncio.sleep(0)
-            if _ends(s) > before:
-                break
+        # Until the run ends or is refused: an event, bounded by the test's budget only (a
+        # fixed count of loop turns was a wall-clock margin in disguise: on a quiet machine a
+        # million turns passed before a 2 s plan on the real clock had played).
+        await until(lambda: _ends(s) > before, "the run's end", pause=lambda _: asyncio.sleep(0))
     finally:
         task.cancel()
         with pytest.raises(asyncio.CancelledError):
