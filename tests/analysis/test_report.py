@@ -86,23 +86,7 @@ def test_the_report_renders_in_headless_chromium(tmp_path):
         assert float(lp["value"]) < 0  # roll damping
         assert 0 < float(lp["std"]) < abs(float(lp["value"])) / 5
         assert f'href="excitation_{k}_derivatives.csv"' in page
-    shot = tmp_path / "shot.png"
-    subprocess.run(
-        [
-            chromium(),
-            "--headless",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--hide-scrollbars",
-            f"--screenshot={shot}",
-            "--window-size=1100,2400",
-            (out / "index.html").as_uri(),
-        ],
-        capture_output=True,
-        timeout=120,
-        check=True,
-    )
-    pixels = imread(shot)[..., :3]
+    pixels = screenshot(tmp_path, (out / "index.html").as_uri(), (1100, 2400))
     assert pixels.shape[:2] == (2400, 1100)
     ink = (pixels < 0.9).any(axis=2)  # anything not (near) white
     # Figures, not just text: plotted lines in several colours over a good part of the page,
