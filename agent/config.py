@@ -18,6 +18,7 @@ from pydantic import (
     BeforeValidator,
     Field,
     ValidationError,
+    field_validator,
     model_validator,
 )
 
@@ -176,9 +177,13 @@ class Surface(Section):
     """Unit of plan amplitudes for this control: surface degrees, or percent for throttle."""
     us_per_unit: float = Field(gt=0.0, le=200.0)
     """PWM microseconds per degree (or per percent) of this control."""
-    direction: Literal[1, -1] = 1
-    """+1 when a larger PWM moves the control in the positive sense (trailing edge down for
-    ailerons and elevator by the thesis's eq. 3.1, more throttle), −1 otherwise."""
+    direction: Literal[1, -1] | None = None
+    """+1 when a larger PWM on the RC channel moves the control in its positive sense, −1 when
+    it moves it the other way. Positive is the thesis's (eq. 3.1, Klein and Morelli): δA right
+    trailing edge down (rolls left), δE trailing edge down (pitches down), δR trailing edge
+    left (yaws left), more throttle. Unset: ArduPlane's sense for the role (its RC inputs rise
+    for roll right, pitch up, yaw right and more throttle), so −1 for aileron, elevator and
+    rudder and +1 for throttle."""
     min_us: int = Field(1000, ge=800, le=2200)
     """Lowest PWM ever commanded on this channel."""
     max_us: int = Field(2000, ge=800, le=2200)
@@ -197,21 +202,27 @@ class Surface(Section):
         return self
 
 
+# A control's `direction` when its table leaves it unset: ArduPlane's RC input sense (roll right,
+# pitch up, yaw right: each a negative deflection by eq. 3.1; more throttle).
+ARDUPLANE_DIRECTION = {"aileron": -1, "elevator": -1, "rudder": -1, "throttle": 1}
+
+
 def _default_surfaces() -> dict[str, Surface]:
     # ArduPlane's default RCMAP: roll 1, pitch 2, throttle 3, yaw 4.
     deg = {"us_per_unit": 20.0, "max_amplitude": 10.0, "rate_limit": 200.0, "travel": 25.0}
     return {
-        "aileron": Surface(channel=1, **deg),
-        "elevator": Surface(channel=2, **deg),
+        "aileron": Surface(channel=1, direction=ARDUPLANE_DIRECTION["aileron"], **deg),
+        "elevator": Surface(channel=2, direction=ARDUPLANE_DIRECTION["elevator"], **deg),
         "throttle": Surface(
             channel=3,
+            direction=ARDUPLANE_DIRECTION["throttle"],
             unit="percent",
             us_per_unit=10.0,
             max_amplitude=30.0,
             rate_limit=400.0,
             travel=50.0,
         ),
-        "rudder": Surface(channel=4, **deg),
+        "rudder": Surface(channel=4, direction=ARDUPLANE_DIRECTION["rudder"], **deg),
     }
 
 
@@ -258,6 +269,16 @@ class Excitation(Section):
     """Controls that plans may excite, keyed by role: aileron, elevator, rudder, throttle."""
     envelope: Envelope = Envelope()
     """Onboard limits on plans and on the aircraft during a run."""
+
+    @field_validator("surfaces")
+    @classmethod
+    def _directions(cls, surfaces: dict[str, Surface]) -> dict[str, Surface]:
+        return {
+            role: s
+            if s.direction is not None
+            else s.model_copy(update={"direction": ARDUPLANE_DIRECTION.get(role, 1)})
+            for role, s in surfaces.items()
+        }
 
     @model_validator(mode="after")
     def _channels(self) -> Excitation:

@@ -134,6 +134,31 @@ async def test_an_unusable_window_gives_a_failure_result_and_the_agent_goes_on(a
     assert agent.identification.results[-1]["failure"] == failures[0].reason
 
 
+async def test_each_stage_is_expected_to_last_what_the_last_did_scaled_by_the_record(tmp_path):
+    # The live view's progress bar for the identification: what the aircraft expects each
+    # stage to take. On the real clock (the fixture's virtual one stands still in a job).
+    from agent.excitation.scheduler import Window
+
+    config = Config(recorder=Recorder(log_dir=str(tmp_path / "logs"), capacity_s=60.0))
+    agent = Agent(config, base=tmp_path, worker=thread_worker)
+    try:
+        ident = agent.identification
+        assert ident.expected("identifying", "lateral", 1500) is None  # nothing to go by yet
+        n = len(agent.recorder.channels)
+        rows = np.zeros((1500, 1 + 2 * n))
+        rows[:, 0] = 100.0 + np.arange(1500) * 0.01
+        await ident.identify(Window("lat", "lateral", 100.0, 115.0, "finished"), rows)
+        took = ident.expected("identifying", "lateral", 1500)
+        assert took is not None
+        assert took > 0
+        assert ident.expected("identifying", "lateral", 3000) == pytest.approx(2 * took)
+        assert ident.expected("identifying", "longitudinal", 1500) is None  # other axes
+        assert ident.expected("comparing with nominal", "lateral", 1500) is None  # no nominal
+        assert ident.stage(agent.clock.now()) is None  # idle again
+    finally:
+        agent.close()
+
+
 async def test_health_record_separates_the_lag_while_identifying(agent):
     # What the lag monitor collected over a period: 10 ms of lag once, while identifying.
     for lag, identifying in [(0.0001, False)] * 99 + [(0.010, True), (0.0002, True)]:

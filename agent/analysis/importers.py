@@ -6,8 +6,9 @@ ArduPilot DataFlash (.bin, read with pymavlink's DFReader). The mapping:
 - IMU.GyrX, GyrY, GyrZ → p, q, r (rad/s) and AccX, AccY, AccZ → ax, ay, az (m/s²), instance 0;
 - ARSP.Airspeed → Vt (m/s), instance 0; AOA.AOA, SSA → alpha, beta (rad; logged in degrees);
 - RCOU.C<n> of each [excitation.surfaces] control (its `channel`) → <control>_pwm (µs, as
-  logged) and <control>: surfaces in degrees from 1500 µs by the control's `us_per_unit`,
-  throttle in µs (PWM, as the thesis);
+  logged) and <control>: surfaces in degrees from 1500 µs by the control's `us_per_unit` and
+  `direction` (the RC input's sense: in MANUAL an output follows its input while
+  SERVOn_REVERSED is 0), throttle in µs (PWM, as the thesis);
 - SIDD (ArduPilot's SystemID mode) Targ, F, Time → sid_target (the injected input),
   sid_frequency_hz, sid_time (0 outside the run), and sid_active (1 while SIDD is logged).
 
@@ -165,8 +166,7 @@ def _dataflash(path: Path, surfaces: Mapping[str, Surface], rate_hz: float) -> I
         pwm = series.get(f"{control}_pwm")
         if pwm is not None:
             values = np.asarray(pwm[1])
-            converted = values if control == "throttle" else (values - 1500.0) / surface.us_per_unit
-            series[control] = (pwm[0], list(converted))
+            series[control] = (pwm[0], list(_deflection(control, values, surface)))
     return _resample(path, "ArduPilot DataFlash", series, rate_hz, notes)
 
 
@@ -220,11 +220,19 @@ def _ulog(path: Path, surfaces: Mapping[str, Surface], rate_hz: float) -> Import
             pwm = d[f"output[{surface.channel - 1}]"]
             t = d["timestamp"] * 1e-6
             put(f"{control}_pwm", t, pwm)
-            put(control, t, pwm if control == "throttle" else (pwm - 1500.0) / surface.us_per_unit)
+            put(control, t, _deflection(control, pwm, surface))
     if not series:
         raise LogImportError(f"{path}: none of the mapped topics are in this log")
     notes = [f"PX4 ({log.msg_info_dict.get('sys_name', '?')}), dropouts: {len(log.dropouts)}"]
     return _resample(path, "PX4 ULog", series, rate_hz, notes)
+
+
+def _deflection(control: str, pwm: np.ndarray, surface: Surface) -> np.ndarray:
+    """A logged output's PWM as the control's value: throttle as is (µs), a surface in degrees
+    from 1500 µs in the sign of eq. 3.1."""
+    if control == "throttle":
+        return pwm
+    return surface.direction * (np.asarray(pwm, dtype=float) - 1500.0) / surface.us_per_unit
 
 
 def _append(series, column: str, t: float, value: float) -> None:

@@ -110,6 +110,7 @@ class Scheduler:
         self._armed: tuple[Plan, Timeline] | None = None
         self._running: Plan | None = None
         self.playing: Playing | None = None  # the plan being played, with its timeline
+        self.played: Playing | None = None  # the last plan played (kept for its window)
         self._seen_low = False
         self._switch: tuple[float, bool] | None = None
         self._state: FlightState | None = None
@@ -277,7 +278,7 @@ class Scheduler:
         trim_pwm = {surfaces[n].channel: round(trim[n]) for n in plan.controls()}
         self._running, self._abort_request = plan, None
         start = self._clock.now()
-        self.playing = Playing(plan, start, timeline)
+        self.playing = self.played = Playing(plan, start, timeline)
         altitude_ref = self._state.altitude_m if self._state else None
         self.counters["runs"] += 1
         detail = ", ".join(f"{n} {trim[n]:.0f} µs" for n in plan.controls())

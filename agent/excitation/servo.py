@@ -20,14 +20,20 @@ DISTORTION = 0.2
 
 def to_pwm(values: np.ndarray, trim_us: float, surface: Surface) -> np.ndarray:
     """PWM (µs, integers) = trim + direction × us_per_unit × value, clamped to the limits."""
-    raw = trim_us + surface.direction * surface.us_per_unit * np.asarray(values, dtype=float)
+    raw = _raw(values, trim_us, surface)
     return np.clip(np.rint(raw), surface.min_us, surface.max_us).astype(int)
 
 
 def pwm_clamped(values: np.ndarray, trim_us: float, surface: Surface) -> int:
     """How many samples to_pwm would clamp at this trim."""
-    raw = trim_us + surface.direction * surface.us_per_unit * np.asarray(values, dtype=float)
+    raw = _raw(values, trim_us, surface)
     return int(np.count_nonzero((raw < surface.min_us) | (raw > surface.max_us)))
+
+
+def _raw(values: np.ndarray, trim_us: float, surface: Surface) -> np.ndarray:
+    if surface.direction is None:  # resolved by role in [excitation.surfaces]
+        raise ValueError("a control's direction is unset outside [excitation.surfaces]")
+    return trim_us + surface.direction * surface.us_per_unit * np.asarray(values, dtype=float)
 
 
 def distortion_warnings(name: str, signal: np.ndarray, dt: float, surface: Surface) -> list[str]:

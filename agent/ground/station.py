@@ -71,8 +71,6 @@ class Heard:
     live_at: float | None = None
     strips: dict[str, deque[tuple[float, float | None]]] = field(default_factory=dict)
     """The run's strip charts: per channel, (time, value in display units), STRIP_S long."""
-    durations: deque[float] = field(default_factory=lambda: deque(maxlen=5))
-    """How long the last identifications took in the worker (s), from the live view."""
     excitation: messages.ExcitationEvent | None = None
     noted: int = 0  # event lines ever noted (the deque keeps the latest)
 
@@ -215,12 +213,8 @@ class GroundStation:
                 strip.popleft()
 
     def _run_over(self) -> None:
-        """A result or failure ends the live view (its charts stay for a look back); how long
-        the worker took, as last seen live, sets the next identification's expectation."""
-        h = self.heard
-        if h.live is not None and h.live.stage == "identifying" and h.live.stage_s is not None:
-            h.durations.append(h.live.stage_s)
-        h.live = None
+        """A result or failure ends the live view (its charts stay for a look back)."""
+        self.heard.live = None
 
     def _answered(self, ack: messages.Ack) -> None:
         command = self.commands.get(ack.ref)

@@ -193,9 +193,13 @@ class Live(Message):
     """The share of the plan played (None: none playing)."""
     plan_s: float | None = None
     stage: str = Field("", max_length=24)
-    """The identification's: "recording margin", "queued", "identifying" ("" none)."""
+    """The identification's: "recording margin", "queued", "identifying", "comparing with
+    nominal" ("" none)."""
     stage_s: float | None = None
     """Time in that stage so far."""
+    stage_expected_s: float | None = None
+    """How long that stage should take: the margin's length, or the last such stage's on
+    these axes scaled by the record's length (None: not known yet)."""
     tenths: dict[str, list[int | None]] = Field(default_factory=dict, max_length=16)
 
 

@@ -20,6 +20,7 @@ import numpy as np
 from agent.channels import SENSOR_CHANNELS
 from agent.clock import Clock, LoopClock
 from agent.config import Config
+from agent.excitation.follow import following
 from agent.excitation.scheduler import Event, Scheduler, Window
 from agent.link import messages
 from agent.link.codec import AIRCRAFT
@@ -253,13 +254,29 @@ class Agent:
             self.scheduler.abort(f"autopilot link lost: {reason}")
 
     def _on_window(self, window: Window, rows: np.ndarray) -> None:
-        """The recorder has the window and its margin: log it and queue its identification."""
+        """The recorder has the window and its margin: log it, check that its surfaces followed
+        their commands, and queue its identification."""
         self.logbook.excitation(window, rows, batch=self.identification.settings.batch)
+        self._check_following(window, rows)
         if window.outcome != "finished":
             text = f"{window.plan_id} aborted ({window.reason}): not identified"
             self.downlink.send(messages.Notice(text=text))
         elif not self.identification.submit(window, rows):
             self.downlink.send(messages.Notice(text="identification queue full: window dropped"))
+
+    def _check_following(self, window: Window, rows: np.ndarray) -> None:
+        """A surface that moved against its command, or not at all, is told to the ground:
+        the direction or a calibration is set up the wrong way (agent.excitation.follow)."""
+        played = self.scheduler.played
+        if played is None or played.plan.id != window.plan_id or len(rows) == 0:
+            return
+        measured = {c: rows[:, 1 + k] for k, c in enumerate(self.recorder.channels)}
+        for f in following(played.timeline, played.start, rows[:, 0], measured):
+            if f.verdict == "follows":
+                continue
+            self.counters[f"surface_{f.verdict.replace(' ', '_')}"] += 1
+            log.warning("%s: %s", window.plan_id, f.text())
+            self.downlink.send(messages.Notice(text=f"{window.plan_id}: {f.text()}"))
 
 
 async def supervised(

@@ -65,7 +65,10 @@ class Identification:
         self.counters = counters
         self.settings = messages.IdentSettings(axes=config.identification.axes)
         self.busy = False  # a window is in the worker
-        self._since = 0.0  # when the window in the worker went in
+        # The stage a busy window is in: (name, since, expected seconds or None).
+        self._stage: tuple[str, float, float | None] | None = None
+        # By (axes, stage): how long the last one took (s) and on how many samples.
+        self._took: dict[tuple[str, str], tuple[float, int]] = {}
         self._windows = 0  # windows waiting in the queue
         self.results: deque[dict] = deque(maxlen=RESULTS_KEPT)
         # The result log: one JSON object per identification (thesis 2.2.1).
@@ -90,12 +93,31 @@ class Identification:
         self._windows += 1
         return True
 
-    def stage(self, now: float) -> tuple[str, float] | None:
-        """What the identification is doing for the live view: ("identifying", seconds in
-        the worker) or ("queued", 0) when a window waits; None when idle."""
-        if self.busy:
-            return "identifying", now - self._since
-        return ("queued", 0.0) if self._windows else None
+    def stage(self, now: float) -> tuple[str, float, float | None] | None:
+        """What the identification is doing, for the live view: (stage, seconds in it, how
+        long it should take or None) — "identifying" (the window in the worker), "comparing
+        with nominal" (each model's TIC on the other's data, in the worker), or ("queued", 0,
+        None) when a window waits; None when idle."""
+        if self.busy and self._stage is not None:
+            name, since, expected = self._stage
+            return name, now - since, expected
+        return ("queued", 0.0, None) if self._windows else None
+
+    def expected(self, name: str, axes: str, samples: int) -> float | None:
+        """How long stage `name` should take on a window of `samples` rows of these axes: the
+        last such stage's time scaled by the samples (the numerics' cost grows about linearly
+        with the record); None before the first."""
+        last = self._took.get((axes, name))
+        return None if last is None else last[0] * samples / max(last[1], 1)
+
+    def _enter(self, name: str, axes: str, samples: int) -> None:
+        self._stage = (name, self.clock.now(), self.expected(name, axes, samples))
+
+    def _leave(self, axes: str, samples: int) -> None:
+        """The stage entered last is over: remember how long it took."""
+        if self._stage is not None:
+            name, since, _ = self._stage
+            self._took[(axes, name)] = (self.clock.now() - since, samples)
 
     def periodic_window(self, now: float, period: float) -> tuple[Window, np.ndarray] | None:
         """Queue the last `period` seconds of frames for identification: the window and its
@@ -181,7 +203,7 @@ class Identification:
                 continue
             window, rows = item
             self._windows -= 1
-            self.busy, self._since = True, self.clock.now()
+            self.busy = True
             try:
                 await self.identify(window, rows)
             except BrokenProcessPool as exc:  # the worker died (killed, out of memory): anew
@@ -199,7 +221,7 @@ class Identification:
                 log.exception("identification of %s failed", window.plan_id)
                 self._failed(window.plan_id, self.settings.axes, f"internal error: {exc!r}")
             finally:
-                self.busy = False
+                self.busy, self._stage = False, None
 
     async def stop(self) -> None:
         """Stop the worker (`stop_worker`) and the model-store thread."""
@@ -292,7 +314,9 @@ class Identification:
             trim_s=self.config.identification.trim_seconds,
             navigation=navigation,
         )
+        self._enter("identifying", axes, len(rows))
         outcome = await loop.run_in_executor(self._pool, jobs.run, job)
+        self._leave(axes, len(rows))
         if not outcome.ok:
             return self._failed(model_id, axes, outcome.reason)
         if ident.batch:
@@ -306,7 +330,7 @@ class Identification:
             (*job.experiments, outcome.experiment),
             extra={"record_s": len(outcome.experiment[0]) * dt, "trim": outcome.trim},
         )
-        suggestion = await self._compare(candidate)
+        suggestion = await self._compare(candidate, len(rows))
         await self._in_store(self.models.add, candidate)
         record = {
             "model_id": model_id,
@@ -321,16 +345,18 @@ class Identification:
         self.writer.write(self._log, (json.dumps(record) + "\n").encode())
         self.downlink.send(result_message(candidate, suggestion))
 
-    async def _compare(self, candidate: Candidate) -> Suggestion:
+    async def _compare(self, candidate: Candidate, samples: int) -> Suggestion:
         """The figure 5.2 suggestion: against the nominal (if any), each model's TIC on the
         other's data (TIC_jN, TIC_Nj), computed in the worker."""
         axes = candidate.axes
         nominal = await self._in_store(self.models.nominal, axes)
         if nominal is None:
             return suggest(candidate, None, None, None)
+        self._enter("comparing with nominal", axes, samples)
         tic_jn = await self._cross_tic(candidate, nominal)
         tic_nj = await self._cross_tic(nominal, candidate)
         await self._check_new_nominal(axes, nominal, tic_nj, candidate)
+        self._leave(axes, samples)
         return suggest(candidate, nominal, tic_jn, tic_nj)
 
     async def _cross_tic(self, model: Candidate, data: Candidate) -> float:

@@ -111,7 +111,11 @@ class Live:
         waiting = self.recorder.waiting
         stage = self.identification.stage(now)
         if stage is None and waiting is not None:
-            stage = ("recording margin", now - waiting.end)
+            stage = (
+                "recording margin",
+                now - waiting.end,
+                self.config.recorder.excitation_margin_s,
+            )
         if playing is None and stage is None:
             return None
         live = self.config.live
@@ -144,6 +148,7 @@ class Live:
             plan_s=None if playing is None else round(playing.timeline.duration, 1),
             stage="" if stage is None else stage[0],
             stage_s=None if stage is None else round(stage[1], 1),
+            stage_expected_s=None if stage is None or stage[2] is None else round(stage[2], 1),
             tenths=tenths,
         )
 

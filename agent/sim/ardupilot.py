@@ -75,17 +75,29 @@ class Params:
     reversed: dict[int, bool] = field(default_factory=dict)
 
 
+# How each servo is linked to JSBSim's control: +1 when a larger PWM moves the control's
+# normalised command up. ArduPlane's RC inputs rise for roll right, pitch up, yaw right and more
+# throttle (its radio calibration), and in MANUAL a servo output follows its input. JSBSim's
+# commands follow FlightGear's sense (measured on the J-3 Cub, Cessna 172 and 182 and PA-28:
+# aileron + rolls right, elevator + pitches nose down, rudder + yaws nose left). So the elevator
+# and rudder servos are linked the other way round, as an installer fits them for the aircraft
+# to answer the sticks; SERVOn_REVERSED (`Params.reversed`) stays 0.
+LINKAGE = {1: 1, 2: -1, 3: 1, 4: -1}
+
+
 def pwm_to_normalised(channel: int, pwm: float) -> float:
-    """Throttle: 1000–2000 µs → 0–1; surfaces: 1500 ± 500 µs → ±1."""
+    """A servo output's PWM → its JSBSim command: throttle 1000–2000 µs → 0–1; surfaces
+    1500 ± 500 µs → ±1 in the sense of LINKAGE."""
     if OUTPUTS.get(channel) == "throttle":
         return (pwm - 1000.0) / 1000.0
-    return (pwm - 1500.0) / 500.0
+    return LINKAGE.get(channel, 1) * (pwm - 1500.0) / 500.0
 
 
 def normalised_to_pwm(channel: int, value: float) -> int:
+    """Inverse of pwm_to_normalised."""
     if OUTPUTS.get(channel) == "throttle":
         return round(1000 + 1000 * value)
-    return round(1500 + 500 * value)
+    return round(1500 + 500 * LINKAGE.get(channel, 1) * value)
 
 
 class ServoModel:

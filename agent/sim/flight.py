@@ -246,7 +246,7 @@ async def fly(options: SimOptions) -> dict:
         outcomes = []
         for run in range(options.runs):
             outcomes.append(await one_run(options, sim.aircraft, sim.ground, run, say))
-        return _report(options, sim.aircraft, sim.agent, outcomes)
+        return _report(options, sim.aircraft, sim.agent, outcomes, sim.ground)
 
 
 @contextlib.asynccontextmanager
@@ -492,7 +492,9 @@ def _truth(aircraft: SimAircraft, axes: str) -> dict[str, complex | list[complex
     return truth
 
 
-def _report(options: SimOptions, aircraft: SimAircraft, agent: Agent, outcomes: list) -> dict:
+def _report(
+    options: SimOptions, aircraft: SimAircraft, agent: Agent, outcomes: list, ground: Ground
+) -> dict:
     last = outcomes[-1]
     result = last.get("result")
     truth = _truth(aircraft, preset(options.preset).axes)
@@ -557,13 +559,17 @@ def _report(options: SimOptions, aircraft: SimAircraft, agent: Agent, outcomes: 
         "recorder": dict(agent.recorder.counters),
         "sensor_gaps": {d.name: d.health().gaps for d in agent.drivers},
         "worker_identifications": len(agent.identification.results),
+        # What the aircraft told the operator besides results (a surface that did not follow
+        # its command, a full queue, a withheld live view…).
+        "notices": [m.text for m in ground.inbox if isinstance(m, messages.Notice)],
     }
 
 
 def format_report(report: dict) -> str:
     lines = [f"{report['aircraft']} · preset {report['preset']} · {report['runs']} run(s)"]
     if report["failure"]:
-        return "\n".join([*lines, f"identification failed: {report['failure']}"])
+        lines.append(f"identification failed: {report['failure']}")
+        return "\n".join([*lines, *(f"notice: {text}" for text in report["notices"])])
     lines.append(f"{'mode':<14}{'identified':>22}{'JSBSim':>22}{'error':>8}{'EMAC %':>8}")
     for row in report["modes"]:
         lam = complex(*row["eigenvalue"])
@@ -575,6 +581,7 @@ def format_report(report: dict) -> str:
     lines.append(f"TIC_avg {report['tic_avg']:.3f}; update suggested: {s['update']}")
     lines += [f"  {step}" for step in s["steps"]]
     lines.append(f"operator: {report['decision']}")
+    lines += [f"notice: {text}" for text in report["notices"]]
     return "\n".join(lines)
 
 

@@ -97,6 +97,10 @@ def test_units_names_and_the_systemid_run(tmp_path):
     assert set(c["aileron_pwm"]) >= {1500.0}
     # The aileron in degrees follows the simulated deflection (20 µs per degree).
     assert np.max(np.abs(c["aileron"])) == pytest.approx(4.0, abs=0.1)
+    # In eq. 3.1's sign: a larger roll output (ArduPlane rolls right) is a negative δA.
+    moved = np.abs(c["aileron_pwm"] - 1500.0) > 1.0
+    assert moved.any()
+    assert np.all(np.sign(c["aileron"][moved]) == -np.sign(c["aileron_pwm"][moved] - 1500.0))
     # SystemID: active from 5 to 25 s, its target is the injected chirp.
     active = imported.time[c["sid_active"] == 1.0]
     assert active[0] == pytest.approx(5.0, abs=0.05)

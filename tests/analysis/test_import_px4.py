@@ -68,6 +68,10 @@ def test_px4_topics_map_to_the_channels(tmp_path):
     assert np.allclose(c["alpha"], 0.06)
     assert np.allclose(c["throttle"], 1350.0)
     assert np.max(np.abs(c["aileron"])) == pytest.approx(5.0)
+    # In eq. 3.1's sign: a larger roll output (ArduPlane rolls right) is a negative δA.
+    moved = np.abs(c["aileron_pwm"] - 1500.0) > 1.0
+    assert moved.any()
+    assert np.all(np.sign(c["aileron"][moved]) == -np.sign(c["aileron_pwm"][moved] - 1500.0))
     assert imported.missing == ["beta"]  # no airflow_slip topic in this log
     assert imported.kind == "PX4 ULog"
 

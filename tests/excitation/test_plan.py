@@ -177,7 +177,9 @@ def test_absurd_plans_are_refused_from_their_parameters_without_rendering(
         check(_one(bold), 50.0, SURFACES, ENVELOPE)
 
 
-SERVO = Surface(channel=1, us_per_unit=20.0, max_amplitude=10.0, rate_limit=150.0, travel=8.0)
+SERVO = Surface(
+    channel=1, us_per_unit=20.0, direction=1, max_amplitude=10.0, rate_limit=150.0, travel=8.0
+)
 
 
 def test_servo_model_warns_when_a_sweep_outruns_the_servo():

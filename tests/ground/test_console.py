@@ -217,7 +217,9 @@ def test_percentages_never_print_as_exponents():
     ]
 
 
-def live(k: int, stage: str = "", stage_s: float | None = None) -> messages.Live:
+def live(
+    k: int, stage: str = "", stage_s: float | None = None, expected_s: float | None = None
+) -> messages.Live:
     """The k-th second of a lateral run as the aircraft sends it (tenths of degrees)."""
     t = [k + 0.1 * i for i in range(10)]
     playing = not stage
@@ -229,6 +231,7 @@ def live(k: int, stage: str = "", stage_s: float | None = None) -> messages.Live
         plan_s=41.0 if playing else None,
         stage=stage,
         stage_s=stage_s,
+        stage_expected_s=expected_s,
         tenths={
             "aileron_cmd": [30 if (x % 2) < 1 else -30 for x in t],
             "aileron": [28 if (x % 2) < 1 else -28 for x in t],
@@ -258,12 +261,18 @@ async def test_the_live_view_shows_the_run_its_identification_and_strip_charts(c
     assert any("\u2801" <= ch <= "\u28ff" for ch in drawn)  # braille dots
     assert text_of(app, "#value-aileron") == "+3.0 +2.8 °\n-3.0 … +3.0"
     assert text_of(app, "#value-phi") == "– °"  # no data, not a made-up zero
-    # After the plan: the identification's stage, then the result ends the live view and
-    # sets what the next identification is measured against.
+    # After the plan: the identification's stage. The first has no expectation (no bar);
+    # then the aircraft's expectation sets the bar; a result ends the live view.
     r.aircraft.session.send_live(live(3, "identifying", 2.5))
     await until(pilot, lambda: "identifying 2.5 s" in text_of(app, "#ident-text"), "stage")
+    assert "about" not in text_of(app, "#ident-text")
+    assert app.query_one("#ident-progress").progress == 0.0
+    r.aircraft.session.send_live(live(4, "comparing with nominal", 1.0, 2.5))
+    await until(pilot, lambda: "of about 2.5 s" in text_of(app, "#ident-text"), "expected")
+    assert "comparing with nominal 1.0 s" in text_of(app, "#ident-text")
+    assert app.query_one("#ident-progress").progress == pytest.approx(40.0)
+    r.aircraft.session.send_live(live(5, "comparing with nominal", 9.0, 2.5))
+    await until(pilot, lambda: "9.0 s" in text_of(app, "#ident-text"), "overdue")
+    assert app.query_one("#ident-progress").progress == 99.0  # an expectation: never 100 %
     r.aircraft.session.send_reliable(result("lat-1"))
     await until(pilot, lambda: "idle" in text_of(app, "#ident-text"), "the run over")
-    r.aircraft.session.send_live(live(4, "identifying", 1.0))
-    await until(pilot, lambda: "the last took 2.5 s" in text_of(app, "#ident-text"), "expected")
-    assert app.query_one("#ident-progress").progress == pytest.approx(40.0)

@@ -78,6 +78,28 @@ async def test_overrides_move_the_jsbsim_surfaces_through_the_servo_model(tmp_pa
     assert released == f.aircraft.pilot(0)[3]  # back to the pilot's stick
 
 
+async def test_a_larger_pwm_rolls_right_pitches_up_and_yaws_right_as_arduplane(tmp_path):
+    # ArduPlane's RC inputs rise for roll right, pitch up and yaw right; each is a negative
+    # deflection in eq. 3.1's sign (δA right trailing edge down, δE down, δR left), which is
+    # what the config's direction −1 on the three surfaces says (docs/excitation.md, "Signs").
+    async with flight(tmp_path) as f:
+        await asyncio.sleep(0.3)
+        plant, pilot = f.aircraft.plant, f.aircraft.pilot
+        pilot.set_switch(True)  # RCx_OPTION 46: overrides enabled
+        for channel, surface, rate in (
+            (1, "aileron", "p"),
+            (2, "elevator", "q"),
+            (4, "rudder", "r"),
+        ):
+            before = plant.state()
+            await _override(f.link, {channel: pilot.stick(channel) + 200}, 0.3)
+            after = plant.state()
+            await f.link.release([channel])
+            await asyncio.sleep(1.0)  # the pilot's trimmed stick again
+            assert after[surface] - before[surface] < -2.0, surface  # degrees, eq. 3.1's sign
+            assert after[rate] - before[rate] > 0.01, rate  # rad/s: right, up, right
+
+
 async def test_overrides_from_a_wrong_system_id_are_ignored(tmp_path):
     async with flight(tmp_path, system_id=200) as f:
         f.aircraft.pilot.set_switch(True)

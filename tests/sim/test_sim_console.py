@@ -78,3 +78,12 @@ async def test_operator_flies_the_lateral_preset_from_the_console(tmp_path):
     records = [json.loads(line) for line in ground_logs[0].read_text().splitlines()]
     stages = {r["message"].get("stage") for r in records if r["message"].get("kind") == "live"}
     assert "recording margin" in stages
+    # The margin's bar runs against its known length ([recorder] excitation_margin_s).
+    margins = [
+        r["message"]
+        for r in records
+        if r["message"].get("kind") == "live" and r["message"].get("stage") == "recording margin"
+    ]
+    assert all(
+        m["stage_expected_s"] == sim.agent.config.recorder.excitation_margin_s for m in margins
+    )

@@ -10,7 +10,9 @@ ground) with one part made to fail mid-flight.
   next run is identified → the driver reconnects, the gap is logged, the result reaches the
   ground after the outage;
 - an identification fails (an order one Markov parameter cannot hold) → a failure
-  result with the reason, and the agent goes on to identify the next run.
+  result with the reason, and the agent goes on to identify the next run;
+- the aileron servo is reversed in the autopilot (SERVO1_REVERSED) → after the first
+  doublet the operator is told the aileron moved against its command.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import re
 import numpy as np
 import pytest
 
-from agent.excitation.plan import preset
+from agent.excitation.plan import Doublet, Plan, Segment, preset
 from agent.link import messages
 from agent.logs import read_log
 from agent.sim.ardupilot import RELEASE_LOW, Params
@@ -206,3 +208,33 @@ async def test_identification_failure_is_reported_and_the_next_run_identified(tm
     results = (next((tmp_path / "logs").glob("*_results_*"))).read_text().splitlines()
     assert '"failure"' in results[0]
     assert '"failure"' not in results[1]
+
+
+async def test_an_aileron_reversed_in_the_autopilot_is_told_after_its_first_doublet(tmp_path):
+    # An installation fault: SERVO1_REVERSED set, so a positive δA command moves the aileron
+    # the other way. The identification alone cannot tell (B changes sign); the check can.
+    params = Params(switch_channel=7, reversed={1: True})
+    async with simulated(SimOptions(preset="lateral", directory=tmp_path), params) as sim:
+        doublet = Doublet(pulse_s=1.0, amplitude=4.0)
+        plan = Plan(
+            id="reversed",
+            axes="lateral",
+            segments=(Segment(signals={"aileron": doublet}, free_s=1.0),),
+        )
+        seen = len(sim.ground.inbox)
+        ack = await sim.ground.command(messages.Arm(plan=plan))
+        assert ack.ok, ack.reason
+        sim.aircraft.pilot.set_switch(True)
+
+        def told():
+            return [
+                m
+                for m in received(sim, messages.Notice, seen)
+                if "aileron moved against its command" in m.text
+            ]
+
+        (notice,) = await until(told, "the notice of the reversed aileron")
+        assert notice.text.startswith("reversed: ")
+        assert "direction in [excitation.surfaces]" in notice.text
+        assert sim.agent.counters["surface_reversed"] == 1
+        assert sim.agent.counters["surface_not_following"] == 0

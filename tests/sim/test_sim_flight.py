@@ -21,6 +21,10 @@ async def test_two_lateral_runs_end_to_end(tmp_path):
     assert report["sensor_gaps"] == {"vn200": 0, "airdata": 0, "surfaces": 0}  # 100 Hz, no loss
     assert report["recorder"]["frames"] > 30 * 100
     assert report["worker_identifications"] == 2  # both ran in the worker process
+    # Commanded and measured surfaces agree in sign end to end (plan, direction, ArduPlane,
+    # servo linkage, pots): the aircraft told the operator of no surface moving against or
+    # not following its command.
+    assert not [n for n in report["notices"] if "command" in n], report["notices"]
     # The result crossed the radio link; the named modes the record resolves are within 15 %.
     modes = {m["name"]: m for m in report["modes"] if m["name"]}
     for name in ("Dutch roll", "roll"):

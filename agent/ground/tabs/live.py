@@ -57,19 +57,18 @@ class LiveTab(Vertical):
         self._strips()
 
     def _ident_progress(self, live) -> float:
-        if live is None or not live.stage:
+        """The stage's time against what the aircraft expects it to take (at most 99 %: an
+        expectation, not a measure of the work done)."""
+        if live is None or not live.stage or not live.stage_expected_s:
             return 0.0
-        if live.stage == "identifying" and self.station.heard.durations:
-            last = self.station.heard.durations[-1]
-            return min(99.0, 100 * (live.stage_s or 0.0) / max(last, 0.1))
-        return 0.0
+        return min(99.0, 100 * (live.stage_s or 0.0) / max(live.stage_expected_s, 0.1))
 
     def _ident_text(self, live) -> Text:
         if live is None or not live.stage:
             return Text("idle", "grey50")
         text = Text(f"{live.stage} {live.stage_s or 0:.1f} s", "bold cyan")
-        if live.stage == "identifying" and self.station.heard.durations:
-            text.append(f" (the last took {self.station.heard.durations[-1]:.1f} s)", "grey70")
+        if live.stage_expected_s:
+            text.append(f" of about {live.stage_expected_s:.1f} s", "grey70")
         return text
 
     def _strips(self) -> None:

@@ -1,0 +1,105 @@
+"""Did each surface follow its command? The check a flight-test engineer makes on the first
+manoeuvre of a flight, made on every excitation window.
+
+A plan commands deflections in eq. 3.1's sign (docs/excitation.md, "Signs"); `direction` in
+[excitation.surfaces] turns them into PWM, and the potentiometer box measures where the
+surfaces went, in the same sign through its calibration. If either is set up the wrong way
+round, the surface moves against its command. Identification cannot tell: the model's B
+simply changes sign, its modes stay right, and its derivatives come out with the wrong sign.
+So the measured surface is correlated with the command, at the servo's lag (up to MAX_LAG_S),
+and a clearly negative or missing correlation is reported to the operator.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from agent.excitation.plan import Timeline
+
+# The servo's transport delay and slew put the surface up to this long behind its command.
+MAX_LAG_S = 0.3
+# Below this correlation a surface did not follow its command; below its negative, it moved
+# against it. A surface following a doublet through 0.1° of pot noise correlates above 0.9.
+FOLLOWS = 0.5
+
+
+@dataclass(frozen=True)
+class Following:
+    """How one control's measured position followed its command over a window."""
+
+    control: str
+    correlation: float
+    """Correlation of measured with commanded at `lag_s` (the lag of the largest |r|)."""
+    lag_s: float
+    gain: float
+    """Measured per commanded deflection at that lag (the servo's and linkage's gain)."""
+
+    @property
+    def verdict(self) -> str:
+        """One of: follows, reversed, not following."""
+        if self.correlation >= FOLLOWS:
+            return "follows"
+        return "reversed" if self.correlation <= -FOLLOWS else "not following"
+
+    def text(self) -> str:
+        """One line for the operator; empty when the surface follows."""
+        r = f"r = {self.correlation:+.2f}"
+        if self.verdict == "reversed":
+            return (
+                f"{self.control} moved against its command ({r}): check its direction in "
+                "[excitation.surfaces] and the sign of its potentiometer calibration"
+            )
+        if self.verdict == "not following":
+            return (
+                f"{self.control} did not follow its command ({r}): check its channel in "
+                "[excitation.surfaces], its servo and its potentiometer"
+            )
+        return ""
+
+
+def following(
+    timeline: Timeline, start: float, times: np.ndarray, measured: Mapping[str, np.ndarray]
+) -> list[Following]:
+    """Each commanded control with a measured column: its command at `times` (the plan's
+    sample then, trim outside the plan) against its measured positions there."""
+    times = np.asarray(times, dtype=float)
+    if times.size < 3:
+        return []
+    dt = float(np.median(np.diff(times)))
+    if not dt > 0:
+        return []
+    index = np.floor((times - start) / timeline.dt).astype(int)
+    inside = (index >= 0) & (index < timeline.count)
+    result = []
+    for control, values in timeline.values.items():
+        column = measured.get(control)
+        if column is None:
+            continue
+        commanded = np.where(inside, values[np.clip(index, 0, timeline.count - 1)], 0.0)
+        best = _best_lag(commanded, np.asarray(column, dtype=float), round(MAX_LAG_S / dt))
+        if best is not None:
+            lag, r, gain = best
+            result.append(Following(control, r, lag * dt, gain))
+    return result
+
+
+def _best_lag(u: np.ndarray, y: np.ndarray, lags: int) -> tuple[int, float, float] | None:
+    """(lag, correlation, gain) of y against u delayed by 0…lags samples at the largest |r|;
+    None when the command does not vary or either has gaps (NaN) throughout."""
+    best = None
+    for lag in range(min(lags, u.size - 3) + 1):
+        a, b = u[: u.size - lag], y[lag:]
+        ok = np.isfinite(a) & np.isfinite(b)
+        if np.count_nonzero(ok) < 3:
+            continue
+        a, b = a[ok] - a[ok].mean(), b[ok] - b[ok].mean()
+        su, sy = float(a @ a), float(b @ b)
+        if su <= 0.0:
+            continue  # nothing commanded to follow here
+        r = float(a @ b) / np.sqrt(su * sy) if sy > 0.0 else 0.0  # a stuck surface: 0
+        if best is None or abs(r) > abs(best[1]):
+            best = (lag, r, float(a @ b) / su)
+    return best
