@@ -47,6 +47,15 @@ period from 31 % to 2.6 % off.
    estimated (u_eff = u / Π(1 + jωτ)). Held inputs (commands recorded at the sample) carry
    the zero-order hold's half-sample delay and sinc; sampled ones are taken at face value.
 
+Sideslip drag (`prepare`): where β is measured, β² (the vane's air-relative β, from trim) is
+a known input of V̇'s equation alone, with a fitted gain: drag due to sideslip, C_D ∝ β²
+(Klein & Morelli's drag models). Odd-harmonic inputs keep even-order effects off the
+longitudinal lines only while β stays periodic. When the bank drifts (the spiral mode), the
+sideslip's slow wander puts sideslip drag on the throttle's lines. On JSBSim's Cub in calm
+air the phugoid was 1 % or 8 % off depending only on the relative sign of the aileron's and
+rudder's multisines; with the term, 0.6 % and 2.6 %. Free on every longitudinal row instead,
+its gains were collinear with the short period's and cost it 4 %.
+
 Kinematics and wind (`prepare`), used when the record carries them. With the trim
 (`operating_point`), the equations of θ and φ are pure kinematics (θ̇ = q cos φ − r sin φ,
 φ̇ = p + tan θ (q sin φ + r cos φ)). Their rows of A and the θ, φ columns of the other rows
@@ -132,6 +141,9 @@ class Spectra:
     # act), and the output columns of θ and φ, whose rows and columns it fixes (see _Problem).
     kinematics: np.ndarray | None = None
     attitude: tuple[int, ...] = ()
+    # Known inputs that enter one equation only: input column → output column (sideslip drag
+    # acts on V̇ alone).
+    rows: Mapping[int, int] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -165,10 +177,11 @@ def spectra(
     known: Sequence[np.ndarray] | None = None,
     kinematics: np.ndarray | None = None,
     attitude: Sequence[int] = (),
+    rows: Mapping[int, int] | None = None,
 ) -> Spectra:
     """Transforms of every experiment (X = Δt · DFT) at the bins in the analysis band;
     `known`: per experiment, a known forcing of each output's equation (samples × outputs);
-    `kinematics` and `attitude`: see Spectra."""
+    `kinematics`, `attitude` and `rows`: see Spectra."""
     top = band_hz or input_band(batch, dt)
     top = min(top, 0.25 / dt)
     parts = []
@@ -198,6 +211,7 @@ def spectra(
         K,
         kinematics,
         tuple(attitude),
+        dict(rows or {}),
     )
 
 
@@ -279,6 +293,10 @@ class _Problem:
             others = [c for c in range(sp.Y.shape[1]) if c not in states]
             if others:  # the other axis's states through the kinematics' linear terms
                 self.K = self.K + sp.Y[:, others] @ J[np.ix_(states, others)].T
+        for column, row in sp.rows.items():  # a known input of one equation only
+            if column in inputs:
+                j = inputs.index(column)
+                self.fixed_B[[i for i, c in enumerate(states) if c != row], j] = True
         self.free = np.concatenate(
             [
                 ~self.fixed_A.ravel(),
@@ -636,6 +654,21 @@ def inertial_air_data(x: np.ndarray, navigation: np.ndarray) -> np.ndarray:
     return np.column_stack([speed, np.arctan2(w, u), np.arcsin(v / np.maximum(speed, 1e-9))])
 
 
+# Sideslip drag (module docstring): β² a known input of V̇'s equation.
+SIDESLIP_DRAG = True
+
+
+def known_gain(fit: AxisFit, column: int, row: int) -> tuple[float, float] | None:
+    """A fitted input gain and its standard error: B[row, column] of `fit` (input and output
+    columns), or None when the fit has no such input or state."""
+    if column not in fit.inputs or row not in fit.states:
+        return None
+    i, j = fit.states.index(row), fit.inputs.index(column)
+    n, r = len(fit.states), len(fit.inputs)
+    k = n * n + i * r + j
+    return float(fit.B[i, j]), float(np.sqrt(max(fit.covariance[k, k], 0.0)))
+
+
 # The measured wind's components, the output they correct and the axis they act on.
 GUSTS = (("airspeed", "longitudinal"), ("alpha", "longitudinal"), ("beta", "lateral"))
 # The states whose equations are kinematics alone (no aerodynamic parameter): their rows of A
@@ -692,6 +725,7 @@ class Prepared:
     kinematics: np.ndarray | None = None  # see Spectra.kinematics (mean over experiments)
     attitude: tuple[int, ...] = ()  # output columns of θ and φ
     rates: tuple[int, ...] = ()  # known input columns of gust rates (GUST_RATE_LAGS lags each)
+    rows: dict[int, int] = field(default_factory=dict)  # see Spectra.rows
 
 
 def prepare(
@@ -728,6 +762,7 @@ def prepare(
     measured = "theta" in index and all(e.navigation is not None for e in batch)
     gusts = tuple(role for role, _ in GUSTS if role in index) if measured else ()
     rated = [role for role in GUST_RATES if role in gusts]
+    drag = SIDESLIP_DRAG and "beta" in index
     out, known, jacobians, squares, count = [], [], [], dict.fromkeys(gusts, 0.0), 0
     for e in batch:
         x = np.zeros((e.y.shape[0], len(KINEMATIC_STATES)))
@@ -735,6 +770,10 @@ def prepare(
             if role in index:
                 x[:, k] = e.y[:, index[role]] + e.operating_point[index[role]]
         u, y = e.u, e.y.copy()
+        # Sideslip drag's regressor: the air-relative β (the vane's), before the wind's
+        # correction below puts the inertial β in its place.
+        beta = x[:, KINEMATIC_STATES.index("beta")]
+        beta = beta - beta[:trim_samples].mean()
         if gusts:
             still = inertial_air_data(x, e.navigation)
             columns = []
@@ -749,6 +788,8 @@ def prepare(
                 y[:, index[role]] = inertial - e.operating_point[index[role]]
             columns += [np.gradient(columns[gusts.index(role)], dt) for role in rated]
             u = np.hstack([u, np.column_stack(columns)])
+        if drag:
+            u = np.hstack([u, (beta * beta)[:, None]])
         count += y.shape[0]
         trim = x[:trim_samples].mean(axis=0)
         jacobians.append(kinematic_jacobian(trim))
@@ -765,6 +806,11 @@ def prepare(
     rates = tuple(r + len(names) + k for k in range(len(rated)))
     names = (*names, *(f"gust {role} rate" for role in rated))
     where = [*where, *(axes[role] for role in rated)]
+    rows = {}
+    if drag:
+        rows[r + len(names)] = index["airspeed"]
+        names = (*names, "beta²")
+        where = [*where, "longitudinal"]
     m = batch[0].y.shape[1]
     J = np.zeros((m, m))
     mean = np.mean(jacobians, axis=0)
@@ -783,4 +829,5 @@ def prepare(
         J,
         attitude,
         rates,
+        rows,
     )

@@ -456,7 +456,14 @@ def _identify_aircraft(
     ready = aircraft.prepare(batch, output_roles, max(1, round(TRIM_S / dt)), dt)
     band = settings.band_hz or aircraft.input_band(batch, dt)
     sp = aircraft.spectra(
-        ready.batch, dt, band, settings.held_inputs, ready.known, ready.kinematics, ready.attitude
+        ready.batch,
+        dt,
+        band,
+        settings.held_inputs,
+        ready.known,
+        ready.kinematics,
+        ready.attitude,
+        ready.rows,
     )
     E = len(batch)
     throttle = [j for j, role in enumerate(input_roles) if role == "throttle"]
@@ -551,6 +558,11 @@ def _identify_aircraft(
     model, covariance, _lag_times = _assemble(
         fits, len(inputs), len(outputs), {width + c: c for c in range(len(outputs))}
     )
+    for column, row in ready.rows.items():  # sideslip drag: V̇ = … + X_β² β²
+        for f in fits:
+            gain = aircraft.known_gain(f, column, row)
+            if gain is not None:
+                report["sideslip_drag"] = {"gain": gain[0], "std": gain[1]}
     report["engine_lag_s"] = {
         f.name: {inputs[j]: tau for j, tau in f.lags.items() if j < r} for f in fits if f.lags
     }
