@@ -1,5 +1,6 @@
 """Did each surface follow its command? The check a flight-test engineer makes on the first
-manoeuvre of a flight, made on every excitation window.
+manoeuvre of a flight, made on every finished excitation window (an aborted run's commands
+may never have reached the servos).
 
 A plan commands deflections in eq. 3.1's sign (docs/excitation.md, "Signs"); `direction` in
 [excitation.surfaces] turns them into PWM, and the potentiometer box measures where the

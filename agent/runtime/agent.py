@@ -268,6 +268,8 @@ class Agent:
         """A surface that moved against its command, or not at all, is told to the ground:
         the direction or a calibration is set up the wrong way (agent.excitation.follow)."""
         played = self.scheduler.played
+        if window.outcome != "finished":  # an aborted run's commands may never have arrived
+            return
         if played is None or played.plan.id != window.plan_id or len(rows) == 0:
             return
         measured = {c: rows[:, 1 + k] for k, c in enumerate(self.recorder.channels)}

@@ -235,7 +235,12 @@ class Identification:
         """Release without a loop (an agent that never ran): the worker, if one was started,
         is told to stop; the model-store thread ends."""
         if self._pool is not None:
-            self._pool.shutdown(wait=False, cancel_futures=True)
+            # A worker process may be busy: told to stop, not waited for (it is killed with
+            # the agent). A thread worker cannot be killed and has nothing left to run once the
+            # agent's jobs were awaited: waited for, so no thread outlives the agent.
+            self._pool.shutdown(
+                wait=isinstance(self._pool, ThreadPoolExecutor), cancel_futures=True
+            )
         self._store.shutdown(wait=True)
 
     # -- a frequency response asked for --------------------------------------------------

@@ -82,9 +82,19 @@ async def test_frequency_response_view(tmp_path):
             app.query_one("#frf-pair").value = "aileron → p"
             await pilot.press("f")
             await until(pilot, lambda: app.query_one("#bode").report, "the frequency response")
-            app.query_one("#bode").scroll_visible(animate=False)
-            await pilot.pause(0.3)
-            matches("console-results-frf-120x44", app.export_screenshot())
+            bode = app.query_one("#bode")
+            bode.scroll_visible(animate=False)
+            # Waited for as an event, not a pause: the view scrolled to the whole Bode plot
+            # and two frames in a row alike (a fixed 0.3 s was too short on a loaded machine).
+            shots: list[str] = []
+
+            def settled() -> bool:
+                shots.append(app.export_screenshot())
+                in_view = app.screen.region.contains_region(bode.region)
+                return in_view and len(shots) > 1 and shots[-1] == shots[-2]
+
+            await until(pilot, settled, "the frequency response in view")
+            matches("console-results-frf-120x44", shots[-1])
 
 
 async def test_live_view(tmp_path):
