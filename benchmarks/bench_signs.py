@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/bench_signs.py                       # the Cub, calm, seeds 2–3
     .venv/bin/python benchmarks/bench_signs.py --aircraft c182 --turbulence 1 --seeds 4
+    .venv/bin/python benchmarks/bench_signs.py --scale-lateral 0.5 --scale-longitudinal 0.5
 
 Flies the full preset four times per seed, with the aileron's and the rudder's amplitudes each
 as is or negated (the same waveforms, mirrored), through `agent.sim.offline.fly` as
@@ -9,7 +10,12 @@ as is or negated (the same waveforms, mirrored), through `agent.sim.offline.fly`
 mode's error against the validated truth (%), the spiral's z (identified less true, in its
 standard errors), and the bank angle's mean and largest excursion. An excitation design
 should not matter by a sign that carries no information: the rows of one seed should agree
-to within its noise.
+to within its noise. `--scale-lateral` and `--scale-longitudinal` scale the preset's
+amplitudes of aileron and rudder, and of elevator and throttle: what moves with amplitude is
+nonlinearity. The truth's spiral is printed beside FGLinearization's, an independent check,
+and, per seed, the spiral identified from the truth's own linear response to the first
+flight's recorded inputs (held over each step, as `Truth.simulate` holds them): what the
+method gives where nothing is nonlinear.
 """
 
 from __future__ import annotations
@@ -20,13 +26,17 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import argparse
+import dataclasses
 
 import numpy as np
-from bench_jsbsim import AIRCRAFT, FIRST_SEED, MODES, experiment, mode_errors, ours
+from bench_jsbsim import AIRCRAFT, FIRST_SEED, MODES, TRIM_SAMPLES, experiment, mode_errors, ours
 
+from agent.channels import INPUT_ROLES, OUTPUT_ROLES
 from agent.excitation.plan import FULL_AMPLITUDE, preset
-from agent.sim.offline import OUTPUTS, fly
-from agent.sim.truth import linear_truth
+from agent.ident import Settings, identify
+from agent.sim.offline import OUTPUTS, Record, fly
+from agent.sim.plant import INPUTS, Plant
+from agent.sim.truth import STATES, Truth, linear_truth
 
 SIGNS = ((1, 1), (-1, 1), (1, -1), (-1, -1))
 
@@ -36,19 +46,32 @@ def main() -> None:
     parser.add_argument("--aircraft", default="J3Cub", choices=list(AIRCRAFT))
     parser.add_argument("--turbulence", type=float, default=0.0)
     parser.add_argument("--seeds", type=int, default=2)
+    parser.add_argument("--scale-lateral", type=float, default=1.0)
+    parser.add_argument("--scale-longitudinal", type=float, default=1.0)
     args = parser.parse_args()
     speed = AIRCRAFT[args.aircraft]
-    truth = linear_truth(args.aircraft, speed).modes()
+    reference = linear_truth(args.aircraft, speed)
+    truth = reference.modes()
     spiral_true = truth["spiral"][0].real if truth.get("spiral") else None
+    fg = np.linalg.eigvals(Plant(args.aircraft, airspeed_kts=speed).linearisation.A)
+    if spiral_true is not None:
+        real = fg[np.abs(fg.imag) < 1e-12].real
+        nearest = real[np.argmin(np.abs(real - spiral_true))]
+        print(
+            f"spiral: truth {spiral_true:+.5f}, FGLinearization's nearest real pole {nearest:+.5f}"
+        )
     head = "  ".join(f"{m:>13}" for m in MODES)
     print(f"{args.aircraft} at {speed:g} kt, turbulence {args.turbulence:g}; errors in %")
     print(f"{'seed':>4} {'aileron':>7} {'rudder':>6} {head}  spiral z  bank mean / max (deg)")
     phi = OUTPUTS.index("phi")
     for seed in range(FIRST_SEED, FIRST_SEED + args.seeds):
         for aileron, rudder in SIGNS:
+            lateral, longitudinal = args.scale_lateral, args.scale_longitudinal
             amplitude = {
-                "aileron": aileron * FULL_AMPLITUDE["aileron"],
-                "rudder": rudder * FULL_AMPLITUDE["rudder"],
+                "aileron": aileron * lateral * FULL_AMPLITUDE["aileron"],
+                "rudder": rudder * lateral * FULL_AMPLITUDE["rudder"],
+                "elevator": longitudinal * FULL_AMPLITUDE["elevator"],
+                "throttle": longitudinal * FULL_AMPLITUDE["throttle"],
             }
             plan = preset("full", amplitude=amplitude)
             rec = fly(
@@ -67,6 +90,31 @@ def main() -> None:
                 f"{bank.mean():+.1f} / {np.abs(bank).max():.1f}",
                 flush=True,
             )
+            if (aileron, rudder) == SIGNS[0]:
+                first = rec
+        print(
+            f"{seed:>4} the truth's linear response: spiral {linear_spiral(reference, first):+.5f}"
+        )
+
+
+def linear_spiral(truth: Truth, rec: Record) -> float:
+    """The spiral identified from the truth's linear response to `rec`'s inputs."""
+    u = rec.u - rec.u[:TRIM_SAMPLES].mean(axis=0)
+    u = u[:, [rec.inputs.index(name) for name in INPUTS]]
+    u[:, INPUTS.index("throttle")] /= 1000.0  # µs → the truth's 0–1
+    x = truth.simulate(u, rec.dt)
+    y = rec.y[:TRIM_SAMPLES].mean(axis=0) + x[:, [STATES.index(o) for o in rec.outputs]]
+    linear = dataclasses.replace(rec, y=y)
+    result = identify(
+        experiment(linear, wind=False),
+        rec.dt,
+        input_names=rec.inputs,
+        output_names=rec.outputs,
+        input_roles=INPUT_ROLES,
+        output_roles=OUTPUT_ROLES,
+        settings=Settings(held_inputs=True),
+    )
+    return next(m.eigenvalue.real for m in result.modes if m.name == "spiral")
 
 
 if __name__ == "__main__":
