@@ -254,15 +254,15 @@ class Agent:
             self.scheduler.abort(f"autopilot link lost: {reason}")
 
     def _on_window(self, window: Window, rows: np.ndarray) -> None:
-        """The recorder has the window and its margin: log it, check that its surfaces followed
-        their commands, and queue its identification."""
+        """The recorder has the window and its margin: log it, queue its identification, then
+        check that its surfaces followed their commands (last: the record and the job first)."""
         self.logbook.excitation(window, rows, batch=self.identification.settings.batch)
-        self._check_following(window, rows)
         if window.outcome != "finished":
             text = f"{window.plan_id} aborted ({window.reason}): not identified"
             self.downlink.send(messages.Notice(text=text))
         elif not self.identification.submit(window, rows):
             self.downlink.send(messages.Notice(text="identification queue full: window dropped"))
+        self._check_following(window, rows)
 
     def _check_following(self, window: Window, rows: np.ndarray) -> None:
         """A surface that moved against its command, or not at all, is told to the ground:
