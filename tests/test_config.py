@@ -86,6 +86,11 @@ AIL = (
             "greater than 0",
         ),
         (AIL.replace("\nchannel = 1", ""), "excitation.surfaces.aileron.channel", "Field required"),
+        (
+            AIL.replace("channel = 1", "channel = 1\ndirection = 2"),
+            "excitation.surfaces.aileron.direction",
+            "1 or -1",
+        ),
         ("[excitation.envelope]\nmin_airspeed = 40\n", "excitation.envelope", "below max_airspeed"),
         ('[sensors.vn200]\nfields = ["common.nope"]\n', "sensors.vn200", "unknown VN-200"),
         ("[sensors.airdata]\nbaud = 10\n", "sensors.airdata.baud", "greater than or equal"),
@@ -128,6 +133,19 @@ def test_bad_config_names_key_and_reason(tmp_path, capsys, text, key, reason):
     assert key in err
     assert reason in err
     assert "Traceback" not in err
+
+
+def test_an_unset_direction_is_arduplanes_sense_for_the_role(tmp_path):
+    # ArduPlane's RC inputs rise for roll right and more throttle: −1 for the aileron (eq. 3.1's
+    # δA > 0 rolls left), +1 for the throttle; a direction given is kept.
+    throttle = AIL.replace("aileron", "throttle").replace("channel = 1", "channel = 3")
+    rudder = AIL.replace("aileron", "rudder").replace("channel = 1", "channel = 4\ndirection = 1")
+    path = tmp_path / "directions.toml"
+    path.write_text(AIL + throttle + rudder)
+    surfaces = load_config(path).excitation.surfaces
+    assert surfaces["aileron"].direction == -1
+    assert surfaces["throttle"].direction == 1
+    assert surfaces["rudder"].direction == 1
 
 
 def test_config_check_ok_and_missing_file(tmp_path, capsys):
