@@ -65,6 +65,7 @@ class Identification:
         self.counters = counters
         self.settings = messages.IdentSettings(axes=config.identification.axes)
         self.busy = False  # a window is in the worker
+        self.ready = False  # the first worker is up and warmed
         # The stage a busy window is in: (name, since, expected seconds or None).
         self._stage: tuple[str, float, float | None] | None = None
         # By (axes, stage): how long the last one took (s) and on how many samples.
@@ -196,6 +197,7 @@ class Identification:
         self.start_worker()
         loop = asyncio.get_running_loop()
         await loop.run_in_executor(self._pool, jobs.warm)  # up before the first window
+        self.ready = True
         while True:
             item = await self._queue.get()
             if isinstance(item, _FrfJob):

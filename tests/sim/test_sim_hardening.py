@@ -188,9 +188,19 @@ async def test_a_hostile_transmitter_and_half_the_frames_lost_change_nothing(tmp
 async def test_the_worker_killed_while_identifying_gives_a_failure_and_a_new_worker(tmp_path):
     async with simulated(SimOptions(preset="lateral", directory=tmp_path)) as sim:
         agent = sim.agent
-        seen = await start_run(sim, "killed")
-        await until(lambda: agent.identification.busy, "the identification")
+        await until(lambda: agent.identification.ready, "the worker warmed up")
         pid = agent.identification.worker_pid
+        # Stopped before the window reaches it, killed once the window is in it: killed while
+        # identifying for certain, however slow the machine (a worker killed after its answer
+        # came back has cost nothing, and that is not what this test is about).
+        os.kill(pid, signal.SIGSTOP)
+        seen = await start_run(sim, "killed")
+
+        def identifying() -> bool:
+            stage = agent.identification.stage(sim.clock.now())
+            return stage is not None and stage[0] == "identifying"
+
+        await until(identifying, "the window in the worker")
         os.kill(pid, signal.SIGKILL)
         failure = await answer(sim, seen)
         assert isinstance(failure, messages.Failure), failure
