@@ -4,6 +4,7 @@ through the full preset by suas-sysid and by the peers, in one process.
     make bench-jsbsim                                            # 3 × 2 × 10 seeds (~5 min)
     .venv/bin/python benchmarks/bench_jsbsim.py --seeds 2 --no-peers          # a quick look
     .venv/bin/python benchmarks/bench_jsbsim.py --aircraft pa28 --turbulence 1
+    .venv/bin/python benchmarks/bench_jsbsim.py --no-peers --without alpha-products
 
 Each seed is one offline flight (`agent.sim.offline.fly`: JSBSim trimmed as `sysid sim` trims
 it, the emulated ArduPlane's servos, the sensors' noise, 100 Hz). It holds the full preset
@@ -17,7 +18,9 @@ Truth: `agent.sim.truth.linear_truth`, JSBSim's validated small-amplitude linear
 per aircraft, condition and method:
 - each named mode's error |λ − λ_true| / |λ_true| (median / worst over seeds);
 - the seeds with every named mode within 10 %;
-- for suas-sysid, the seeds whose spiral holds the truth within 3 standard errors;
+- for suas-sysid, the seeds whose spiral holds the truth within 3 standard errors, and below
+  the row the spiral's z-scores (identified − truth over its standard error): their mean, sd,
+  rms and worst, which would be 0, 1, 1 and about 2 for an unbiased, calibrated estimate;
 - the validation TIC: the model simulated on separate records, its own seed each: an elevator
   doublet judged on V, α, q, θ, and an aileron then a rudder doublet judged on β, p, r, φ
   (the mean of the two means; median / worst over seeds). The doublets are sized to the
@@ -55,7 +58,7 @@ from agent.excitation.plan import (
     preset,
     render,
 )
-from agent.ident import Experiment, Settings, identify
+from agent.ident import Experiment, Settings, aircraft, identify
 from agent.ident.convert import StateSpace
 from agent.ident.errors import DataError, IdentificationFailed
 from agent.ident.fit import simulate
@@ -276,13 +279,34 @@ def validation_tic(model: StateSpace, records: list[tuple[Experiment, tuple]]) -
     return float(np.mean(tics))
 
 
+def _without_alpha_products() -> None:
+    aircraft.BILINEAR = ()
+
+
+def _without_sideslip_drag() -> None:
+    aircraft.SIDESLIP_DRAG = False
+
+
+# Terms of the whole-aircraft method that `--without` leaves out (docs/identification.md).
+ABLATIONS = {"alpha-products": _without_alpha_products, "sideslip-drag": _without_sideslip_drag}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--aircraft", nargs="*", default=list(AIRCRAFT))
     parser.add_argument("--turbulence", type=float, nargs="*", default=[0.0, 1.0])
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--no-peers", action="store_true")
+    parser.add_argument(
+        "--without",
+        nargs="*",
+        default=[],
+        choices=sorted(ABLATIONS),
+        help="leave out a term of the whole-aircraft method, to see what it does",
+    )
     args = parser.parse_args()
+    for term in args.without:
+        ABLATIONS[term]()
     plan = preset("full")
     print(
         "cells: median / worst over seeds; errors in %; ≤10 %: seeds with every named mode "
@@ -307,9 +331,9 @@ def main() -> None:
                 rows.setdefault("validated truth", []).append(
                     ([0.0] * len(MODES), truth_tic(reference, check, rec.dt), np.nan, None)
                 )
-                inside = _spiral_inside(spiral, truth)
+                z = _spiral_z(spiral, truth)
                 rows.setdefault("suas-sysid", []).append(
-                    (mode_errors(found, truth), validation_tic(model, check), seconds, inside)
+                    (mode_errors(found, truth), validation_tic(model, check), seconds, z)
                 )
                 if args.no_peers:
                     continue
@@ -331,14 +355,15 @@ def main() -> None:
             )
 
 
-def _spiral_inside(spiral, truth) -> bool | None:
-    """Whether the truth's spiral lies within 3 standard errors of the identified one."""
+def _spiral_z(spiral, truth) -> float | None:
+    """The identified spiral's offset from the truth's in its standard errors (inf when none
+    was identified or it has no standard error; None when the truth has no spiral)."""
     if not truth.get("spiral"):
         return None
-    if spiral is None or spiral.uncertainty is None:
-        return False
+    if spiral is None or spiral.uncertainty is None or spiral.uncertainty.real <= 0:
+        return np.inf
     true = truth["spiral"][0].real
-    return abs(spiral.eigenvalue.real - true) <= 3 * spiral.uncertainty.real
+    return float((spiral.eigenvalue.real - true) / spiral.uncertainty.real)
 
 
 def _print(name: str, turbulence: float, method: str, results: list) -> None:
@@ -346,8 +371,8 @@ def _print(name: str, turbulence: float, method: str, results: list) -> None:
     cells = "  ".join(_pair(np.median(c), np.max(c)) for c in e.T)
     ok = int(np.sum(np.all(e <= 10, axis=1)))
     tics = np.array([r[1] for r in results])
-    spiral = [r[3] for r in results if r[3] is not None]
-    spiral_cell = f"{sum(spiral):2d}/{len(spiral):<2d}" if spiral else "  –  "
+    z = np.array([r[3] for r in results if r[3] is not None])
+    spiral_cell = f"{int(np.sum(np.abs(z) <= 3)):2d}/{len(z):<2d}" if z.size else "  –  "
     times = [r[2] for r in results if np.isfinite(r[2])]
     seconds = f"{np.median(times):5.2f}" if times else "    –"
     print(
@@ -355,6 +380,12 @@ def _print(name: str, turbulence: float, method: str, results: list) -> None:
         f"{np.median(tics):5.3f}/{np.max(tics):5.3f}  {seconds}",
         flush=True,
     )
+    if z.size and np.all(np.isfinite(z)):  # calibrated and unbiased: mean 0, sd and rms 1
+        print(
+            f"{'':8} {'':4} spiral z (identified − truth, in its σ): mean {np.mean(z):+.2f}, "
+            f"sd {np.std(z):.2f}, rms {np.sqrt(np.mean(z * z)):.2f}, worst {np.max(np.abs(z)):.2f}",
+            flush=True,
+        )
 
 
 def _pair(median: float, worst: float) -> str:

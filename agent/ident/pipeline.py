@@ -468,6 +468,8 @@ def _identify_aircraft(
     E = len(batch)
     throttle = [j for j, role in enumerate(input_roles) if role == "throttle"]
     known = {axis: [j for j, a in ready.extra_axes.items() if a == axis] for axis in aircraft.AXES}
+    if "longitudinal" not in present:  # α barely moves: its products only add unknowns
+        known["lateral"] = [j for j in known["lateral"] if j not in ready.bilinear]
     names = [*inputs, *ready.extra_names]
     wind = {"measured": bool(ready.gusts), "gust_rms": ready.gust_rms}
     fits, report = (
@@ -516,23 +518,23 @@ def _identify_aircraft(
             # The longitudinal forces and moments are even in the lateral variables (the
             # airframe's symmetry), so lateral controls never join the longitudinal axis: what
             # they explain there is even-order (sideslip drag), which a linear term only mimics.
-            # The propeller's torque and slipstream do act linearly on the lateral axis.
-            # The other axis's controls and its states are two descriptions of one coupling
-            # at the other axis's lines, where its states are its controls' response: both
-            # together are nearly collinear there. Only the one that explains more joins. On
-            # JSBSim's Cessna 182 in light turbulence both together biased the spiral (within
-            # 3σ of the truth on 8 of 10 seeds, z up to 4.5); either alone, 10 of 10.
+            # Where the longitudinal controls reach the lateral axis, the throttle joins it
+            # (the propeller's torque and slipstream act linearly and at once), the elevator
+            # does not: it has no path to the lateral forces but through the longitudinal
+            # states. Controls and states join each on its own test. When the one that
+            # explained more of the cost joined alone, the choice flipped between seeds where
+            # the two were nearly equal, and the spiral flipped with it (JSBSim's Cub in calm
+            # air: z from about 1 to 3.3).
             join_controls = moved_inputs > aircraft.COUPLED and fitted.name == "lateral"
             join_states = moved_states > aircraft.COUPLED
-            if join_controls and join_states:
-                join_controls, join_states = by_inputs > by_states, by_inputs <= by_states
             lags = list(fitted.lags)
             if join_controls:
-                ins += other
-                controls += other
+                thrust = [j for j in other if j in throttle]
+                ins += thrust
+                controls += thrust
                 # The throttle reaches the lateral axis as it reaches the longitudinal one:
                 # through the engine's lags (its torque and slipstream follow the thrust).
-                lags += [j for j in other if j in throttle]
+                lags += thrust
             if join_states:
                 ins += cross
             if ins != list(fitted.inputs):
@@ -548,10 +550,10 @@ def _identify_aircraft(
                 )
         coupled = []
         for k, f in enumerate(fits):
-            if any(j >= width for j in f.inputs):
-                coupled.append(f"{f.name} coupled by the other axis's states")
-            elif any(j < r and j not in own[k] for j in f.inputs):
-                coupled.append(f"{f.name} coupled by the other axis's controls")
+            by = ["the throttle"] if any(j < r and j not in own[k] for j in f.inputs) else []
+            by += ["the other axis's states"] if any(j >= width for j in f.inputs) else []
+            if by:
+                coupled.append(f"{f.name} coupled by {' and '.join(by)}")
         report["model"] = "decoupled" + (f", {' and '.join(coupled)}" if coupled else "")
     else:
         report["model"] = fits[0].name
@@ -563,6 +565,19 @@ def _identify_aircraft(
             gain = aircraft.known_gain(f, column, row)
             if gain is not None:
                 report["sideslip_drag"] = {"gain": gain[0], "std": gain[1]}
+    # The lateral derivatives' change with α: each product's gain in β̇, ṗ and ṙ.
+    products = {}
+    for column in ready.bilinear:
+        for f in fits:
+            for row in f.states:
+                gain = aircraft.known_gain(f, column, row)
+                if gain is not None and row not in ready.attitude:
+                    products.setdefault(names[column], {})[outputs[row]] = {
+                        "gain": gain[0],
+                        "std": gain[1],
+                    }
+    if products:
+        report["alpha_products"] = products
     report["engine_lag_s"] = {
         f.name: {inputs[j]: tau for j, tau in f.lags.items() if j < r} for f in fits if f.lags
     }

@@ -130,7 +130,9 @@ ATTITUDE = (3, 7)  # θ and φ: kinematics alone
 ATTITUDE_ROWS = np.isin(np.arange(8), ATTITUDE)
 
 
-def gusty_record(seed: int, tau_q: float = 0.0, drag: float = 0.0, scale: float = 0.0015):
+def gusty_record(
+    seed: int, tau_q: float = 0.0, drag: float = 0.0, scale: float = 0.0015, roll_ab: float = 0.0
+):
     """The aircraft flown through a gust g (V, α, β; low-passed white noise, 0.03 m/s and
     0.03° rms), the controls at 0.15 % of the full preset (A.2's responses are large): the
     forces see the air-relative state, ẋ_i = A(x_i − g) + B u, the vanes and the
@@ -139,7 +141,8 @@ def gusty_record(seed: int, tau_q: float = 0.0, drag: float = 0.0, scale: float 
     `tau_q` (s), the forces also see Dryden's pitch-rate gust q_g = s α_g / (1 + τ s): they
     depend on q − q_g (α̇ = q + … and θ̇ = q keep the inertial q). With `drag` (m/s² per
     rad²), V̇ also loses drag · β² (sideslip drag, β the air-relative sideslip from trim);
-    `scale`: the controls' share of the full preset.
+    `scale`: the controls' share of the full preset. With `roll_ab` (1/s² per rad²), ṗ also
+    gains roll_ab · α β (the rolling moment's change with α, α and β air-relative from trim).
 
     A.2's models came from flight data and do not keep θ̇ = q: their θ and φ rows and
     columns are replaced by the kinematics at the operating point, as a real aircraft has
@@ -184,6 +187,7 @@ def gusty_record(seed: int, tau_q: float = 0.0, drag: float = 0.0, scale: float 
         inertial[k] = model.C @ state + model.D @ w[k]
         remainder = kinematic_remainder((inertial[k] + op)[None], op)[0] * ATTITUDE_ROWS
         remainder[0] -= drag * (inertial[k, 4] - g[k, 2]) ** 2
+        remainder[5] += roll_ab * (inertial[k, 1] - g[k, 1]) * (inertial[k, 4] - g[k, 2])
         state = model.A @ state + model.B @ w[k] + DT * np.concatenate([remainder, [0, 0]])
     air = inertial.copy()
     air[:, GUSTS] -= g
@@ -290,6 +294,45 @@ def test_sideslip_drag_is_a_known_input_of_the_airspeeds_equation(monkeypatch):
     assert blind > 4 * error
 
 
+def test_the_rolling_moments_change_with_alpha_is_a_known_input_of_the_lateral_axis():
+    """ṗ gains −50 α β (C_lβ changing with α, as JSBSim's Cub tabulates it), every control at
+    3 % of the full preset (α and β to about 1°): the α·β input of the lateral axis gives the
+    gain back (measured: −50.8 ± 0.5); without the term every product's gain is nought within
+    three standard errors. The longitudinal axis has no such input, and with the longitudinal
+    controls left out (α barely moves) neither has the lateral one."""
+    scale = np.full(4, 0.03)
+
+    def identified(roll_ab: float, inputs=INPUTS) -> dict:
+        u, air, op, navigation, _ = gusty_record(seed=5, scale=scale, roll_ab=roll_ab)
+        columns = [INPUTS.index(name) for name in inputs]
+        record = Experiment(u[:, columns], air, operating_point=op, navigation=navigation)
+        return identify(
+            record,
+            DT,
+            input_names=inputs,
+            output_names=OUTPUTS,
+            output_roles=OUTPUTS,
+            settings=Settings(held_inputs=False),
+        ).aircraft
+
+    report = identified(-50.0)
+    products = report["alpha_products"]
+    assert set(products) == {"alpha·beta", "alpha·p", "alpha·r"}
+    assert set(products["alpha·beta"]) == {"beta", "p", "r"}  # φ̇ is kinematics
+    assert products["alpha·beta"]["p"]["gain"] == pytest.approx(-50.0, rel=0.04)
+    longitudinal, lateral = report["axes"]
+    assert "alpha·beta" in lateral["inputs"]
+    assert not any(name.startswith("alpha·") for name in longitudinal["inputs"])
+    still = identified(0.0)["alpha_products"]
+    for rows in still.values():
+        for gain in rows.values():
+            assert abs(gain["gain"]) < 3 * gain["std"]
+    alone = identified(-50.0, ("aileron", "rudder"))
+    assert [axis["name"] for axis in alone["axes"]] == ["lateral"]
+    assert "alpha_products" not in alone
+    assert not any(name.startswith("alpha·") for name in alone["axes"][0]["inputs"])
+
+
 def test_navigation_of_the_wrong_shape_is_refused_clearly():
     # Bad input tried: navigation with a row missing, and an operating point one value short.
     u, air, op, navigation, _ = gusty_record(seed=1)
@@ -328,13 +371,14 @@ def test_a_propellers_gyroscopic_coupling_is_found_as_a_coupling_block_of_a():
     assert np.max(np.abs(found - true) / np.abs(true)) < 5e-3
 
 
-def test_the_other_axis_joins_by_its_controls_or_its_states_not_both():
+def test_the_throttle_and_the_longitudinal_states_join_the_lateral_axis_each_on_its_own_test():
     """The propeller's torque (the thrust state → roll and yaw) couples the throttle into the
-    lateral axis: the longitudinal controls and the longitudinal states both explain it (at
-    the throttle's lines the states are the controls' response), so only the one that
-    explains more joins, here the controls (83 % of the lateral cost against 7 %). It joins
-    through the engine's lags, as it reaches the longitudinal axis, and the aircraft's modes
-    come back (without the lags they were 19 % off)."""
+    lateral axis; the longitudinal states explain part of it too (at the throttle's lines they
+    are its response). Each joins on its own test: the throttle (through the engine's lags, as
+    it reaches the longitudinal axis; without them the modes were 19 % off) and the states,
+    but not the elevator, which has no path to the lateral forces but through the states. The
+    aircraft's modes come back (measured: 0.13 % off at worst; with the controls alone, the
+    former rule, 0.24 %)."""
     A, B, C = aircraft_with_engine_lag()
     A[5:7, 9] = [0.04, -0.02]  # thrust state → ṗ, ṙ
     record = full_preset_record(A, B, C)
@@ -342,16 +386,16 @@ def test_the_other_axis_joins_by_its_controls_or_its_states_not_both():
     report = result.aircraft
     coupling = report["coupling"]["lateral"]
     assert coupling["response_by_inputs"] > COUPLED
-    assert coupling["response_by_states"] > COUPLED  # both qualify
-    assert coupling["by_inputs"] > coupling["by_states"]
+    assert coupling["response_by_states"] > COUPLED  # both qualify, both join
     lateral = next(a for a in report["axes"] if a["name"] == "lateral")
     assert "throttle" in lateral["inputs"]
-    assert not any(name in lateral["inputs"] for name in ("airspeed", "alpha", "q", "theta"))
-    assert "lateral coupled by the other axis's controls" in report["model"]
+    assert "elevator" not in lateral["inputs"]
+    assert all(name in lateral["inputs"] for name in ("airspeed", "alpha", "q"))
+    assert "lateral coupled by the throttle and the other axis's states" in report["model"]
     assert "throttle" in report["engine_lag_s"]["lateral"]
     found = np.sort_complex(np.linalg.eigvals(result.continuous.A[:8, :8]))
     true = np.sort_complex(np.linalg.eigvals(A[:8, :8]))
-    assert np.max(np.abs(found - true) / np.abs(true)) < 0.01
+    assert np.max(np.abs(found - true) / np.abs(true)) < 3e-3
 
 
 def _spectra(U: np.ndarray, record: np.ndarray, Y: np.ndarray | None = None) -> Spectra:
