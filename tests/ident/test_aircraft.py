@@ -53,13 +53,13 @@ def full_preset_record(A, B, C):
     return Experiment(u, simulate(model, u))
 
 
-def aircraft_identify(record) -> Identification:
+def aircraft_identify(record, inputs=INPUTS) -> Identification:
     """The whole record identified as the agent does for `--axes full`: every channel named
     by its role, the inputs sampled (not held)."""
     return identify(
         record,
         DT,
-        input_names=INPUTS,
+        input_names=inputs,
         output_names=OUTPUTS,
         output_roles=OUTPUTS,
         settings=Settings(held_inputs=False),
@@ -306,14 +306,7 @@ def test_the_rolling_moments_change_with_alpha_is_a_known_input_of_the_lateral_a
         u, air, op, navigation, _ = gusty_record(seed=5, scale=scale, roll_ab=roll_ab)
         columns = [INPUTS.index(name) for name in inputs]
         record = Experiment(u[:, columns], air, operating_point=op, navigation=navigation)
-        return identify(
-            record,
-            DT,
-            input_names=inputs,
-            output_names=OUTPUTS,
-            output_roles=OUTPUTS,
-            settings=Settings(held_inputs=False),
-        ).aircraft
+        return aircraft_identify(record, inputs).aircraft
 
     report = identified(-50.0)
     products = report["alpha_products"]
