@@ -592,7 +592,7 @@ def _identify_aircraft(
         for f in fits
     ]
     hold = "zoh" if settings.held_inputs else "foh"
-    discrete = discretize_hold(model.A, model.B, model.C, model.D, dt, hold)
+    discrete = _sampled(model, dt, hold, outputs)
     n_model = model.A.shape[0]
     # Each record starts where its outputs are (the model's first states are the outputs) with
     # the engine's lag states at rest. Estimated by least squares instead, those nearly
@@ -688,6 +688,27 @@ def _identify_aircraft(
         warnings=tuple(warnings),
         method="aircraft",
         aircraft=report,
+    )
+
+
+def _sampled(model: StateSpace, dt: float, hold: str, outputs: Sequence[str]) -> StateSpace:
+    """The whole-aircraft model sampled at dt. An output with no response above its noise (a
+    dead sensor's noise alone) gets gains of 10¹⁰ in the other equations and the model a pole
+    millions of 1/s fast, which no sampling survives: a clear failure naming that output, not
+    an overflow deep in the modal analysis."""
+    with np.errstate(all="ignore"):
+        discrete = discretize_hold(model.A, model.B, model.C, model.D, dt, hold)
+    if all(np.all(np.isfinite(x)) for x in (discrete.A, discrete.B)):
+        return discrete
+    pole = np.max(np.abs(np.linalg.eigvals(model.A)))
+    m = len(outputs)
+    gains = np.max(np.abs(model.A[:m, :m]), axis=0)  # what each output's changes are worth
+    where = outputs[int(np.argmax(gains))]
+    raise IdentificationFailed(
+        f"the identified model has a pole of {pole:.3g} 1/s, far beyond what sampling at "
+        f"{dt:g} s can show, and gains up to {gains.max():.3g} on {where}: an output with no "
+        f"response above its noise (a dead sensor) does that; check {where}'s signal or "
+        "leave it out of the outputs"
     )
 
 

@@ -20,7 +20,7 @@ from agent.ident.aircraft import (
     measured_gust,
 )
 from agent.ident.convert import discretize_foh
-from agent.ident.errors import DataError
+from agent.ident.errors import DataError, IdentificationFailed
 from agent.ident.fit import simulate
 from agent.ident.reference import LATERAL, LONGITUDINAL
 
@@ -324,6 +324,36 @@ def test_the_rolling_moments_change_with_alpha_is_a_known_input_of_the_lateral_a
     assert [axis["name"] for axis in alone["axes"]] == ["lateral"]
     assert "alpha_products" not in alone
     assert not any(name.startswith("alpha·") for name in alone["axes"][0]["inputs"])
+
+
+def test_a_dead_alpha_vane_is_a_clear_failure_naming_it():
+    """Bad input tried: the α vane dead, its channel sensor noise alone (10⁻⁷ rad), no INS.
+    Its noise is no response, and the other equations fitted it with gains of 10¹⁰ and a pole
+    of 9·10⁶ 1/s, whose sampling overflowed: an "array must not contain infs or NaNs" from
+    deep in the modal analysis. Now a failure that names α, and through the worker's job (what
+    the agent runs) a failed outcome with that reason, so the ground is told and flying goes
+    on."""
+    from agent.ident.job import Job, run
+
+    u, air, op, _, _ = gusty_record(seed=5, scale=np.full(4, 0.03))
+    air[:, 1] = 1e-7 * np.random.default_rng(1).normal(size=len(air))
+    with pytest.raises(IdentificationFailed, match="on alpha: an output with no response"):
+        aircraft_identify(Experiment(u, air, operating_point=op))
+    job = Job(
+        "ful-1",
+        "full",
+        DT,
+        INPUTS,
+        OUTPUTS,
+        OUTPUTS,
+        ((u, air),),
+        Settings(held_inputs=False),
+        contexts=((op, None),),
+        input_roles=INPUTS,
+    )
+    outcome = run(job)
+    assert not outcome.ok
+    assert "check alpha's signal" in outcome.reason
 
 
 def test_navigation_of_the_wrong_shape_is_refused_clearly():
