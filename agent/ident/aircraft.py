@@ -83,9 +83,9 @@ it changes the outputs by more than COUPLED:
   assembled A (Klein & Morelli, ch. 9: the other axis's measured states as inputs), so the
   modes are the coupled aircraft's.
 At the other axis's lines its states are its controls' response, so the two overlap there.
-An earlier rule let only the one that explained more of the cost join. On JSBSim's Cub in
-calm air the two were nearly equal, the choice flipped between seeds, and the spiral flipped
-with it: z went from about 1 to 3.3.
+Letting only the one that explains more of the cost join would make the model's structure
+hang on a near tie: on JSBSim's Cub in calm air the two shares are nearly equal, the choice
+flips from seed to seed, and the spiral with it (z about 1 or 3.3).
 
 The lateral derivatives' change with α (`prepare`): where both axes are fitted together,
 α·β, α·p and α·r (the still-air states, from trim) are known inputs of the lateral axis, with

@@ -521,10 +521,9 @@ def _identify_aircraft(
             # Where the longitudinal controls reach the lateral axis, the throttle joins it
             # (the propeller's torque and slipstream act linearly and at once), the elevator
             # does not: it has no path to the lateral forces but through the longitudinal
-            # states. Controls and states join each on its own test. When the one that
-            # explained more of the cost joined alone, the choice flipped between seeds where
-            # the two were nearly equal, and the spiral flipped with it (JSBSim's Cub in calm
-            # air: z from about 1 to 3.3).
+            # states. Controls and states join each on its own test, not one of them by the
+            # larger share of the cost: where the shares nearly tie (JSBSim's Cub in calm
+            # air), that choice flips from seed to seed and the spiral with it.
             join_controls = moved_inputs > aircraft.COUPLED and fitted.name == "lateral"
             join_states = moved_states > aircraft.COUPLED
             lags = list(fitted.lags)
