@@ -36,14 +36,15 @@ from agent.config import (
     VectorNav,
     to_toml,
 )
-from agent.excitation.plan import preset
+from agent.excitation.plan import planned_s, preset
 from agent.link import messages
 from agent.link.codec import GROUND
 from agent.link.endpoint import build_endpoint
 from agent.link.session import LinkSession
 from agent.runtime import Agent
-from agent.sim.aircraft import AircraftOptions, SimAircraft
+from agent.sim.aircraft import TICK_HZ, AircraftOptions, SimAircraft
 from agent.sim.ardupilot import Params
+from agent.sim.pace import Overdue, Pace
 from agent.sim.plant import KT
 from agent.sim.radio import EmulatedXBee, RfChannel, module_pair
 from agent.sim.truth import linear_truth
@@ -53,8 +54,10 @@ log = logging.getLogger(__name__)
 
 AIR = bytes.fromhex("0013A20041000001")
 GROUND_ADDR = bytes.fromhex("0013A20041000002")
-# Deadlines of the scripted operator (s): connection, an acknowledgement, a result after the
-# plan ends (recorder margin + identification + radio).
+# Deadlines of the scripted operator on a quiet machine (s): connection, an acknowledgement
+# (arming the full preset renders its multisines first), a result after the plan ends
+# (recorder margin + identification + radio). Each stretches with the slowness measured while
+# it runs (agent.sim.pace): a busy laptop still flies.
 CONNECT_S, ACK_S, RESULT_S = 30.0, 10.0, 90.0
 OPEN_ATTEMPTS = 3
 
@@ -86,6 +89,9 @@ class Ground:
     """When each inbox message arrived (monotonic s, the agent's clock base on this machine)."""
     acks: dict = field(default_factory=dict)
     accepted: bool = False
+    pace: Pace = field(default_factory=lambda: Pace(LoopClock()))
+    """What the operator's deadlines stretch with (the flight's sets the simulator and the
+    agent's processes)."""
 
     def on_message(self, message, seq) -> None:
         if isinstance(message, messages.Ack):
@@ -103,9 +109,19 @@ class Ground:
 
     async def command(self, message) -> messages.Ack:
         seq = self.session.send_reliable(message)
-        if not await until(lambda: seq in self.acks, ACK_S):
-            raise SimError(f"no acknowledgement of {message.kind} in {ACK_S:g} s")
+        await wait(
+            self.pace, lambda: seq in self.acks, f"no acknowledgement of {message.kind}", ACK_S
+        )
         return self.acks[seq]
+
+
+async def wait(pace: Pace, predicate, failure: str, base_s: float, fixed_s: float = 0.0):
+    """predicate()'s first truthy value; SimError "`failure` in N s" once the deadline,
+    stretched for a busy machine, has passed (`Pace.until`)."""
+    found = await pace.until(predicate, base_s, fixed_s)
+    if isinstance(found, Overdue):
+        raise SimError(found.message(failure))
+    return found
 
 
 async def until(predicate, timeout: float, poll_s: float = 0.05):
@@ -157,8 +173,10 @@ def _config(
             port=str(ports / "xbee-air"),
             peer=GROUND_ADDR.hex(),
             key_file=str(tmp / "link.key"),
-            counter_file=str(tmp / "air.counter"),
-            seen_file=str(tmp / "air.seen"),
+            # The aircraft's link state in a folder of its own, as on a flight computer's
+            # card: a test can fill that file system alone (tests/sim/test_sim_hardening.py).
+            counter_file=str(tmp / "air" / "link.counter"),
+            seen_file=str(tmp / "air" / "link.seen"),
         ),
         recorder=Recorder(log_dir=str(tmp / "logs")),
     )
@@ -246,7 +264,9 @@ async def fly(options: SimOptions) -> dict:
         outcomes = []
         for run in range(options.runs):
             outcomes.append(await one_run(options, sim.aircraft, sim.ground, run, say))
-        return _report(options, sim.aircraft, sim.agent, outcomes, sim.ground)
+    # After the flight is torn down: the truth's linearisation takes seconds (tens on a busy
+    # machine) and would hold the event loop the agent and the aircraft still ran on.
+    return _report(options, sim.aircraft, sim.agent, outcomes, sim.ground)
 
 
 @contextlib.asynccontextmanager
@@ -290,16 +310,25 @@ async def _parts(
         asyncio.create_task(ground_module.run(), name="xbee-ground"),
     ]
     ground = agent = None
+
+    def workers() -> list[int | None]:
+        """The agent's processes besides this one, whose CPU waits stretch deadlines too."""
+        if isinstance(agent, AgentProcess):
+            return [agent.pid]
+        return [] if agent is None else [agent.identification.worker_pid]
+
+    pace = Pace(clock, flown=lambda: aircraft.ticks / TICK_HZ, pids=workers)
     try:
-        if not await until(
+        await wait(
+            pace,
             lambda: (
                 aircraft.mavlink_address is not None
                 and air.port.plugged
                 and ground_module.port.plugged
             ),
+            "the simulated aircraft did not start",
             CONNECT_S,
-        ):
-            raise SimError("the simulated aircraft did not start")
+        )
         axes = preset(options.preset).axes
         config = _config(
             tmp, ports, aircraft.mavlink_address, axes, options.realtime_priority, plane.speed_kts
@@ -312,6 +341,7 @@ async def _parts(
             tasks.append(asyncio.create_task(agent.run(), name="agent"))
         if operator:
             ground = await ground_station(ground_module, tmp, clock, tasks)
+            ground.pace = pace
         say(f"simulated {plane.aircraft} at {plane.speed_kts:g} kt; agent up")
 
         def connected() -> bool:
@@ -319,7 +349,8 @@ async def _parts(
                 return ground is not None and ground.flight_mode() is not None
             return agent.autopilot.connected and (ground is None or ground.session.link_up)
 
-        if not await until(connected, CONNECT_S):
+        late = await pace.until(connected, CONNECT_S)
+        if isinstance(late, Overdue):
             if agent_process:
                 missing = "the autopilot and the ground (no status with a flight mode)"
             else:
@@ -328,7 +359,7 @@ async def _parts(
                     ("the ground", ground is None or ground.session.link_up),
                 ]
                 missing = " and ".join(name for name, up in parts if not up)
-            raise SimError(f"the agent did not connect to {missing} in {CONNECT_S:g} s")
+            raise SimError(late.message(f"the agent did not connect to {missing}"))
         await asyncio.sleep(1.0)  # trimmed flight before the first excitation
         yield SimFlight(options, tmp, clock, aircraft, channel, air, ground_module, agent, ground)
     finally:
@@ -388,8 +419,8 @@ async def one_run(options: SimOptions, aircraft: SimAircraft, ground: Ground, ru
     def answered() -> bool:
         return any(isinstance(m, messages.Result | messages.Failure) for m in ground.inbox[seen:])
 
-    if not await until(answered, 60.0 + RESULT_S):
-        raise SimError(f"no identification result for {plan.id}")
+    failure = f"no identification result for {plan.id}"
+    await wait(ground.pace, answered, failure, RESULT_S, fixed_s=planned_s(plan))
     aircraft.pilot.set_switch(False)
     answer = next(
         m for m in ground.inbox[seen:] if isinstance(m, messages.Result | messages.Failure)
