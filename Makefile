@@ -46,7 +46,9 @@ test: $(STAMP) chromium
 
 # The suite on a busy machine: `make test` with both cores loaded by two CPU hogs at normal
 # priority, stopped when it ends (RUNS=3: three in a row, stopping at the first failure).
-RUNS ?= 1
+# RUNS is set per target: `make fuzz` has its own default, and a global `RUNS ?=` would
+# give both targets whichever default came first.
+test-loaded: RUNS ?= 1
 test-loaded: $(STAMP)
 	@$(PYTHON) -c "while 1: pass" & h1=$$!; $(PYTHON) -c "while 1: pass" & h2=$$!; \
 	  trap 'kill $$h1 $$h2 2>/dev/null' EXIT; trap 'exit 130' INT TERM HUP PIPE; \
@@ -81,7 +83,7 @@ $(FUZZ_STAMP): $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[test,fuzz]'
 	touch $(FUZZ_STAMP)
 
-RUNS ?= 1000000
+fuzz: RUNS ?= 1000000
 fuzz: $(FUZZ_STAMP)
 	$(BIN)/python fuzz/fuzz.py --runs $(RUNS)
 

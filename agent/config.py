@@ -6,6 +6,7 @@ ignored setting. Loaded once at start-up and passed down; there are no global se
 
 from __future__ import annotations
 
+import itertools
 import os
 import tomllib
 import types
@@ -44,6 +45,22 @@ def _auto_or_count(value: object) -> object:
 
 
 AutoOrCount = Annotated[int | Literal["auto"], BeforeValidator(_auto_or_count)]
+
+# The largest decimation factor. Its anti-alias filter has 20 taps per unit of the factor,
+# and each record needs 40 samples per unit; beyond this the filter alone would take
+# gigabytes. The identification core holds the same bound (agent.ident.preprocess, which
+# this layer may not import; tests/test_config.py checks the two agree).
+MAX_DECIMATION = 1000
+
+
+def _decimation(value: object) -> object:
+    value = _auto_or_count(value)
+    if isinstance(value, int) and value > MAX_DECIMATION:
+        raise ValueError(f'must be "auto" or an integer from 1 to {MAX_DECIMATION}, got {value!r}')
+    return value
+
+
+Decimation = Annotated[int | Literal["auto"], BeforeValidator(_decimation)]
 Name = Annotated[str, Field(min_length=1, pattern=r"^[A-Za-z_][A-Za-z0-9_.\-]*$")]
 
 
@@ -135,9 +152,9 @@ class Identification(Section):
     of the normalised regression; 0 is plain least squares."""
     hankel_blocks: int | None = Field(None, ge=2, le=500)
     """Block rows (= columns) of the ERA Hankel matrix; unset: 20, more if order_max needs."""
-    decimation: AutoOrCount = "auto"
-    """Decimation factor after the anti-alias filter; "auto" brings the rate down to 25 × the
-    band of interest; 1 keeps the record rate."""
+    decimation: Decimation = "auto"
+    """Decimation factor after the anti-alias filter, 1 to 1000; "auto" brings the rate down
+    to 25 × the band of interest; 1 keeps the record rate."""
     band_hz: float | None = Field(None, ge=0.01, le=500.0)
     """Band of interest in Hz, 0.01–500 (an aircraft's slowest named mode, the phugoid, is
     above 0.01 Hz); unset: where 99 % of every input's power lies (≥ 0.5 Hz)."""
@@ -147,8 +164,8 @@ class Identification(Section):
     smoothing_s: float | None = Field(None, gt=0.0)
     """Savitzky–Golay smoothing window in seconds (cubic), on inputs and outputs; unset: none."""
     method: Literal["auto", "time", "frequency", "aircraft"] = "auto"
-    """"auto": "aircraft" when the outputs are an axis's four (any axes set) and neither markov
-    nor order is set, else "time";
+    """"auto": "aircraft" when the outputs are an axis's four (any axes set) and none of
+    markov, order or a decimation other than 1 is set, else "time";
     "time": OKID from the time-domain regression; "frequency": OKID from averaged spectra and
     the frequency response over whole excitation periods (thesis §4.3.1); "aircraft":
     decoupled longitudinal and lateral models, every state measured, fitted in the frequency
@@ -162,6 +179,16 @@ class Identification(Section):
     refine: bool = True
     """Refine the OKID/ERA model by output error (maximum likelihood) and report Cramér–Rao
     standard errors; false reports the OKID/ERA model as is."""
+
+    @model_validator(mode="after")
+    def _aircraft_takes_no_decimation(self) -> Identification:
+        if self.method == "aircraft" and self.decimation not in ("auto", 1):
+            raise ValueError(
+                f'method "aircraft" fits the spectra at the record\'s own rate and takes no '
+                f'decimation (given {self.decimation}): set decimation = "auto", or method = '
+                '"time" or "frequency"'
+            )
+        return self
 
 
 class Surface(Section):
@@ -366,36 +393,66 @@ class Link(Section):
     """A heartbeat goes out when nothing else was sent for this long."""
     deadline_s: float = Field(3.0, gt=0.0, le=120.0)
     """The link is down when no authenticated frame arrived for this long."""
+    command_max_age_s: float = Field(10.0, ge=1.0, le=300.0)
+    """The aircraft refuses a command (anything but an Abort) sent longer ago than this,
+    with the reason, so a command jammed on the way and injected later is never obeyed late.
+    The age is read on the aircraft's own clock (the ground says what that clock read when
+    it queued the command, from the aircraft's last message; the clocks need not agree), so
+    it includes up to one of the aircraft's status intervals. Retries of a command over a
+    lossy link count from its first sending."""
+
+
+MAKE_KEY = "sysid keygen {path}"
 
 
 def load_key(path: str | Path) -> bytes:
-    """The link key from its file (hex); ConfigError-style messages on every problem."""
+    """The link key from its file (hex); ValueError with what to do on every problem."""
     path = Path(path)
+    make = MAKE_KEY.format(path=path)
     try:
         text = path.read_text().strip()
-    except OSError as exc:
-        make = f"(umask 077; python -c 'import secrets; print(secrets.token_hex(32))' > {path})"
+    except (OSError, ValueError) as exc:  # a binary file is a UnicodeDecodeError
         raise ValueError(
-            f"{path}: cannot read the link key ({exc.strerror or exc}); make one with: {make}"
+            f"{path}: cannot read the link key ({getattr(exc, 'strerror', None) or exc}); "
+            f"make one with: {make}"
         ) from exc
     try:
         key = bytes.fromhex(text)
     except ValueError:
-        raise ValueError(f"{path}: the link key must be hex digits") from None
-    if len(key) < 16:
-        raise ValueError(f"{path}: the link key has {len(key)} bytes; use 32")
-    if len(set(key)) < len(key) // 4:  # 32 random bytes hold ~26 distinct values; 00…00 has 1
         raise ValueError(
-            f"{path}: the link key has only {len(set(key))} distinct byte values in "
-            f"{len(key)}: not a random key; make one with "
-            "python -c 'import secrets; print(secrets.token_hex(32))'"
-        )
+            f"{path}: the link key must be hex digits (a passphrase is not a key); make one "
+            f"with: {make}"
+        ) from None
+    if len(key) < 16:
+        raise ValueError(f"{path}: the link key has {len(key)} bytes; use 32: {make}")
+    weakness = key_weakness(key)
+    if weakness is not None:
+        raise ValueError(f"{path}: the link key {weakness}: not a random key; make one: {make}")
     if os.name == "posix" and path.stat().st_mode & 0o077:
         raise ValueError(
             f"{path}: the link key is readable by other users (mode "
             f"{path.stat().st_mode & 0o777:03o}); chmod 600 {path}"
         )
     return key
+
+
+def key_weakness(key: bytes) -> str | None:
+    """What betrays a key that was not drawn at random, or None. Each test is one a random
+    key of 16 bytes or more fails with a probability below 1e-7 (a 32-byte key: below 1e-13):
+    few distinct byte values (00…00, abab…), every byte printable text (a password written
+    as hex: (95/256)^16), a steady step between bytes (00 01 02 …), or a repeating block."""
+    n = len(key)
+    if len(set(key)) < n // 4:  # 32 random bytes hold ~26 distinct values; 00…00 has 1
+        return f"has only {len(set(key))} distinct byte values in {n}"
+    if all(0x20 <= b < 0x7F for b in key):
+        return "is printable text in hex (a password), not random bytes"
+    steps = {(b - a) % 256 for a, b in itertools.pairwise(key)}
+    if len(steps) < n // 4:
+        return f"steps between its bytes take only {len(steps)} values (a sequence)"
+    for period in range(1, n // 2 + 1):
+        if key[period:] == key[:-period]:
+            return f"repeats every {period} bytes"
+    return None
 
 
 class Runtime(Section):

@@ -29,7 +29,7 @@ import queue
 import re
 import threading
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -316,18 +316,123 @@ class JsonLinesHandler(logging.Handler):
         return (json.dumps(event) + "\n").encode()
 
 
-def read_log(path: Path) -> tuple[list[str], np.ndarray]:
-    """A flight or excitation log: (column names, rows); empty cells are NaN. Comment lines
-    are skipped; a last line without a line end (a power cut mid-write) is ignored."""
-    text = Path(path).read_bytes().decode()
-    lines = text.split("\n")
-    complete = lines[:-1]  # the piece after the last newline is unfinished or empty
-    rows = [ln for ln in complete if ln and not ln.startswith("#")]
-    header, body = rows[0].split(","), rows[1:]
-    data = np.array(
-        [[float(c) if c else np.nan for c in ln.split(",")] for ln in body], dtype=float
-    ).reshape(len(body), len(header))
-    return header, data
+# A number as a CSV cell holds one: what float() reads, less what no CSV writer means by a
+# number (Python's digit separators, 1_000; non-ASCII digits; padding). nan and inf are read,
+# for the finite checks downstream to name.
+_NUMBER = re.compile(
+    r"[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|(?i:inf|infinity|nan))", re.ASCII
+)
+# In an ASCII text, what float() would take in a cell that _NUMBER refuses: a whole log is
+# searched at once, and float() refuses the rest cell by cell.
+_NOT_CSV = re.compile(r"[_ \t\r\v\f]")
+
+
+class LogError(ValueError):
+    """A log that cannot be read as one; the message names the line (and column)."""
+
+
+def csv_number(cell: str) -> float:
+    """The number in a CSV cell; ValueError for what float() reads but a CSV reader should
+    not (1_000, ' 1', non-ASCII digits)."""
+    if not _NUMBER.fullmatch(cell):
+        hint = " (write numbers without '_' separators)" if "_" in cell else ""
+        raise ValueError(f"{cell!r} is not a number{hint}")
+    return float(cell)
+
+
+# The longest line read from a log: a row of every channel is a few hundred bytes; a file
+# with no line ends (/dev/zero, a binary file) is refused at this length, not read whole.
+MAX_LINE = 1 << 20
+# The most data rows read from one log, as `sysid identify` reads at most 5 million rows of a
+# record: 14 hours of a 100 Hz flight log. A larger file is refused, not held.
+MAX_ROWS = 5_000_000
+# Data lines checked and parsed together: the text in hand at once is this many lines.
+BLOCK_LINES = 1024
+
+
+def read_log(path: Path, columns: Iterable[str] | None = None) -> tuple[list[str], np.ndarray]:
+    """A flight or excitation log: (column names, rows); empty cells are NaN. `columns`: keep
+    only these (those the header has, in its order); None keeps every column. Comment lines
+    are skipped; a last line without a line end (a power cut mid-write) is ignored. A line
+    that is not a row of numbers is a LogError naming its line and column; so is a line over
+    MAX_LINE bytes, and a log over MAX_ROWS rows. Read a block of lines at a time, so memory
+    is what is kept, not the file."""
+    lines = _content_lines(Path(path))
+    first = next(lines, None)
+    if first is None:
+        raise LogError(
+            "no header row, only comment lines: the log was cut before its first row "
+            "(a power cut or a full disk); leave it out"
+        )
+    header = first[1].split(",")
+    wanted = None if columns is None else set(columns)
+    keep = [j for j, name in enumerate(header) if wanted is None or name in wanted]
+    blocks, body = [], []
+    for count, numbered in enumerate(lines, start=1):
+        if count > MAX_ROWS:
+            raise LogError(f"more than {MAX_ROWS} data rows, the most one log may have; cut it")
+        body.append(numbered)
+        if len(body) == BLOCK_LINES:
+            blocks.append(_rows(header, body)[:, keep])
+            body = []
+    blocks.append(_rows(header, body)[:, keep])
+    return [header[j] for j in keep], np.concatenate(blocks)
+
+
+def _content_lines(path: Path) -> Iterator[tuple[int, str]]:
+    """(line number, text) of each whole line that is neither blank nor a comment."""
+    with path.open("rb") as handle:
+        number = 0
+        while line := handle.readline(MAX_LINE + 1):
+            number += 1
+            if len(line) > MAX_LINE:
+                raise LogError(f"line {number} is longer than {MAX_LINE} bytes: not a log")
+            if not line.endswith(b"\n"):
+                return  # unfinished: a power cut mid-write
+            text = line[:-1].decode().removesuffix("\r")  # CR LF: line ends a copy changed
+            if text.strip() and not text.startswith("#"):
+                yield number, text
+
+
+def _rows(header: list[str], body: list[tuple[int, str]]) -> np.ndarray:
+    """The lines of `body` ((line number, text)) as rows of floats; a LogError names the
+    first that is not a row of numbers."""
+    data_lines = [ln for _, ln in body]
+    joined = "\n".join(data_lines)
+    try:
+        if joined.count(",") != (len(header) - 1) * len(body) or not joined.isascii():
+            raise ValueError
+        if _NOT_CSV.search(joined):
+            raise ValueError
+        # Ragged rows (a comma moved between lines) raise here too.
+        data = np.array(
+            [[float(c) if c else np.nan for c in ln.split(",")] for ln in data_lines], dtype=float
+        )
+    except ValueError:
+        raise LogError(_bad_line(header, body)) from None
+    return data.reshape(len(body), len(header))
+
+
+def _bad_line(header: list[str], body: list[tuple[int, str]]) -> str:
+    """What is wrong with the first line of `body` with a field too many or too few, or a
+    cell that is not a number."""
+    for line_no, ln in body:
+        cells = ln.split(",")
+        if len(cells) != len(header):
+            return (
+                f"line {line_no}: {len(cells)} fields, the header has {len(header)} "
+                "(lines joined or cut by a bad copy?); repair or delete the line"
+            )
+        for j, (name, cell) in enumerate(zip(header, cells, strict=True)):
+            try:
+                if cell:
+                    csv_number(cell)
+            except ValueError as exc:
+                return (
+                    f"line {line_no}, column {j + 1} ({name!r}): {exc}; "
+                    "repair the cell or delete the line"
+                )
+    return "not a table of numbers"
 
 
 def units_of(names: Iterable[str], table: dict[str, tuple[str, str]]) -> list[str]:

@@ -17,7 +17,8 @@ from __future__ import annotations
 import json
 import logging
 import os
-import time
+import re
+import secrets
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -154,19 +155,47 @@ def suggest(
     )
 
 
+# Random bytes naming a series of model numbers (see ModelStore.reserve_id).
+SERIES_BYTES = 4
+_SERIES_TEXT = re.compile(f"[0-9a-f]{{{2 * SERIES_BYTES}}}")
+
 # Undecided candidates kept for a decision; older ones are dropped (a decision on one is refused
 # as unknown: the result log still has it).
 CANDIDATES_KEPT = 16
+
+
+# A model store file's description is a few kB (its data set is beside it, in .npz).
+SUMMARY_MAX_BYTES = 16 * 2**20
 
 
 def model_summary(path: Path) -> dict:
     """A model store file's id and modes, {"model_id", "modes"} (what a report highlights);
     ValueError naming the file when it is not one."""
     try:
-        stored = json.loads(Path(path).read_text())
+        with open(path, "rb") as handle:  # bounded: /dev/zero or a stray log is no model
+            text = handle.read(SUMMARY_MAX_BYTES + 1)
+        if len(text) > SUMMARY_MAX_BYTES:
+            raise ValueError(f"over {SUMMARY_MAX_BYTES // 2**20} MiB")
+        stored = json.loads(text)
         return {"model_id": stored["model_id"], "modes": stored["result"]["modes"]}
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+    except (OSError, ValueError, KeyError, TypeError, RecursionError) as exc:
         raise ValueError(f"{path}: not a model store file ({exc})") from None
+
+
+def _read_numbering(path: Path) -> tuple[str, int]:
+    """The numbering's series and last number; a new series from 0 when the file is missing
+    or unreadable (logged)."""
+    try:
+        document = json.loads(path.read_text())
+        series, last = document["series"], document["last"]
+        if _SERIES_TEXT.fullmatch(str(series)) and type(last) is int and last >= 0:
+            return series, last
+        raise ValueError(f"not a numbering: {str(document)[:60]}")
+    except FileNotFoundError:
+        pass
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        log.error("%s is unreadable (%s); model ids go on in a new series", path, exc)
+    return secrets.token_hex(SERIES_BYTES), 0
 
 
 class ModelStore:
@@ -177,30 +206,35 @@ class ModelStore:
         self.directory.mkdir(parents=True, exist_ok=True)
         self.candidates: dict[str, Candidate] = {}
         self.damaged = 0
+        self.unsaved_ids = 0  # ids given while the numbering could not be written
         self._ids: dict[str, str | None] = {}
         """Candidates awaiting the operator's decision, the latest CANDIDATES_KEPT (each
         holds its data set; a long flight must not grow without bound)."""
 
-    def reserve_number(self) -> int:
-        """The next model number, never given twice, across boots too: the file `numbering`
-        holds the last one given, written (fsynced) before it is used. A Decision names a
-        model by its id, so an id from before a reboot (a queued or replayed decision) must
-        never name another model. An unreadable file resumes from the wall clock in seconds,
-        above any number given before."""
+    def reserve_id(self, axes: str) -> str:
+        """A new model id, `lat-7-3fa9c1d2`, never given twice on this aircraft, across boots
+        too: a Decision names a model by its id, so an id from before a reboot (a queued or
+        replayed decision) must never name another model. The number counts up in the file
+        `numbering`, written (fsynced) before it is used; the tag after it names the
+        numbering's series, drawn at random when the file is first made and again whenever
+        it is missing or unreadable (deleted, damaged, a new card), so a numbering that
+        starts over never repeats an id (two series alike: one draw in 2**32). The wall
+        clock plays no part: a flight computer without a real-time clock boots in 1970."""
         path = self.directory / "numbering"
-        try:
-            last = int(path.read_text()) if path.exists() else 0
-        except (OSError, ValueError):
-            log.error("%s is unreadable; model numbers resume from the clock", path)
-            last = int(time.time())
+        series, last = _read_numbering(path)
         number = last + 1
         tmp = path.with_suffix(".tmp")
-        with open(tmp, "w") as handle:
-            handle.write(str(number))
-            handle.flush()
-            os.fsync(handle.fileno())
-        tmp.replace(path)
-        return number
+        try:
+            with open(tmp, "w") as handle:
+                handle.write(json.dumps({"series": series, "last": number}))
+                handle.flush()
+                os.fsync(handle.fileno())
+            tmp.replace(path)
+        except OSError as exc:  # a full or failing disk: an id of its own series, never again
+            self.unsaved_ids += 1
+            log.error("%s not written (%s): the model id takes a series of its own", path, exc)
+            series = secrets.token_hex(SERIES_BYTES)
+        return f"{axes[:3]}-{number}-{series}"
 
     def add(self, candidate: Candidate) -> None:
         self.candidates[candidate.model_id] = candidate

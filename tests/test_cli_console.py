@@ -7,6 +7,7 @@ named), a missing key file, a serial port that does not exist (exit 1, before an
 from __future__ import annotations
 
 import os
+import secrets
 import subprocess
 import sys
 from pathlib import Path
@@ -46,7 +47,7 @@ def test_no_key_file_or_no_port_is_reported_before_the_screen(tmp_path):
     done = sysid("console", "--config", str(config), "--base", str(tmp_path), cwd=tmp_path)
     assert done.returncode == 1
     assert "cannot read the link key" in done.stderr
-    (tmp_path / "link.key").write_text(bytes(range(32)).hex())
+    (tmp_path / "link.key").write_text(secrets.token_hex(32))
     (tmp_path / "link.key").chmod(0o600)
     done = sysid("console", "--config", str(config), "--base", str(tmp_path), cwd=tmp_path)
     assert done.returncode == 1

@@ -15,6 +15,7 @@ import pytest
 from agent.cli import main
 from agent.config import SurfacePort
 from agent.sim import devices
+from tests.capped import sysid
 from tests.drivers.rig import state
 
 DATA = Path(__file__).parent / "data"
@@ -64,3 +65,50 @@ def test_the_command_lines_device_names_are_the_codecs():
     from drivers.decode import CODECS
 
     assert sorted(DEVICES) == sorted(CODECS)
+
+
+def test_json_streams_a_large_capture_in_little_memory(tmp_path):
+    """Bad input tried: `decode airdata BIG --json` on a valid 6 MB capture (the test capture
+    2100 times over: 102 900 messages). Every message used to be held, then the whole
+    document as one string (about 20 times the capture; 1.1 GB for 60 MB). Streamed, it runs
+    under a limit of 80 MB of address space, and stdout is still one JSON object."""
+    capture = tmp_path / "big.txt"
+    capture.write_bytes((DATA / "airdata.txt").read_bytes() * 2100)
+    with (tmp_path / "out.json").open("w") as out:
+        done = sysid(
+            "decode", "airdata", str(capture), "--json", cwd=tmp_path, limit=80 << 20, stdout=out
+        )
+    assert done.returncode == 0, done.stderr
+    document = json.loads((tmp_path / "out.json").read_text())
+    assert len(document["messages"]) == 49 * 2100
+    assert document["messages"][-1]["type"] == "AirData"
+    assert document["stats"]["frames"] == 49 * 2100
+
+
+def test_an_error_while_streaming_still_closes_the_one_json_object(monkeypatch, capsys):
+    """Bad input tried: a capture whose reading fails after three messages (an I/O error on a
+    failing card): stdout is still exactly one JSON object, the three messages and the error
+    in it, and the traceback on stderr."""
+    import drivers.decode
+
+    real = drivers.decode.decode_file
+
+    def failing(device, path):
+        messages, stats = real(device, path)
+
+        def three_then_fail():
+            for k, message in enumerate(messages):
+                if k == 3:
+                    raise OSError(5, "Input/output error")
+                yield message
+
+        return three_then_fail(), stats
+
+    monkeypatch.setattr(drivers.decode, "decode_file", failing)
+    assert main(["decode", "airdata", str(DATA / "airdata.txt"), "--json"]) == 1
+    out, err = capsys.readouterr()
+    document = json.loads(out)  # exactly one object
+    assert len(document["messages"]) == 3
+    assert document["error"]["message"] == "after 3 item(s): OSError: [Errno 5] Input/output error"
+    assert document["error"]["exit"] == 1
+    assert "Traceback" in err

@@ -1,8 +1,9 @@
 """`sysid excite`: CSV, JSON and plot previews, and bad input.
 
 Bad input tried: a plan file that is not JSON, a plan with an unknown control, a missing plan
-file, an amplitude beyond the envelope, a malformed --amplitude, a rate of 0, and a plot
-path in a directory that does not exist. Each gives a message and exit 2.
+file, an amplitude beyond the envelope, a malformed --amplitude, an amplitude of 0, nan or
+inf, a rate of 0, a harmonic of 10**400, and a plot path in a directory that does not exist.
+Each gives a message and exit 2.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import pytest
 
 from agent.cli import main
 from agent.excitation.plan import preset
+from tests.capped import sysid
 
 
 def test_csv_has_a_header_and_one_row_per_command(capsys):
@@ -80,6 +82,10 @@ def test_plot_and_plan_file(tmp_path):
         (["--plan", "{missing}"], "cannot be read"),
         (["--preset", "lateral", "--amplitude", "aileron=15"], "exceeds its max_amplitude"),
         (["--preset", "lateral", "--amplitude", "aileron:3"], "CONTROL=VALUE"),
+        # A pydantic dump with a URL before; now what to give.
+        (["--preset", "lateral", "--amplitude", "aileron=0"], "aileron=0: give a finite ampl"),
+        (["--preset", "lateral", "--amplitude", "aileron=nan"], "nan: give a finite amplitude"),
+        (["--preset", "full", "--amplitude", "throttle=inf"], "inf: give a finite amplitude"),
         (["--preset", "lateral", "--rate", "0"], "--rate must be"),
         (["--preset", "lateral", "--plot", "{nodir}"], "cannot be written"),
     ],
@@ -101,6 +107,23 @@ def test_bad_input_is_a_clear_error(tmp_path, capsys, args, message):
     err = capsys.readouterr().err
     assert "sysid excite: error:" in err
     assert message in err
+    assert "pydantic" not in err
+
+
+def test_a_harmonic_of_10_to_the_400_is_refused_with_its_key(tmp_path, capsys):
+    """Bad input tried: a plan file whose multisine harmonic is 10**400 (an OverflowError
+    traceback). Refused naming the harmonic's key, without pydantic's echoes of it."""
+    plan = tmp_path / "plan.json"
+    plan.write_text(
+        '{"id":"x","axes":"lateral","segments":[{"signals":{"aileron":{"kind":"multisine",'
+        f'"harmonics":[{10**400}],"period_s":10,"amplitude":3}}}}}}]}}'
+    )
+    assert main(["excite", "--plan", str(plan), "--json"]) == 2
+    out, err = capsys.readouterr()
+    assert json.loads(out)["error"]["exit"] == 2
+    assert "segments.0.signals.aileron.multisine.harmonics.0: Input should be less than" in err
+    assert "Tuple should have" not in err
+    assert "Traceback" not in err
 
 
 def test_an_internal_error_still_leaves_one_json_object(monkeypatch, capsys):
@@ -137,3 +160,44 @@ def test_an_amplitude_for_a_control_the_preset_does_not_play_is_refused(capsys):
         assert main(["excite", "--preset", "lateral", "--amplitude", item]) == 2
         err = capsys.readouterr().err
         assert "the lateral preset plays aileron, rudder; no amplitude for" in err, err
+
+
+@pytest.mark.parametrize("spelling", ["same", "hard link"])
+def test_a_plot_onto_the_plan_is_refused_and_the_plan_kept(tmp_path, capsys, spelling):
+    """Bad input tried: `excite --plan p.png --plot p.png` (the plan used to be read and then
+    overwritten by the picture), and --plot naming a hard link to the plan: exit 2 naming
+    both, the plan's bytes unchanged, nothing else written."""
+    plan = tmp_path / "p.png"
+    plan.write_bytes(preset("longitudinal").to_bytes())
+    before = plan.read_bytes()
+    plot = plan
+    if spelling == "hard link":
+        plot = tmp_path / "picture.png"
+        plot.hardlink_to(plan)
+    assert main(["excite", "--plan", str(plan), "--plot", str(plot)]) == 2
+    err = capsys.readouterr().err
+    assert f"--plot {plot}: that is {plan}, the plan" in err, err
+    assert plan.read_bytes() == before
+    assert len(list(tmp_path.iterdir())) == (1 if spelling == "same" else 2)
+
+
+def test_a_plot_that_fails_halfway_leaves_the_old_picture(small_disk, capsys):
+    """Bad input tried: --plot onto a disk that fills up while the picture is written (a real
+    256 KiB tmpfs): the picture from before is still there, whole, and no temporary file is
+    left (matplotlib used to truncate it first and stop halfway)."""
+    picture = small_disk / "plan.png"
+    assert main(["excite", "--preset", "lateral", "--plot", str(picture)]) == 0
+    before = picture.read_bytes()
+    # The four-control preset's picture is larger than the whole disk.
+    assert main(["excite", "--preset", "full", "--plot", str(picture)]) == 2
+    assert "No space left on device" in capsys.readouterr().err
+    assert picture.read_bytes() == before
+    assert [p.name for p in small_disk.iterdir()] == ["plan.png"]
+
+
+def test_a_plan_file_without_end_is_refused_at_its_bound(tmp_path):
+    """Bad input tried: --plan /dev/zero (read whole before: it grew until the memory ran
+    out), in a process of its own with a memory limit."""
+    done = sysid("excite", "--plan", "/dev/zero", cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    assert "/dev/zero: longer than 1048576 bytes; not a plan" in done.stderr

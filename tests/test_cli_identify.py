@@ -11,7 +11,10 @@ message and exit 2 (bad input), never a traceback.
 from __future__ import annotations
 
 import csv
+import errno
 import json
+import os
+import signal
 import subprocess
 import sys
 import warnings
@@ -22,8 +25,13 @@ import pytest
 
 from agent.cli import main
 from agent.ident import reference
+from tests.capped import sysid
+from tests.waiting import until_sync
 
 ROOT = Path(__file__).resolve().parents[1]
+# An interrupted command's exit: its interpreter has already started, so this only bounds a
+# hang (a command that ignored SIGINT), well inside the suite's per-test timeout.
+INTERRUPTED_DEADLINE_S = 60
 LAT = ["--inputs", "aileron,rudder", "--outputs", "beta,p,r,phi"]
 CONTRACT = {
     "dt",
@@ -267,6 +275,8 @@ BAD = [
     ("nan.csv", _set(200, "p", "nan"), [], "line 202: non-finite value 'nan' in column 'p'"),
     ("inf.csv", _set(30, "beta", "inf"), [], "non-finite value 'inf' in column 'beta'"),
     ("text.csv", _set(5, "r", "n/a"), [], "'n/a' in column 'r' is not a number"),
+    # float() reads 1_000 as 1000; a CSV reader must not.
+    ("underscore.csv", _set(120, "p", "1_000"), [], "line 122: '1_000' in column 'p' is not a"),
     ("const.csv", _constant_rudder, [], "input 'rudder' is constant"),
     ("short.csv", lambda h, r: (h, r[:60]), ["--markov", "10"], "need at least"),
     (
@@ -325,6 +335,24 @@ RAW = [
         "not a text CSV file",
     ),
 ]
+
+
+def test_a_last_line_cut_mid_number_is_refused_with_what_to_do(tmp_path, capsys, lateral_csv):
+    """Bad input tried: a record whose last line lost its line end and its last digits (a copy
+    that stopped): the cut number used to be read as it stood. A record ending with a line end
+    and blank space after it is read."""
+    whole = lateral_csv.read_bytes()
+    cut = tmp_path / "cut.csv"
+    cut.write_bytes(whole.rstrip(b"\r\n")[:-2])
+    lines = whole.count(b"\n")
+    assert main(["identify", str(cut), *LAT, "--json"]) == 2
+    message = json.loads(capsys.readouterr().out)["error"]["message"]
+    assert f"line {lines}: the last line has no line end" in message
+    assert "end it with a newline, else delete it" in message
+    spaced = tmp_path / "spaced.csv"
+    spaced.write_bytes(whole + b"  \n\n ")
+    assert main(["identify", str(spaced), *LAT, "--method", "time", "--json"]) == 0
+    capsys.readouterr()
 
 
 @pytest.mark.parametrize(("name", "content", "message"), RAW, ids=[r[0] for r in RAW])
@@ -403,6 +431,52 @@ def test_console_script_and_module_entry_point(lateral_csv):
     )
     assert proc.returncode == 0, proc.stderr
     assert json.loads(proc.stdout)["order"] == 4
+
+
+def _writer_once_read(fifo: Path, proc: subprocess.Popen) -> int:
+    """The FIFO's write end, once the command has opened its read end (ENXIO until then)."""
+
+    def opened() -> int | None:
+        assert proc.poll() is None, f"ended before reading its input: {proc.communicate()}"
+        try:
+            return os.open(fifo, os.O_WRONLY | os.O_NONBLOCK)
+        except OSError as exc:
+            if exc.errno != errno.ENXIO:
+                raise
+            return None
+
+    return until_sync(opened, f"the command to open {fifo.name}", pause_s=0.01)
+
+
+@pytest.mark.parametrize("command", ["identify", "analyze"])
+def test_ctrl_c_under_json_is_exit_130_with_one_json_object(tmp_path, command):
+    """Input: Ctrl-C (SIGINT) while `sysid identify|analyze LOG --json` reads its log, a FIFO
+    whose writer has sent nothing yet (the command is then surely at work, inside its run).
+    It used to end with a KeyboardInterrupt traceback and an empty stdout."""
+    fifo = tmp_path / "lat.csv"
+    os.mkfifo(fifo)
+    argv = [sys.executable, "-m", "agent", command, str(fifo), *LAT, "--json"]
+    proc = subprocess.Popen(argv, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    writer = None
+    try:
+        writer = _writer_once_read(fifo, proc)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=INTERRUPTED_DEADLINE_S)
+    finally:
+        if writer is not None:
+            os.close(writer)
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 130, err.decode()
+    assert out.count(b"\n") == 1, out
+    assert json.loads(out)["error"] == {
+        "kind": "interrupted",
+        "message": "interrupted (Ctrl-C)",
+        "exit": 130,
+    }
+    assert b"Traceback" not in err
+    assert f"sysid {command}: error: interrupted (Ctrl-C)".encode() in err
 
 
 def test_more_bad_records_each_named(tmp_path, capsys, lateral_csv):
@@ -494,3 +568,39 @@ def test_odd_settings_and_values_get_one_clear_reason(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "overflow" in err
     assert "nothing moved" not in err
+
+
+def test_a_decimation_asks_for_okid_and_the_aircraft_method_refuses_it(capsys, lateral_csv):
+    """Input: --decimation 2 on a lateral record named by role. `auto` used to pick the
+    aircraft method and ignore the factor (the result said decimation 1); a decimation is
+    OKID's, so it now asks for OKID, and `--method aircraft --decimation 2` is refused with
+    what to do. A factor of 1 (none) is what the aircraft method does anyway."""
+    code, doc = run_json(capsys, str(lateral_csv), *LAT, "--decimation", "2")
+    assert code == 0
+    assert doc["method"] == "time"
+    assert doc["preprocessing"]["decimation"] == 2
+    aircraft = [str(lateral_csv), *LAT, "--method", "aircraft", "--decimation"]
+    code, doc = run_json(capsys, *aircraft, "2")
+    assert code == 2
+    message = doc["error"]["message"]
+    assert "method 'aircraft' fits the record's spectra at its own rate and takes no " in message
+    assert "give --method time or frequency" in message
+    code, doc = run_json(capsys, *aircraft, "1")
+    assert code == 0
+    assert doc["method"] == "aircraft"
+
+
+def test_a_decimation_beyond_the_bound_is_refused_before_any_filter(tmp_path, lateral_csv):
+    """Bad input tried: `identify --method time --decimation 10000000`, and the same factor as
+    `[identification] decimation` in a config (`config check` used to accept it): the
+    filter, 2 × 10⁸ taps, was built before the record's length was checked (1.6 GB, or a
+    MemoryError traceback). In a process of its own with a memory limit."""
+    args = ("identify", str(lateral_csv), *LAT, "--method", "time")
+    done = sysid(*args, "--decimation", "10000000", cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    assert "--decimation 10000000: give 1 to 1000" in done.stderr
+    (tmp_path / "config.toml").write_text("[identification]\ndecimation = 10000000\n")
+    done = sysid(*args, cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    assert "identification.decimation" in done.stderr
+    assert "an integer from 1 to 1000, got 10000000" in done.stderr

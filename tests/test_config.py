@@ -60,6 +60,8 @@ AIL = (
         ("[identification]\naxes = 'yaw'\n", "identification.axes", "lateral"),
         ('[identification.channels]\np = "r"\n', "identification.channels", "repeated: r"),
         ("[identification]\ndecimation = 0\n", "identification.decimation", "integer ≥ 1"),
+        # `config check` accepted it; identify then built a 1.6 GB filter.
+        ("[identification]\ndecimation = 10000000\n", "identification.decimation", "1 to 1000"),
         (
             "[identification]\nband_hz = -1\n",
             "identification.band_hz",
@@ -120,6 +122,12 @@ AIL = (
             "excitation.envelope.max_duration_s",
             "finite number",
         ),
+        # A decimation the aircraft method used to ignore without a word.
+        (
+            '[identification]\nmethod = "aircraft"\ndecimation = 4\n',
+            "identification",
+            'takes no decimation (given 4): set decimation = "auto", or method = "time"',
+        ),
     ],
 )
 def test_bad_config_names_key_and_reason(tmp_path, capsys, text, key, reason):
@@ -159,7 +167,7 @@ def test_link_key_file_problems_are_explained(tmp_path):
     from agent.config import load_key
 
     # Bad input tried: a missing key file, a key that is not hex, a key that is too short.
-    with pytest.raises(ValueError, match=r"make one with: \(umask 077; python -c"):
+    with pytest.raises(ValueError, match=r"make one with: sysid keygen .*none\.key"):
         load_key(tmp_path / "none.key")
     (tmp_path / "bad.key").write_text("zz" * 32)
     with pytest.raises(ValueError, match="must be hex digits"):
@@ -167,14 +175,28 @@ def test_link_key_file_problems_are_explained(tmp_path):
     (tmp_path / "short.key").write_text("ab" * 8 + "\n")
     with pytest.raises(ValueError, match="has 8 bytes; use 32"):
         load_key(tmp_path / "short.key")
-    (tmp_path / "good.key").write_text(bytes(range(32)).hex() + "\n")
+    good = bytes.fromhex("5f1e9c27d4a0b38e61c7f2094ad35be8c06f1a729e4d83b5f02c6e917ad4b358")
+    (tmp_path / "good.key").write_text(good.hex() + "\n")
     (tmp_path / "good.key").chmod(0o600)
-    assert load_key(tmp_path / "good.key") == bytes(range(32))
+    assert load_key(tmp_path / "good.key") == good
     # Bad input tried: a key of one repeated byte, and a good key readable by other users.
     (tmp_path / "weak.key").write_text("ab" * 32 + "\n")
     (tmp_path / "weak.key").chmod(0o600)
     with pytest.raises(ValueError, match="only 1 distinct byte values in 32: not a random key"):
         load_key(tmp_path / "weak.key")
+    # Bad input tried: keys that pass a count of distinct bytes but were never random.
+    weak = {
+        "sequence": (bytes(range(32)).hex(), "steps between its bytes take only 1 values"),
+        "password": (b"hunter2-hunter2-hunter2-hunter2!".hex(), "printable text in hex"),
+        "passphrase": ("correct horse battery staple", "must be hex digits"),
+        "block": ("5f1e9c27d4a0b38e61c7f2094ad35be8" * 2, "repeats every 16 bytes"),
+    }
+    for name, (text, reason) in weak.items():
+        (tmp_path / f"{name}.key").write_text(text + "\n")
+        (tmp_path / f"{name}.key").chmod(0o600)
+        with pytest.raises(ValueError, match=reason) as refused:
+            load_key(tmp_path / f"{name}.key")
+        assert "sysid keygen" in str(refused.value)  # and how to make a good one
     (tmp_path / "good.key").chmod(0o644)
     with pytest.raises(ValueError, match=r"readable by other users \(mode 644\); chmod 600"):
         load_key(tmp_path / "good.key")
@@ -260,3 +282,37 @@ def test_the_configuration_reference_is_current_and_every_key_is_described():
     cells = [row.split(" | ") for row in rows]  # key, type, default, description
     undescribed = [c[0] for c in cells if not c[-1].strip(" |")]
     assert not undescribed, undescribed
+
+
+def test_the_config_and_the_identification_core_bound_decimation_alike():
+    from agent.config import MAX_DECIMATION
+    from agent.ident import preprocess
+
+    assert MAX_DECIMATION == preprocess.MAX_DECIMATION
+
+
+def test_keygen_makes_a_key_the_link_takes_and_never_writes_over_one(tmp_path, capsys):
+    """`sysid keygen`: a key load_key takes (strong, mode 0600) with its fingerprint. Bad
+    input tried: the same file again (a key in use would be lost: refused, exit 2, the file
+    unchanged), a folder that does not exist; under --json one object on every path."""
+    import json
+
+    from agent.config import load_key
+    from agent.link.codec import key_fingerprint
+
+    path = tmp_path / "link.key"
+    assert main(["keygen", str(path), "--json"]) == 0
+    made = json.loads(capsys.readouterr().out)
+    key = load_key(path)
+    assert len(key) == 32
+    assert made == {"file": str(path), "fingerprint": key_fingerprint(key)}
+    assert path.stat().st_mode & 0o777 == 0o600
+    before = path.read_text()
+    assert main(["keygen", str(path), "--json"]) == 2
+    error = json.loads(capsys.readouterr().out)["error"]
+    assert "exists: a key is never written over" in error["message"]
+    assert path.read_text() == before
+    assert main(["keygen", str(tmp_path / "no" / "such" / "k")]) == 2
+    assert "cannot be created" in capsys.readouterr().err
+    assert main(["keygen", str(tmp_path / "other.key")]) == 0
+    assert load_key(tmp_path / "other.key") != key  # drawn anew

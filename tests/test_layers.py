@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # are one layer: none imports another.
 LAYERS = (
     ("drivers",),
-    ("agent", "agent.channels", "agent.logs", "agent.splane"),
+    ("agent", "agent.channels", "agent.logs", "agent.outputs", "agent.splane"),
     ("agent.clock", "agent.config"),
     ("agent.excitation",),
     ("agent.ident", "agent.link", "agent.recorder", "agent.models"),

@@ -174,17 +174,43 @@ def test_the_nominal_id_follows_accept_and_revert(tmp_path):
     assert ModelStore(tmp_path).nominal_id("lateral") == "a"  # read back after a restart
 
 
-def test_model_numbers_are_never_given_twice_across_boots(tmp_path):
-    """Bad input tried: a Decision for "lat-1" queued or replayed after a reboot. Ids used to
-    restart at lat-1 every boot, so it could make a model the operator never saw nominal; the
-    numbering now goes on from the store's file, and an unreadable file resumes from the
-    clock (above anything given before)."""
+def test_model_ids_are_never_given_twice_across_boots(tmp_path, small_disk_at):
+    """Bad input tried: a Decision for an id queued or replayed after a reboot, with the
+    store's `numbering` file kept, deleted, damaged, or on a full disk. Ids used to restart at
+    lat-1 when the file was deleted, and to resume from the wall clock (lower than ids given,
+    on a computer without a real-time clock) when it was damaged. An id now carries its
+    numbering's series, drawn anew whenever the numbering is lost."""
+    import errno
+
     store = ModelStore(tmp_path)
-    assert [store.reserve_number() for _ in range(3)] == [1, 2, 3]
-    rebooted = ModelStore(tmp_path)
-    assert rebooted.reserve_number() == 4
-    (tmp_path / "numbering").write_text("garbage")
-    assert ModelStore(tmp_path).reserve_number() > 1_700_000_000
+    given = [store.reserve_id("lateral") for _ in range(3)]
+    assert [g.rsplit("-", 1)[0] for g in given] == ["lat-1", "lat-2", "lat-3"]
+    given.append(ModelStore(tmp_path).reserve_id("lateral"))  # a reboot: the series goes on
+    assert given[-1].startswith("lat-4-")
+    (tmp_path / "numbering").unlink()  # deleted
+    given += [ModelStore(tmp_path).reserve_id("lateral") for _ in range(2)]
+    (tmp_path / "numbering").write_text("garbage")  # damaged
+    given.append(ModelStore(tmp_path).reserve_id("lateral"))
+    (tmp_path / "numbering").write_text('{"series": "00000000", "last": 1e400}')
+    given.append(ModelStore(tmp_path).reserve_id("lateral"))
+    assert len(set(given)) == len(given), given
+    assert given[4].startswith("lat-1-")  # numbering started over, in another series
+    assert all(len(g) <= 32 for g in given)  # a Decision's model_id holds it
+    # A full disk: the numbering cannot be written, and still no id repeats.
+    disk = small_disk_at(tmp_path / "disk")
+    full = ModelStore(disk)
+    given.append(full.reserve_id("longitudinal"))
+    with open(disk / "filler", "wb", buffering=0) as handle:
+        code = None
+        while code is None:
+            try:
+                handle.write(b"\0" * 4096)
+            except OSError as exc:
+                code = exc.errno
+    assert code == errno.ENOSPC
+    given += [full.reserve_id("longitudinal") for _ in range(3)]
+    assert full.unsaved_ids == 3
+    assert len(set(given)) == len(given), given
 
 
 def test_a_mode_without_emac_is_judged_by_its_cramer_rao_bound():

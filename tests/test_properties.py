@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
+from pydantic import BaseModel
 
 from agent.config import Config, ConfigError, load_config
 from agent.ground.config import GroundConfig
@@ -38,6 +39,7 @@ from agent.link.codec import (
     CounterStore,
     LinkCodec,
 )
+from agent.link.session import LinkSession
 from agent.logs import format_row
 from drivers.airdata.codec import MAX_LINE, AirData, AirDataCodec
 from drivers.codec import StreamDecoder
@@ -156,7 +158,8 @@ def test_garbage_between_valid_frames_never_costs_a_frame(name, data):
 
 # -- the radio link -------------------------------------------------------------------------
 
-KEY = bytes(range(32))
+# A fixed key drawn at random (a patterned one, as bytes(range(32)) was, is refused).
+KEY = bytes.fromhex("5f1e9c27d4a0b38e61c7f2094ad35be8c06f1a729e4d83b5f02c6e917ad4b358")
 AIR_ADDR, GROUND_ADDR = b"A" * 8, b"G" * 8
 PLAIN = st.recursive(
     st.none()
@@ -212,6 +215,35 @@ def test_frames_signed_around_arbitrary_bodies_never_raise(data):
         if out is not None:  # the application's validator then refuses it clearly or takes it
             _outcome(messages.from_dict, out, error=messages.LinkMessageError)
     assert ground.partial_bytes <= 8 * 255 * 256
+
+
+SESSION_FIELD = st.sampled_from(["s", "e", "b", "r", "t", "upto", "kind"])
+
+
+class _StillClock:
+    def now(self) -> float:
+        return 0.0
+
+
+@PROPERTY
+@given(
+    bodies=st.lists(
+        PLAIN | st.dictionaries(SESSION_FIELD, PLAIN | st.sampled_from(["lack", "abort", "ping"])),
+        max_size=8,
+    )
+)
+def test_a_session_given_any_signed_value_never_raises(bodies):
+    """A sender holding the key but sending values the session never sends (`[1, 2]`,
+    `{"s": "x"}`, `{"s": null}`, a "lack" with a bad bound …): `LinkSession.receive`
+    counts them and never raises; whatever it hands on is a validated message."""
+    air = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(None), address=AIR_ADDR)
+    handed: list = []
+    session = LinkSession(air, None, GROUND_ADDR, _StillClock(), lambda m, s: handed.append(m))
+    for counter, body in enumerate(bodies):
+        header = HEADER.pack(VERSION, GROUND, counter, counter, 0, 1)
+        data = header + msgpack.packb(body, use_bin_type=True)
+        session.receive(GROUND_ADDR, data + air._tag(GROUND_ADDR, AIR_ADDR, data), 0.0)
+    assert all(isinstance(m, BaseModel) for m in handed)  # validated, never a raw value
 
 
 @PROPERTY

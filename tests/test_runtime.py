@@ -105,6 +105,26 @@ async def test_a_message_that_is_not_a_command_is_refused_by_name(agent):
     assert agent.counters["commands_unknown"] == 2
 
 
+def test_an_agent_built_without_config_text_logs_the_hash_of_its_settings(tmp_path):
+    # Input: the agent as `sysid sim` builds it in-process, Agent(config) with no file text;
+    # its excitation logs carried sha256("") (e3b0c442...), naming no config.
+    from agent.config import to_toml
+    from agent.logs import config_hash
+    from drivers.values import Window
+
+    config = Config(recorder=Recorder(log_dir=str(tmp_path / "logs"), rate_hz=50.0))
+    agent = Agent(config, base=tmp_path, worker=thread_worker)
+    try:
+        rows = np.zeros((2, len(agent.recorder.columns)))
+        window = Window("lat1", "lateral", 1.0, 1.02, "finished", "")
+        path = agent.logbook.excitation(window, rows)
+    finally:
+        agent.close()
+    sha = [ln for ln in path.read_text().splitlines() if ln.startswith("# config sha256 ")]
+    assert sha == [f"# config sha256 {config_hash(to_toml(config))}"]
+    assert config_hash(to_toml(config)) != config_hash("")
+
+
 def test_every_update_period_queues_the_latest_data(agent):
     n = len(agent.recorder.channels)
     for k in range(3000):  # 30 s of frames at 100 Hz
@@ -224,21 +244,28 @@ async def test_a_new_nominal_that_predicts_worse_is_rolled_back(tmp_path):
     agent, window, rows = a2_flight(tmp_path)
     sent = []
     agent.downlink.subscribe(sent.append)
+
+    def last_id() -> str:
+        return [m for m in sent if isinstance(m, messages.Result)][-1].model_id
+
     try:
         await agent.identification.identify(window, rows)
-        await agent.commands.handle(messages.Decision(model_id="lat-1", accept=True), 1)
+        first = last_id()
+        await agent.commands.handle(messages.Decision(model_id=first, accept=True), 1)
         await agent.identification.identify(window, rows)
-        wrong = agent.models.candidates["lat-2"]
+        second = last_id()
+        wrong = agent.models.candidates[second]
         wrong.result["B"] = (-np.asarray(wrong.result["B"])).tolist()
-        await agent.commands.handle(messages.Decision(model_id="lat-2", accept=True), 2)
-        assert agent.models.nominal_id("lateral") == "lat-2"
+        await agent.commands.handle(messages.Decision(model_id=second, accept=True), 2)
+        assert agent.models.nominal_id("lateral") == second
         await agent.identification.identify(window, rows)
     finally:
         agent.close()
-    assert agent.models.nominal_id("lateral") == "lat-1"
+    assert (first.rsplit("-", 1)[0], second.rsplit("-", 1)[0]) == ("lat-1", "lat-2")
+    assert agent.models.nominal_id("lateral") == first
     notices = [m.text for m in sent if isinstance(m, messages.Notice)]
     assert any(
-        t.startswith("self-check: nominal lat-2") and t.endswith("reverted") for t in notices
+        t.startswith(f"self-check: nominal {second}") and t.endswith("reverted") for t in notices
     ), notices
 
 
@@ -293,8 +320,10 @@ async def test_the_frequency_response_of_a_pair_is_sent_when_asked(tmp_path):
     worker = asyncio.create_task(agent.identification.run())
     try:
         await agent.identification.identify(window, rows)
+        (result,) = [m for m in agent.sent if isinstance(m, messages.Result)]
+        model_id = result.model_id
         for seq, (model, i, o) in enumerate(
-            [("lat-1", "aileron", "p"), ("lat-1", "elevator", "q"), ("lat-9", "aileron", "p")],
+            [(model_id, "aileron", "p"), (model_id, "elevator", "q"), ("lat-9", "aileron", "p")],
             start=1,
         ):
             agent.commands.receive(messages.FrfRequest(model_id=model, input=i, output=o), seq)
@@ -308,7 +337,7 @@ async def test_the_frequency_response_of_a_pair_is_sent_when_asked(tmp_path):
     assert "no pair elevator → q" in answered[2].reason
     assert "no model lat-9" in answered[3].reason
     (report,) = [m for m in agent.sent if isinstance(m, messages.FrfReport)]
-    assert (report.model_id, report.input, report.output) == ("lat-1", "aileron", "p")
+    assert (report.model_id, report.input, report.output) == (model_id, "aileron", "p")
     assert 10 <= len(report.freq_hz) <= messages.FRF_POINTS
     assert np.all(np.diff(report.freq_hz) > 0)
     assert all(g is not None and 0 <= g <= 1 for g in report.coherence)

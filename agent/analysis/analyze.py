@@ -19,12 +19,12 @@ from pathlib import Path
 import numpy as np
 
 from agent.analysis.identify import Request, load_experiments
-from agent.analysis.records import RecordError, time_steps
+from agent.analysis.records import MAX_LINE, RecordError, time_steps
 from agent.ident import Experiment, Settings
 from agent.ident import job as jobs
 from agent.ident.errors import DataError
 from agent.ident.job import Outcome
-from agent.logs import read_log
+from agent.logs import LogError, read_log
 
 # A setting is "within" the best if its mean TIC_avg is at most this much worse (relative).
 TIC_MARGIN = 0.10
@@ -56,6 +56,11 @@ def parse_sweep(text: str) -> tuple[str, list[int]]:
     name = name.strip()
     if not sep or name not in SWEEPABLE:
         raise AnalyzeError(f"--sweep {text!r}: give markov=… or order=… (e.g. markov=1:20)")
+    # Counted before any list is built: a range is counted and bounded arithmetically.
+    if spec.count(",") >= MAX_SWEEP:
+        raise AnalyzeError(
+            f"--sweep {text[:40]!r}…: {spec.count(',') + 1} values; at most {MAX_SWEEP}"
+        )
     try:
         if ":" in spec:
             parts = [int(v) for v in spec.split(":")]
@@ -65,7 +70,7 @@ def parse_sweep(text: str) -> tuple[str, list[int]]:
             if step == 0:
                 raise AnalyzeError(f"--sweep {text!r}: the step must not be 0")
             # Both ends included, counting up or down (markov=5:1:-1 is 5, 4, 3, 2, 1).
-            values = list(range(start, stop + (1 if step > 0 else -1), step))
+            values: Sequence[int] = range(start, stop + (1 if step > 0 else -1), step)
         else:
             values = [int(v) for v in spec.split(",")]
     except AnalyzeError:
@@ -74,11 +79,11 @@ def parse_sweep(text: str) -> tuple[str, list[int]]:
         raise AnalyzeError(f"--sweep {text!r}: values must be integers") from None
     if not values:
         raise AnalyzeError(f"--sweep {text!r}: names no value (the step runs away from the end)")
-    if min(values) < 1:
-        raise AnalyzeError(f"--sweep {text!r}: values must be ≥ 1")
     if len(values) > MAX_SWEEP:
         raise AnalyzeError(f"--sweep {text!r}: {len(values)} values; at most {MAX_SWEEP}")
-    return name, values
+    if min(values) < 1:
+        raise AnalyzeError(f"--sweep {text!r}: values must be ≥ 1")
+    return name, list(values)
 
 
 def select_logs(paths: Sequence[Path], excitations: Sequence[str] | None) -> list[Path]:
@@ -116,9 +121,7 @@ def _number(path: Path) -> str:
 def _header(path: Path, pattern: str) -> str | None:
     """The first match of `pattern`'s group in the log's comment lines."""
     with path.open(encoding="utf-8", errors="replace") as handle:
-        for line in handle:
-            if not line.startswith("#"):
-                return None
+        while (line := handle.readline(MAX_LINE)).startswith("#"):  # never a whole /dev/zero
             found = re.search(pattern, line)
             if found:
                 return found.group(1)
@@ -187,7 +190,7 @@ def _experiment(path: Path, request: Request) -> tuple[Experiment, float, bool]:
     Either way the experiment carries its operating point and, where the log has the INS's
     heading and velocities (`Request.navigation`), its navigation, as onboard."""
     with path.open(encoding="utf-8", errors="replace") as handle:
-        ours = handle.readline().startswith("# suas-sysid")
+        ours = handle.readline(MAX_LINE).startswith("# suas-sysid")
     if not ours:
         single = replace(request, paths=(path,))
         try:
@@ -196,8 +199,12 @@ def _experiment(path: Path, request: Request) -> tuple[Experiment, float, bool]:
             raise AnalyzeError(str(exc)) from exc
         return experiments[0], dt, False
     try:
-        columns, rows = read_log(path)
-    except (OSError, ValueError, IndexError) as exc:
+        # Only the columns used are kept: memory goes with them, not with the log.
+        used = ("time", *request.inputs, *request.outputs, *request.navigation)
+        columns, rows = read_log(path, used)
+    except LogError as exc:  # names the line and column
+        raise AnalyzeError(f"{path}: {exc}") from exc
+    except (OSError, ValueError) as exc:
         raise AnalyzeError(f"{path}: not a readable log ({exc})") from exc
     missing = [n for n in ("time", *request.inputs, *request.outputs) if n not in columns]
     if missing:
@@ -287,9 +294,13 @@ def run_cases(
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(workers, mp_context=context) as pool:
         futures = [pool.submit(jobs.run, c.job) for c in cases]
-        for future in futures:
-            future.result()
-            tick()
+        try:
+            for future in futures:
+                future.result()
+                tick()
+        except BaseException:  # Ctrl-C: leaving the pool must not run the cases still queued
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
         return [f.result() for f in futures]
 
 

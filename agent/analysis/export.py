@@ -36,12 +36,19 @@ import json
 import re
 import zipfile
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
 from agent.analysis import derivatives
 
 TWO_PI = 2 * np.pi
+# The longest line of a result or ground log, or model store file: one identified model
+# (matrices, modes, the frequency fit) is far under a megabyte at order 100. A longer line (a
+# file with no line ends: /dev/zero, a binary file) is refused at this length, not read whole;
+# so is a source larger than MAX_SOURCE.
+MAX_LINE = 16 << 20
+MAX_SOURCE = 1 << 30
 
 
 class ExportError(ValueError):
@@ -59,21 +66,49 @@ def load_models(path: str | Path) -> Models:
     """Every model in a result log, a model store file or a ground log, as export dicts."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        with path.open("rb") as handle:
+            if path.suffix != ".json":
+                return _from_lines(path, _lines(path, handle))
+            text = _bounded(path, handle.read(MAX_LINE + 1), "the file")
     except OSError as exc:
         raise ExportError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
+    try:
+        return Models([_from_store(path, json.loads(text))])
+    except (ValueError, KeyError, TypeError) as exc:
+        raise ExportError(f"{path}: not a model store file ({exc})") from exc
+
+
+def _bounded(path: Path, data: bytes, what: str) -> str:
+    """`data` as text, refused when longer than MAX_LINE or not UTF-8."""
+    if len(data) > MAX_LINE:
+        raise ExportError(
+            f"{path}: {what} is longer than {MAX_LINE} bytes; give a result log, a model "
+            "store file or a ground log"
+        )
+    try:
+        return data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise ExportError(
-            f"{path}: not a UTF-8 text file (byte {exc.start}: {exc.reason}); give a result "
-            "log, a model store file or a ground log"
+            f"{path}: not a UTF-8 text file ({what}, byte {exc.start}: {exc.reason}); give a "
+            "result log, a model store file or a ground log"
         ) from exc
-    if path.suffix == ".json":
-        try:
-            return Models([_from_store(path, json.loads(text))])
-        except (ValueError, KeyError, TypeError) as exc:
-            raise ExportError(f"{path}: not a model store file ({exc})") from exc
+
+
+def _lines(path: Path, handle):
+    """(number, text) of each line, each at most MAX_LINE bytes, MAX_SOURCE in all."""
+    total, number = 0, 0
+    while data := handle.readline(MAX_LINE + 1):
+        number += 1
+        total += len(data)
+        if total > MAX_SOURCE:
+            raise ExportError(f"{path}: larger than {MAX_SOURCE} bytes; not a log of results")
+        yield number, _bounded(path, data, f"line {number}")
+
+
+def _from_lines(path: Path, lines) -> Models:
+    """The models of a result log or a ground log, one JSON object a line."""
     models, skipped = Models(), []
-    for number, line in enumerate(text.splitlines(), start=1):
+    for number, line in lines:
         if not line.strip():
             continue
         try:
@@ -213,7 +248,8 @@ def matlab_names(ids: list[str]) -> list[str]:
     return names
 
 
-def to_mat(models: list[dict], path: str | Path) -> None:
+def to_mat(models: list[dict], path: str | Path | BinaryIO) -> None:
+    """The models as a MATLAB .mat file at `path`, or into a binary file object."""
     from scipy.io import savemat
 
     variables: dict[str, object] = {}
@@ -230,7 +266,8 @@ def to_mat(models: list[dict], path: str | Path) -> None:
         variables[name] = struct
     variables["model_ids"] = np.array([m["id"] for m in models], dtype=object)
     variables["model_variables"] = np.array(names, dtype=object)
-    savemat(str(path), variables, do_compression=True, oned_as="column")
+    target = path if hasattr(path, "write") else str(path)
+    savemat(target, variables, do_compression=True, oned_as="column")
 
 
 def to_json(models: list[dict]) -> str:

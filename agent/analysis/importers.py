@@ -28,7 +28,11 @@ since the log's first sample. A channel the log does not have is left out and li
 
 from __future__ import annotations
 
+import contextlib
 import io
+import os
+import sys
+import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -117,7 +121,67 @@ def import_log(
     raise LogImportError(f"{path}: unknown log type {path.suffix!r} (ArduPilot .bin, PX4 .ulg)")
 
 
+class _Chatter(io.TextIOBase):
+    """Where pymavlink's prints go while a log is read: counted, the first kept, none shown.
+    It prints to stdout and stderr a line or two per damaged record (thousands for one
+    damaged FMT), and stdout is the command's."""
+
+    def __init__(self) -> None:
+        self.lines, self.first = 0, ""
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, text: str) -> int:
+        self.lines += text.count("\n")
+        if not self.first and text.strip():
+            self.first = next(ln.strip() for ln in text.splitlines() if ln.strip())[:200]
+        return len(text)
+
+
+@contextlib.contextmanager
+def _quiet(chatter: _Chatter):
+    """pymavlink's prints into `chatter`: Python's (stdout and stderr), and its C indexer's,
+    which fprintf a line per bad header to file descriptor 2 itself (caught in a temporary
+    file, then counted)."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with tempfile.TemporaryFile() as sink:
+            os.dup2(sink.fileno(), 2)
+            try:
+                with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
+                    yield
+            finally:
+                os.dup2(saved, 2)
+                sink.seek(0)
+                for chunk in iter(lambda: sink.read(1 << 16), b""):
+                    chatter.write(chunk.decode(errors="replace"))
+    finally:
+        os.close(saved)
+
+
 def _dataflash(path: Path, surfaces: Mapping[str, Surface], rate_hz: float) -> Imported:
+    chatter = _Chatter()
+    with _quiet(chatter):
+        series, notes = _read_dataflash(path, surfaces)
+    if chatter.lines:
+        notes.append(
+            f"pymavlink reported {chatter.lines} line(s) of damage while reading, the first: "
+            f"{chatter.first}"
+        )
+    for control, surface in surfaces.items():
+        pwm = series.get(f"{control}_pwm")
+        if pwm is not None:
+            values = np.asarray(pwm[1])
+            series[control] = (pwm[0], list(_deflection(control, values, surface)))
+    return _resample(path, "ArduPilot DataFlash", series, rate_hz, notes)
+
+
+def _read_dataflash(
+    path: Path, surfaces: Mapping[str, Surface]
+) -> tuple[dict[str, tuple[list[float], list[float]]], list[str]]:
+    """Every mapped message's (times, values) by column, and notes on what was found."""
     from pymavlink import DFReader
 
     try:
@@ -162,12 +226,7 @@ def _dataflash(path: Path, surfaces: Mapping[str, Surface], rate_hz: float) -> I
                 _append(series, column, t, float(getattr(m, name)) * scale)
     if damaged:
         notes.append(f"{damaged} damaged message(s) skipped; reading went on past each")
-    for control, surface in surfaces.items():
-        pwm = series.get(f"{control}_pwm")
-        if pwm is not None:
-            values = np.asarray(pwm[1])
-            series[control] = (pwm[0], list(_deflection(control, values, surface)))
-    return _resample(path, "ArduPilot DataFlash", series, rate_hz, notes)
+    return series, notes
 
 
 def _ulog(path: Path, surfaces: Mapping[str, Surface], rate_hz: float) -> Imported:

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from agent.logs import csv_number
+
 # Sampling jitter allowed, as a fraction of the median step: loggers stamp samples with some
 # scheduling noise, but beyond 1 % the record is not uniformly sampled and OKID's
 # discrete-time model would be wrong.
@@ -85,6 +87,7 @@ def read_record(path: str | Path, names: Sequence[str], optional: Sequence[str] 
         raise RecordError(f"{path}: not a text CSV file ({exc.reason})") from exc
     except csv.Error as exc:
         raise RecordError(f"{path}: not a readable CSV file ({exc})") from exc
+    _check_last_line_ends(path)
     time = values[:, 0]
     columns = {name: values[:, j + 1] for j, name in enumerate([*names, *extra])}
     for name in extra:
@@ -108,6 +111,27 @@ def _line(path: Path, handle) -> str:
 def _lines(path: Path, handle):
     while line := _line(path, handle):
         yield line
+
+
+# The end of a record looked at for its last line end: a row is far shorter.
+TAIL = 1 << 16
+
+
+def _check_last_line_ends(path: Path) -> None:
+    """A last line without a line end may have been cut mid-number (a copy or a write that
+    stopped), and a number cut short still reads as a number: refused, with what to do."""
+    with path.open("rb") as raw:
+        size = raw.seek(0, 2)
+        raw.seek(max(0, size - TAIL))
+        tail = raw.read(TAIL).rstrip(b" \t\r")
+        if not tail or tail.endswith(b"\n"):
+            return
+        raw.seek(0)
+        line_no = 1 + sum(chunk.count(b"\n") for chunk in iter(lambda: raw.read(TAIL), b""))
+    raise RecordError(
+        f"{path} line {line_no}: the last line has no line end, so it may have been cut "
+        "mid-number; if the line is whole, end it with a newline, else delete it"
+    )
 
 
 def _check_header(path: Path, header: list[str]) -> None:
@@ -221,15 +245,16 @@ def _read_rows(
             cell = row[j].strip()
             if k >= strict:
                 try:
-                    parsed.append(float(cell))
+                    parsed.append(csv_number(cell))
                 except ValueError:
                     parsed.append(np.nan)
                 continue
             try:
-                value = float(cell)
+                value = csv_number(cell)
             except ValueError:
+                hint = " (write numbers without '_' separators)" if "_" in cell else ""
                 raise RecordError(
-                    f"{path} line {line_no}: {cell!r} in column '{name}' is not a number"
+                    f"{path} line {line_no}: {cell!r} in column '{name}' is not a number{hint}"
                 ) from None
             if not np.isfinite(value):
                 raise RecordError(

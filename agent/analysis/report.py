@@ -23,6 +23,7 @@ import html
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import BinaryIO
 
 import matplotlib
 import matplotlib.ticker
@@ -40,6 +41,7 @@ from agent.ident.convert import StateSpace
 from agent.ident.fit import fit
 from agent.ident.frf import MeasuredResponse
 from agent.ident.job import Outcome, prepared
+from agent.outputs import Outputs
 
 DPI = 90
 COLOURS = plt.rcParams["axes.prop_cycle"].by_key()["color"]
@@ -55,7 +57,7 @@ def _model(outcome: Outcome) -> StateSpace:
     return StateSpace(*(np.asarray(r[k], dtype=float) for k in ("A", "B", "C", "D")))
 
 
-def time_histories(case: Case, outcome: Outcome, path: Path) -> None:
+def time_histories(case: Case, outcome: Outcome, path: BinaryIO) -> None:
     batch, dt = _prepared(case, outcome)
     result = fit(_model(outcome), batch)
     outputs = case.job.outputs
@@ -88,7 +90,7 @@ def time_histories(case: Case, outcome: Outcome, path: Path) -> None:
     axes[0].set_title(f"excitation {case.label}: TIC_avg {result.tic_avg:.3f}")
     axes[-1].set_xlabel("time (s, deviations from trim)")
     fig.tight_layout()
-    fig.savefig(path, dpi=DPI)
+    fig.savefig(path, dpi=DPI, format="png")
     plt.close(fig)
 
 
@@ -133,7 +135,7 @@ def _anchor(case: Case) -> str:
     return f"mode-{case.label}"
 
 
-def hankel(cases: Sequence[Case], outcomes: Sequence[Outcome], path: Path) -> None:
+def hankel(cases: Sequence[Case], outcomes: Sequence[Outcome], path: BinaryIO) -> None:
     fig, ax = plt.subplots(figsize=(7, 3.5))
     for k, (case, outcome) in enumerate(zip(cases, outcomes, strict=True)):
         if not outcome.ok:
@@ -154,7 +156,7 @@ def hankel(cases: Sequence[Case], outcomes: Sequence[Outcome], path: Path) -> No
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=DPI)
+    fig.savefig(path, dpi=DPI, format="png")
     plt.close(fig)
 
 
@@ -166,7 +168,9 @@ def _phase_line(f: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.insert(f, jumps, np.nan), np.insert(wrapped, jumps, np.nan)
 
 
-def frequency_responses(case: Case, outcome: Outcome, path: Path) -> tuple[MeasuredResponse, list]:
+def frequency_responses(
+    case: Case, outcome: Outcome, path: BinaryIO
+) -> tuple[MeasuredResponse, list]:
     """Each input → output pair at the frequencies the input excited: the measured response
     (magnitude in dB, phase) and its coherence, the identified model's response over it.
     Points below COHERENCE_MIN are drawn apart (×). Returns the measured response and the
@@ -231,7 +235,7 @@ def frequency_responses(case: Case, outcome: Outcome, path: Path) -> tuple[Measu
         fontsize=9,
     )
     fig.tight_layout()
-    fig.savefig(path, dpi=DPI)
+    fig.savefig(path, dpi=DPI, format="png")
     plt.close(fig)
     return measured, low
 
@@ -242,7 +246,7 @@ def _averaging(measured: MeasuredResponse) -> str:
     return f"{measured.segments} half-overlapping Hann segments of {measured.segment_s:.1f} s"
 
 
-def input_spectra(case: Case, dt: float, path: Path) -> list[tuple[str, float]]:
+def input_spectra(case: Case, dt: float, path: BinaryIO) -> list[tuple[str, float]]:
     """Power spectral density of each input; returns each input's RPF."""
     u = np.vstack([u for u, _ in case.job.experiments])
     fig, ax = plt.subplots(figsize=(7, 3.2))
@@ -258,12 +262,12 @@ def input_spectra(case: Case, dt: float, path: Path) -> list[tuple[str, float]]:
     ax.legend(fontsize=8)
     ax.set_title(f"excitation {case.label}: inputs")
     fig.tight_layout()
-    fig.savefig(path, dpi=DPI)
+    fig.savefig(path, dpi=DPI, format="png")
     plt.close(fig)
     return rpf
 
 
-def _derivatives(case: Case, outcome: Outcome, directory: Path, tag: str) -> str:
+def _derivatives(case: Case, outcome: Outcome, directory: Path, tag: str, outputs: Outputs) -> str:
     """The stability and control derivatives with their standard errors, and their CSV."""
     table = derivatives.from_result(outcome.result)
     if table is None:
@@ -272,7 +276,7 @@ def _derivatives(case: Case, outcome: Outcome, directory: Path, tag: str) -> str
             "do not determine its state).</p>"
         )
     name = f"{tag}_derivatives.csv"
-    (directory / name).write_text(derivatives.to_csv([(case.label, table)]))
+    outputs.write_text(directory / name, derivatives.to_csv([(case.label, table)]))
     known = "" if np.isfinite(table.std).any() else " (no standard errors: not refined)"
     return (
         f"<h3>Derivatives</h3><p>Row: the output whose rate; column: the state or input; "
@@ -339,27 +343,48 @@ margin:0.5em 0}h2{border-bottom:2px solid #ccc;margin-top:2em}.fail{color:#b00}.
 svg.splane{display:block;margin:0.5em 0}svg.splane a:hover{opacity:0.7}"""
 
 
+def files(directory: Path, cases: Sequence[Case]) -> list[Path]:
+    """Every file `write` may write for `cases` in `directory`."""
+    names = ["index.html", "hankel.png"]
+    for case in cases:
+        tag = _tag(case)
+        names += [f"{tag}_{part}" for part in ("time.png", "bode.png", "inputs.png")]
+        names.append(f"{tag}_derivatives.csv")
+    return [directory / name for name in names]
+
+
+def _tag(case: Case) -> str:
+    return f"excitation_{case.label}"
+
+
 def write(
     directory: Path,
     logs: Sequence[Path],
     cases: Sequence[Case],
     outcomes: Sequence[Outcome],
     nominal: dict | None = None,
+    outputs: Outputs | None = None,
 ) -> Path:
-    """The report in `directory` (index.html and its PNGs); returns the page's path."""
+    """The report in `directory` (index.html and its PNGs); returns the page's path. Every
+    file is written through `outputs` (the command's, which checked them against its inputs),
+    each whole or not at all."""
+    outputs = Outputs({}) if outputs is None else outputs
+    for path in files(directory, cases):  # all checked before any is written
+        outputs.claimed(path)
     directory.mkdir(parents=True, exist_ok=True)
     parts = [
         f"<h1>suas-sysid report</h1><p>{len(logs)} log(s): "
         + ", ".join(html.escape(Path(p).name) for p in logs)
         + "</p>"
     ]
-    hankel(cases, outcomes, directory / "hankel.png")
+    with outputs.open(directory / "hankel.png") as handle:
+        hankel(cases, outcomes, handle)
     parts.append(
         f"<h2>Eigenvalues</h2>{s_plane(cases, outcomes, nominal)}"
         '<h2>Hankel singular values</h2><img src="hankel.png" alt="Hankel">'
     )
     for k, (case, outcome) in enumerate(zip(cases, outcomes, strict=True)):
-        tag = f"excitation_{case.label}"
+        tag = _tag(case)
         parts.append(f"<h2>Excitation {html.escape(case.label)}</h2>")
         if not outcome.ok:
             parts.append(
@@ -373,10 +398,13 @@ def write(
         )
         parts.append(mode_table(outcome, _anchor(case)))
         parts.append(excitation_s_plane(k, cases, outcomes, nominal))
-        parts.append(_derivatives(case, outcome, directory, tag))
-        time_histories(case, outcome, directory / f"{tag}_time.png")
-        measured, low = frequency_responses(case, outcome, directory / f"{tag}_bode.png")
-        rpf = input_spectra(case, case.job.record_dt, directory / f"{tag}_inputs.png")
+        parts.append(_derivatives(case, outcome, directory, tag, outputs))
+        with outputs.open(directory / f"{tag}_time.png") as handle:
+            time_histories(case, outcome, handle)
+        with outputs.open(directory / f"{tag}_bode.png") as handle:
+            measured, low = frequency_responses(case, outcome, handle)
+        with outputs.open(directory / f"{tag}_inputs.png") as handle:
+            rpf = input_spectra(case, case.job.record_dt, handle)
         rpf_text = ", ".join(f"{n} {v:.2f}" for n, v in rpf)
         parts.append(
             f'<img src="{tag}_time.png" alt="time histories {tag}">'
@@ -386,9 +414,10 @@ def write(
             f'<img src="{tag}_inputs.png" alt="input spectra {tag}">'
         )
     page = directory / "index.html"
-    page.write_text(
+    outputs.write_text(
+        page,
         f'<!doctype html><html><head><meta charset="utf-8"><title>suas-sysid '
         f"report</title><style>{CSS}</style></head><body>{''.join(parts)}"
-        "</body></html>"
+        "</body></html>",
     )
     return page

@@ -1,9 +1,11 @@
-"""The `sysid` command: parse arguments, load config, call in. Exit 0 ok, 1 failed, 2 bad input.
+"""The `sysid` command: parse arguments, load config, call in. Exit 0 ok, 1 failed, 2 bad input,
+130 interrupted (Ctrl-C).
 
 One module per command, each with `add_parser(sub)` (its options; `set_defaults(run=…)`) and
 `run(args) -> exit code`, importing what it needs only when it runs, so that `sysid --help`
 stays quick. A command stops with `common.CommandError` (or `refused`, `failed`); `main`
-turns that, a usage error and, under `--json`, a bug into its message and exit code, once.
+turns that, a usage error, Ctrl-C and, under `--json`, a bug into its message and exit code,
+once.
 Every `add_parser` opens alike (name, help, description) on purpose: a command's words stay
 in its own module; what commands share (options, config loading) is in `common`.
 """
@@ -24,6 +26,7 @@ from agent.cli import (
     export,
     identify,
     import_log,
+    keygen,
     onboard,
     report,
     sim,
@@ -32,6 +35,7 @@ from agent.cli import (
 from agent.cli.common import (
     EXIT_BAD_INPUT,
     EXIT_FAILED,
+    EXIT_INTERRUPTED,
     CommandError,
     Parser,
     UsageError,
@@ -53,6 +57,7 @@ COMMANDS = (
     sim,
     console,
     config_check,
+    keygen,
 )
 
 
@@ -60,7 +65,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = Parser(
         prog="sysid",
         description="System identification of small fixed-wing "
-        "aircraft, onboard and on the ground. Exit 0 ok, 1 failed, 2 bad input.",
+        "aircraft, onboard and on the ground. Exit 0 ok, 1 failed, 2 bad input, "
+        "130 interrupted.",
     )
     parser.add_argument("--version", action="version", version=f"sysid {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -71,7 +77,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `sysid` console script. Under `--json` an unexpected error (a bug)
-    still leaves exactly one JSON object on stdout; its traceback goes to stderr."""
+    or Ctrl-C still leaves exactly one JSON object on stdout; a bug's traceback goes to
+    stderr, Ctrl-C's is left out (exit 130)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         args = build_parser().parse_args(argv)
@@ -95,9 +102,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         return code
     except CommandError as exc:
         say_error(name, exc.message if exc.kind == "error" else f"{exc.kind}: {exc.message}")
-        if as_json:
+        if as_json and not json_state["printed"]:  # a streamed object closed with its error
             print_json({"error": {"kind": exc.kind, "message": exc.message, "exit": exc.code}})
         return exc.code
+    except KeyboardInterrupt:
+        message = "interrupted (Ctrl-C)"
+        say_error(name, message)
+        if as_json and not json_state["printed"]:
+            print_json(
+                {"error": {"kind": "interrupted", "message": message, "exit": EXIT_INTERRUPTED}}
+            )
+        return EXIT_INTERRUPTED
     except Exception as exc:
         if not as_json:
             raise
@@ -105,5 +120,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         traceback.print_exc()
         message = f"internal error: {type(exc).__name__}: {exc}"
-        print_json({"error": {"kind": "internal", "message": message, "exit": EXIT_FAILED}})
+        if not json_state["printed"]:
+            print_json({"error": {"kind": "internal", "message": message, "exit": EXIT_FAILED}})
         return EXIT_FAILED

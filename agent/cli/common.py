@@ -11,9 +11,11 @@ import argparse
 import json
 import math
 import sys
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
+EXIT_INTERRUPTED = 130  # the shell's code for a command ended by SIGINT (128 + 2)
 DEFAULT_CONFIG = Path("config.toml")
 
 
@@ -68,6 +70,36 @@ def print_json(document) -> None:
     json_state["printed"] = True
 
 
+def print_json_items(key: str, items: Iterable, rest: Callable[[], dict]) -> None:
+    """One JSON object on stdout, `{key: [*items], **rest()}`, written item by item so that
+    a long list is never held whole; `rest` is called after the last item. An error among the
+    items still closes the object, with an "error" member, before it goes on up."""
+    out = sys.stdout
+    out.write("{" + json.dumps(key) + ": [")
+    json_state["printed"] = True
+    count = 0
+    try:
+        for item in items:
+            out.write((", " if count else "") + json.dumps(finite(item), allow_nan=False))
+            count += 1
+    except BrokenPipeError:  # the reader went away: nothing can be closed
+        raise
+    except BaseException as exc:
+        code = (
+            exc.code
+            if isinstance(exc, CommandError)
+            else EXIT_INTERRUPTED
+            if isinstance(exc, KeyboardInterrupt)
+            else EXIT_FAILED
+        )
+        message = f"after {count} item(s): {type(exc).__name__}: {exc}"
+        error = {"kind": "error", "message": message, "exit": code}
+        out.write("], " + json.dumps({"error": error})[1:] + "\n")
+        raise
+    tail = json.dumps(finite(rest()), allow_nan=False)
+    out.write("]" + (", " + tail[1:] if tail != "{}" else "}") + "\n")
+
+
 def finite(value):
     if isinstance(value, float):
         return value if math.isfinite(value) else None
@@ -119,6 +151,15 @@ positive_seconds = checked(
 )
 port = checked(
     int, lambda p: 0 <= p <= 65535, "port number", "not a UDP port: give 0 (any) to 65535"
+)
+# The simulator's Dryden intensity in units of light turbulence (W20 = 5 ft/s): 0 is calm air,
+# and MIL-F-8785C's severe turbulence (W20 = 45 kt, 76 ft/s) is about 15.
+MAX_TURBULENCE = 15.0
+turbulence = checked(
+    float,
+    lambda v: 0.0 <= v <= MAX_TURBULENCE,  # NaN fails both
+    "turbulence intensity",
+    f"give 0 (calm) to {MAX_TURBULENCE:g} (severe); 1 is light (W20 = 5 ft/s)",
 )
 
 
@@ -248,11 +289,40 @@ def load_optional_config(path: Path | None):
     return read_config(DEFAULT_CONFIG if path is None else path)
 
 
+def config_input(path: Path | None) -> dict:
+    """The config file a command reads (`load_optional_config`'s), as an input of
+    `outputs_for`."""
+    if path is None and not DEFAULT_CONFIG.exists():
+        return {}
+    return {DEFAULT_CONFIG if path is None else path: "the config file"}
+
+
+def outputs_for(inputs: dict):
+    """The one way a command writes files (`agent.outputs.Outputs`): each output checked
+    against `inputs` (path → what it is) and the other outputs, written whole or not at all."""
+    from agent.outputs import Outputs
+
+    return Outputs(inputs)
+
+
+def claim(outputs, path: Path, option: str = "--out") -> Path:
+    """`outputs.claim`, refused (exit 2) when the output is an input or another output."""
+    from agent.outputs import OutputError
+
+    try:
+        return outputs.claim(path, option)
+    except OutputError as exc:
+        raise refused(str(exc)) from None
+
+
 def identification_request(args: argparse.Namespace, paths):
     """(config, request, settings) from the shared identification options."""
     from agent.analysis import identify as identify_cmd
+    from agent.config import MAX_DECIMATION
     from agent.ident.job import settings_from
 
+    if args.decimation is not None and args.decimation > MAX_DECIMATION:
+        raise refused(f"--decimation {args.decimation}: give 1 to {MAX_DECIMATION}")
     config = load_optional_config(args.config).identification
     inputs, outputs = args.inputs, args.outputs
     if args.axes is not None:

@@ -36,9 +36,9 @@ def run(args: argparse.Namespace) -> int:
         raise common.refused(f"{args.file}: cannot be read ({exc.strerror or exc})") from None
     messages, stats = decode_file(args.device, args.file)
     try:
-        if args.json:  # one object: the messages and the stream's statistics
-            common.print_json(
-                {"messages": [as_json(m) for m in messages], "stats": stats.as_dict()}
+        if args.json:  # one object, streamed: the messages, then the stream's statistics
+            common.print_json_items(
+                "messages", (as_json(m) for m in messages), lambda: {"stats": stats.as_dict()}
             )
         else:
             for message in messages:

@@ -39,6 +39,11 @@ def run(args: argparse.Namespace) -> int:
     from agent.excitation.preview import PreviewError, csv_text, load_plan, parse_amplitudes, plot
 
     config = common.load_optional_config(args.config)
+    outputs = common.outputs_for({args.plan: "the plan", **common.config_input(args.config)})
+    plot_path = None
+    if args.plot is not None:  # matplotlib writes a name without a suffix as name.png
+        plot_path = args.plot if args.plot.suffix else args.plot.with_name(args.plot.name + ".png")
+        common.claim(outputs, plot_path, "--plot")
     try:
         rate = config.excitation.rate_hz if args.rate is None else args.rate
         if not 1.0 <= rate <= 1000.0:
@@ -54,9 +59,9 @@ def run(args: argparse.Namespace) -> int:
     report = plans.summary(timeline, config.excitation.surfaces)
     for warning in report["warnings"]:
         print(f"sysid excite: warning: {warning}", file=sys.stderr)
-    if args.plot is not None:
+    if plot_path is not None:
         try:
-            plot(timeline, report, columns, args.plot)
+            plot(timeline, report, columns, plot_path, outputs)
         except ValueError as exc:  # PreviewError, or matplotlib's unknown file format
             raise common.refused(str(exc)) from None
     if args.json:

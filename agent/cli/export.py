@@ -33,6 +33,11 @@ def run(args: argparse.Namespace) -> int:
     suffix = args.out.suffix.lower()
     if suffix not in (".mat", ".json", ".csv"):
         raise common.refused(f"{args.out}: give a .mat, .json or .csv file to write")
+    inputs = {args.source: "the file being exported"}
+    if args.source.suffix == ".json":  # a model store file: its data set is read with it
+        inputs[args.source.with_suffix(".npz")] = "the exported model's data set"
+    outputs = common.outputs_for(inputs)
+    common.claim(outputs, args.out)
     try:
         models = load_models(args.source)
     except ExportError as exc:
@@ -52,11 +57,12 @@ def run(args: argparse.Namespace) -> int:
         models = [m for m in models if m["id"] in args.model]
     try:
         if suffix == ".mat":
-            to_mat(models, args.out)
+            with outputs.open(args.out) as handle:
+                to_mat(models, handle)
         elif suffix == ".csv":
-            args.out.write_text(to_csv(models))
+            outputs.write_text(args.out, to_csv(models))
         else:
-            args.out.write_text(to_json(models))
+            outputs.write_text(args.out, to_json(models))
     except ExportError as exc:
         raise common.refused(str(exc)) from None
     except OSError as exc:

@@ -31,11 +31,13 @@ def run(args: argparse.Namespace) -> int:
     config = common.load_optional_config(args.config)
     if not 1.0 <= args.rate <= 1000.0:
         raise common.refused(f"--rate {args.rate:g}: give 1 to 1000 Hz")
-    if args.out.exists() and args.out.resolve() == args.file.resolve():
-        raise common.refused(f"{args.out}: that is the log being imported; give another --out")
+    outputs = common.outputs_for(
+        {args.file: "the log being imported", **common.config_input(args.config)}
+    )
+    common.claim(outputs, args.out)
     try:
         imported = import_log(args.file, config.excitation.surfaces, args.rate)
-        args.out.write_text(imported.csv())
+        outputs.write_text(args.out, imported.csv())
     except LogImportError as exc:
         raise common.refused(str(exc)) from None
     except OSError as exc:

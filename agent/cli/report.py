@@ -37,11 +37,16 @@ def run(args: argparse.Namespace) -> int:
         except ValueError as exc:
             raise common.refused(str(exc)) from None
     cases = cases_for(args, paths, batch=False, sweep=None, prepared=prepared)
-    outcomes = common.run_cases(cases, args, quiet=False)
-    from agent.analysis.report import write
+    from agent.analysis.report import files, write
 
+    inputs = {path: "a log being reported" for path in paths}
+    inputs |= {args.nominal: "the nominal model", **common.config_input(args.config)}
+    outputs = common.outputs_for(inputs)
+    for path in files(args.out, cases):  # refused before the identifications run
+        common.claim(outputs, path)
+    outcomes = common.run_cases(cases, args, quiet=False)
     try:
-        page = write(args.out, paths, cases, outcomes, nominal)
+        page = write(args.out, paths, cases, outcomes, nominal, outputs)
     except OSError as exc:
         raise common.failed(f"{args.out}: cannot be written ({exc.strerror or exc})") from None
     identified = sum(o.ok for o in outcomes)

@@ -19,7 +19,10 @@ def add_parser(sub) -> None:
     parser.add_argument("--aircraft", default="J3Cub")
     parser.add_argument("--speed-kts", type=float, default=60.0)
     parser.add_argument(
-        "--turbulence", type=float, default=0.0, help="Dryden intensity: 1 = light (W20 = 5 ft/s)"
+        "--turbulence",
+        type=common.turbulence,
+        default=0.0,
+        help="Dryden intensity: 0 none, 1 light (W20 = 5 ft/s), at most 15 (severe)",
     )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--preset", choices=PRESETS, default="full")

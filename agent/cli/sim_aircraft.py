@@ -20,9 +20,10 @@ def add_parser(sub) -> None:
     parser.add_argument("--altitude-ft", type=float, default=1000.0)
     parser.add_argument(
         "--turbulence",
-        type=float,
+        type=common.turbulence,
         default=0.0,
-        help="Dryden intensity: 0 none, 1 light (W20 = 5 ft/s), 5 ≈ MIL-F-8785C light (15 kt)",
+        help="Dryden intensity: 0 none, 1 light (W20 = 5 ft/s), 5 ≈ MIL-F-8785C light (15 kt), "
+        "at most 15 (severe)",
     )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(

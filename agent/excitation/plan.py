@@ -17,12 +17,19 @@ from typing import Annotated, ClassVar, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from agent.channels import AXIS_SETS
 from agent.config import Envelope, Surface
 from agent.excitation import servo, signals
 from agent.excitation.names import CONTROLS, PRESETS
 
 AxisSet = Literal["lateral", "longitudinal", "full"]
 Nonzero = Annotated[float, Field(allow_inf_nan=False)]
+# A multisine harmonic's bound. The highest one that can play is 60,000 (period_s ≤ 120 s,
+# a command rate ≤ 1000 Hz); above that the Nyquist refusal names the frequency. The bound
+# sits far above it and only keeps an integer of hundreds of digits (10**400, which no float
+# holds) out of the frequency arithmetic.
+MAX_HARMONIC = 10**9
+Harmonic = Annotated[int, Field(ge=1, le=MAX_HARMONIC)]
 
 
 class _Model(BaseModel):
@@ -113,7 +120,7 @@ class Multisine(_Signal):
     started at a zero crossing so whole periods begin and end at trim."""
 
     kind: Literal["multisine"] = "multisine"
-    harmonics: tuple[int, ...] = Field(min_length=1, max_length=64)
+    harmonics: tuple[Harmonic, ...] = Field(min_length=1, max_length=64)
     period_s: float = Field(gt=0.0, le=120.0)
     periods: float = Field(2.0, gt=0.0, le=20.0)
     phases: Literal["optimised", "schroeder"] = "optimised"
@@ -329,7 +336,7 @@ def _cheap_refusals(plan: Plan, rate_hz: float, envelope: Envelope) -> list[str]
     pulses shorter than a command period, a length beyond the envelope. A plan from the
     radio goes through these before it is rendered, so a typo (a harmonic of 1e6, a sweep
     from 1e-9 Hz with dwell cycles, a pulse of 1e-4 s) is refused at once."""
-    reasons = []
+    reasons = _stray_controls(plan)
     nyquist, period = rate_hz / 2, 1.0 / rate_hz
     for segment in plan.segments:
         for name, sig in segment.signals.items():
@@ -352,6 +359,22 @@ def _cheap_refusals(plan: Plan, rate_hz: float, envelope: Envelope) -> list[str]
             f"max_duration_s = {envelope.max_duration_s:g} s"
         )
     return reasons
+
+
+def _stray_controls(plan: Plan) -> list[str]:
+    """A control the plan's axis set does not identify (a lateral plan on the elevator): its
+    response would enter the record with no input in the model to explain it, and it moves
+    the other axis off its trim. Refused rather than warned: no run of one axis set wants it
+    (docs/excitation.md)."""
+    takes = AXIS_SETS[plan.axes][0]
+    stray = [c for c in plan.controls() if c not in takes]
+    if not stray:
+        return []
+    return [
+        f"{', '.join(stray)}: not an input of the {plan.axes} model ({', '.join(takes)}), "
+        f"so its response would be left unexplained in the fit; play only "
+        f'{", ".join(takes)}, or fly the plan as axes "full"'
+    ]
 
 
 def check(plan: Plan, rate_hz: float, surfaces: Mapping[str, Surface], envelope: Envelope):

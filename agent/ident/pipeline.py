@@ -140,12 +140,13 @@ def identify(
     """Identify one model from a batch of experiments sampled every `dt` seconds.
 
     `method` "auto" (the default) is "aircraft" when the roles name an axis's four outputs
-    with one of its inputs (any `--axes`) and none of p, the order or refine=False is given
-    (they are OKID's: asking for them asks for OKID), and "time" otherwise. The structured
-    model with its kinematics known holds an aircraft's modes where a black-box model of the
-    same record can leave a poorly determined one to the data's last digits (an unconverged
-    8-state refinement put a lateral record's roll mode anywhere from −9.9 ± 1.1j to −12.9
-    under 1e-14 perturbations; the aircraft method gave −12.2 on each, the truth −12.1)."""
+    with one of its inputs (any `--axes`) and none of p, the order, a decimation other than 1
+    or refine=False is given (they are OKID's: asking for them asks for OKID), and "time"
+    otherwise. The structured model with its kinematics known holds an aircraft's modes where
+    a black-box model of the same record can leave a poorly determined one to the data's last
+    digits (an unconverged 8-state refinement put a lateral record's roll mode anywhere from
+    −9.9 ± 1.1j to −12.9 under 1e-14 perturbations; the aircraft method gave −12.2 on each,
+    the truth −12.1)."""
     settings = settings or Settings()
     raw = okid.as_experiments(experiments)
     if dt <= 0:
@@ -155,9 +156,15 @@ def identify(
     in_roles = tuple(input_roles) if input_roles is not None else inputs
     out_roles = tuple(output_roles) if output_roles is not None else ()
     present = aircraft.axes_present(in_roles, out_roles)
+    # A decimation factor is OKID's preprocessing: the aircraft method fits the record's own
+    # spectra at its own rate, so a factor other than 1 asks for OKID, as p and the order do.
+    decimated = settings.decimation not in (None, 1)
     if settings.method == "auto":
         okid_asked = (
-            settings.markov is not None or settings.order is not None or not settings.refine
+            settings.markov is not None
+            or settings.order is not None
+            or decimated
+            or not settings.refine
         )
         settings = replace(settings, method="aircraft" if present and not okid_asked else "time")
     if settings.method == "aircraft":
@@ -165,6 +172,12 @@ def identify(
             raise DataError(
                 "method 'aircraft' needs the four outputs of an axis (airspeed, alpha, q, "
                 "theta or beta, p, r, phi) and its inputs, named by their roles"
+            )
+        if decimated:
+            raise DataError(
+                f"method 'aircraft' fits the record's spectra at its own rate and takes no "
+                f"decimation (given {settings.decimation}): leave --decimation (and "
+                "[identification] decimation) out, or give --method time or frequency"
             )
         return _identify_aircraft(raw, dt, inputs, outputs, in_roles, out_roles, present, settings)
     batch, prep = preprocess(

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.signal
 
-from agent.ident.errors import InsufficientDataError
+from agent.ident.errors import DataError, InsufficientDataError
 from agent.ident.okid import Experiment
 
 # Fraction of each input's (mean-removed) power that lies inside the band of interest.
@@ -45,6 +45,9 @@ TAPS_PER_FACTOR = 10
 CUTOFF = 0.8
 # After decimation every experiment keeps at least this many samples.
 MIN_SAMPLES = 20
+# The largest decimation factor taken: beyond it the filter alone (2 × TAPS_PER_FACTOR taps
+# per unit) would take gigabytes. agent/config.py holds the same bound for the config file.
+MAX_DECIMATION = 1000
 
 
 @dataclass(frozen=True)
@@ -77,8 +80,9 @@ def input_band(batch: Sequence[Experiment], dt: float) -> float:
 
 
 def decimation_factor(dt: float, band_hz: float, shortest: int) -> int:
-    """Largest factor keeping the rate ≥ RATE_FACTOR × band and ≥ MIN_SAMPLES per experiment."""
-    factor = max(1, int(np.floor(1.0 / (dt * RATE_FACTOR * band_hz))))
+    """Largest factor (at most MAX_DECIMATION) keeping the rate ≥ RATE_FACTOR × band and
+    ≥ MIN_SAMPLES per experiment."""
+    factor = min(MAX_DECIMATION, max(1, int(np.floor(1.0 / (dt * RATE_FACTOR * band_hz)))))
     while factor > 1 and (shortest - 2 * TAPS_PER_FACTOR * factor) // factor < MIN_SAMPLES:
         factor -= 1
     return factor
@@ -103,7 +107,14 @@ def preprocess(
     smoothing_s: float | None = None,
     smoothing_order: int = 3,
 ) -> tuple[list[Experiment], Preprocessing]:
-    """The batch at the analysis rate, and what was done. `decimation` None = automatic."""
+    """The batch at the analysis rate, and what was done. `decimation` None = automatic;
+    a factor is checked against MAX_DECIMATION and the records' length before its filter is
+    built."""
+    if decimation is not None and not 1 <= decimation <= MAX_DECIMATION:
+        raise DataError(
+            f"decimation {decimation} is outside 1…{MAX_DECIMATION}; give a factor in it, or "
+            "leave it automatic"
+        )
     band = band_hz if band_hz is not None else input_band(batch, dt)
     shortest = min(e.length for e in batch)
     factor = decimation if decimation is not None else decimation_factor(dt, band, shortest)
@@ -125,13 +136,14 @@ def preprocess(
         ]
     dropped = 0
     if factor > 1:
-        taps = lowpass_taps(factor)
-        dropped = (taps.size - 1) // 2
-        if shortest - taps.size + 1 < MIN_SAMPLES * factor:
+        size = 2 * TAPS_PER_FACTOR * factor + 1  # lowpass_taps's, counted before it is built
+        if shortest - size + 1 < MIN_SAMPLES * factor:
             raise InsufficientDataError(
-                f"decimating by {factor} needs at least {MIN_SAMPLES * factor + taps.size - 1} "
+                f"decimating by {factor} needs at least {MIN_SAMPLES * factor + size - 1} "
                 f"samples per record; the shortest has {shortest}"
             )
+        taps = lowpass_taps(factor)
+        dropped = (taps.size - 1) // 2
         decimated = []
         for e in out:
             u = e.u.copy()

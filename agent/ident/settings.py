@@ -16,7 +16,7 @@ class Settings:
     estimate_d: bool = False
     regularization: float = 0.0
     hankel_blocks: int | None = None
-    decimation: int | None = None  # None: automatic from the band; 1: none
+    decimation: int | None = None  # None: automatic from the band; 1: none (OKID's only)
     band_hz: float | None = None  # None: from the inputs' spectra
     held_inputs: bool = True  # inputs held between samples (commands, zero-order hold)
     smoothing_s: float | None = None  # Savitzky–Golay window; None: no smoothing

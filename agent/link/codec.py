@@ -30,6 +30,7 @@ from __future__ import annotations
 import hashlib
 import hmac
 import json
+import logging
 import os
 import struct
 import time
@@ -39,6 +40,8 @@ from pathlib import Path
 
 import msgpack
 
+log = logging.getLogger(__name__)
+
 VERSION = 2
 GROUND, AIRCRAFT = 0, 1
 HEADER = struct.Struct(">BBQHBB")
@@ -47,42 +50,111 @@ OVERHEAD = HEADER.size + TAG
 WINDOW = 64
 # Reassembly bounds: partial messages per source, and how long one may stay incomplete.
 MAX_PARTIAL = 8
+# Frames of one message at most: the header's fragment index and count are one byte each.
+MAX_FRAMES = 255
 PARTIAL_TIMEOUT_S = 10.0
 # Counters reserved per write of the counter file: a reboot skips at most this many.
 COUNTER_BLOCK = 1 << 16
+# The header's counter is a uint64; files holding more (or a jump near it) are refused.
+COUNTER_MAX = 1 << 63
 
 
 class CounterStore:
     """The sender's frame counter, never reused across restarts.
 
     With a file, counters are reserved in blocks: the file holds the end of the reserved block,
-    written (and fsynced) before any counter of the block is used. Without one, the counter
-    starts at the wall clock in microseconds (monotonic across restarts while the clock is)."""
+    written (and fsynced) before any counter of the block is used. A disk that cannot be
+    written costs this end its sending (each attempt to reserve raises OSError, which the
+    session counts; at start it is logged), never its receiving, so an Abort still arrives
+    and acts. Without a file, the counter starts at the wall clock in
+    microseconds (monotonic across restarts while the clock is)."""
 
     def __init__(self, path: Path | None = None):
         self._path = path
         if path is None:
             self._next, self._reserved = time.time_ns() // 1000, 1 << 63
         else:
-            start = int(path.read_text()) if path.exists() else 0
+            start = _read_counter(path) if path.exists() else 0
             self._next, self._reserved = start, start
-            self._reserve()
+            try:  # the file says from the start that this end has used the key
+                self._reserve()
+            except OSError as exc:
+                log.error("%s: frame counters not reserved (%s); sending waits for it", path, exc)
 
     def _reserve(self) -> None:
-        self._reserved = self._next + COUNTER_BLOCK
+        end = self._next + COUNTER_BLOCK
         tmp = self._path.with_suffix(".tmp")
         with open(tmp, "w") as handle:
-            handle.write(str(self._reserved))
+            handle.write(str(end))
             handle.flush()
             os.fsync(handle.fileno())
         tmp.replace(self._path)
+        self._reserved = end  # only once it is on disk
 
     def next(self) -> int:
+        """The next counter; OSError when its block cannot be reserved on disk."""
         if self._next >= self._reserved:
             self._reserve()
         value = self._next
         self._next += 1
         return value
+
+
+def _read_counter(path: Path) -> int:
+    """The counter file's number; ValueError naming the file when it is not one in range."""
+    try:
+        text = path.read_text().strip()
+        value = int(text) if text.isdigit() and len(text) <= 20 else -1
+    except (OSError, ValueError) as exc:  # UnicodeDecodeError is a ValueError
+        raise ValueError(f"{path}: the frame counter is unreadable ({exc})") from exc
+    if not 0 <= value < COUNTER_MAX:
+        raise ValueError(
+            f"{path}: the frame counter {text[:40]!r} is not a whole number below 2**63: "
+            "restore the file or give both ends a new key (sysid keygen)"
+        )
+    return value
+
+
+def key_fingerprint(key: bytes) -> str:
+    """A short public name of a key (it reveals nothing of it): the replay state is bound to
+    it, and `sysid keygen` prints it so both ends can be compared."""
+    return hashlib.sha256(b"suas-sysid link key fingerprint\0" + key).hexdigest()[:16]
+
+
+def read_floors(path: Path, fingerprint: str) -> dict[bytes, int]:
+    """The highest counter accepted from each source, from the seen file; ValueError naming
+    the file and what to do when it is not a replay state. A state of another key (its
+    fingerprint differs) says nothing of this key's frames: empty."""
+    try:
+        document = json.loads(path.read_text())
+        if isinstance(document, dict) and "floors" in document:
+            if document.get("key") != fingerprint:
+                log.warning("%s: replay state of another key; starting empty", path)
+                return {}
+            document = document["floors"]
+        if not isinstance(document, dict):
+            raise ValueError(f"a map of sources, not {type(document).__name__}")
+        floors = {_address(k): _floor(v) for k, v in document.items()}
+    except (OSError, ValueError, RecursionError) as exc:  # json and Unicode errors included
+        raise ValueError(
+            f"{path}: the replay state is unreadable ({exc}); without it every frame "
+            "recorded under this key would be accepted again: restore the file or "
+            "give both ends a new key (sysid keygen)"
+        ) from exc
+    return floors
+
+
+def _address(text: object) -> bytes:
+    if not isinstance(text, str) or len(text) != 16:
+        raise ValueError(f"{str(text)[:40]!r} is not a 64-bit radio address in hex")
+    return bytes.fromhex(text)
+
+
+def _floor(value: object) -> int:
+    # JSON's Infinity and 1e400 are floats, and a bool is an int to Python: neither is a counter.
+    if type(value) is not int or not -1 <= value < COUNTER_MAX:
+        raise ValueError(f"{str(value)[:40]!r} is not a frame counter (a whole number ≥ -1)")
+    return value
 
 
 class ReplayWindow:
@@ -109,6 +181,15 @@ class ReplayWindow:
             return "replayed"
         self._bits |= 1 << age
         return None
+
+
+class MessageTooLarge(ValueError):
+    """A message that needs more frames than one message may have."""
+
+
+def pack(message: dict) -> bytes:
+    """A message's MessagePack body, as it goes on air."""
+    return msgpack.packb(message, use_bin_type=True, use_single_float=False)
 
 
 @dataclass
@@ -141,16 +222,8 @@ class LinkCodec:
         self.max_payload = max_payload
         self._message_number = 0
         self._seen_path = seen
-        floors = {}
-        if seen is not None and seen.exists():
-            try:
-                floors = {bytes.fromhex(k): int(v) for k, v in json.loads(seen.read_text()).items()}
-            except (ValueError, AttributeError, TypeError, UnicodeDecodeError) as exc:
-                raise ValueError(
-                    f"{seen}: the replay state is unreadable ({exc}); without it every frame "
-                    "recorded under this key would be accepted again: restore the file or "
-                    "give both ends a new key"
-                ) from exc
+        self.fingerprint = key_fingerprint(key)
+        floors = read_floors(seen, self.fingerprint) if seen is not None and seen.exists() else {}
         self._windows: dict[bytes, ReplayWindow] = {a: ReplayWindow(f) for a, f in floors.items()}
         self._saved: dict[bytes, int] = dict(floors)
         self._partials: dict[bytes, OrderedDict[int, _Partial]] = {}
@@ -161,16 +234,15 @@ class LinkCodec:
 
     def encode(self, message: dict, destination: bytes | None = None) -> list[bytes]:
         """The frames carrying one message (a dict of plain values) to `destination` (default:
-        the one allowed peer)."""
+        the one allowed peer). MessageTooLarge when it needs more frames than a message may
+        have; OSError when the frame counters cannot be reserved on disk."""
         if destination is None:
             if len(self.allow) != 1:
                 raise ValueError("give the destination: more than one peer is allowed")
             (destination,) = self.allow
-        body = msgpack.packb(message, use_bin_type=True, use_single_float=False)
+        body = pack(message)
         chunk = self.max_payload - OVERHEAD
-        count = max(1, -(-len(body) // chunk))
-        if count > 255:
-            raise ValueError(f"message of {len(body)} bytes needs {count} frames; at most 255")
+        count = self.frames_needed(len(body))
         self._message_number = (self._message_number + 1) & 0xFFFF
         frames = []
         for index in range(count):
@@ -180,6 +252,17 @@ class LinkCodec:
             data = header + body[index * chunk : (index + 1) * chunk]
             frames.append(data + self._tag(self.address, destination, data))
         return frames
+
+    def frames_needed(self, size: int) -> int:
+        """Frames for a body of `size` bytes at the radio's payload; MessageTooLarge past
+        MAX_FRAMES (the header's fragment count is one byte)."""
+        count = max(1, -(-size // (self.max_payload - OVERHEAD)))
+        if count > MAX_FRAMES:
+            raise MessageTooLarge(
+                f"a message of {size} bytes needs {count} frames of {self.max_payload} bytes; "
+                f"at most {MAX_FRAMES} ({MAX_FRAMES * (self.max_payload - OVERHEAD)} bytes)"
+            )
+        return count
 
     def _tag(self, source: bytes, destination: bytes, data: bytes) -> bytes:
         mac = hmac.new(self._key, source.rjust(8, b"\0"), hashlib.sha256)
@@ -219,13 +302,14 @@ class LinkCodec:
         return message
 
     def save_seen(self) -> bool:
-        """Write the highest counter accepted from each source (the session calls this about
-        once a second), so a restarted receiver refuses frames it accepted before. After an
-        unclean restart, frames of the last interval could be accepted once more."""
+        """Write the highest counter accepted from each source, so a restarted receiver refuses
+        frames it accepted before (True: written; False: nothing new). OSError when the disk
+        refuses: the state is then still unsaved, and the next call tries again."""
         snapshot = self.seen_snapshot()
         if snapshot is None:
             return False
         self.write_seen(snapshot)
+        self.mark_saved(snapshot)
         return True
 
     def seen_snapshot(self) -> dict[bytes, int] | None:
@@ -233,17 +317,27 @@ class LinkCodec:
         current = {a: w.highest for a, w in self._windows.items()}
         if self._seen_path is None or current == self._saved:
             return None
-        self._saved = current
         return current
 
     def write_seen(self, snapshot: dict[bytes, int]) -> None:
-        """Write a snapshot (file-system work: the session runs it off the event loop)."""
+        """Write a snapshot, fsynced, through a temporary file (file-system work: the session
+        runs it off the event loop). Raises OSError as the disk does."""
         tmp = self._seen_path.with_suffix(".tmp")
+        floors = {a.hex(): h for a, h in snapshot.items()}
         with open(tmp, "w") as handle:
-            handle.write(json.dumps({a.hex(): h for a, h in snapshot.items()}))
+            handle.write(json.dumps({"key": self.fingerprint, "floors": floors}))
             handle.flush()
             os.fsync(handle.fileno())
         tmp.replace(self._seen_path)
+
+    def mark_saved(self, snapshot: dict[bytes, int]) -> None:
+        """A snapshot is on disk (call only once write_seen has returned)."""
+        self._saved = snapshot
+
+    @property
+    def unsaved(self) -> bool:
+        """Frames accepted that the seen file does not cover yet."""
+        return self.seen_snapshot() is not None
 
     def _drop(self, reason: str) -> None:
         self.counters[reason] += 1

@@ -2,24 +2,33 @@
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from pathlib import Path
 
 from agent.clock import Clock
 from agent.config import Link, load_key
-from agent.link.codec import CounterStore, LinkCodec
-from agent.link.session import LinkSession
+from agent.link.codec import CounterStore, LinkCodec, key_fingerprint, read_floors
+from agent.link.session import Guard, LinkSession
 from drivers.xbee.driver import XBeeRadio
+
+log = logging.getLogger(__name__)
 
 
 def build_endpoint(
-    cfg: Link, role: str, base: Path, clock: Clock, on_message: Callable
+    cfg: Link,
+    role: str,
+    base: Path,
+    clock: Clock,
+    on_message: Callable,
+    guard: Guard | None = None,
 ) -> tuple[XBeeRadio, LinkSession]:
     """The radio and the session: the shared key, this end's counter and replay state under
-    `base`, the peer as the only source accepted. The radio is not opened here: its `watch()`
-    opens it and reopens it whenever it is lost, and the session's frames until then are
-    counted as transport errors (reliable messages wait and retry). Raises ValueError (no
-    peer, a bad key file) with the reason."""
+    `base`, the peer as the only source accepted; with a `guard` (the end that obeys
+    commands), commands older than `command_max_age_s` are refused. The radio is not opened
+    here: its `watch()` opens it and reopens it whenever it is lost, and the session's frames
+    until then are counted as transport errors (reliable messages wait and retry). Raises
+    ValueError (no peer, a bad key file, a bad replay state) or OSError with the reason."""
     if cfg.peer is None:
         raise ValueError("[link] peer (the other end's 64-bit address) is not set")
     peer = bytes.fromhex(cfg.peer)
@@ -31,15 +40,22 @@ def build_endpoint(
             "again (a recorded Revert or Arm replayed): restore the file or give both ends a "
             "new key"
         )
-    if not seen.exists():  # a first start under this key: the state starts here, saved
-        seen.write_text("{}")
-    codec = LinkCodec(
-        load_key(base / cfg.key_file),
-        role,
-        {peer},
-        counter=CounterStore(counter),
-        seen=seen,
-    )
+    key = load_key(base / cfg.key_file)
+    first = not seen.exists()
+    for state in (counter, seen):
+        state.parent.mkdir(parents=True, exist_ok=True)
+    if not first:  # refused before anything is written (the counter reserves a block)
+        read_floors(seen, key_fingerprint(key))
+    codec = LinkCodec(key, role, {peer}, counter=CounterStore(counter), seen=seen)
+    if first:  # a first start under this key: the state starts here, saved and bound to it
+        codec.write_seen({})
+        log.info(
+            "%s: a first start under key %s: its replay state starts empty. A key used "
+            "before, from another directory, would accept every frame recorded under it "
+            "again: make a new key for new state (sysid keygen)",
+            seen,
+            codec.fingerprint,
+        )
     sessions: list[LinkSession] = []
 
     def receive(source: bytes, payload: bytes, t: float) -> None:
@@ -66,6 +82,8 @@ def build_endpoint(
         on_message,
         heartbeat_s=cfg.heartbeat_s,
         deadline_s=cfg.deadline_s,
+        guard=guard,
+        max_age_s=cfg.command_max_age_s if guard is not None else None,
     )
     sessions.append(session)
     return radio, session

@@ -118,6 +118,9 @@ class Status(Message):
     """The nominal model id of each identification type that has one."""
     recorder: dict[str, float] = Field(default_factory=dict)
     sensors: dict[str, dict[str, float | str | None]] = Field(default_factory=dict)
+    link_fault: str | None = Field(None, max_length=200)
+    """Why the aircraft's link cannot obey state-changing commands now (its replay state
+    cannot be saved: a full or failing disk); None: it can. An Abort is obeyed regardless."""
 
 
 class ExcitationEvent(Message):

@@ -19,7 +19,7 @@ import numpy as np
 
 from agent.channels import SENSOR_CHANNELS
 from agent.clock import Clock, LoopClock
-from agent.config import Config
+from agent.config import Config, to_toml
 from agent.excitation.follow import following
 from agent.excitation.scheduler import Event, Scheduler, Window
 from agent.link import messages
@@ -58,7 +58,7 @@ class Agent:
         *,
         base: Path = Path("."),
         clock: Clock | None = None,
-        config_text: str = "",
+        config_text: str | None = None,
         worker: Callable[[], Executor] = new_worker,
     ):
         self.config, self.base = config, Path(base)
@@ -72,7 +72,9 @@ class Agent:
             self.writer,
             self.recorder.columns,
             units_of(self.recorder.columns, SENSOR_CHANNELS),
-            config_hash(config_text),
+            # No file text (an agent built in-process, as `sysid sim` does): the hash of the
+            # settings themselves, which is what `sysid agent` reads from the file it writes.
+            config_hash(to_toml(config) if config_text is None else config_text),
             config.recorder.rate_hz,
         )
         self.recorder.sink = self.logbook.row
@@ -215,7 +217,12 @@ class Agent:
         # that does not answer at power-up leaves the aircraft recording without a link.
         try:
             self.radio, self.downlink.session = build_endpoint(
-                self.config.link, AIRCRAFT, self.base, self.clock, self.commands.receive
+                self.config.link,
+                AIRCRAFT,
+                self.base,
+                self.clock,
+                self.commands.receive,
+                guard=self.commands,
             )
         except (ValueError, OSError) as exc:  # the link refused, not the agent: it records
             self.counters["link_refused"] += 1
@@ -229,6 +236,7 @@ class Agent:
             # radio never answered shows it here, not only in warning lines.
             "radio": dict(self.radio.counters) if self.radio is not None else None,
             "link": dict(self.session.counters) if self.session is not None else None,
+            "downlink": dict(self.downlink.counters),
             "logs": {
                 "errors": self.writer.errors,
                 "dropped": self.writer.dropped,

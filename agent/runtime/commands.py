@@ -3,9 +3,12 @@ reason.
 
 An abort acts at once, in the link's callback (and cancels any arm or start still waiting its
 turn); the others wait in a bounded queue for the command task, which keeps plan rendering and
-model-store files off the link's path. Each message type has one handler (`Commands.handlers`):
-it returns "" when done, or the reason it was not; a refusal the handler raises
-(`PlanRefused`, no such model, no previous nominal) is a reason too.
+model-store files off the link's path. `Commands` is the link session's guard: the session
+hands an abort on the moment it arrives, whatever the disk does, and refuses through it a
+command whose replay state could not be saved or that arrived too late. Each message type
+has one handler (`Commands.handlers`): it returns "" when done, or the reason it was not; a
+refusal the handler raises (`PlanRefused`, no such model, no previous nominal) is a reason
+too.
 """
 
 from __future__ import annotations
@@ -65,6 +68,28 @@ class Commands:
         except asyncio.QueueFull:
             self.counters["commands_dropped"] += 1
             self._ack(seq, "busy: too many commands waiting; send it again")
+
+    # -- the link session's guard (agent.link.session.Guard) --------------------------------
+
+    def changes_state(self, message: messages.Message) -> bool:
+        """Everything but an abort: an abort only makes the aircraft safer."""
+        return not isinstance(message, messages.Abort)
+
+    def refuse(self, message: messages.Message, seq: int, reason: str) -> None:
+        """The session could not let this command act (its replay state is not on disk, or
+        it came too late): the ground is told why."""
+        self.counters["commands_refused_by_link"] += 1
+        log.warning("%s refused: %s", type(message).__name__, reason)
+        self._ack(seq, reason)
+
+    def overtaken(self, message: messages.Message, seq: int) -> None:
+        """A command sent before an abort that has already acted: an arm or start is
+        cancelled, as one waiting in the queue would be; anything else is carried out."""
+        if isinstance(message, messages.Arm | messages.Start):
+            self.counters["commands_cancelled"] += 1
+            self._ack(seq, "cancelled by an abort that arrived before it was carried out")
+        else:
+            self.receive(message, seq)
 
     def _cancel_queued_runs(self) -> None:
         """An abort also cancels an arm or start still waiting its turn (else a plan armed a

@@ -300,9 +300,9 @@ class Identification:
         axes, ident = self.settings.axes, self.settings
         channels = self.config.identification.channels
         inputs, outputs = channels.axis_set(axes)
-        # Numbered across boots (the model store's file): an id never names two models.
-        number = await self._in_store(self.models.reserve_number)
-        model_id = f"{axes[:3]}-{number}"
+        # Never given twice on this aircraft (the model store's numbering): an id never names
+        # two models.
+        model_id = await self._in_store(self.models.reserve_id, axes)
         navigation = channels.navigation()
         needed = {*inputs, *outputs, *navigation}
         columns = {c: rows[:, 1 + k] for k, c in enumerate(self.recorder.channels) if c in needed}

@@ -106,4 +106,10 @@ class Status:
                 "log_dropped": float(self.writer.dropped),
             },
             sensors=sensors,
+            link_fault=self._link_fault(),
         )
+
+    def _link_fault(self) -> str | None:
+        session = self.downlink.session
+        fault = None if session is None else session.persist_error
+        return None if fault is None else fault[:200]

@@ -80,8 +80,9 @@ class EmulatedXBee:
         self.network: dict[bytes, EmulatedXBee] = {}
         self.counters: Counter[str] = Counter()
         self._tasks: set[asyncio.Task] = set()
-        self.encryption = False
-        """The module's AES encryption (EE) as configured: off, as a module ships."""
+        self.encryption: bool | None = False
+        """The module's AES encryption (EE) as configured: off, as a module ships; None: a
+        module without encryption, which answers EE as an invalid command."""
 
     @property
     def path(self) -> Path:
@@ -160,6 +161,8 @@ class EmulatedXBee:
             b"DB": bytes([min(255, max(0, -self.channel.rssi_dbm))]),
             b"EE": bytes([1 if self.encryption else 0]),
         }
+        if self.encryption is None:
+            del answers[b"EE"]
         if value and command in answers:  # a write: accepted, value unchanged here
             self._send(api.at_response(frame_id, command, 0))
         elif command in answers:

@@ -164,12 +164,13 @@ class XBeeRadio:
             with contextlib.suppress(Exception):
                 device.close()
             raise RadioError(f"{self.port}: the open was given up")
-        if encrypted is False and self.require_encryption:
+        if encrypted is not True and self.require_encryption:  # fail closed: unknown is off
             with contextlib.suppress(Exception):
                 device.close()
+            state = "is off (EE = 0)" if encrypted is False else "cannot be read (no answer to EE)"
             raise RadioError(
-                f"{self.port}: the XBee's AES encryption is off (EE = 0) and "
-                "[link] require_encryption is set: set EE = 1 and KY"
+                f"{self.port}: the XBee's AES encryption {state} and [link] "
+                "require_encryption is set: use a module with AES encryption, EE = 1 and KY"
             )
         self.max_payload, self.address, self.encrypted = max_payload, address, encrypted
         return device

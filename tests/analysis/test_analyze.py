@@ -24,6 +24,7 @@ from agent.analysis.identify import Request
 from agent.config import Config
 from agent.ident import reference
 from agent.ident.job import settings_from
+from tests.capped import sysid
 
 ROOT = Path(__file__).resolve().parents[2]
 NOISE = {"beta": 2e-3, "p": 2e-3, "r": 1e-3, "phi": 1e-3}
@@ -201,10 +202,36 @@ def _repeated_time(lines):
     return lines
 
 
+def _comments_only(lines):
+    return [line for line in lines if line.startswith("#")]
+
+
+def _set_p(row: int, cell: str):
+    """Data row `row` (from 0; file line row + 4 under two comments and the header) with its
+    p cell (column 5) replaced by `cell`."""
+
+    def damage(lines):
+        cells = lines[3 + row].split(",")
+        cells[4] = cell
+        lines[3 + row] = ",".join(cells)
+        return lines
+
+    return damage
+
+
+def _extra_field(lines):
+    lines[3 + 14] += ",0.5"
+    return lines
+
+
 DAMAGED = [
     ("cut", _cut_after_header, "0 data row(s) after the header: the log was cut short"),
     ("empty-time", _empty_time_cell, "data row 10 has no time"),
     ("repeated-time", _repeated_time, "time does not increase at data row 22"),
+    ("comments-only", _comments_only, "no header row, only comment lines"),
+    ("extra-field", _extra_field, "line 18: 8 fields, the header has 7"),
+    ("bad-cell", _set_p(30, "0.1x"), "line 34, column 5 ('p'): '0.1x' is not a number"),
+    ("underscore", _set_p(30, "1_000"), "line 34, column 5 ('p'): '1_000' is not a number"),
 ]
 
 
@@ -214,7 +241,9 @@ def test_a_damaged_agent_log_is_a_clear_error(tmp_path, capsys, name, damage, me
     """Bad input tried: an agent log cut right after its header (a power cut), one with an
     empty time cell, one with a row written twice: exit 2 with the reason, no traceback, and
     under --json one JSON object (the row-twice log used to be identified across the repeat,
-    and the other two ended in an IndexError)."""
+    and the other two ended in an IndexError). Then a log of comment lines only ("list index
+    out of range"), a row with a field too many ("inhomogeneous shape"), a cell 0.1x (no line
+    named) and a cell 1_000 (read as 1000): each named by its line and column."""
     from agent.cli import main
 
     (path,) = excitation_logs(tmp_path, count=1)
@@ -256,3 +285,73 @@ def test_an_unreachable_scheduler_is_a_clear_error(tmp_path):
     assert done.returncode == 1, done.stderr
     assert "cannot run the jobs: missing port number in address 'nonsense'" in done.stderr
     assert "missing port number" in json.loads(done.stdout)["error"]["message"]
+
+
+def test_a_sweep_is_counted_before_its_values_are_listed(tmp_path):
+    """Bad input tried: --sweep markov=1:100000000 (its 10⁸ values, 3.9 GB, used to be listed
+    before "at most 200" was checked), in a process of its own with a memory limit."""
+    excitation_logs(tmp_path, count=1)
+    done = sysid(
+        "analyze", str(tmp_path), "--axes", "lateral", "--sweep", "markov=1:100000000", cwd=tmp_path
+    )
+    assert done.returncode == 2, done.stderr
+    assert "'markov=1:100000000': 100000000 values; at most 200" in done.stderr
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["analyze", "/dev/zero"], "/dev/zero: a line longer than 1048576 characters"),
+        (["report", "/dev/zero", "--out", "report"], "/dev/zero: a line longer than 1048576"),
+        (["analyze", "/dev/zero", "--excitation", "3"], "no excitation log '3' among 1 file"),
+    ],
+)
+def test_a_log_without_line_ends_is_refused_at_its_bound(tmp_path, args, message):
+    """Bad input tried: `analyze /dev/zero`, `report /dev/zero`, and `analyze /dev/zero
+    --excitation 3` (which looks for the plan id in its header): each line used to be read
+    whole, growing until the memory ran out. In a process of its own with a memory limit."""
+    done = sysid(*args, "--axes", "lateral", cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    assert message in done.stderr
+
+
+def test_an_agent_log_over_the_row_cap_is_refused(tmp_path, capsys, monkeypatch):
+    """Bad input tried: an agent log over the rows one log may have (agent logs had no cap: a
+    200 MB log took 1.3 GB). The cap lowered to 100 rows here, as for a 5-million-row log."""
+    from agent.cli import main
+
+    monkeypatch.setattr("agent.logs.MAX_ROWS", 100)
+    (path,) = excitation_logs(tmp_path, count=1)
+    assert main(["analyze", str(path), "--axes", "lateral"]) == 2
+    assert "more than 100 data rows, the most one log may have" in capsys.readouterr().err
+
+
+def test_an_agent_log_takes_the_memory_of_the_columns_used(tmp_path, capsys):
+    """Bad input tried: a wide agent log, 14 MB of 40 columns of which the lateral axes use 7
+    (the whole text, its lines and every cell as a Python float used to be held at once,
+    about 7 times the file). Read a block at a time and only the columns used kept, the peak
+    is well under the file's size."""
+    import tracemalloc
+
+    from agent.cli import main
+
+    names = ["time", "aileron", "rudder", "beta", "p", "r", "phi"]
+    names += [f"extra_{k}" for k in range(33)]
+    data = np.random.default_rng(0).normal(size=(30_000, len(names)))
+    data[:, 0] = np.arange(data.shape[0]) * 0.02
+    path = tmp_path / "0001_lateral_single_20261122.csv"
+    with path.open("w") as handle:
+        handle.write("# suas-sysid lateral log, created 2026-11-22\n")
+        handle.write(",".join(names) + "\n")
+        np.savetxt(handle, data, delimiter=",", fmt="%.9g")
+    # Read through to the time window, which is empty: the reading is all that is measured.
+    args = ["analyze", str(path), "--axes", "lateral", "--start", "1e9"]
+    assert main(args) == 2  # once to import what the command imports
+    tracemalloc.start()
+    try:
+        assert main(args) == 2
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert "fewer than 3 samples between --start and --end" in capsys.readouterr().err
+    assert peak < path.stat().st_size / 2, (peak, path.stat().st_size)

@@ -26,8 +26,13 @@ from agent.config import Config, Identification, Recorder
 from agent.excitation.scheduler import Window
 from agent.link import messages
 from agent.runtime import Agent
+from tests.capped import sysid
 
 ROOT = Path(__file__).resolve().parents[2]
+
+
+SERIES = "5eed0001"
+LAT1, LAT2 = f"lat-1-{SERIES}", f"lat-2-{SERIES}"
 
 
 @pytest.fixture
@@ -39,6 +44,9 @@ def flight(tmp_path):
         recorder=Recorder(log_dir=str(tmp_path / "logs"), rate_hz=50.0),
         identification=Identification(trim_seconds=0.5),
     )
+    # The store's numbering in a known series, so the ids are known: LAT1, LAT2.
+    (tmp_path / "models").mkdir()
+    (tmp_path / "models" / "numbering").write_text(json.dumps({"series": SERIES, "last": 0}))
     agent = Agent(config, base=tmp_path, worker=lambda: ThreadPoolExecutor(1))
     channels = agent.recorder.channels
     rows = np.full((len(table), 1 + 2 * len(channels)), np.nan)
@@ -52,7 +60,7 @@ def flight(tmp_path):
             window = Window(f"run{k}", "lateral", rows[0, 0], rows[-1, 0], "finished")
             await agent.identification.identify(window, rows)
             if k == 0:
-                await agent.commands.handle(messages.Decision(model_id="lat-1", accept=True), 1)
+                await agent.commands.handle(messages.Decision(model_id=LAT1, accept=True), 1)
 
     try:
         asyncio.run(fly())
@@ -65,12 +73,12 @@ def test_mat_export_loads_back_with_the_same_matrices(flight, tmp_path):
     base, _ = flight
     log = next((base / "logs").glob("*_results_*.jsonl"))
     models = load_models(log)
-    assert [m["id"] for m in models] == ["lat-1", "lat-2"]
+    assert [m["id"] for m in models] == [LAT1, LAT2]
     to_mat(models, tmp_path / "flight.mat")
     mat = loadmat(tmp_path / "flight.mat", simplify_cells=True)
-    assert list(mat["model_ids"]) == ["lat-1", "lat-2"]
+    assert list(mat["model_ids"]) == [LAT1, LAT2]
     record = json.loads(log.read_text().splitlines()[0])["result"]
-    m = mat["lat_1"]
+    m = mat[variable_name(LAT1)]
     for key in ("A", "B", "C", "D"):
         np.testing.assert_array_equal(np.atleast_2d(m[key]), np.array(record[key]))
     np.testing.assert_array_equal(m["Ac"], np.array(record["continuous"]["A"]))
@@ -95,7 +103,7 @@ def test_the_nominal_store_exports_its_data_set(flight, tmp_path):
     base, _ = flight
     models = load_models(base / "models" / "lateral_nominal.json")
     to_mat(models, tmp_path / "nominal.mat")
-    m = loadmat(tmp_path / "nominal.mat", simplify_cells=True)["lat_1"]
+    m = loadmat(tmp_path / "nominal.mat", simplify_cells=True)[variable_name(LAT1)]
     u, y = np.atleast_2d(m["u"]), np.atleast_2d(m["y"])
     assert u.shape[1] == 2
     assert y.shape[1] == 4
@@ -106,7 +114,7 @@ def test_json_and_the_command_line(flight, tmp_path):
     base, _ = flight
     log = next((base / "logs").glob("*_results_*.jsonl"))
     data = json.loads(to_json(load_models(log)))
-    assert data[1]["id"] == "lat-2"
+    assert data[1]["id"] == LAT2
     assert len(data[1]["eigenvalues"][0]) == 2  # [re, im]
     env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
     run = lambda *a: subprocess.run(  # noqa: E731
@@ -117,11 +125,11 @@ def test_json_and_the_command_line(flight, tmp_path):
         timeout=60,
         env=env,
     )
-    done = run(str(log), "--out", "one.mat", "--model", "lat-2")
+    done = run(str(log), "--out", "one.mat", "--model", LAT2)
     assert done.returncode == 0, done.stderr
     assert (
-        list(loadmat(tmp_path / "one.mat", simplify_cells=True)["model_ids"]) == ["lat-2"]
-        or loadmat(tmp_path / "one.mat", simplify_cells=True)["model_ids"] == "lat-2"
+        list(loadmat(tmp_path / "one.mat", simplify_cells=True)["model_ids"]) == [LAT2]
+        or loadmat(tmp_path / "one.mat", simplify_cells=True)["model_ids"] == LAT2
     )
     assert "no model lat-9" in run(str(log), "--out", "x.mat", "--model", "lat-9").stderr
     assert "give a .mat, .json or .csv" in run(str(log), "--out", "x.txt").stderr
@@ -130,13 +138,11 @@ def test_json_and_the_command_line(flight, tmp_path):
     assert done.returncode == 0, done.stderr
     with (tmp_path / "derivatives.csv").open() as handle:
         rows = list(csv.DictReader(handle))
-    assert {r["model"] for r in rows} == {"lat-1", "lat-2"}
+    assert {r["model"] for r in rows} == {LAT1, LAT2}
     assert len(rows) == 2 * 4 * 6  # β̇, ṗ, ṙ, φ̇ over β, p, r, φ, aileron, rudder
     model = load_models(log)[0]
     lp = next(
-        r
-        for r in rows
-        if r["model"] == "lat-1" and r["equation"] == "dp/dt" and r["variable"] == "p"
+        r for r in rows if r["model"] == LAT1 and r["equation"] == "dp/dt" and r["variable"] == "p"
     )
     p = model["outputs"].index("p")
     assert float(lp["value"]) == pytest.approx(model["Ac"][p, p], rel=1e-5)
@@ -211,7 +217,7 @@ def test_damaged_sources_are_clear_errors_and_nothing_is_dropped_silently(flight
     torn = tmp_path / "torn.jsonl"
     torn.write_text("\n".join([lines[0], '{"model_id": "lat-', lines[1]]) + "\n")
     models = load_models(torn)
-    assert [m["id"] for m in models] == ["lat-1", "lat-2"]
+    assert [m["id"] for m in models] == [LAT1, LAT2]
     assert models.skipped == (2,)
     done = subprocess.run(
         [sys.executable, "-m", "agent", "export", str(torn), "--out", str(tmp_path / "t.mat")],
@@ -223,9 +229,39 @@ def test_damaged_sources_are_clear_errors_and_nothing_is_dropped_silently(flight
     assert done.returncode == 0, done.stderr
     assert "1 line(s) not JSON and not exported (line 2)" in done.stderr
     twins = load_models(log)
-    twins[1]["id"] = "lat_1"
+    name = variable_name(LAT1)  # lat_1_5eed0001: the second id spelled as the first's name
+    twins[1]["id"] = name
     to_mat(twins, tmp_path / "twins.mat")
     mat = loadmat(tmp_path / "twins.mat", simplify_cells=True)
-    assert list(mat["model_variables"]) == ["lat_1", "lat_1_2"]
-    assert mat["lat_1"]["id"] == "lat-1"
-    assert mat["lat_1_2"]["id"] == "lat_1"
+    assert list(mat["model_variables"]) == [name, f"{name}_2"]
+    assert mat[name]["id"] == LAT1
+    assert mat[f"{name}_2"]["id"] == name
+
+
+def test_an_out_that_is_the_source_is_refused_and_the_store_kept(flight, tmp_path, capsys):
+    """Bad input tried: `export nom.json --out nom.json` (the model store file used to be
+    overwritten by the export) and --out naming a hard link to it: exit 2 naming both, the
+    store's bytes unchanged."""
+    from agent.cli import main
+
+    base, _ = flight
+    record = json.loads(next((base / "logs").glob("*_results_*.jsonl")).read_text().split("\n")[0])
+    store = tmp_path / "nom.json"  # a model store file: the id, the axes and the result
+    store.write_text(json.dumps({k: record[k] for k in ("model_id", "axes", "result")}))
+    before = store.read_bytes()
+    assert len(load_models(store)) == 1  # a source export takes
+    (tmp_path / "again.json").hardlink_to(store)
+    for out in (store, tmp_path / "again.json"):
+        assert main(["export", str(store), "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert f"--out {out}: that is {store}, the file being exported" in err, err
+        assert store.read_bytes() == before
+
+
+def test_a_source_without_line_ends_is_refused_at_its_bound(tmp_path):
+    """Bad input tried: `export /dev/zero --out x.mat` (read whole before: it grew until the
+    memory ran out), in a process of its own with a memory limit."""
+    done = sysid("export", "/dev/zero", "--out", "x.mat", cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    assert "/dev/zero: line 1 is longer than 16777216 bytes" in done.stderr
+    assert not (tmp_path / "x.mat").exists()

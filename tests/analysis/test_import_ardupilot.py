@@ -7,13 +7,16 @@ each message at its own time stamp). The import must map units and names, resamp
 recognise the SystemID run, and give a record `sysid identify` turns back into the known pole.
 
 Bad input tried: a file that is not a DataFlash log, a log cut off mid-message (what was read
-before the cut is imported), a log with none of the mapped messages, a missing file, an
-unknown extension, a rate out of range.
+before the cut is imported), a log with none of the mapped messages, a damaged FMT record
+(pymavlink's thousands of lines about it kept off stdout), a missing file, an unknown
+extension, a rate out of range.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -211,6 +214,36 @@ def test_fifty_flipped_bytes_cost_the_damaged_messages_not_the_rest(tmp_path):
     assert imported.notes, "the damage was not reported"
 
 
+def test_a_damaged_fmt_record_is_one_note_not_thousands_of_lines(tmp_path):
+    """Input: a DataFlash log whose ATT format record says 27 bytes where its messages have 28
+    (one damaged FMT). pymavlink printed about 3,000 lines for it, a thousand to stdout, which
+    is the command's; they are counted into one note now, and the rest of the log imported."""
+    path = tmp_path / "fmt.bin"
+    systemid_log(path, seconds=10.0)
+    data = bytearray(path.read_bytes())
+    at = data.index(b"\xa3\x95\x80\x83")  # FMT (0x80) of type 0x83, ATT: Length is next
+    assert data[at + 5 : at + 8] == b"ATT"
+    data[at + 4] -= 1
+    path.write_bytes(bytes(data))
+    done = subprocess.run(
+        [sys.executable, "-m", "agent", "import", "fmt.bin", "--out", "fmt.csv"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
+    )
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    rows = re.match(r"fmt\.csv: (\d+) rows over", lines[0])
+    assert rows is not None, lines[0]
+    assert int(rows.group(1)) > 450  # 10 s at 50 Hz: the rest of the log is there
+    assert all(ln.startswith(("note: ", "not in the log: ")) for ln in lines[1:]), lines[:5]
+    assert any(ln.startswith("note: pymavlink reported ") for ln in lines)
+    assert "not in the log: phi, theta, psi" in lines  # ATT's columns, lost with its format
+    assert done.stderr == ""
+
+
 def test_command_line_refusals(tmp_path):
     def run(*args):
         return subprocess.run(
@@ -234,5 +267,49 @@ def test_command_line_refusals(tmp_path):
     before = (tmp_path / "c.bin").read_bytes()
     same = run("c.bin", "--out", "./c.bin")
     assert same.returncode == 2
-    assert "that is the log being imported" in same.stderr
+    assert "that is c.bin, the log being imported" in same.stderr
     assert (tmp_path / "c.bin").read_bytes() == before
+
+
+@pytest.mark.parametrize("link", ["hard", "symbolic"])
+def test_an_out_linked_to_the_log_is_refused_and_the_log_kept(tmp_path, capsys, link):
+    """Bad input tried: `import ok.bin --out hard.bin` where hard.bin is a hard link to ok.bin
+    (the path strings differ, so the log used to be overwritten by the CSV), and the same
+    through a symbolic link: exit 2 naming both, the log's bytes unchanged."""
+    from agent.cli import main
+
+    log = tmp_path / "ok.bin"
+    systemid_log(log, seconds=2.0)
+    before = log.read_bytes()
+    out = tmp_path / "hard.bin"
+    if link == "hard":
+        out.hardlink_to(log)
+    else:
+        out.symlink_to(log)
+    assert main(["import", str(log), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"--out {out}: that is {log}, the log being imported" in err, err
+    assert log.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["hard.bin", "ok.bin"]
+
+
+def test_a_full_disk_leaves_the_old_output_whole(small_disk, capsys):
+    """Bad input tried: `import` onto a disk that fills up while the CSV is written (a real
+    256 KiB tmpfs): exit 1, and the CSV from before is still there, whole, with no temporary
+    file beside it (the write used to truncate it first and stop halfway)."""
+    from agent.cli import main
+
+    log = small_disk.parent / "sid.bin"
+    systemid_log(log, seconds=5.0)
+    out = small_disk / "sid.csv"
+    assert main(["import", str(log), "--out", str(out)]) == 0
+    capsys.readouterr()
+    before = out.read_bytes()
+    disk = os.statvfs(small_disk)
+    # Half the old CSV free: the new one (at twice the rate, twice the size) fits neither
+    # beside the old one nor in its place.
+    (small_disk / "filler").write_bytes(b"x" * (disk.f_bavail * disk.f_frsize - len(before) // 2))
+    assert main(["import", str(log), "--out", str(out), "--rate", "100"]) == 1
+    assert "cannot be written" in capsys.readouterr().err
+    assert out.read_bytes() == before
+    assert sorted(p.name for p in small_disk.iterdir()) == ["filler", "sid.csv"]

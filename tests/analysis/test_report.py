@@ -154,24 +154,34 @@ def test_the_frequency_response_figure_renders_in_headless_chromium(tmp_path):
 def test_a_bad_nominal_file_is_refused(tmp_path):
     excitation_logs(tmp_path, count=1)
     (tmp_path / "nominal.json").write_text("{}")
-    done = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "agent",
-            "report",
-            str(tmp_path),
-            "--axes",
-            "lateral",
-            "--out",
-            str(tmp_path / "r"),
-            "--nominal",
-            str(tmp_path / "nominal.json"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        env=ENV,
-    )
+    from tests.capped import sysid
+
+    def report(nominal: str) -> subprocess.CompletedProcess:
+        args = ["report", str(tmp_path), "--axes", "lateral", "--out", str(tmp_path / "r")]
+        return sysid(*args, "--nominal", nominal, cwd=tmp_path)
+
+    done = report(str(tmp_path / "nominal.json"))
     assert done.returncode == 2
     assert "not a model store file" in done.stderr
+    # Bad input tried: /dev/zero as the nominal (its whole read grew until killed).
+    done = report("/dev/zero")
+    assert done.returncode == 2
+    assert "not a model store file (over 16 MiB)" in done.stderr
+
+
+def test_a_report_file_that_is_a_log_is_refused_before_the_work(tmp_path, capsys):
+    """Bad input tried: `report LOG --out DIR` where a file the report writes in DIR (the
+    excitation's derivatives CSV) is a hard link to LOG: the log used to be overwritten after
+    the identification. Refused at once naming both, the log's bytes unchanged."""
+    from agent.cli import main
+
+    (log,) = excitation_logs(tmp_path, count=1)
+    before = log.read_bytes()
+    out = tmp_path / "report"
+    out.mkdir()
+    (out / "excitation_1_derivatives.csv").hardlink_to(log)
+    assert main(["report", str(log), "--axes", "lateral", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"--out {out}/excitation_1_derivatives.csv: that is {log}, a log being" in err, err
+    assert log.read_bytes() == before
+    assert [p.name for p in out.iterdir()] == ["excitation_1_derivatives.csv"]

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
+from agent.channels import AXIS_SETS
 from agent.config import Config, Envelope, Surface
 from agent.excitation import servo
 from agent.excitation.plan import (
@@ -118,6 +119,22 @@ def test_malformed_plans_are_rejected_with_the_field_named():
         )
 
 
+@pytest.mark.parametrize(
+    "harmonic", [b"1" + b"0" * 400, b"1e400", b"1e300"], ids=["10**400", "1e400", "1e300"]
+)
+def test_a_harmonic_no_float_holds_is_refused_by_its_key(harmonic):
+    # Bad input tried: a multisine harmonic of 10**400 (an OverflowError traceback when its
+    # frequency was computed), 1e400 (infinity in JSON) and 1e300 written as a number.
+    data = (
+        b'{"id":"x","axes":"lateral","segments":[{"signals":{"aileron":{"kind":"multisine",'
+        b'"harmonics":[' + harmonic + b'],"period_s":10,"amplitude":3}}}]}'
+    )
+    with pytest.raises(ValidationError) as caught:
+        Plan.from_bytes(data)
+    locs = [e["loc"] for e in caught.value.errors()]
+    assert ("segments", 0, "signals", "aileron", "multisine", "harmonics", 0) in locs
+
+
 def _one(signal, name="aileron", free_s=0.0) -> Plan:
     return Plan(id="t", axes="lateral", segments=(Segment(signals={name: signal}, free_s=free_s),))
 
@@ -143,6 +160,29 @@ def test_plans_outside_the_envelope_are_refused_before_start():
     strict = Envelope(max_duration_s=30.0)
     with pytest.raises(PlanRefused, match="max_duration_s = 30"):
         check(preset("full"), 50.0, SURFACES, strict)
+
+
+@pytest.mark.parametrize(
+    ("axes", "control", "signal"),
+    [
+        ("lateral", "elevator", Doublet(pulse_s=0.5, amplitude=3.0)),
+        ("longitudinal", "rudder", Doublet(pulse_s=1.0, amplitude=3.0)),
+    ],
+)
+def test_a_plan_playing_a_control_its_axis_set_does_not_identify_is_refused(axes, control, signal):
+    # Input: a lateral plan with an elevator doublet (it used to fly), and a longitudinal one
+    # with a rudder doublet. The full set takes every control.
+    plan = Plan(
+        id="t",
+        axes=axes,
+        segments=(Segment(signals={PRESET_CONTROLS[axes][0]: signal, control: signal}),),
+    )
+    takes = ", ".join(AXIS_SETS[axes][0])
+    with pytest.raises(PlanRefused) as caught:
+        check(plan, 50.0, SURFACES, ENVELOPE)
+    assert f"{control}: not an input of the {axes} model ({takes})" in str(caught.value)
+    assert f'play only {takes}, or fly the plan as axes "full"' in str(caught.value)
+    assert check(plan.model_copy(update={"axes": "full"}), 50.0, SURFACES, ENVELOPE).count > 0
 
 
 ABSURD = [

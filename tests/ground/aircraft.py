@@ -23,7 +23,8 @@ from agent.link.session import LinkSession
 from agent.sim.radio import EmulatedXBee, RfChannel
 from drivers.xbee.driver import XBeeRadio
 
-KEY = bytes(range(32))
+# A fixed key drawn at random (a patterned one, as bytes(range(32)) was, is refused).
+KEY = bytes.fromhex("5f1e9c27d4a0b38e61c7f2094ad35be8c06f1a729e4d83b5f02c6e917ad4b358")
 AIR = bytes.fromhex("0013A20040000001")
 GROUND = bytes.fromhex("0013A20040000002")
 

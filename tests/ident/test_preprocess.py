@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from agent.ident import Experiment, Settings, identify, reference
-from agent.ident.errors import InsufficientDataError
+from agent.ident.errors import DataError, InsufficientDataError
 from agent.ident.preprocess import RATE_FACTOR, decimation_factor, input_band, preprocess
 from tests.conftest import DT, matched_relative_errors, true_eigenvalues
 
@@ -89,3 +89,26 @@ def test_impossible_preprocessing_is_refused_with_the_reason(kwargs, message):
     decimation factor the record is too short for."""
     with pytest.raises(InsufficientDataError, match=message):
         preprocess([_record()], DT, **kwargs)
+
+
+@pytest.mark.parametrize("factor", [0, 1001])
+def test_a_decimation_beyond_the_bound_is_refused_before_its_filter_is_built(factor):
+    """Bad input tried: decimation factors of 0 and MAX_DECIMATION + 1 (10⁷, whose filter of
+    2 × 10⁸ taps used to be built before the record's length was checked, is tried through
+    `sysid identify` in tests/test_cli_identify.py, under a memory limit). Each is refused
+    from its value alone."""
+    with pytest.raises(DataError, match=rf"decimation {factor} is outside 1…1000"):
+        preprocess([_record()], DT, decimation=factor)
+
+
+def test_a_short_record_is_refused_from_the_filter_length_before_it_is_built(monkeypatch):
+    """Bad input tried: a factor within the bound on a record too short for it: refused from
+    the filter's length, counted, without building it."""
+    import agent.ident.preprocess as prep
+
+    def never(factor):
+        raise AssertionError(f"a filter of {factor} built for a record too short for it")
+
+    monkeypatch.setattr(prep, "lowpass_taps", never)
+    with pytest.raises(InsufficientDataError, match="decimating by 1000 needs at least 40000"):
+        preprocess([_record()], DT, decimation=1000)

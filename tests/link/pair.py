@@ -9,12 +9,13 @@ from pathlib import Path
 
 from agent.clock import LoopClock
 from agent.link.codec import AIRCRAFT, GROUND, CounterStore, LinkCodec
-from agent.link.session import LinkSession
+from agent.link.session import Guard, LinkSession
 from agent.sim.radio import EmulatedXBee, RfChannel
 from drivers.xbee.driver import XBeeRadio
 from tests import waiting
 
-KEY = bytes(range(32))
+# A fixed key drawn at random (a patterned one, as bytes(range(32)) was, is refused).
+KEY = bytes.fromhex("5f1e9c27d4a0b38e61c7f2094ad35be8c06f1a729e4d83b5f02c6e917ad4b358")
 AIR_ADDR = bytes.fromhex("0013A20040000001")
 GROUND_ADDR = bytes.fromhex("0013A20040000002")
 
@@ -43,7 +44,13 @@ async def link_pair(
     escaped: bool = False,
     channel: RfChannel | None = None,
     deadline_s: float = 3.0,
+    air_state: Path | None = None,
+    air_guard: Guard | None = None,
+    air_max_age_s: float | None = None,
 ):
+    """Two ends joined by emulated XBees. `air_state`: the folder of the aircraft's counter
+    and seen files (default `tmp_path`); `air_guard`, `air_max_age_s`: the aircraft's session
+    as an end that obeys commands (agent.link.session.Guard)."""
     clock = LoopClock()
     channel = channel or RfChannel()
     air_module = EmulatedXBee("air", AIR_ADDR, tmp_path, channel, clock, escaped=escaped)
@@ -60,12 +67,13 @@ async def link_pair(
         ("ground", GROUND, ground_module, AIR_ADDR),
     ):
         inbox: list = []
+        state = (air_state or tmp_path) if name == "air" else tmp_path
         codec = LinkCodec(
             KEY,
             role,
             {peer},
-            counter=CounterStore(tmp_path / f"{name}.counter"),
-            seen=tmp_path / f"{name}.seen",
+            counter=CounterStore(state / f"{name}.counter"),
+            seen=state / f"{name}.seen",
         )
         holder: list[LinkSession] = []
         radio = XBeeRadio(
@@ -81,6 +89,8 @@ async def link_pair(
             clock,
             lambda m, _seq, box=inbox: box.append(m),
             deadline_s=deadline_s,
+            guard=air_guard if name == "air" else None,
+            max_age_s=air_max_age_s if name == "air" else None,
         )
         holder.append(session)
         tasks.append(asyncio.create_task(session.run(), name=f"session-{name}"))

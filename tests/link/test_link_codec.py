@@ -21,7 +21,8 @@ from agent.link.codec import (
     LinkCodec,
 )
 
-KEY = bytes(range(32))
+# A fixed key drawn at random (a patterned one, as bytes(range(32)) was, is refused).
+KEY = bytes.fromhex("5f1e9c27d4a0b38e61c7f2094ad35be8c06f1a729e4d83b5f02c6e917ad4b358")
 AIR, GROUND_ADDR, INTRUDER = b"A" * 8, b"G" * 8, b"X" * 8
 
 

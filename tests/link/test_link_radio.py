@@ -9,6 +9,7 @@ unplugged for 3 s, and the aircraft's session restarted while the ground's numbe
 from __future__ import annotations
 
 import asyncio
+import json
 
 import numpy as np
 import pytest
@@ -302,7 +303,7 @@ async def test_an_agent_whose_radio_does_not_answer_at_start_records_and_links_l
         assert not session.link_up
         air.plug()
         assert await wait_for(lambda: session.link_up)  # the agent's frames arrive
-        assert agent.session.link_up  # and the ground's reach the agent
+        assert await wait_for(lambda: agent.session.link_up)  # and the ground's reach it
         assert agent.radio.counters["reopened"] == 0  # a first open, not a reopen
     finally:
         running.cancel()
@@ -395,12 +396,14 @@ async def test_a_command_acted_on_is_refused_when_replayed_after_a_reboot(tmp_pa
 
 def test_a_missing_or_damaged_replay_state_refuses_the_link(tmp_path):
     """Bad input tried: the seen file deleted while the counter file is there (the key was
-    used: every recorded frame would be accepted again), and a seen file of garbage (it used
-    to stop the agent at start-up). build_endpoint refuses with the reason; the agent then
+    used: every recorded frame would be accepted again), and seen files of garbage, of
+    Infinity, 1e400, 1.5, true or -7 as a counter, of a bad address, of a list, nested a
+    hundred thousand deep, and a directory in its place (each used to stop the agent at
+    start-up or be taken). build_endpoint refuses with the reason; the agent then
     flies and records without a link (the agent's `_build_link`)."""
     from agent.clock import LoopClock
     from agent.config import Link
-    from agent.link.codec import AIRCRAFT
+    from agent.link.codec import AIRCRAFT, key_fingerprint
     from agent.link.endpoint import build_endpoint
     from tests.link.pair import GROUND_ADDR, KEY
 
@@ -415,13 +418,37 @@ def test_a_missing_or_damaged_replay_state_refuses_the_link(tmp_path):
         seen_file="air.seen",
     )
     build_endpoint(cfg, AIRCRAFT, tmp_path, LoopClock(), lambda *_: None)  # a first start
-    assert (tmp_path / "air.seen").read_text() == "{}"  # its state starts saved
+    # Its state starts saved, bound to the key.
+    state = json.loads((tmp_path / "air.seen").read_text())
+    assert state == {"key": key_fingerprint(KEY), "floors": {}}
     (tmp_path / "air.seen").unlink()
     with pytest.raises(ValueError, match=r"air\.seen is missing while .*air\.counter exists"):
         build_endpoint(cfg, AIRCRAFT, tmp_path, LoopClock(), lambda *_: None)
-    (tmp_path / "air.seen").write_text("{not json")
+    peer = GROUND_ADDR.hex()
+    for bad in (
+        "{not json",
+        f'{{"{peer}": Infinity}}',
+        f'{{"{peer}": 1e400}}',
+        f'{{"{peer}": 1.5}}',
+        f'{{"{peer}": true}}',
+        f'{{"{peer}": -7}}',
+        '{"zz": 1}',
+        "[1, 2]",
+        json.dumps({"key": key_fingerprint(KEY), "floors": [1]}),
+        "[" * 100_000,  # deep nesting: a RecursionError in json
+    ):
+        (tmp_path / "air.seen").write_text(bad)
+        with pytest.raises(ValueError, match="the replay state is unreadable"):
+            build_endpoint(cfg, AIRCRAFT, tmp_path, LoopClock(), lambda *_: None)
+    (tmp_path / "air.seen").unlink()
+    (tmp_path / "air.seen").mkdir()  # not a file at all
     with pytest.raises(ValueError, match="the replay state is unreadable"):
         build_endpoint(cfg, AIRCRAFT, tmp_path, LoopClock(), lambda *_: None)
+    (tmp_path / "air.seen").rmdir()
+    # The state of another key says nothing of this one's frames: it starts empty.
+    (tmp_path / "air.seen").write_text(json.dumps({"key": "0" * 16, "floors": {peer: 99}}))
+    _, session = build_endpoint(cfg, AIRCRAFT, tmp_path, LoopClock(), lambda *_: None)
+    assert session.codec.seen_snapshot() is None  # nothing held: no floor for the peer
 
 
 async def test_a_queued_abort_survives_a_full_outbox(tmp_path):
@@ -474,7 +501,8 @@ async def test_a_frame_of_an_older_session_reordered_behind_a_new_one_is_dropped
 async def test_a_radio_with_its_encryption_off_is_reported_or_refused(tmp_path):
     """Bad input tried: a module with AES encryption off (EE = 0, as shipped), whose settings
     any node on the network could change by Remote AT commands: the open reads EE, warns and
-    counts it; with require_encryption the module is refused with the reason; with EE = 1 it
+    counts it; with require_encryption the module is refused with the reason, and so is a
+    module that does not answer EE at all (it used to be taken: fail open); with EE = 1 it
     opens quietly."""
     from agent.clock import LoopClock
     from drivers.xbee.driver import RadioError, XBeeRadio
@@ -484,22 +512,31 @@ async def test_a_radio_with_its_encryption_off_is_reported_or_refused(tmp_path):
     module = EmulatedXBee("air", AIR_ADDR, tmp_path, RfChannel(), clock)
     running = asyncio.create_task(module.run(), name="xbee-air")
     await asyncio.sleep(0.05)
+
+    def radio(**options) -> XBeeRadio:
+        return XBeeRadio(str(module.path), 115200, clock, lambda *_: None, **options)
+
     try:
-        plain = XBeeRadio(str(module.path), 115200, clock, lambda *_: None)
+        plain = radio()
         await plain.open()
         assert plain.encrypted is False
         assert plain.counters["unencrypted_opens"] == 1
         await plain.close()
-        strict = XBeeRadio(
-            str(module.path), 115200, clock, lambda *_: None, require_encryption=True
-        )
+        strict = radio(require_encryption=True)
         with pytest.raises(RadioError, match=r"encryption is off \(EE = 0\)"):
             await strict.open()
         await strict.close()
+        module.encryption = None  # no EE command: whether it encrypts cannot be told
+        silent = radio()
+        await silent.open()
+        assert silent.encrypted is None  # without require_encryption: opened
+        await silent.close()
+        strict = radio(require_encryption=True)
+        with pytest.raises(RadioError, match=r"encryption cannot be read \(no answer to EE\)"):
+            await strict.open()
+        await strict.close()
         module.encryption = True
-        secured = XBeeRadio(
-            str(module.path), 115200, clock, lambda *_: None, require_encryption=True
-        )
+        secured = radio(require_encryption=True)
         await secured.open()
         assert secured.encrypted is True
         assert secured.counters["unencrypted_opens"] == 0
@@ -509,10 +546,23 @@ async def test_a_radio_with_its_encryption_off_is_reported_or_refused(tmp_path):
         await asyncio.gather(running, return_exceptions=True)
 
 
-async def test_an_agent_whose_link_is_refused_flies_and_records(tmp_path):
+@pytest.mark.parametrize(
+    ("seen", "counter"),
+    [
+        (None, "65536"),  # the key was used; the seen file is gone
+        ('{"0013a20040000002": Infinity}', "65536"),  # an OverflowError used to stop the agent
+        ('{"0013a20040000002": 1e400}', "65536"),
+        ("{}", "1e400"),
+        ("{}", "-5"),  # a negative counter made every frame fail to pack
+    ],
+    ids=["seen-missing", "seen-infinity", "seen-1e400", "counter-1e400", "counter-negative"],
+)
+async def test_an_agent_whose_link_is_refused_flies_and_records(tmp_path, seen, counter):
     """Bad input tried: the agent started with its seen file deleted while its counter file
-    is there. The link is refused with the reason (counted), and the agent flies and records
-    without it; a damaged seen file used to stop the agent at start-up."""
+    is there, a seen file holding Infinity or 1e400 (JSON floats: int() of them raised
+    OverflowError, which stopped the agent at start-up), a counter file of 1e400 or -5. The
+    link is refused with the reason (counted), and the agent flies and records without it;
+    nothing is written over the state it refused."""
     from agent.clock import LoopClock
     from agent.config import Autopilot, Config, Link, Recorder, Sensors
     from agent.runtime import Agent
@@ -521,7 +571,9 @@ async def test_an_agent_whose_link_is_refused_flies_and_records(tmp_path):
 
     (tmp_path / "link.key").write_text(KEY.hex())
     (tmp_path / "link.key").chmod(0o600)
-    (tmp_path / "air.counter").write_text("65536")  # the key was used; air.seen is gone
+    (tmp_path / "air.counter").write_text(counter)
+    if seen is not None:
+        (tmp_path / "air.seen").write_text(seen)
     off = {"enabled": False}
     config = Config(
         recorder=Recorder(log_dir=str(tmp_path / "logs"), capacity_s=60.0),
@@ -546,4 +598,11 @@ async def test_an_agent_whose_link_is_refused_flies_and_records(tmp_path):
     finally:
         running.cancel()
         await asyncio.gather(running, return_exceptions=True)
-    assert not (tmp_path / "air.seen").exists()  # nothing written over the missing state
+    # Nothing written over the state it refused.
+    assert (tmp_path / "air.counter").read_text() == counter
+    if seen is None:
+        assert not (tmp_path / "air.seen").exists()
+    else:
+        assert (tmp_path / "air.seen").read_text() == seen
+    execution = next((tmp_path / "logs").glob("*_exec_*")).read_text()
+    assert "link refused, flying without it" in execution

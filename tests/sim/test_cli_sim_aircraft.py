@@ -64,3 +64,15 @@ def test_a_port_that_is_not_one_is_a_usage_error(port, capsys):
 
     assert main(["sim-aircraft", "--mavlink-port", port]) == 2
     assert "argument --mavlink-port" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", ["sim", "sim-aircraft"])
+@pytest.mark.parametrize("value", ["-5", "nan", "inf", "16"])
+def test_a_turbulence_outside_calm_to_severe_is_a_usage_error(command, value, capsys):
+    """Bad input tried: --turbulence -5 (`sysid sim` flew it, in calm air), nan, inf and 16
+    (beyond MIL-F-8785C's severe): refused before anything starts, with the range."""
+    from agent.cli import main
+
+    assert main([command, "--turbulence", value]) == 2
+    err = capsys.readouterr().err
+    assert f"argument --turbulence: {value}: give 0 (calm) to 15 (severe)" in err

@@ -414,3 +414,53 @@ async def test_an_agent_stopped_mid_run_trims_and_releases_before_its_link_close
     assert_trimmed_then_released(sim, started, started.time)
     assert overrides == {}
     assert_logs_whole(tmp_path)
+
+
+# -- the disk holding the link's replay state fills up mid-run ------------------------------
+
+
+async def test_an_abort_acts_at_once_while_the_link_state_cannot_be_written(
+    tmp_path, small_disk_at
+):
+    """Bad input tried: the file system holding the aircraft's link state (a real 1 MiB
+    tmpfs) filled up during an excitation, so every write of the seen file fails with ENOSPC
+    from the kernel. The session used to hold every command until that write succeeded and
+    restart on its error (6 restarts in 20 s): the ground's Abort never acted. Now the Abort
+    acts the moment it arrives: no excitation command goes out after it (the scheduler's next
+    command is the trim), then the release; a state-changing command is refused with the
+    disk's reason, which the status carries; the agent records throughout, and the session
+    never restarts."""
+    disk = small_disk_at(tmp_path / "air", "1m")
+    async with simulated(SimOptions(preset="lateral", directory=tmp_path)) as sim:
+        agent = sim.agent
+        sent: list[tuple[messages.Message, int]] = []  # every downlink message, as it is sent
+        agent.downlink.subscribe(lambda m: sent.append((m, agent.scheduler.counters["commands"])))
+        seen = await start_run(sim, "state-disk-full")
+        started = received(sim, messages.ExcitationEvent, seen, event="started")[0]
+        assert fill(disk / "filler") == errno.ENOSPC  # from the kernel
+        refused = await sim.ground.command(messages.IdentSettings(axes="lateral"))
+        assert not refused.ok
+        assert "replay state cannot be saved" in refused.reason
+        assert "No space left on device" in refused.reason
+        await until(
+            lambda: [m for m in received(sim, messages.Status, seen) if m.link_fault],
+            "the status's link fault",
+        )
+        frames = agent.recorder.ring.count
+        ack = await sim.ground.command(messages.Abort(reason="operator abort, disk full"))
+        assert ack.ok, ack.reason
+        end = await finished_or_aborted(sim, seen)
+        assert end.event == "aborted"
+        assert "disk full" in end.detail
+        await until(lambda: agent.recorder.ring.count > frames + 100, "recording")
+        failures = agent.session.counters["seen_write_failures"]
+        restarts = agent.counters["link_restarts"]
+        sim.aircraft.pilot.set_switch(False)
+    # The Abort's acknowledgement is sent in the callback that received it; the scheduler's
+    # command count then is its count at the end: not one excitation command after it.
+    at_abort = next(n for m, n in sent if isinstance(m, messages.Ack) and m.ref == ack.ref)
+    assert agent.scheduler.counters["commands"] == at_abort
+    assert_trimmed_then_released(sim, started, started.time)
+    assert failures >= 1
+    assert restarts == 0
+    assert_logs_whole(tmp_path)

@@ -57,6 +57,8 @@ class StatusTab(Horizontal):
             ("loop lag", num(s.loop_lag_ms, "{:.1f} ms, worst of 1 s")),
         ]
         head.append("\n".join(f"{k:<11} {v}" for k, v in rows))
+        if s.link_fault:  # commands other than an abort are refused until this clears
+            head.append(f"\nLINK: {s.link_fault}", "bold red")
         flight.update(head)
         table = self.query_one("#sensors", DataTable)
         table.clear()
