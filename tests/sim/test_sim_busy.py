@@ -133,8 +133,9 @@ async def test_past_the_cap_the_operator_says_the_machine_was_too_busy(tmp_path,
     message = str(caught.value)
     assert message.startswith("no acknowledgement of arm in "), message
     assert "this machine was too busy to fly the simulation in real time" in message
+    # What was measured over the wait: the CPU stretch only when the flight's process ran at
+    # least MIN_RUN_S in it (tests/sim/test_pace.py checks that phrase); these two always.
     assert re.search(r"the simulation ran at \d+\.\d\d× real time", message), message
-    assert re.search(r"the flight's threads took \d+\.\d× their CPU time", message), message
     assert re.search(r"the event loop lagged up to \d+(\.\d s| ms)", message), message
 
 
