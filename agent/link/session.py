@@ -67,15 +67,12 @@ class Guard(Protocol):
 
     def changes_state(self, message: messages.Message) -> bool:
         """False for a message that only makes the aircraft safer: acted on at once."""
-        ...
 
     def refuse(self, message: messages.Message, seq: int, reason: str) -> None:
         """A command not carried out (its replay state could not be saved, or it came late)."""
-        ...
 
     def overtaken(self, message: messages.Message, seq: int) -> None:
         """A command handed on after a later safe message (an Abort) already acted."""
-        ...
 
 
 class Malformed(ValueError):
