@@ -125,12 +125,14 @@ class Channels(Section):
         return None
 
 
-class Identification(Section):
+class IdentificationConfig(Section):
     """How models are identified (OKID → ERA → modes → fit), onboard and offline."""
 
     axes: Literal["lateral", "longitudinal", "full"] = "lateral"
-    """Default axis set: lateral (aileron, rudder → β, p, r, φ), longitudinal (throttle,
-    elevator → V, α, q, θ) or full (all four → all eight)."""
+    """Axis set where nothing else says which: lateral (aileron, rudder → β, p, r, φ),
+    longitudinal (throttle, elevator → V, α, q, θ) or full (all four → all eight). Onboard an
+    excitation is identified on its plan's axes unless the ground chose axes; this one is for
+    the periodic identification (no plan) and offline analysis."""
     channels: Channels = Channels()
     """Names of the recorded channels for each role."""
     markov: AutoOrCount = "auto"
@@ -158,9 +160,11 @@ class Identification(Section):
     band_hz: float | None = Field(None, ge=0.01, le=500.0)
     """Band of interest in Hz, 0.01–500 (an aircraft's slowest named mode, the phugoid, is
     above 0.01 Hz); unset: where 99 % of every input's power lies (≥ 0.5 Hz)."""
-    held_inputs: bool = True
-    """Inputs are held between samples (commands; a zero-order hold). false: they are samples
-    of continuously varying signals (e.g. surface potentiometers)."""
+    held_inputs: bool | Literal["auto"] = "auto"
+    """true: inputs are held between samples (commands; a zero-order hold). false: they are
+    samples of continuously varying signals. "auto": the agent's own recordings (onboard, and
+    its flight logs replayed by `sysid analyze`) are the surface potentiometers' samples of
+    moving surfaces, so not held; other records (`sysid identify` on CSV) are held."""
     smoothing_s: float | None = Field(None, gt=0.0)
     """Savitzky–Golay smoothing window in seconds (cubic), on inputs and outputs; unset: none."""
     method: Literal["auto", "time", "frequency", "aircraft"] = "auto"
@@ -181,7 +185,7 @@ class Identification(Section):
     standard errors; false reports the OKID/ERA model as is."""
 
     @model_validator(mode="after")
-    def _aircraft_takes_no_decimation(self) -> Identification:
+    def _aircraft_takes_no_decimation(self) -> IdentificationConfig:
         if self.method == "aircraft" and self.decimation not in ("auto", 1):
             raise ValueError(
                 f'method "aircraft" fits the spectra at the record\'s own rate and takes no '
@@ -484,7 +488,7 @@ class Live(Section):
 class Config(Section):
     """The whole configuration file."""
 
-    identification: Identification = Identification()
+    identification: IdentificationConfig = IdentificationConfig()
     """The identification core's settings."""
     excitation: Excitation = Excitation()
     """The excitation scheduler's settings and the onboard envelope."""

@@ -20,12 +20,13 @@ import os
 import re
 import secrets
 import zipfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from agent.channels import AXIS_SETS
+from agent.ident.document import ModeDocument, ResultDocument
 
 log = logging.getLogger(__name__)
 
@@ -44,23 +45,25 @@ CR_MAX = 0.2
 SELF_CHECK_RATIO = 1.5
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Candidate:
+    """An identified model with the data set it was identified from."""
+
     model_id: str
     axes: str
     record_dt: float
-    result: dict
-    preprocessing: dict
+    result: ResultDocument
     experiments: tuple[tuple[np.ndarray, np.ndarray], ...]
     tic_nn: float | None = None  # as nominal: its TIC on its own data
-    extra: dict = field(default_factory=dict)
+    record_s: float | None = None  # the newest record's length (None: unknown)
+    trim: dict[str, dict[str, float]] | None = None  # its trim, "inputs"/"outputs" by channel
 
     @property
     def tic_jj(self) -> float:
-        return float(self.result["tic_avg"])
+        return float(self.result.tic_avg)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Suggestion:
     update: bool
     steps: list[str]
@@ -74,18 +77,18 @@ class Suggestion:
     tic_nj: float | None = None
 
 
-def _weak(mode: dict) -> bool:
+def _weak(mode: ModeDocument) -> bool:
     """A mode poorly identified: its EMAC below EMAC_MIN, or, without EMAC, its natural
     frequency's Cramér–Rao standard error above CR_MAX of it (no error either: weak)."""
-    if mode.get("emac") is not None:
-        return mode["emac"] < EMAC_MIN
-    sigma, omega = mode.get("frequency_std_rad_s"), mode.get("frequency_rad_s")
+    if mode.emac is not None:
+        return mode.emac < EMAC_MIN
+    sigma, omega = mode.frequency_std_rad_s, mode.frequency_rad_s
     return sigma is None or not omega or sigma / omega > CR_MAX
 
 
-def _resolved(mode: dict, span: float) -> bool:
+def _resolved(mode: ModeDocument, span: float) -> bool:
     """Whether a record `span` s long resolves the mode: its time constant within half of it."""
-    return bool(abs(mode["eigenvalue"][0]) * span / 2 >= 1.0)
+    return bool(abs(mode.eigenvalue[0]) * span / 2 >= 1.0)
 
 
 def suggest(
@@ -97,15 +100,15 @@ def suggest(
     # reported, but it fails neither the stability step nor the quality step. Its sign is not
     # determined either: the simulated Cub's spiral (+0.004 1/s) came back at +0.04 and +0.09
     # 1/s from the two 15 s records of one lateral `sysid sim` flight.
-    span = candidate.extra.get("record_s", np.inf)
-    modes = candidate.result["modes"]
+    span = np.inf if candidate.record_s is None else candidate.record_s
+    modes = candidate.result.modes
     judged = [m for m in modes if _resolved(m, span)]
-    fastest = max(m["eigenvalue"][0] for m in modes)
-    judged_fastest = max((m["eigenvalue"][0] for m in judged), default=-np.inf)
+    fastest = max(m.eigenvalue[0] for m in modes)
+    judged_fastest = max((m.eigenvalue[0] for m in judged), default=-np.inf)
     stable = bool(judged_fastest < DIVERGENCE_LIMIT)
     state = (
         "stable"
-        if candidate.result["stable"]
+        if candidate.result.stable
         else f"slowly divergent (doubles in {np.log(2) / fastest:.0f} s)"
         if fastest < DIVERGENCE_LIMIT
         else f"UNSTABLE (doubles in {np.log(2) / judged_fastest:.1f} s)"
@@ -115,10 +118,10 @@ def suggest(
     )
     steps.append(f"1 stability: {state}")
     ok &= stable
-    named = [m for m in modes if m["name"]]
+    named = [m for m in modes if m.name]
     resolved = [m for m in named if _resolved(m, span)]
-    slow = [m["name"] for m in named if m not in resolved]
-    weak = [m["name"] for m in resolved if _weak(m)]
+    slow = [m.name for m in named if m not in resolved]
+    weak = [m.name for m in resolved if _weak(m)]
     quality = bool(resolved) and not weak
     if quality:
         text = f"named modes EMAC ≥ {EMAC_MIN:.0f} % or Cramér–Rao σ(ωn) ≤ {CR_MAX:.0%}"
@@ -139,7 +142,7 @@ def suggest(
     checks = {"stability": stable, "quality": quality, "fit": bool(tic_jj < TIC_LIMIT)}
     if nominal is None:
         steps.append("4–7 no nominal model yet")
-        return Suggestion(bool(ok), steps, checks, tic_jj)
+        return Suggestion(update=bool(ok), steps=steps, checks=checks, tic_jj=tic_jj)
     tic_nn = nominal.tic_nn if nominal.tic_nn is not None else nominal.tic_jj
     better = bool(tic_jn is not None and tic_jn <= tic_nn)
     steps.append(
@@ -151,7 +154,13 @@ def suggest(
     steps.append(f"6–7 TIC_jj + TIC_jN {mine:.3f} vs TIC_NN + TIC_Nj {theirs:.3f}: {verdict}")
     checks |= {"no worse": better, "combined": combined}
     return Suggestion(
-        bool(ok and better and combined), steps, checks, tic_jj, tic_jn, tic_nn, tic_nj
+        update=bool(ok and better and combined),
+        steps=steps,
+        checks=checks,
+        tic_jj=tic_jj,
+        tic_jn=tic_jn,
+        tic_nn=tic_nn,
+        tic_nj=tic_nj,
     )
 
 
@@ -168,16 +177,24 @@ CANDIDATES_KEPT = 16
 SUMMARY_MAX_BYTES = 16 * 2**20
 
 
-def model_summary(path: Path) -> dict:
-    """A model store file's id and modes, {"model_id", "modes"} (what a report highlights);
-    ValueError naming the file when it is not one."""
+@dataclass(frozen=True, kw_only=True)
+class StoredModel:
+    """A model store file's id and modes (what a report highlights)."""
+
+    model_id: str
+    modes: list[ModeDocument]
+
+
+def model_summary(path: Path) -> StoredModel:
+    """A model store file's id and modes; ValueError naming the file when it is not one."""
     try:
         with open(path, "rb") as handle:  # bounded: /dev/zero or a stray log is no model
             text = handle.read(SUMMARY_MAX_BYTES + 1)
         if len(text) > SUMMARY_MAX_BYTES:
             raise ValueError(f"over {SUMMARY_MAX_BYTES // 2**20} MiB")
         stored = json.loads(text)
-        return {"model_id": stored["model_id"], "modes": stored["result"]["modes"]}
+        result = ResultDocument.model_validate(stored["result"])
+        return StoredModel(model_id=str(stored["model_id"]), modes=result.modes)
     except (OSError, ValueError, KeyError, TypeError, RecursionError) as exc:
         raise ValueError(f"{path}: not a model store file ({exc})") from None
 
@@ -311,11 +328,11 @@ class ModelStore:
                     "model_id": c.model_id,
                     "axes": c.axes,
                     "record_dt": c.record_dt,
-                    "result": c.result,
-                    "preprocessing": c.preprocessing,
+                    "result": c.result.model_dump(mode="json"),
                     "tic_nn": c.tic_nn,
                     "count": len(c.experiments),
-                    "extra": c.extra,
+                    "record_s": c.record_s,
+                    "trim": c.trim,
                 }
             )
         )
@@ -329,15 +346,16 @@ class ModelStore:
             m = json.loads(meta.read_text())
             with np.load(data) as arrays:
                 experiments = tuple((arrays[f"u{k}"], arrays[f"y{k}"]) for k in range(m["count"]))
+            earlier = m.get("extra", {})  # where a store written before kept the two
             return Candidate(
-                m["model_id"],
-                m["axes"],
-                m["record_dt"],
-                m["result"],
-                m["preprocessing"],
-                experiments,
-                m["tic_nn"],
-                m.get("extra", {}),
+                model_id=m["model_id"],
+                axes=m["axes"],
+                record_dt=m["record_dt"],
+                result=ResultDocument.model_validate(m["result"]),
+                experiments=experiments,
+                tic_nn=m["tic_nn"],
+                record_s=m.get("record_s", earlier.get("record_s")),
+                trim=m.get("trim", earlier.get("trim")),
             )
         except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile) as exc:
             # A damaged store must not stop identification: set the files aside (kept for

@@ -213,7 +213,11 @@ class Recorder:
 
     def window(self, t0: float, t1: float) -> Frames:
         """A copy of the frames with time in [t0, t1]."""
-        rows = self.ring.between(t0, t1)
+        return self.frames(self.ring.between(t0, t1))
+
+    def frames(self, rows: np.ndarray) -> Frames:
+        """Rows of the ring (`Ring.between`, a logged window) by channel: the one place that
+        knows the row layout [time, values…, ages…]. Views into `rows`, not copies."""
         n = len(self.channels)
         return Frames(
             time=rows[:, 0],

@@ -1,5 +1,5 @@
 """The serial transport every sensor shares: pyserial-asyncio, with reconnection as a small
-state machine (STYLE.md item 7) and a silence watchdog.
+state machine (docs/contributing.md, *Reconnecting*) and a silence watchdog.
 
     waiting ──open ok──▶ open ──port error / EOF──▶ waiting (after backoff)
        ▲ └─open fails─┐   └──no byte for silence_s──▶ waiting (after backoff)

@@ -24,8 +24,9 @@ import msgpack
 from agent.config import Config, ConfigError, load_config
 from agent.ground.config import GroundConfig
 from agent.link import messages
-from agent.link.codec import AIRCRAFT, GROUND, HEADER, TAG, VERSION, CounterStore, LinkCodec
+from agent.link.codec import AIRCRAFT, GROUND, HEADER, TAG, VERSION, LinkCodec
 from agent.link.session import LinkSession
+from agent.link.store import CounterStore
 from drivers.airdata.codec import MAX_LINE, AirData, AirDataCodec
 from drivers.codec import StreamDecoder
 from drivers.surfaces.codec import LENGTH, SurfaceCodec, SurfaceFrame

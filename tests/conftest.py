@@ -33,7 +33,8 @@ def wait_budget(request):
 
 @pytest.fixture(autouse=True)
 def no_leaked_threads():
-    """Fail a test that leaves threads running (STYLE.md item 4)."""
+    """Fail a test that leaves threads running (docs/contributing.md, *Fakes at the transport
+    seam*)."""
     before = set(threading.enumerate())
     yield
     leaked = [
@@ -62,7 +63,8 @@ def _library_pool(thread: threading.Thread) -> bool:
 
 @pytest.fixture
 async def no_leaked_tasks():
-    """Fail an async test that leaves tasks running (STYLE.md item 4); use it per module."""
+    """Fail an async test that leaves tasks running (docs/contributing.md, *Fakes at the
+    transport seam*); use it per module."""
     yield
     current = asyncio.current_task()
     leaked = [t for t in asyncio.all_tasks() if t is not current and not t.done()]

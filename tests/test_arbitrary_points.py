@@ -28,8 +28,8 @@ from agent.config import Config, Recorder
 from agent.logs import JsonLinesHandler, LogWriter
 from agent.runtime import Agent
 from agent.runtime.health import GcWatch
-from drivers.autopilot.driver import _Seam
-from drivers.xbee.driver import XBeeRadio
+from drivers.autopilot.driver import MessageSeam
+from drivers.xbee.driver import PacketSeam
 
 # How long a thread that logs a few lines may take before it is called deadlocked: each line
 # here runs dozens of full collections (about 15 ms each on this machine, longer when it is
@@ -174,35 +174,33 @@ def test_the_gc_callback_takes_no_lock_and_does_not_log(tracked_locks):
 
 
 async def test_the_radio_callback_takes_no_lock_and_does_not_log(tracked_locks):
-    frames = []
-    radio = XBeeRadio(
-        "/dev/null",
-        115200,
-        VirtualClock(0.0),
-        on_frame=lambda source, data, t: frames.append((source, data)),
-    )
-    radio._loop = asyncio.get_running_loop()
+    # The seam XBeeRadio hands digi-xbee as its packet callback.
+    delivered = []
+    seam = PacketSeam(asyncio.get_running_loop(), delivered.append, bound=2)
     packet = ReceivePacket(
         XBee64BitAddress(bytes(range(8))), XBee16BitAddress.UNKNOWN_ADDRESS, 0, bytearray(b"frame")
     )
     seen = []
     thread = threading.Thread(
-        target=lambda: seen.extend(_locks_and_logging(lambda: radio._packet(packet))),
+        target=lambda: seen.extend(
+            _locks_and_logging(lambda: [seam.callback(packet) for _ in range(3)])
+        ),
         name="digi-xbee-callback",
     )
     thread.start()
     thread.join()
     assert seen == []
-    for _ in range(100):  # the frame crosses into the loop on its next turns
-        if frames:
+    for _ in range(100):  # the frames cross into the loop on its next turns
+        if len(delivered) == 2:
             break
         await asyncio.sleep(0)
-    assert frames == [(bytes(range(8)), b"frame")]
+    assert delivered == [packet, packet]  # the third was past the bound: dropped, counted
+    assert seam.dropped == 1
 
 
 async def test_the_autopilot_callback_takes_no_lock_and_does_not_log(tracked_locks):
     delivered = []
-    seam = _Seam(asyncio.get_running_loop(), delivered.append)
+    seam = MessageSeam(asyncio.get_running_loop(), delivered.append)
     message = MavlinkMessage(message_name="ATTITUDE", fields_json='{"roll": 0.1}')
     seen = []
     thread = threading.Thread(

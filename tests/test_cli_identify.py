@@ -25,6 +25,7 @@ import pytest
 
 from agent.cli import main
 from agent.ident import reference
+from agent.ident.document import ResultDocument
 from tests.capped import sysid
 from tests.waiting import until_sync
 
@@ -36,7 +37,6 @@ LAT = ["--inputs", "aileron,rudder", "--outputs", "beta,p,r,phi"]
 CONTRACT = {
     "dt",
     "order",
-    "markov",
     "inputs",
     "outputs",
     "A",
@@ -45,12 +45,16 @@ CONTRACT = {
     "D",
     "Ac",
     "Bc",
-    "singular_values",
     "stable",
     "tic",
     "tic_avg",
     "modes",
+    "method",
+    "preprocessing",
+    "okid",
+    "aircraft",
 }
+OKID_KEYS = {"markov", "markov_auto", "singular_values", "tic_avg", "frequency"}
 MODE_KEYS = {
     "name",
     "eigenvalue",
@@ -98,6 +102,15 @@ def test_json_contract_on_a_noise_free_record(capsys, lateral_csv):
     assert set(doc) >= CONTRACT
     assert doc["dt"] == pytest.approx(0.02)
     assert doc["order"] == 4
+    # OKID/ERA's own part: p (chosen: every p tried is listed), the Hankel singular values,
+    # the OKID/ERA model's fit; no whole-aircraft part.
+    assert set(doc["okid"]) == OKID_KEYS
+    assert doc["okid"]["markov"] in {t["markov"] for t in doc["okid"]["markov_auto"]}
+    assert len(doc["okid"]["singular_values"]) >= doc["order"]
+    assert doc["okid"]["frequency"] is None
+    assert doc["aircraft"] is None
+    # The document reads back as the one typed form every consumer uses.
+    assert ResultDocument.model_validate(doc).model_dump(mode="json") == doc
     assert doc["inputs"] == ["aileron", "rudder"]
     assert np.allclose(doc["Ac"], reference.LATERAL.A, rtol=0, atol=1e-6)
     assert np.allclose(doc["Bc"], reference.LATERAL.B, rtol=0, atol=1e-6)
@@ -124,10 +137,15 @@ def test_auto_is_the_aircraft_method_for_an_axis_named_by_role_unless_okid_is_as
     assert code == 0
     assert doc["method"] == "aircraft"
     assert np.allclose(doc["Ac"], reference.LATERAL.A, rtol=0.05, atol=0.01)
+    # The method's own part, and no OKID part (no p, no Hankel singular values).
+    assert doc["okid"] is None
+    assert [axis["name"] for axis in doc["aircraft"]["axes"]] == ["lateral"]
     for extra in (["--markov", "3"], ["--order", "4"], ["--no-refine"]):
         code, doc = run_json(capsys, str(lateral_csv), *LAT, *extra)
         assert code == 0
         assert doc["method"] == "time", extra
+        assert doc["aircraft"] is None
+    assert doc["okid"]["markov_auto"] is not None  # --no-refine: p still chosen
 
 
 def test_json_reports_cramer_rao_uncertainty_and_preprocessing(capsys, tmp_path):
@@ -137,6 +155,7 @@ def test_json_reports_cramer_rao_uncertainty_and_preprocessing(capsys, tmp_path)
     code, doc = run_json(capsys, str(path), *LAT)
     assert code == 0
     assert doc["refinement"]["hold"] == "zoh"
+    assert "okid_tic_avg" not in doc["refinement"]  # OKID/ERA's own fit is its part's
     assert doc["preprocessing"]["record_dt"] == pytest.approx(0.02)
     for mode in doc["modes"]:
         re_std, _im_std = mode["eigenvalue_std"]
@@ -163,9 +182,10 @@ def test_frequency_method_from_the_command_line(capsys, tmp_path):
     code, doc = run_json(capsys, str(path), *LAT, "--method", "frequency", "--trim", "none")
     assert code == 0
     assert doc["method"] == "frequency"
-    assert doc["frequency"]["periodic"] is True
-    assert doc["frequency"]["segment_s"] == pytest.approx(20.0)
-    assert doc["frequency"]["markov_from"] == "observer fit to the FRF"
+    spectra = doc["okid"]["frequency"]
+    assert spectra["periodic"] is True
+    assert spectra["segment_s"] == pytest.approx(20.0)
+    assert spectra["markov_from"] == "observer fit to the FRF"
     assert np.allclose(doc["Ac"], model.A, rtol=0.01, atol=0.01)
     code, doc = run_json(capsys, str(path), *LAT, "--method", "frequency", "--period", "7.3")
     assert code == 0  # a wrong period is not an error: it leaks, and says so

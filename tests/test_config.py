@@ -207,10 +207,10 @@ def test_the_simulators_agent_config_file_loads_back_to_the_same_config(tmp_path
     # ports, the autopilot URL, the link files, the log directory, and the real-time priority
     # the benchmarks fly with.
     from agent.config import to_toml
-    from agent.sim.flight import _config
+    from agent.sim.flight import agent_config
 
     for priority, speed in ((None, 60.0), (10, 90.0)):
-        config = _config(
+        config = agent_config(
             tmp_path, tmp_path / "ports", ("127.0.0.1", 14555), "lateral", priority, speed
         )
         path = tmp_path / "agent.toml"

@@ -13,13 +13,15 @@ ROOT = Path(__file__).resolve().parents[1]
 
 # Lowest first. `drivers` depends on nothing above it; the value types every layer shares
 # are drivers/values.py's. The onboard runtime, the offline analysis and the ground console
-# are one layer: none imports another.
+# are one layer: none imports another. The identification core sits below the link and the model
+# store, which carry and keep its result document (agent/ident/document.py).
 LAYERS = (
     ("drivers",),
     ("agent", "agent.channels", "agent.logs", "agent.outputs", "agent.splane"),
     ("agent.clock", "agent.config"),
     ("agent.excitation",),
-    ("agent.ident", "agent.link", "agent.recorder", "agent.models"),
+    ("agent.ident",),
+    ("agent.link", "agent.recorder", "agent.models"),
     ("agent.runtime", "agent.analysis", "agent.ground"),
     ("agent.sim",),
     ("agent.cli",),

@@ -10,21 +10,48 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from agent.ident.document import ModeDocument, OkidDocument, ResultDocument
 from agent.models import CANDIDATES_KEPT, Candidate, ModelStore, suggest
+from tests.documents import OUTPUTS, lateral_document
+
+
+def mode(name: str, eigenvalue: tuple[float, float], emac: float | None, **more) -> ModeDocument:
+    """A mode as the document carries it; what the suggestion does not read is left neutral."""
+    re, im = eigenvalue
+    fields = {
+        "frequency_rad_s": float(np.hypot(re, im)),
+        "damping": -re / float(np.hypot(re, im)),
+        "time_constant_s": None,
+        "msv": 100.0,
+        "mci": 100.0,
+        "moi": 100.0,
+        "mpc": 100.0,
+        "cmi": None,
+    }
+    return ModeDocument(name=name, eigenvalue=eigenvalue, emac=emac, **(fields | more))
 
 
 def candidate(model_id: str, *, tic: float = 0.1, modes=None, record_s: float = 20.0):
     modes = modes or [
-        {"name": "Dutch roll", "eigenvalue": [-0.8, 3.0], "emac": 95.0},
-        {"name": "roll", "eigenvalue": [-9.0, 0.0], "emac": 90.0},
-        {"name": "spiral", "eigenvalue": [0.004, 0.0], "emac": 20.0},
+        mode("Dutch roll", (-0.8, 3.0), 95.0),
+        mode("roll", (-9.0, 0.0), 90.0),
+        mode("spiral", (0.004, 0.0), 20.0),
     ]
-    stable = all(m["eigenvalue"][0] < 0 for m in modes)
     rng = np.random.default_rng(len(model_id))
     data = ((rng.normal(size=(100, 2)), rng.normal(size=(100, 4))),)
-    result = {"tic_avg": tic, "stable": stable, "modes": modes}
+    result = lateral_document(
+        stable=all(m.eigenvalue[0] < 0 for m in modes),
+        tic=dict.fromkeys(OUTPUTS, tic),
+        tic_avg=tic,
+        modes=modes,
+    )
     return Candidate(
-        model_id, "lateral", 0.02, result, {"decimate": 1}, data, extra={"record_s": record_s}
+        model_id=model_id,
+        axes="lateral",
+        record_dt=0.02,
+        result=result,
+        experiments=data,
+        record_s=record_s,
     )
 
 
@@ -42,9 +69,9 @@ def test_a_divergence_the_record_cannot_resolve_is_reported_not_judged():
     the record does not resolve it, and its sign is not determined; from a 60 s record it is,
     and it fails the stability step."""
     modes = [
-        {"name": "Dutch roll", "eigenvalue": [-0.65, 2.2], "emac": 95.0},
-        {"name": "roll", "eigenvalue": [-12.0, 0.0], "emac": 90.0},
-        {"name": "spiral", "eigenvalue": [0.094, 0.0], "emac": 60.0},
+        mode("Dutch roll", (-0.65, 2.2), 95.0),
+        mode("roll", (-12.0, 0.0), 90.0),
+        mode("spiral", (0.094, 0.0), 60.0),
     ]
     short = suggest(candidate("a", modes=modes, record_s=15.0), None, None, None)
     assert short.update
@@ -59,13 +86,13 @@ def test_a_divergence_the_record_cannot_resolve_is_reported_not_judged():
     ("change", "step", "text", "check"),
     [
         (
-            {"modes": [{"name": "roll", "eigenvalue": [0.2, 0.0], "emac": 90.0}]},
+            {"modes": [mode("roll", (0.2, 0.0), 90.0)]},
             0,
             "UNSTABLE",
             "stability",
         ),
         (
-            {"modes": [{"name": "roll", "eigenvalue": [-9.0, 0.0], "emac": 30.0}]},
+            {"modes": [mode("roll", (-9.0, 0.0), 30.0)]},
             1,
             "weak: roll (EMAC below 50 %",
             "quality",
@@ -220,20 +247,14 @@ def test_a_mode_without_emac_is_judged_by_its_cramer_rao_bound():
 
     def modes(sigma_dutch_roll):
         return [
-            {
-                "name": "Dutch roll",
-                "eigenvalue": [-0.66, 2.19],
-                "emac": None,
-                "frequency_rad_s": 2.29,
-                "frequency_std_rad_s": sigma_dutch_roll,
-            },
-            {
-                "name": "roll",
-                "eigenvalue": [-12.1, 0.0],
-                "emac": None,
-                "frequency_rad_s": 12.1,
-                "frequency_std_rad_s": 0.4,
-            },
+            mode(
+                "Dutch roll",
+                (-0.66, 2.19),
+                None,
+                frequency_rad_s=2.29,
+                frequency_std_rad_s=sigma_dutch_roll,
+            ),
+            mode("roll", (-12.1, 0.0), None, frequency_rad_s=12.1, frequency_std_rad_s=0.4),
         ]
 
     assert suggest(candidate("a", modes=modes(0.05)), None, None, None).checks["quality"]
@@ -242,3 +263,24 @@ def test_a_mode_without_emac_is_judged_by_its_cramer_rao_bound():
     assert "weak: Dutch roll" in weak.steps[1]
     unknown = suggest(candidate("a", modes=modes(None)), None, None, None)
     assert not unknown.checks["quality"]
+
+
+def test_a_model_stored_before_the_typed_document_is_read_back(tmp_path):
+    """A nominal kept across an update: its document has the earlier layout (Markov
+    parameters, singular values and the spectra at the top, the OKID/ERA fit under the
+    refinement). It reads back with those in the OKID part, nothing else changed; the
+    whole-aircraft method's p = 0 of that layout is dropped, not made an OKID part."""
+    okid = OkidDocument(markov=7, markov_auto=None, singular_values=[3.0, 1.0, 0.01], tic_avg=0.1)
+    new = candidate("a").result.model_copy(update={"okid": okid})  # unrefined: one fit
+    earlier = new.model_dump(mode="json")
+    okid = earlier.pop("okid")
+    earlier |= {
+        "markov": okid["markov"],
+        "markov_auto": None,
+        "singular_values": okid["singular_values"],
+        "frequency": None,
+        "refinement": None,
+    }
+    assert ResultDocument.model_validate(earlier) == new
+    aircraft = earlier | {"method": "aircraft", "markov": 0, "singular_values": []}
+    assert ResultDocument.model_validate(aircraft).okid is None

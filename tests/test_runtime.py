@@ -151,7 +151,7 @@ async def test_an_unusable_window_gives_a_failure_result_and_the_agent_goes_on(a
     assert len(failures) == 1
     assert "1.00 s gap" in failures[0].reason
     assert agent.counters["identification_failures"] == 1
-    assert agent.identification.results[-1]["failure"] == failures[0].reason
+    assert agent.identification.results[-1].failure == failures[0].reason
 
 
 async def test_each_stage_is_expected_to_last_what_the_last_did_scaled_by_the_record(tmp_path):
@@ -218,7 +218,7 @@ def a2_flight(tmp_path, refine: bool = False):
     recorded rows."""
     import csv
 
-    from agent.config import Identification
+    from agent.config import IdentificationConfig
     from agent.excitation.scheduler import Window
 
     root = Path(__file__).resolve().parents[1]
@@ -226,7 +226,7 @@ def a2_flight(tmp_path, refine: bool = False):
         table = list(csv.DictReader(handle))
     config = Config(
         recorder=Recorder(log_dir=str(tmp_path / "logs"), rate_hz=50.0),
-        identification=Identification(refine=refine),
+        identification=IdentificationConfig(refine=refine),
     )
     agent = Agent(config, base=tmp_path, worker=thread_worker)
     channels = agent.recorder.channels
@@ -255,7 +255,7 @@ async def test_a_new_nominal_that_predicts_worse_is_rolled_back(tmp_path):
         await agent.identification.identify(window, rows)
         second = last_id()
         wrong = agent.models.candidates[second]
-        wrong.result["B"] = (-np.asarray(wrong.result["B"])).tolist()
+        wrong.result = wrong.result.model_copy(update={"B": (-np.asarray(wrong.result.B)).tolist()})
         await agent.commands.handle(messages.Decision(model_id=second, accept=True), 2)
         assert agent.models.nominal_id("lateral") == second
         await agent.identification.identify(window, rows)
@@ -342,11 +342,9 @@ async def test_the_frequency_response_of_a_pair_is_sent_when_asked(tmp_path):
     assert np.all(np.diff(report.freq_hz) > 0)
     assert all(g is not None and 0 <= g <= 1 for g in report.coherence)
     # The measured response is the model's own data's: the identified model lies on it.
-    result = agent.identification.results[-1]["result"]
-    model = model_response(
-        result["A"], result["B"], result["C"], result["D"], result["dt"], report.freq_hz
-    )
-    i, j = result["inputs"].index("aileron"), result["outputs"].index("p")
+    result = agent.identification.results[-1].result
+    model = model_response(result.A, result.B, result.C, result.D, result.dt, report.freq_hz)
+    i, j = result.inputs.index("aileron"), result.outputs.index("p")
     model_db = 20 * np.log10(np.abs(model[:, j, i]))
     assert np.median(np.abs(model_db - np.array(report.mag_db))) < 1.0
     # What goes on air: the codec's own MessagePack, within the seven frames it was sized for.

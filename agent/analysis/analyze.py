@@ -1,7 +1,7 @@
 """`sysid analyze`: the onboard identification re-run on the logs with changed settings
-(thesis 6.2.3) — per excitation or as one batch, a sweep of p or the order with a table of
-TIC_avg and mode consistency (thesis table 6.6) and a recommended setting, and cross-validation
-across excitations (each model's TIC on every other excitation: the thesis's TIC_jN).
+(thesis 6.2.3) — per excitation or as one batch, or once per value of a sweep of p or the
+order. This module makes and runs the cases; `findings` tabulates what they found (the sweep's
+table and recommendation, the cross-validation) and reports it.
 
 Each identification is the agent's own worker job (`agent.ident.job.run`), so the numbers are
 the ones the aircraft would have produced. Jobs run in parallel processes (`jobs`), or on a
@@ -26,10 +26,6 @@ from agent.ident.errors import DataError
 from agent.ident.job import Outcome
 from agent.logs import LogError, read_log
 
-# A setting is "within" the best if its mean TIC_avg is at most this much worse (relative).
-TIC_MARGIN = 0.10
-# Named modes agree across excitations if their eigenvalues are within this (relative).
-CONSISTENT = 0.15
 SWEEPABLE = ("markov", "order")
 
 
@@ -132,6 +128,17 @@ def _plan(path: Path) -> str | None:
     return _header(path, r"excitation plan (\S+),")
 
 
+def own_log(path: Path) -> bool:
+    """Whether `path` is one of the agent's own logs (its first line says so): its inputs are
+    then the surface potentiometers' samples of moving surfaces, which the settings of
+    `held_inputs = "auto"` treat as not held (`Settings.from_config`'s `sampled_inputs`)."""
+    try:
+        with path.open(encoding="utf-8", errors="replace") as handle:
+            return handle.readline(MAX_LINE).startswith("# suas-sysid")
+    except OSError as exc:
+        raise AnalyzeError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
+
+
 def build_cases(
     request: Request,
     roles: Sequence[str | None],
@@ -141,17 +148,15 @@ def build_cases(
     sweep: tuple[str, list[int]] | None,
     input_roles: Sequence[str | None] = (),
 ) -> tuple[list[Case], float]:
-    """Every identification the analysis needs, and the records' sample time. `roles` and
-    `input_roles`: the outputs' and inputs' roles (None where a channel has none)."""
-    data, contexts, rates, ours = [], [], [], []
+    """Every identification the analysis needs, and the records' sample time. `settings`:
+    made with `sampled_inputs` when any of the logs is the agent's own (`own_log`), as onboard.
+    `roles` and `input_roles`: the outputs' and inputs' roles (None where a channel has none)."""
+    data, contexts, rates = [], [], []
     for path in request.paths:
-        exp, dt, own = _experiment(Path(path), request)
+        exp, dt = _experiment(Path(path), request)
         data.append((exp.u, exp.y))
         contexts.append((exp.operating_point, exp.navigation))
         rates.append(dt)
-        ours.append(own)
-    if any(ours):  # as onboard: the surface pots sample moving surfaces, not held commands
-        settings = replace(settings, held_inputs=False)
     dt = rates[0]
     if any(abs(r - dt) > 0.01 * dt for r in rates):
         raise AnalyzeError(f"the logs are sampled at different rates ({sorted(set(rates))} s)")
@@ -168,14 +173,14 @@ def build_cases(
         case_settings = replace(settings, **dict(key))
         for label, group, context in groups:
             job = jobs.Job(
-                label,
-                "analysis",
-                dt,
-                tuple(request.inputs),
-                tuple(request.outputs),
-                tuple(r or "" for r in roles),
-                group,
-                case_settings,
+                model_id=label,
+                axes="analysis",
+                record_dt=dt,
+                inputs=tuple(request.inputs),
+                outputs=tuple(request.outputs),
+                roles=tuple(r or "" for r in roles),
+                experiments=group,
+                settings=case_settings,
                 contexts=context,
                 input_roles=tuple(r or "" for r in input_roles),
             )
@@ -183,21 +188,19 @@ def build_cases(
     return cases, dt
 
 
-def _experiment(path: Path, request: Request) -> tuple[Experiment, float, bool]:
-    """(experiment, dt, whether it is the agent's log) of one log. The agent's own logs go
+def _experiment(path: Path, request: Request) -> tuple[Experiment, float]:
+    """(experiment, dt) of one log. The agent's own logs go
     through the agent's window code (edge rows without data cut, gaps up to 0.1 s bridged,
     trim removed), as onboard; any other record through `sysid identify`'s strict reader.
     Either way the experiment carries its operating point and, where the log has the INS's
     heading and velocities (`Request.navigation`), its navigation, as onboard."""
-    with path.open(encoding="utf-8", errors="replace") as handle:
-        ours = handle.readline(MAX_LINE).startswith("# suas-sysid")
-    if not ours:
+    if not own_log(path):
         single = replace(request, paths=(path,))
         try:
             experiments, dt, _, _ = load_experiments(single)
         except RecordError as exc:
             raise AnalyzeError(str(exc)) from exc
-        return experiments[0], dt, False
+        return experiments[0], dt
     try:
         # Only the columns used are kept: memory goes with them, not with the log.
         used = ("time", *request.inputs, *request.outputs, *request.navigation)
@@ -244,7 +247,7 @@ def _experiment(path: Path, request: Request) -> tuple[Experiment, float, bool]:
         y = y + operating_point
         operating_point = np.zeros_like(operating_point)
     nav = jobs.window_navigation(values, request.inputs, request.outputs, request.navigation)
-    return Experiment(u, y, operating_point=operating_point, navigation=nav), dt, True
+    return Experiment(u, y, operating_point=operating_point, navigation=nav), dt
 
 
 def _check_time(path: Path, time: np.ndarray) -> None:
@@ -302,157 +305,3 @@ def run_cases(
             pool.shutdown(wait=True, cancel_futures=True)
             raise
         return [f.result() for f in futures]
-
-
-def named_modes(outcome: Outcome) -> dict[str, complex]:
-    if not outcome.ok:
-        return {}
-    return {m["name"]: complex(*m["eigenvalue"]) for m in outcome.result["modes"] if m["name"]}
-
-
-def sweep_table(cases: Sequence[Case], outcomes: Sequence[Outcome]) -> list[dict]:
-    """One row per swept value: mean TIC_avg over the excitations, the modes named in every
-    excitation, and each mode's worst relative deviation from its median across them. With
-    one excitation the spread is instead each mode's deviation from its median over the whole
-    sweep: how settled the mode is as the setting changes."""
-    rows: dict[tuple, list[dict]] = {}
-    for case, outcome in zip(cases, outcomes, strict=True):
-        rows.setdefault(case.key, []).append(outcome)
-    single = all(len(g) == 1 for g in rows.values())
-    table = []
-    for key, group in rows.items():
-        ok = [o for o in group if o.ok]
-        tics = [o.result["tic_avg"] for o in ok]
-        modes = [named_modes(o) for o in ok]
-        common = sorted(set.intersection(*(set(m) for m in modes))) if modes else []
-        spread = {}
-        for name in common:
-            values = np.array([m[name] for m in modes])
-            centre = complex(np.median(values.real), np.median(np.abs(values.imag)))
-            values = values.real + 1j * np.abs(values.imag)
-            spread[name] = float(np.max(np.abs(values - centre)) / max(abs(centre), 1e-9))
-        table.append(
-            {
-                "setting": dict(key),
-                "identified": len(ok),
-                "failed": [o.reason for o in group if not o.ok],
-                "tic_avg": float(np.mean(tics)) if tics else None,
-                "orders": sorted({o.result["order"] for o in ok}),
-                "markov": sorted({o.result["markov"] for o in ok}),
-                "modes": {n: [[m[n].real, m[n].imag] for m in modes] for n in common},
-                "spread": spread,
-            }
-        )
-    if single and len(table) > 1:
-        _spread_over_sweep(table)
-    return table
-
-
-def _spread_over_sweep(table: list[dict]) -> None:
-    names = set.intersection(*(set(r["modes"]) for r in table if r["modes"])) if table else set()
-    for name in names:
-        values = np.array([complex(*row["modes"][name][0]) for row in table if row["modes"]])
-        values = values.real + 1j * np.abs(values.imag)
-        centre = complex(np.median(values.real), np.median(values.imag))
-        for row in table:
-            if name in row["modes"]:
-                lam = complex(*row["modes"][name][0])
-                lam = complex(lam.real, abs(lam.imag))
-                row["spread"][name] = abs(lam - centre) / max(abs(centre), 1e-9)
-
-
-def recommend(table: Sequence[dict], excitations: int) -> dict | None:
-    """The first setting (smallest value) whose TIC_avg is within TIC_MARGIN of the best,
-    identified every excitation, and names the most modes consistently (spread < CONSISTENT);
-    None when nothing identified."""
-    usable = [r for r in table if r["tic_avg"] is not None and r["identified"] == excitations]
-    if not usable:
-        return None
-    best = min(r["tic_avg"] for r in usable)
-
-    def consistent(row) -> int:
-        return sum(s < CONSISTENT for s in row["spread"].values())
-
-    near = [r for r in usable if r["tic_avg"] <= best * (1 + TIC_MARGIN)]
-    most = max(consistent(r) for r in near)
-    return next(r for r in near if consistent(r) == most)
-
-
-def cross_validation(
-    cases: Sequence[Case], outcomes: Sequence[Outcome]
-) -> list[list[float | None]]:
-    """TIC_avg of the model of excitation i on excitation j's data (rows i, columns j); the
-    diagonal is each model on its own data."""
-    matrix: list[list[float | None]] = []
-    for case, outcome in zip(cases, outcomes, strict=True):
-        row: list[float | None] = []
-        for other in cases:
-            if not outcome.ok:
-                row.append(None)
-                continue
-            row.append(
-                jobs.cross_tic(
-                    outcome.result,
-                    outcome.preprocessing,
-                    case.job.record_dt,
-                    other.job.experiments,
-                )
-            )
-        matrix.append(row)
-    return matrix
-
-
-def case_summary(outcome: Outcome) -> dict:
-    """What `sysid analyze` reports of one case's outcome."""
-    if not outcome.ok:
-        return {"ok": False, "reason": outcome.reason}
-    r = outcome.result
-    modes = [{"name": m["name"], "eigenvalue": m["eigenvalue"]} for m in r["modes"]]
-    refinement = r.get("refinement")
-    return {
-        "ok": True,
-        "markov": r["markov"],
-        "order": r["order"],
-        "tic_avg": r["tic_avg"],
-        "modes": modes,
-        "converged": refinement["converged"] if refinement else None,
-        "warnings": list(r.get("warnings", ())),
-    }
-
-
-def analysis_text(report: dict, paths) -> str:
-    """`sysid analyze`'s report as text: each case, the sweep table, the cross-validation."""
-    lines = [f"{len(paths)} log(s): " + ", ".join(Path(p).name for p in paths)]
-    for case in report["cases"]:
-        setting = " ".join(f"{k}={v}" for k, v in case["setting"].items())
-        head = f"excitation {case['excitation']}" + (f" ({setting})" if setting else "")
-        if not case["ok"]:
-            lines.append(f"{head}: failed: {case['reason']}")
-            continue
-        modes = ", ".join(
-            f"{m['name']} {complex(*m['eigenvalue']):.3f}" for m in case["modes"] if m["name"]
-        )
-        lines.append(
-            f"{head}: p {case['markov']}, n {case['order']}, "
-            f"TIC_avg {case['tic_avg']:.3f}; {modes or 'no named mode'}"
-        )
-    if "sweep" in report:
-        lines.append("")
-        lines.append(
-            f"{'setting':<14}{'TIC_avg':>9}  {'ok':>3}  modes (worst spread across excitations)"
-        )
-        for row in report["sweep"]:
-            setting = " ".join(f"{k}={v}" for k, v in row["setting"].items())
-            tic = "–" if row["tic_avg"] is None else f"{row['tic_avg']:.4f}"
-            spread = ", ".join(f"{n} {100 * s:.0f}%" for n, s in row["spread"].items())
-            lines.append(f"{setting:<14}{tic:>9}  {row['identified']:>3}  {spread or '–'}")
-        best = report["recommended"]
-        chosen = " ".join(f"{k}={v}" for k, v in best["setting"].items()) if best else None
-        lines.append(f"recommended: {chosen or 'none (nothing identified every time)'}")
-    if "cross_tic" in report:
-        lines.append("")
-        lines.append("TIC_avg of model i (rows) on excitation j (columns):")
-        for k, row in enumerate(report["cross_tic"], start=1):
-            cells = " ".join("    –" if v is None else f"{v:5.3f}" for v in row)
-            lines.append(f"  {k:>2}: {cells}")
-    return "\n".join(lines)

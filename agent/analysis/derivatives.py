@@ -23,6 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from agent.ident.document import ResultDocument
+
 # A derivative whose standard error exceeds this share of its value is marked as poorly
 # determined by the manoeuvre.
 POOR = 0.5
@@ -41,19 +43,19 @@ class Derivatives:
             return np.abs(self.std / np.where(self.value != 0, self.value, np.nan))
 
 
-def from_result(result: dict) -> Derivatives | None:
-    """The table of an identification (`sysid identify --json`'s object), or None when the
-    model is not in output coordinates."""
-    if result.get("Ac") is None or result.get("Bc") is None:
+def from_result(result: ResultDocument) -> Derivatives | None:
+    """The table of an identification, or None when the model is not in output
+    coordinates."""
+    if result.Ac is None or result.Bc is None:
         return None
-    refinement = result.get("refinement") or {}
+    refinement = result.refinement
     return from_matrices(
-        result["outputs"],
-        result["inputs"],
-        result["Ac"],
-        result["Bc"],
-        refinement.get("Ac_std"),
-        refinement.get("Bc_std"),
+        result.outputs,
+        result.inputs,
+        result.Ac,
+        result.Bc,
+        None if refinement is None else refinement.Ac_std,
+        None if refinement is None else refinement.Bc_std,
     )
 
 

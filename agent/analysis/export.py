@@ -36,11 +36,14 @@ import json
 import re
 import zipfile
 from pathlib import Path
-from typing import BinaryIO
+from typing import BinaryIO, Protocol
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict
 
 from agent.analysis import derivatives
+from agent.ident.document import ResultDocument
+from agent.link import messages
 
 TWO_PI = 2 * np.pi
 # The longest line of a result or ground log, or model store file: one identified model
@@ -73,9 +76,11 @@ def load_models(path: str | Path) -> Models:
     except OSError as exc:
         raise ExportError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
     try:
-        return Models([_from_store(path, json.loads(text))])
+        stored = StoreFile.model_validate(json.loads(text))
+        model = _from_result(stored.model_id, stored.axes, stored.result, stored.the_trim())
     except (ValueError, KeyError, TypeError) as exc:
         raise ExportError(f"{path}: not a model store file ({exc})") from exc
+    return Models([_with_data(path, stored, model)])
 
 
 def _bounded(path: Path, data: bytes, what: str) -> str:
@@ -105,6 +110,49 @@ def _lines(path: Path, handle):
         yield number, _bounded(path, data, f"line {number}")
 
 
+class Trim(BaseModel):
+    """The trim removed before identification, by channel (the agent's `window_and_trim`)."""
+
+    model_config = ConfigDict(frozen=True)
+    inputs: dict[str, float]
+    outputs: dict[str, float]
+
+
+class ResultLine(BaseModel):
+    """A line of the agent's result log: one identification and what it was made of."""
+
+    model_config = ConfigDict(frozen=True, extra="ignore")  # window, suggestion: not exported
+    model_id: str
+    axes: str
+    result: ResultDocument
+    trim: Trim | None = None
+
+
+class _Earlier(BaseModel):
+    """Where a model store file written before kept its trim."""
+
+    model_config = ConfigDict(frozen=True, extra="ignore")
+    trim: Trim | None = None
+
+
+class StoreFile(BaseModel):
+    """A model store file (agent.models.ModelStore): its data set is in the .npz beside it,
+    `count` experiments."""
+
+    model_config = ConfigDict(frozen=True, extra="ignore")
+    model_id: str
+    axes: str
+    result: ResultDocument
+    count: int | None = None
+    trim: Trim | None = None
+    extra: _Earlier | None = None
+
+    def the_trim(self) -> Trim | None:
+        if self.trim is not None or self.extra is None:
+            return self.trim
+        return self.extra.trim
+
+
 def _from_lines(path: Path, lines) -> Models:
     """The models of a result log or a ground log, one JSON object a line."""
     models, skipped = Models(), []
@@ -117,16 +165,11 @@ def _from_lines(path: Path, lines) -> Models:
             skipped.append(number)  # reported, never silently dropped
             continue
         try:
-            if "result" in record and "model_id" in record:  # the agent's result log
-                models.append(
-                    _from_result(
-                        record["model_id"], record["axes"], record["result"], record.get("trim")
-                    )
-                )
-            elif record.get("dir") == "rx" and record["message"].get("kind") == "result":
-                models.append(_from_message(record["message"]))
+            model = _from_record(record)
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise ExportError(f"{path}:{number}: not a result record ({exc})") from exc
+        if model is not None:
+            models.append(model)
     if not models:
         unreadable = f" ({len(skipped)} line(s) not JSON)" if skipped else ""
         raise ExportError(f"{path}: no identified model in this file{unreadable}")
@@ -134,17 +177,46 @@ def _from_lines(path: Path, lines) -> Models:
     return models
 
 
+def _from_record(record: object) -> dict | None:
+    """The model of a result log's line or of a result heard in a ground log; None for any
+    other line."""
+    if not isinstance(record, dict):
+        return None
+    if "result" in record and "model_id" in record:  # the agent's result log
+        line = ResultLine.model_validate(record)
+        return _from_result(line.model_id, line.axes, line.result, line.trim)
+    message = record.get("message")
+    if record.get("dir") == "rx" and isinstance(message, dict) and message.get("kind") == "result":
+        heard = messages.from_dict(message)
+        if isinstance(heard, messages.Result):
+            return _from_message(heard)
+    return None
+
+
 def _matrix(value) -> np.ndarray:
     return np.atleast_2d(np.asarray(value if value is not None else [], dtype=float))
 
 
-def _modes(modes: list[dict]) -> dict:
-    lam = np.array([complex(*m["eigenvalue"]) for m in modes])
+class _Matrices(Protocol):
+    A: list[list[float]]
+    B: list[list[float]]
+    C: list[list[float]]
+    D: list[list[float]]
+
+
+def _state_space(model: _Matrices | None, suffix: str = "") -> dict:
+    """A, B, C, D (each named with `suffix`) of a model; empty matrices without one."""
+    values = (None,) * 4 if model is None else (model.A, model.B, model.C, model.D)
+    return {f"{k}{suffix}": _matrix(v) for k, v in zip("ABCD", values, strict=True)}
+
+
+def _modes(names: list[str | None], eigenvalues: list[complex], damping: list) -> dict:
+    lam = np.array(eigenvalues, dtype=complex)
     return {
         "eigenvalues": lam.reshape(-1, 1),
-        "mode_names": [m.get("name") or "" for m in modes],
+        "mode_names": [name or "" for name in names],
         "frequency_hz": np.abs(lam) / TWO_PI,
-        "damping": np.array([_or_nan(m.get("damping")) for m in modes]),
+        "damping": np.array([_or_nan(z) for z in damping]),
     }
 
 
@@ -152,73 +224,71 @@ def _or_nan(value: float | None) -> float:
     return np.nan if value is None else float(value)
 
 
-def _trim(trim: dict | None, inputs, outputs) -> dict:
-    if not trim:
+def _trim(trim: Trim | None, inputs, outputs) -> dict:
+    if trim is None:
         return {"u0": np.zeros((0,)), "y0": np.zeros((0,))}
     return {
-        "u0": np.array([trim["inputs"][n] for n in inputs]),
-        "y0": np.array([trim["outputs"][n] for n in outputs]),
+        "u0": np.array([trim.inputs[n] for n in inputs]),
+        "y0": np.array([trim.outputs[n] for n in outputs]),
     }
 
 
-def _from_result(model_id: str, axes: str, r: dict, trim: dict | None) -> dict:
-    continuous = r.get("continuous") or {}
-    refinement = r.get("refinement") or {}
+def _from_result(model_id: str, axes: str, r: ResultDocument, trim: Trim | None) -> dict:
+    refinement = r.refinement
     return {
         "id": model_id,
         "axes": axes,
-        "dt": float(r["dt"]),
-        "inputs": list(r["inputs"]),
-        "outputs": list(r["outputs"]),
-        **{k: _matrix(r[k]) for k in ("A", "B", "C", "D")},
-        **{f"{k}c": _matrix(continuous.get(k)) for k in ("A", "B", "C", "D")},
-        "coordinates": r.get("coordinates", "outputs"),
-        **{f"{k}c_std": _matrix(refinement.get(f"{k}c_std")) for k in ("A", "B")},
-        **_trim(trim, r["inputs"], r["outputs"]),
-        **_modes(r["modes"]),
-        "tic": _tic(r["tic"], r["outputs"]),
-        "tic_avg": float(r["tic_avg"]),
+        "dt": float(r.dt),
+        "inputs": list(r.inputs),
+        "outputs": list(r.outputs),
+        **_state_space(r),
+        **_state_space(r.continuous, "c"),
+        "coordinates": r.coordinates,
+        "Ac_std": _matrix(None if refinement is None else refinement.Ac_std),
+        "Bc_std": _matrix(None if refinement is None else refinement.Bc_std),
+        **_trim(trim, r.inputs, r.outputs),
+        **_modes(
+            [m.name for m in r.modes],
+            [complex(*m.eigenvalue) for m in r.modes],
+            [m.damping for m in r.modes],
+        ),
+        "tic": np.asarray([r.tic[o] for o in r.outputs], dtype=float),  # kept by name
+        "tic_avg": float(r.tic_avg),
     }
 
 
-def _tic(tic, outputs) -> np.ndarray:
-    """Per output, in output order (the result log keeps them by name)."""
-    values = [tic[o] for o in outputs] if isinstance(tic, dict) else tic
-    return np.asarray(values, dtype=float)
-
-
-def _from_message(m: dict) -> dict:
-    modes = [
-        {"name": x["name"], "eigenvalue": [x["real"], x["imag"]], "damping": x["damping"]}
-        for x in m["modes"]
-    ]
+def _from_message(m: messages.Result) -> dict:
     return {
-        "id": m["model_id"],
-        "axes": m["axes"],
-        "dt": float(m["dt"]),
-        "inputs": list(m["inputs"]),
-        "outputs": list(m["outputs"]),
-        **{k: _matrix(m[k]) for k in ("A", "B", "C", "D")},
+        "id": m.model_id,
+        "axes": m.axes,
+        "dt": float(m.dt),
+        "inputs": list(m.inputs),
+        "outputs": list(m.outputs),
+        **_state_space(m),
         **{f"{k}c": np.zeros((0, 0)) for k in ("A", "B", "C", "D")},
         "coordinates": "",
         **{f"{k}c_std": np.zeros((0, 0)) for k in ("A", "B")},
-        **_trim(None, m["inputs"], m["outputs"]),
-        **_modes(modes),
-        "tic": np.asarray(m["tic"], dtype=float),
-        "tic_avg": float(m["tic_avg"]),
+        **_trim(None, m.inputs, m.outputs),
+        **_modes(
+            [x.name for x in m.modes],
+            [complex(x.real, x.imag) for x in m.modes],
+            [x.damping for x in m.modes],
+        ),
+        "tic": np.asarray(m.tic, dtype=float),
+        "tic_avg": float(m.tic_avg),
     }
 
 
-def _from_store(path: Path, meta: dict) -> dict:
-    model = _from_result(
-        meta["model_id"], meta["axes"], meta["result"], (meta.get("extra") or {}).get("trim")
-    )
+def _with_data(path: Path, stored: StoreFile, model: dict) -> dict:
+    """The model with the store's data set (the .npz beside it), when there is one."""
     data = path.with_suffix(".npz")
     if data.exists():
         try:
+            if stored.count is None:
+                raise KeyError("count")
             with np.load(data, allow_pickle=False) as arrays:
-                model["u"] = [arrays[f"u{k}"] for k in range(meta["count"])]
-                model["y"] = [arrays[f"y{k}"] for k in range(meta["count"])]
+                model["u"] = [arrays[f"u{k}"] for k in range(stored.count)]
+                model["y"] = [arrays[f"y{k}"] for k in range(stored.count)]
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
             raise ExportError(
                 f"{data}: the model's data set is damaged ({type(exc).__name__}: {exc})"

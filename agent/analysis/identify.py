@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from agent.analysis.records import Record, RecordError, read_record, select, trim_values
-from agent.config import Identification as IdentConfig
+from agent.config import IdentificationConfig as IdentConfig
 from agent.ident import Experiment, Identification, Settings, identify
 
 # Two records are one batch only if their sample times agree this closely.

@@ -37,10 +37,11 @@ from agent.analysis import derivatives, splane
 from agent.analysis.analyze import Case
 from agent.excitation.signals import relative_peak_factor
 from agent.ident import Experiment, frf
-from agent.ident.convert import StateSpace
+from agent.ident.document import ResultDocument
 from agent.ident.fit import fit
 from agent.ident.frf import MeasuredResponse
 from agent.ident.job import Outcome, prepared
+from agent.models import StoredModel
 from agent.outputs import Outputs
 
 DPI = 90
@@ -48,18 +49,13 @@ COLOURS = plt.rcParams["axes.prop_cycle"].by_key()["color"]
 
 
 def _prepared(case: Case, outcome: Outcome) -> tuple[list[Experiment], float]:
-    batch, prep = prepared(outcome.preprocessing, case.job.record_dt, case.job.experiments)
+    batch, prep = prepared(outcome.result.preprocessing, case.job.record_dt, case.job.experiments)
     return batch, prep.dt
-
-
-def _model(outcome: Outcome) -> StateSpace:
-    r = outcome.result
-    return StateSpace(*(np.asarray(r[k], dtype=float) for k in ("A", "B", "C", "D")))
 
 
 def time_histories(case: Case, outcome: Outcome, path: BinaryIO) -> None:
     batch, dt = _prepared(case, outcome)
-    result = fit(_model(outcome), batch)
+    result = fit(outcome.result.model(), batch)
     outputs = case.job.outputs
     fig, axes = plt.subplots(len(outputs), 1, figsize=(9, 1.9 * len(outputs)), sharex=True)
     axes = np.atleast_1d(axes)
@@ -94,7 +90,7 @@ def time_histories(case: Case, outcome: Outcome, path: BinaryIO) -> None:
     plt.close(fig)
 
 
-def s_plane(cases: Sequence[Case], outcomes: Sequence[Outcome], nominal: dict | None) -> str:
+def s_plane(cases: Sequence[Case], outcomes: Sequence[Outcome], nominal: StoredModel | None) -> str:
     """Every excitation's modes, one colour each, and the nominal's: an inline SVG."""
     marks = []
     for k, (case, outcome) in enumerate(zip(cases, outcomes, strict=True)):
@@ -103,16 +99,16 @@ def s_plane(cases: Sequence[Case], outcomes: Sequence[Outcome], nominal: dict | 
             marks += [
                 replace(m, colour=colour)
                 for m in splane.marks_of(
-                    outcome.result["modes"], "this", f"excitation {case.label}", _anchor(case)
+                    outcome.result.modes, "this", f"excitation {case.label}", _anchor(case)
                 )
             ]
     if nominal is not None:
-        marks += splane.marks_of(nominal["modes"], "nominal", f"nominal {nominal['model_id']}")
+        marks += splane.marks_of(nominal.modes, "nominal", f"nominal {nominal.model_id}")
     return splane.svg(marks, "eigenvalues of every excitation")
 
 
 def excitation_s_plane(
-    k: int, cases: Sequence[Case], outcomes: Sequence[Outcome], nominal: dict | None
+    k: int, cases: Sequence[Case], outcomes: Sequence[Outcome], nominal: StoredModel | None
 ) -> str:
     """Excitation k's modes with their ellipses, the nominal's, and the earlier excitations'
     faded."""
@@ -121,14 +117,27 @@ def excitation_s_plane(
     for earlier, done in zip(cases[:k], outcomes[:k], strict=True):
         if done.ok:
             marks += splane.marks_of(
-                done.result["modes"], "earlier", f"excitation {earlier.label}", _anchor(earlier)
+                done.result.modes, "earlier", f"excitation {earlier.label}", _anchor(earlier)
             )
     if nominal is not None:
-        marks += splane.marks_of(nominal["modes"], "nominal", f"nominal {nominal['model_id']}")
+        marks += splane.marks_of(nominal.modes, "nominal", f"nominal {nominal.model_id}")
     marks += splane.marks_of(
-        outcome.result["modes"], "this", f"excitation {case.label}", _anchor(case)
+        outcome.result.modes, "this", f"excitation {case.label}", _anchor(case)
     )
     return splane.svg(marks, f"excitation {case.label}: its modes, the nominal's, earlier ones")
+
+
+def _summary(r: ResultDocument) -> str:
+    """The model in one line: what its method chose (OKID's p, or the aircraft method's
+    structure), the order, the fit, stability."""
+    if r.okid is not None:
+        chosen = f"p = {r.okid.markov}, "
+    elif r.aircraft is not None:
+        chosen = f"whole-aircraft method ({r.aircraft.model}), "
+    else:
+        chosen = ""
+    stable = "stable" if r.stable else "not stable"
+    return f"{chosen}n = {r.order}, TIC_avg = {r.tic_avg:.3f}, {stable}"
 
 
 def _anchor(case: Case) -> str:
@@ -136,12 +145,16 @@ def _anchor(case: Case) -> str:
 
 
 def hankel(cases: Sequence[Case], outcomes: Sequence[Outcome], path: BinaryIO) -> None:
+    """The Hankel singular values of every OKID/ERA model, each with its chosen order (the
+    whole-aircraft method has none: it realises no Hankel matrix)."""
     fig, ax = plt.subplots(figsize=(7, 3.5))
+    drawn = False
     for k, (case, outcome) in enumerate(zip(cases, outcomes, strict=True)):
-        if not outcome.ok:
+        if not outcome.ok or outcome.result.okid is None:
             continue
-        sv = np.asarray(outcome.result["singular_values"], dtype=float)
-        n = outcome.result["order"]
+        drawn = True
+        sv = np.asarray(outcome.result.okid.singular_values, dtype=float)
+        n = outcome.result.order
         colour = COLOURS[k % len(COLOURS)]
         ax.semilogy(
             np.arange(1, sv.size + 1),
@@ -154,7 +167,10 @@ def hankel(cases: Sequence[Case], outcomes: Sequence[Outcome], path: BinaryIO) -
     ax.set_xlabel("index")
     ax.set_ylabel("Hankel singular value")
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8)
+    if drawn:
+        ax.legend(fontsize=8)
+    else:
+        ax.text(0.5, 0.5, "no OKID/ERA model", transform=ax.transAxes, ha="center")
     fig.tight_layout()
     fig.savefig(path, dpi=DPI, format="png")
     plt.close(fig)
@@ -177,7 +193,7 @@ def frequency_responses(
     pairs whose coherence is low at most of their input's frequencies."""
     batch, dt = _prepared(case, outcome)
     measured = frf.measured(batch, dt)
-    model = _model(outcome)
+    model = outcome.result.model()
     inputs, outputs = case.job.inputs, case.job.outputs
     size = (2.4 * len(outputs), 2.9 * len(inputs))
     fig, axes = plt.subplots(
@@ -314,20 +330,20 @@ def mode_table(outcome: Outcome, anchor: str = "mode") -> str:
     links to it)."""
     head = ("mode", "eigenvalue", "f (Hz)", "ζ", "τ (s)", "MSV", "MCI", "MOI", "EMAC", "MPC", "CMI")
     rows = []
-    for k, m in enumerate(outcome.result["modes"]):
-        lam = complex(*m["eigenvalue"])
+    for k, m in enumerate(outcome.result.modes):
+        lam = complex(*m.eigenvalue)
         cells = (
-            m["name"] or "–",
+            m.name or "–",
             f"{lam.real:+.3f}{lam.imag:+.3f}j",
-            _fmt(m["frequency_rad_s"] / (2 * np.pi), "{:.3f}"),
-            _fmt(m["damping"]),
-            _fmt(m["time_constant_s"]),
-            _fmt(m["msv"], "{:.3g}"),
-            _fmt(m["mci"], "{:.3g}"),
-            _fmt(m["moi"], "{:.3g}"),
-            _fmt(m["emac"], "{:.0f}"),
-            _fmt(m["mpc"], "{:.0f}"),
-            _fmt(m["cmi"], "{:.0f}"),
+            _fmt(m.frequency_hz, "{:.3f}"),
+            _fmt(m.damping),
+            _fmt(m.time_constant_s),
+            _fmt(m.msv, "{:.3g}"),
+            _fmt(m.mci, "{:.3g}"),
+            _fmt(m.moi, "{:.3g}"),
+            _fmt(m.emac, "{:.0f}"),
+            _fmt(m.mpc, "{:.0f}"),
+            _fmt(m.cmi, "{:.0f}"),
         )
         cells_html = "".join(f"<td>{html.escape(c)}</td>" for c in cells)
         rows.append(f'<tr id="{anchor}-{k}">{cells_html}</tr>')
@@ -362,7 +378,7 @@ def write(
     logs: Sequence[Path],
     cases: Sequence[Case],
     outcomes: Sequence[Outcome],
-    nominal: dict | None = None,
+    nominal: StoredModel | None = None,
     outputs: Outputs | None = None,
 ) -> Path:
     """The report in `directory` (index.html and its PNGs); returns the page's path. Every
@@ -391,11 +407,7 @@ def write(
                 f'<p class="fail">identification failed: {html.escape(outcome.reason)}</p>'
             )
             continue
-        r = outcome.result
-        parts.append(
-            f"<p>p = {r['markov']}, n = {r['order']}, TIC_avg = {r['tic_avg']:.3f}, "
-            f"{'stable' if r['stable'] else 'not stable'}</p>"
-        )
+        parts.append(f"<p>{html.escape(_summary(outcome.result))}</p>")
         parts.append(mode_table(outcome, _anchor(case)))
         parts.append(excitation_s_plane(k, cases, outcomes, nominal))
         parts.append(_derivatives(case, outcome, directory, tag, outputs))

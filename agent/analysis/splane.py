@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agent import splane
+from agent.ident.document import ModeDocument
 
 COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2")
 SIGMAS = 2.0
@@ -35,45 +36,43 @@ class Mark:
     colour: str = COLOURS[0]
 
 
-def marks_of(modes: Sequence[dict], kind: str, label: str, anchor: str | None = None) -> list[Mark]:
-    """Marks of a result's modes (`sysid identify --json`'s "modes"); `anchor`: the id
-    prefix of their rows in the mode table (row k is `{anchor}-{k}`)."""
-    marks = []
-    for k, m in enumerate(modes):
-        s = complex(*m["eigenvalue"])
-        std = m.get("eigenvalue_std")
-        marks.append(
-            Mark(
-                s=s,
-                std=None if std is None else (float(std[0]), float(std[1])),
-                name=m.get("name"),
-                kind=kind,
-                tooltip=f"{label}: {tooltip(m)}",
-                href=None if anchor is None else f"#{anchor}-{k}",
-                colour=COLOURS[k % len(COLOURS)],
-            )
+def marks_of(
+    modes: Sequence[ModeDocument], kind: str, label: str, anchor: str | None = None
+) -> list[Mark]:
+    """Marks of a result's modes; `anchor`: the id prefix of their rows in the mode table
+    (row k is `{anchor}-{k}`)."""
+    return [
+        Mark(
+            s=complex(*m.eigenvalue),
+            std=m.eigenvalue_std,
+            name=m.name,
+            kind=kind,
+            tooltip=f"{label}: {tooltip(m)}",
+            href=None if anchor is None else f"#{anchor}-{k}",
+            colour=COLOURS[k % len(COLOURS)],
         )
-    return marks
+        for k, m in enumerate(modes)
+    ]
 
 
-def tooltip(m: dict) -> str:
+def tooltip(m: ModeDocument) -> str:
     """A mode's row as one line."""
-    re, im = m["eigenvalue"]
+    re, im = m.eigenvalue
     lam = f"{re:+.3f} ± {abs(im):.3f}j" if im else f"{re:+.3f}"
-    std = m.get("eigenvalue_std")
+    std = m.eigenvalue_std
     if std is not None:
         lam += f" (σ {std[0]:.2g}, {std[1]:.2g})" if im else f" (σ {std[0]:.2g})"
-    parts = [f"{m.get('name') or 'unnamed'}: λ {lam} 1/s"]
-    omega = m.get("frequency_rad_s")
+    parts = [f"{m.name or 'unnamed'}: λ {lam} 1/s"]
+    omega = m.frequency_rad_s
     if omega:
-        parts.append(f"ωn {omega:.3g} rad/s ({omega / (2 * np.pi):.3g} Hz)")
-    if im and m.get("damping") is not None:
-        zeta = f"ζ {m['damping']:.3f}"
-        if m.get("damping_std") is not None:
-            zeta += f" ± {m['damping_std']:.2g}"
+        parts.append(f"ωn {omega:.3g} rad/s ({m.frequency_hz:.3g} Hz)")
+    if im:
+        zeta = f"ζ {m.damping:.3f}"
+        if m.damping_std is not None:
+            zeta += f" ± {m.damping_std:.2g}"
         parts.append(zeta)
-    if m.get("time_constant_s") is not None:
-        parts.append(f"τ {m['time_constant_s']:.3g} s")
+    if m.time_constant_s is not None:
+        parts.append(f"τ {m.time_constant_s:.3g} s")
     return "; ".join(parts)
 
 

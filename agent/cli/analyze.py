@@ -37,13 +37,26 @@ def select(args: argparse.Namespace):
         raise common.refused(str(exc)) from None
 
 
-def cases_for(args: argparse.Namespace, paths, batch: bool, sweep, prepared=None):
-    """The cases of `sysid analyze` and `sysid report`: one identification per excitation
-    (or one of all, or one per swept value); `prepared`: `identification_request`'s answer
-    when the caller has it."""
+def request_for(args: argparse.Namespace, paths):
+    """`common.identification_request` for logs: where any of them is the agent's own, its
+    inputs are the surfaces' sampled positions (`held_inputs = "auto"`: not held), as
+    onboard."""
     from agent.analysis import analyze as an
 
-    config, request, settings = prepared or common.identification_request(args, paths)
+    try:
+        sampled = any(an.own_log(p) for p in paths)
+    except an.AnalyzeError as exc:
+        raise common.refused(str(exc)) from None
+    return common.identification_request(args, paths, sampled_inputs=sampled)
+
+
+def cases_for(args: argparse.Namespace, paths, batch: bool, sweep, prepared=None):
+    """The cases of `sysid analyze` and `sysid report`: one identification per excitation
+    (or one of all, or one per swept value); `prepared`: `request_for`'s answer when the
+    caller has it."""
+    from agent.analysis import analyze as an
+
+    config, request, settings = prepared or request_for(args, paths)
     if getattr(args, "cross", False) and batch:
         raise common.refused("--cross needs one model per excitation: drop --batch")
     roles = [config.channels.role_of(n) for n in request.outputs]
@@ -59,6 +72,7 @@ def cases_for(args: argparse.Namespace, paths, batch: bool, sweep, prepared=None
 
 def run(args: argparse.Namespace) -> int:
     from agent.analysis import analyze as an
+    from agent.analysis.findings import analysed
 
     paths = select(args)
     try:
@@ -67,22 +81,16 @@ def run(args: argparse.Namespace) -> int:
         raise common.refused(str(exc)) from None
     cases = cases_for(args, paths, args.batch, sweep)
     outcomes = common.run_cases(cases, args, quiet=args.json)
-    report = {
-        "logs": [str(p) for p in paths],
-        "cases": [
-            {"excitation": c.label, "setting": dict(c.key), **an.case_summary(o)}
-            for c, o in zip(cases, outcomes, strict=True)
-        ],
-    }
-    excitations = 1 if args.batch else len(paths)
-    if sweep is not None:
-        table = an.sweep_table(cases, outcomes)
-        report["sweep"] = table
-        report["recommended"] = an.recommend(table, excitations)
-    if args.cross:
-        report["cross_tic"] = an.cross_validation(cases, outcomes)
+    analysis = analysed(
+        paths,
+        cases,
+        outcomes,
+        excitations=1 if args.batch else len(paths),
+        sweep=sweep is not None,
+        cross=args.cross,
+    )
     if args.json:
-        common.print_json(report)
+        common.print_json(analysis.document())
     else:
-        print(an.analysis_text(report, paths))
+        print(analysis.text())
     return common.EXIT_OK if any(o.ok for o in outcomes) else common.EXIT_FAILED

@@ -315,11 +315,12 @@ def claim(outputs, path: Path, option: str = "--out") -> Path:
         raise refused(str(exc)) from None
 
 
-def identification_request(args: argparse.Namespace, paths):
-    """(config, request, settings) from the shared identification options."""
+def identification_request(args: argparse.Namespace, paths, *, sampled_inputs: bool = False):
+    """(config, request, settings) from the shared identification options; `sampled_inputs`:
+    the records are the agent's own (`Settings.from_config`), not CSV records."""
     from agent.analysis import identify as identify_cmd
     from agent.config import MAX_DECIMATION
-    from agent.ident.job import settings_from
+    from agent.ident.settings import Settings
 
     if args.decimation is not None and args.decimation > MAX_DECIMATION:
         raise refused(f"--decimation {args.decimation}: give 1 to {MAX_DECIMATION}")
@@ -340,10 +341,11 @@ def identification_request(args: argparse.Namespace, paths):
         trim_seconds=trim_s,
         navigation=config.channels.navigation(),
     )
-    settings = settings_from(
+    settings = Settings.from_config(
         config,
-        args.markov,
-        args.order,
+        sampled_inputs=sampled_inputs,
+        markov=args.markov,
+        order=args.order,
         decimation=args.decimation,
         refine=args.refine,
         method=args.method,

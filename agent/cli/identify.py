@@ -23,7 +23,7 @@ def run(args: argparse.Namespace) -> int:
     from agent.analysis import identify as identify_cmd
     from agent.analysis.records import RecordError
     from agent.ident import DataError, IdentificationFailed
-    from agent.ident.summary import format_text, to_dict
+    from agent.ident.summary import format_text
 
     config, request, settings = common.identification_request(args, args.data)
     try:
@@ -33,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
     except IdentificationFailed as exc:
         raise common.CommandError(str(exc), common.EXIT_FAILED, "identification failed") from None
     if args.json:
-        common.print_json(to_dict(outcome.result, outcome.trim))
+        common.print_json(outcome.result.document(outcome.trim).model_dump(mode="json"))
     else:
         print(format_text(outcome.result, outcome.records, outcome.samples))
     return common.EXIT_OK

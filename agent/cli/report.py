@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from agent.cli import common
-from agent.cli.analyze import cases_for, select
+from agent.cli.analyze import cases_for, request_for, select
 
 
 def add_parser(sub) -> None:
@@ -27,7 +27,7 @@ def add_parser(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     paths = select(args)
-    prepared = common.identification_request(args, paths)
+    prepared = request_for(args, paths)
     nominal = None
     if args.nominal is not None:
         from agent.models import model_summary

@@ -134,6 +134,13 @@ def low_peak_phases(harmonics: Sequence[int]) -> np.ndarray:
     return np.array(_optimised(k))
 
 
+def forget_phases() -> None:
+    """Forget the phases optimised so far (each set of harmonics is optimised once per process
+    and kept), so the next `low_peak_phases` computes them afresh: for a test or benchmark
+    that needs the optimisation's CPU time."""
+    _optimised.cache_clear()
+
+
 def zero_start(harmonics: Sequence[int], phases: Sequence[float]) -> np.ndarray:
     """The same multisine delayed so it starts at a zero crossing: phases φ_k + k·θ.
 

@@ -7,29 +7,53 @@ in the top line. F5 aborts a run from anywhere (x too, outside a text field). Ev
 asks for confirmation, is sent reliably, and its acknowledgement (or the aircraft's reason for
 refusing) is logged. The app only draws the GroundStation and calls its commands: everything
 received is in the ground log. The layout is `console.tcss`.
+
+Nothing is redrawn on a timer: the station hands each thing it hears to the app as a typed
+event, the app posts it to itself as a Textual message (`agent.ground.posted`), and its
+handlers set the reactive state of the tab that shows it, which redraws what changed. One
+timer (`ticker`) updates the values that change with time passing alone: the link's liveness
+and the status's age.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import ClassVar
 
 from rich.text import Text
 from textual.app import App, ComposeResult
 from textual.binding import Binding
-from textual.css.query import NoMatches
+from textual.reactive import var
+from textual.timer import Timer
 from textual.widgets import Footer, RichLog, Static, TabbedContent, TabPane
 from textual.worker import Worker, WorkerState
 
-from agent.ground.station import GroundStation, Line
+from agent.ground import events, posted
+from agent.ground.events import Line
+from agent.ground.station import GroundStation
 from agent.ground.tabs.excite import ExciteTab
 from agent.ground.tabs.identify import IdentifyTab
 from agent.ground.tabs.live import LiveTab
 from agent.ground.tabs.results import ResultsTab
 from agent.ground.tabs.status import StatusTab
 from agent.ground.widgets import num
+from agent.link import messages
 
-REFRESH_S = 0.5
+# The link is lost when no frame came for its deadline, and a status grows old, with nothing
+# heard: time passing is their only event, so the ticker looks at them this often (the
+# seconds shown to a tenth; a lost link shown within half a second).
+TICK_S = 0.5
 LEVEL_STYLE = {"info": "", "warning": "yellow", "error": "bold red"}
+
+
+@dataclass(frozen=True, kw_only=True)
+class LinkView:
+    """The top line's link indicators, as shown (so an unchanged one redraws nothing)."""
+
+    up: bool
+    last_heard_s: float | None
+    loss_percent: int | None
+    rssi_dbm: int | None
 
 
 class Console(App):
@@ -53,13 +77,17 @@ class Console(App):
         Binding("q", "quit", "quit"),
     ]
 
+    link: var[LinkView | None] = var(None, init=False)
+    """The link's indicators, from the ticker."""
+    status: var[messages.Status | None] = var(None, init=False)
+    """The status last heard (the top line's flight mode, excitation and nominal)."""
+
     def __init__(self, station: GroundStation, *, run_link: bool = True):
         super().__init__()
         self.station = station
         self.run_link = run_link
-        self._events_shown = 0
-        self._mounted = False
-        self.status_tab = StatusTab(station)
+        self.ticker: Timer | None = None  # the one timer (TICK_S), once mounted
+        self.status_tab = StatusTab(station.config.stale_s)
         self.excite_tab = ExciteTab(station, self.send)
         self.identify_tab = IdentifyTab(station, self.send, id="settings")
         self.results_tab = ResultsTab(station, self.send)
@@ -71,7 +99,9 @@ class Console(App):
         return self.results_tab.selected
 
     def compose(self) -> ComposeResult:
-        yield Static(id="top")
+        self.top = Static(id="top")
+        self.log_pane = RichLog(id="log", max_lines=500, wrap=True)
+        yield self.top
         with TabbedContent(initial="status", id="tabs"):
             with TabPane("Status 1", id="status"):
                 yield self.status_tab
@@ -83,75 +113,102 @@ class Console(App):
                 yield self.results_tab
             with TabPane("Live 5", id="live"):
                 yield self.live_tab
-        yield RichLog(id="log", max_lines=500, wrap=True)
+        yield self.log_pane
         yield Footer()
 
     def on_mount(self) -> None:
-        self._mounted = True
-        self.station.listeners.append(self._heard)
+        for line in self.station.heard.events:  # noted before the screen was up
+            self.log_pane.write(_line(line))
+        self.results_tab.heard(None)  # results read back from earlier ground logs
+        self.station.subscribe(self._heard)
         if self.run_link:
             self.run_worker(self.station.run(), name="link", exit_on_error=False)
-        self.set_interval(REFRESH_S, self.refresh_all)
-        self.refresh_all()
+        self.ticker = self.set_interval(TICK_S, self._tick)
+        self._tick()
+        self._top()
 
     async def on_unmount(self) -> None:
-        if self._heard in self.station.listeners:
-            self.station.listeners.remove(self._heard)
+        self.station.unsubscribe(self._heard)
         await self.station.close()
 
-    # -- refresh ----------------------------------------------------------------------------
+    # -- what the station heard: one handler each ----------------------------------------------
 
-    def _heard(self, what: str) -> None:
-        if not self._mounted:
-            return
-        if what == "result":
-            self.results_tab.selected = None  # show the newest
-        self.refresh_all()
+    def _heard(self, event: events.Event) -> None:
+        """The station's subscriber: each event becomes a message to this app (the station
+        runs on the app's loop; post_message would also take it from another thread)."""
+        self.post_message(posted.posted(event))
 
-    def refresh_all(self) -> None:
-        try:
-            self.identify_tab.show()
-            self._top()
-            self.status_tab.show()
-            self._events()
-            self.results_tab.show()
-            self.live_tab.show()
-        except NoMatches:  # the screen is being taken down (quit): nothing left to draw
-            return
+    def on_status_heard(self, message: posted.StatusHeard) -> None:
+        status = message.heard.status
+        self._look_at_link()  # a frame just heard: the link is up
+        self.status = status
+        self.status_tab.status = status
+        self.status_tab.age = round(self.station.clock.now() - message.heard.at, 1)
+        self.results_tab.nominal = tuple(sorted(status.nominal.items()))
+        self.identify_tab.reported = status.settings
+
+    def on_live_frame(self, message: posted.LiveFrame) -> None:
+        self.live_tab.live = message.heard.live
+
+    def on_result_heard(self, message: posted.ResultHeard) -> None:
+        self.results_tab.heard(message.heard.result.model_id)
+
+    def on_frf_heard(self, message: posted.FrfHeard) -> None:
+        r = message.heard.report
+        self.results_tab.frf = (r.model_id, r.input, r.output)
+
+    def on_ack_heard(self, message: posted.AckHeard) -> None:
+        command = message.heard.command
+        if isinstance(command.message, messages.IdentSettings):
+            self.identify_tab.answered(command)
+
+    def on_noted(self, message: posted.Noted) -> None:
+        self.log_pane.write(_line(message.heard.line))
+
+    # -- time passing -----------------------------------------------------------------------
+
+    def _tick(self) -> None:
+        """The values that change with time alone: the link's liveness and the status's age
+        (each redraws only when its shown value changed)."""
+        self._look_at_link()
+        age = self.station.status_age()
+        self.status_tab.age = None if age is None else round(age, 1)
+
+    def _look_at_link(self) -> None:
+        q = self.station.link_quality()
+        heard = q["last_heard_s"]
+        self.link = LinkView(
+            up=q["up"],
+            last_heard_s=None if heard is None else round(heard, 1),
+            loss_percent=None if q["loss"] is None else round(100 * q["loss"]),
+            rssi_dbm=q["rssi_dbm"],
+        )
+
+    def watch_link(self) -> None:
+        self._top()
+
+    def watch_status(self) -> None:
+        self._top()
 
     def _top(self) -> None:
-        q = self.station.link_quality()
-        s = self.station.heard.status
+        link, s = self.link, self.status
         text = Text()
-        if q["up"]:
+        if link is not None and link.up:
             text.append(" LINK UP ", "bold black on green")
         else:
             text.append(" LINK LOST ", "bold white on red")
-        text.append(f" {num(q['last_heard_s'], '{:.1f}')} s")
-        if q["loss"] is not None:
-            text.append(f" · loss {100 * q['loss']:.0f}%")
-        if q["rssi_dbm"] is not None:
-            text.append(f" · {q['rssi_dbm']} dBm")
+        text.append(f" {num(None if link is None else link.last_heard_s, '{:.1f}')} s")
+        if link is not None and link.loss_percent is not None:
+            text.append(f" · loss {link.loss_percent}%")
+        if link is not None and link.rssi_dbm is not None:
+            text.append(f" · {link.rssi_dbm} dBm")
         if s is not None:
             text.append(f" │ {s.flight_mode or '?'} │ {s.excitation}")
             if s.identifying:
                 text.append(" │ identifying", "bold cyan")
             nominal = " ".join(s.nominal.values()) or "none"
             text.append(f" │ nominal {nominal}")
-        self._main_screen().query_one("#top", Static).update(text)
-
-    def _events(self) -> None:
-        heard = self.station.heard
-        fresh = min(heard.noted - self._events_shown, len(heard.events))
-        log = self._main_screen().query_one("#log", RichLog)
-        for line in list(heard.events)[len(heard.events) - fresh :]:
-            log.write(_line(line))
-        self._events_shown = heard.noted
-
-    def _main_screen(self):
-        """The main screen (the app's own query looks at the top screen, which is the
-        confirmation dialog while one is open)."""
-        return self.screen_stack[0]
+        self.top.update(text)
 
     def on_worker_state_changed(self, event: Worker.StateChanged) -> None:
         if event.worker.name == "link" and event.state == WorkerState.ERROR:
@@ -181,7 +238,9 @@ class Console(App):
             self.results_tab.ask_frf()
 
     def _tabs(self) -> TabbedContent:
-        return self._main_screen().query_one("#tabs", TabbedContent)
+        """The tabs (the app's own query looks at the top screen, which is the confirmation
+        dialog while one is open)."""
+        return self.screen_stack[0].query_one("#tabs", TabbedContent)
 
     def send(self, command) -> None:
         """Carry out a station command; one the radio cannot take is logged, not raised."""
@@ -189,7 +248,6 @@ class Console(App):
             command()
         except RuntimeError as exc:  # the radio is not open
             self.station.note("error", f"not sent: {exc}")
-        self.refresh_all()
 
 
 def _line(line: Line) -> Text:

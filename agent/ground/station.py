@@ -1,7 +1,8 @@
 """The ground station without the screen: the link session with the aircraft, what it has
 heard (status, events, results, refusals), the commands in flight and their answers, and the
 ground log. The Textual app (`agent.ground.app`) only draws this and calls its commands, so
-nothing the operator relies on depends on the screen.
+nothing the operator relies on depends on the screen: each thing heard or done is handed, as
+it happens, to the station's subscribers as a typed event (`agent.ground.events`).
 
 The ground log (`NNNN_ground_DATE.jsonl` in `log_dir`) has one JSON object per line: every
 message received (`"dir": "rx"`, results in full), every command sent (`"tx"`, with its
@@ -22,7 +23,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from agent.clock import Clock
+from agent.ground import events
 from agent.ground.config import GroundConfig
+from agent.ground.events import Command, Line
 from agent.link import messages
 from agent.link.codec import GROUND
 from agent.link.endpoint import open_endpoint
@@ -35,26 +38,6 @@ log = logging.getLogger(__name__)
 EVENTS_KEPT = 500
 # The live view's strip charts keep this many seconds.
 STRIP_S = 30.0
-
-
-@dataclass
-class Command:
-    """A command sent to the aircraft and, once it arrives, its answer."""
-
-    seq: int
-    label: str
-    sent_at: float
-    message: messages.Message
-    ack: messages.Ack | None = None
-
-
-@dataclass
-class Line:
-    """One line of the event log."""
-
-    time: float
-    level: str  # "info", "warning", "error"
-    text: str
 
 
 @dataclass
@@ -72,7 +55,6 @@ class Heard:
     strips: dict[str, deque[tuple[float, float | None]]] = field(default_factory=dict)
     """The run's strip charts: per channel, (time, value in display units), STRIP_S long."""
     excitation: messages.ExcitationEvent | None = None
-    noted: int = 0  # event lines ever noted (the deque keeps the latest)
 
 
 class GroundStation:
@@ -82,8 +64,9 @@ class GroundStation:
         self.config, self.clock, self.base = config, clock, Path(base)
         self.heard = Heard()
         self.commands: dict[int, Command] = {}
-        self.settings_in_effect: messages.IdentSettings | None = None  # the last acknowledged
-        self.listeners: list[Callable[[str], None]] = []
+        # The last settings the aircraft acknowledged (what its status reports is newer).
+        self.settings_acknowledged: messages.IdentSettings | None = None
+        self._subscribers: list[Callable[[events.Event], None]] = []
         self.session: LinkSession | None = None
         self.rssi_dbm: int | None = None
         self.rssi_errors = 0  # RSSI reads that failed (logged; the link goes on)
@@ -161,11 +144,11 @@ class GroundStation:
         h = self.heard
         if isinstance(message, messages.Status):
             h.status, h.status_at = message, now
-            self._tell("status")
+            self._tell(events.StatusHeard(message, now))
             return
         if isinstance(message, messages.Live):
             self._live(message, now)
-            self._tell("live")
+            self._tell(events.LiveFrame(message))
             return
         if isinstance(message, messages.Ack):
             self._answered(message)
@@ -182,7 +165,7 @@ class GroundStation:
                 "info",
                 f"result {message.model_id} ({message.axes}): TIC {message.tic_avg:.3f}, {verdict}",
             )
-            self._tell("result")
+            self._tell(events.ResultHeard(message))
         elif isinstance(message, messages.FrfReport):
             h.frfs[(message.model_id, message.input, message.output)] = message
             self.note(
@@ -190,12 +173,11 @@ class GroundStation:
                 f"frequency response {message.model_id} {message.input} → {message.output}: "
                 f"{len(message.freq_hz)} frequencies",
             )
-            self._tell("frf")
+            self._tell(events.FrfHeard(message))
         elif isinstance(message, messages.Failure):
             self._run_over()
             h.failures.append(message)
             self.note("error", f"identification {message.model_id} failed: {message.reason}")
-            self._tell("result")
         elif isinstance(message, messages.Notice):
             self.note("warning", message.text)
 
@@ -215,6 +197,7 @@ class GroundStation:
     def _run_over(self) -> None:
         """A result or failure ends the live view (its charts stay for a look back)."""
         self.heard.live = None
+        self._tell(events.LiveFrame(None))
 
     def _answered(self, ack: messages.Ack) -> None:
         command = self.commands.get(ack.ref)
@@ -223,12 +206,12 @@ class GroundStation:
             return
         command.ack = ack
         if ack.ok and isinstance(command.message, messages.IdentSettings):
-            self.settings_in_effect = command.message
+            self.settings_acknowledged = command.message
         if ack.ok:
             self.note("info", f"{command.label}: acknowledged")
         else:
             self.note("error", f"{command.label}: REFUSED — {ack.reason}")
-        self._tell("ack")
+        self._tell(events.AckHeard(command))
 
     def _keep(self, result: messages.Result) -> None:
         results = self.heard.results
@@ -244,7 +227,7 @@ class GroundStation:
         if self.session is None:
             raise RuntimeError("the radio is not open")
         seq = self.session.send_reliable(message)
-        command = Command(seq, label, self.clock.now(), message)
+        command = Command(seq=seq, label=label, sent_at=self.clock.now(), message=message)
         self.commands[seq] = command
         self._write("tx", messages.to_dict(message), seq=seq)
         self.note("info", f"{label}: sent")
@@ -257,7 +240,8 @@ class GroundStation:
         return self.send(messages.Abort(reason="operator abort (ground)"), "abort")
 
     def settings(self, settings: messages.IdentSettings) -> Command:
-        return self.send(settings, f"settings {settings.axes}")
+        axes = settings.axes or "on each plan's axes"
+        return self.send(settings, f"settings {axes}")
 
     def decide(self, model_id: str, accept: bool) -> Command:
         verb = "accept" if accept else "reject"
@@ -285,14 +269,22 @@ class GroundStation:
     # -- log --------------------------------------------------------------------------------
 
     def note(self, level: str, text: str) -> None:
-        self.heard.events.append(Line(self.clock.now(), level, text))
-        self.heard.noted += 1
+        line = Line(self.clock.now(), level, text)
+        self.heard.events.append(line)
         self._write("note", {"level": level, "text": text})
-        self._tell("event")
+        self._tell(events.Noted(line))
 
-    def _tell(self, what: str) -> None:
-        for listener in self.listeners:
-            listener(what)
+    def subscribe(self, subscriber: Callable[[events.Event], None]) -> None:
+        """Hand `subscriber` every event from now on (in order, as it happens)."""
+        self._subscribers.append(subscriber)
+
+    def unsubscribe(self, subscriber: Callable[[events.Event], None]) -> None:
+        if subscriber in self._subscribers:
+            self._subscribers.remove(subscriber)
+
+    def _tell(self, event: events.Event) -> None:
+        for subscriber in self._subscribers:
+            subscriber(event)
 
     def _write(self, direction: str, data: dict, seq: int | None = None) -> None:
         if self._log is None:

@@ -10,7 +10,7 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import ModalScreen
 from textual.widgets import Button, Label
 
-from agent.link import messages
+from agent.ident.document import ModeDocument
 
 MODE_COLUMNS = ("mode", "eigenvalue", "f Hz", "ζ", "τ s", "MSV", "MCI", "MOI", "EMAC", "MPC", "CMI")
 
@@ -30,7 +30,7 @@ def percent(value: float | None) -> str:
     return f"{value:.2g}" if abs(value) >= 0.01 or value == 0 else "<0.01"
 
 
-def mode_row(m: messages.ModeReport) -> tuple[str, ...]:
+def mode_row(m: ModeDocument) -> tuple[str, ...]:
     """A mode as a row under MODE_COLUMNS."""
     lam = f"{m.real:+.3f}{m.imag:+.3f}j" if m.imag else f"{m.real:+.3f}"
     return (
@@ -48,7 +48,7 @@ def mode_row(m: messages.ModeReport) -> tuple[str, ...]:
     )
 
 
-def mode_line(m: messages.ModeReport) -> str:
+def mode_line(m: ModeDocument) -> str:
     """A mode's row as one line: name, eigenvalue with its σ, ωn, ζ with its σ, τ."""
     lam = f"{m.real:+.3f}{m.imag:+.3f}j" if m.imag else f"{m.real:+.3f}"
     if m.real_std is not None and m.imag_std is not None:

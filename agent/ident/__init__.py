@@ -9,7 +9,9 @@ from agent.ident.errors import (
     InsufficientDataError,
 )
 from agent.ident.okid import Experiment
-from agent.ident.pipeline import Identification, Settings, identify
+from agent.ident.pipeline import identify
+from agent.ident.result import Identification
+from agent.ident.settings import Settings
 
 __all__ = [
     "ConstantChannelError",

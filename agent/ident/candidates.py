@@ -37,7 +37,7 @@ STALL = 3
 BAND_MULTIPLE = 5.0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Candidate:
     """One OKID → ERA → fit run for a given p: what the automatic choice compares."""
 

@@ -34,7 +34,7 @@ NUMERICAL_ZERO = 1e-13
 DEFAULT_HANKEL_BLOCKS = 20
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class EraResult:
     """A discrete realisation (A, B, C, D) with the Hankel diagnostics it came from."""
 

@@ -201,7 +201,7 @@ def theil(predicted: np.ndarray, measured: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(tic), tic, 1.0)  # an overflowing prediction fits not at all
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Fit:
     """Simulated outputs per experiment and the TIC per output over the whole batch."""
 
@@ -234,6 +234,10 @@ def fit(
     predicted = np.vstack(predictions)
     if not np.all(np.isfinite(predicted)):
         # The simulation diverged: as bad a fit as TIC can say.
-        return Fit(tuple(predictions), tuple(states), np.ones(measured.shape[1]))
+        return Fit(
+            predictions=tuple(predictions),
+            initial_states=tuple(states),
+            tic=np.ones(measured.shape[1]),
+        )
     tic = theil(predicted, measured)
     return Fit(predictions=tuple(predictions), initial_states=tuple(states), tic=tic)

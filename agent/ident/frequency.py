@@ -44,7 +44,7 @@ MIN_PERIOD = 8
 MIN_WELCH_SEGMENT = 64
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Spectra:
     """Averaged spectral densities over all segments (eq. 4.22)."""
 
@@ -264,7 +264,7 @@ def markov_observer(markov: np.ndarray) -> ObserverMarkov:
     )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class FrequencyData:
     """Spectra and FRF of a batch, and the warnings they raise."""
 
@@ -301,4 +301,9 @@ def analyse(batch: Sequence[Experiment], period: int | None = None) -> Frequency
             "a record holds only one whole period of the excitation: the start-up transient "
             "is in the window and leaks between the harmonics; fly at least two periods"
         )
-    return FrequencyData(spectra, frequency_response(spectra), period, tuple(warnings))
+    return FrequencyData(
+        spectra=spectra,
+        frf=frequency_response(spectra),
+        period=period,
+        warnings=tuple(warnings),
+    )

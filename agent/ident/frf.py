@@ -38,7 +38,7 @@ EXCITED_FRACTION = 1e-2
 COHERENCE_MIN = 0.6
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class MeasuredResponse:
     """H and γ² at the bins where some input is excited; nan where an input is not."""
 

@@ -1,69 +1,29 @@
-"""One identification as a job for a worker process: a window of recorded data in, a plain
-result (or a failure with its reason) out. Pure functions of picklable arguments, so the agent's
-event loop only hands them to a pre-started process and never waits on them.
+"""One identification as a job for a worker process: a window of recorded data in, the result's
+document (agent.ident.document) or a failure with its reason out. Pure functions of picklable
+arguments, so the agent's event loop only hands them to a pre-started process and never waits
+on them; the process itself (its priority, its life tied to the agent's) is
+agent.runtime.worker's.
 """
 
 from __future__ import annotations
 
 import contextlib
-import os
-import sys
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from agent.channels import AXIS_SETS
 from agent.ident import Experiment, Settings, frf, identify
-from agent.ident.convert import StateSpace
+from agent.ident.document import PreprocessingDocument, ResultDocument
 from agent.ident.errors import DataError, IdentificationFailed
 from agent.ident.fit import fit
 from agent.ident.preprocess import preprocess
-from agent.ident.summary import to_dict
-
-if TYPE_CHECKING:  # the config's type only: the worker never parses a config
-    from agent.config import Identification as IdentificationConfig
-
-
-def settings_from(
-    config: IdentificationConfig,
-    markov: int | None,
-    order: int | None,
-    *,
-    decimation: int | None = None,
-    refine: bool | None = None,
-    method: str | None = None,
-    period_s: float | None = None,
-) -> Settings:
-    """Identification settings: command-line values (not None) override the config file."""
-    return Settings(
-        markov=markov if markov is not None else _auto(config.markov),
-        markov_max=config.markov_max,
-        order=order if order is not None else _auto(config.order),
-        order_max=config.order_max,
-        estimate_d=config.estimate_d,
-        regularization=config.regularization,
-        hankel_blocks=config.hankel_blocks,
-        decimation=decimation if decimation is not None else _auto(config.decimation),
-        band_hz=config.band_hz,
-        held_inputs=config.held_inputs,
-        smoothing_s=config.smoothing_s,
-        refine=config.refine if refine is None else refine,
-        noise_model=config.noise_model,
-        method=method or config.method,
-        period_s=period_s if period_s is not None else config.period_s,
-    )
-
-
-def _auto(value: int | str) -> int | None:
-    return None if value == "auto" else int(value)
-
 
 # Gaps (NaN) up to this long are bridged linearly; longer ones fail the job with the reason.
 MAX_GAP_S = 0.1
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Job:
     model_id: str
     axes: str
@@ -150,7 +110,7 @@ def _bridge(x: np.ndarray, dt: float, name: str) -> np.ndarray:
     return np.interp(t, t[~bad], x[~bad])
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Outcome:
     """What a job gives back: the identification, or why there is none."""
 
@@ -159,11 +119,8 @@ class Outcome:
     reason: str = ""
     """Why it failed ("" when ok)."""
     axes: str = ""
-    result: dict | None = None
-    """The identification as plain data (`agent.ident.summary.to_dict`) when ok."""
-    preprocessing: dict | None = None
-    """How its data were preprocessed (factor, band_hz, held_inputs, smoothing_s), so other
-    data can be prepared the same way (`cross_tic`)."""
+    result: ResultDocument | None = None
+    """The identification's document when ok."""
     experiment: tuple[np.ndarray, np.ndarray] | None = None
     """With a `window`: the experiment made of it (u, y), trim removed."""
     trim: dict | None = None
@@ -184,7 +141,9 @@ def run(job: Job) -> Outcome:
                 job.window, job.inputs, job.outputs, job.record_dt, job.trim_s
             )
         except (DataError, KeyError) as exc:
-            return Outcome(job.model_id, False, f"window unusable: {exc}", job.axes)
+            return Outcome(
+                model_id=job.model_id, ok=False, reason=f"window unusable: {exc}", axes=job.axes
+            )
         extra = {"experiment": (u, y), "trim": trim}
         # Its absolute trim and navigation, for the aircraft method's kinematics and wind.
         op = np.array([trim["outputs"][n] for n in job.outputs])
@@ -201,21 +160,8 @@ def run(job: Job) -> Outcome:
             settings=job.settings,
         )
     except (DataError, IdentificationFailed, np.linalg.LinAlgError, ValueError) as exc:
-        return Outcome(job.model_id, False, str(exc), job.axes, **extra)
-    prep = result.preprocessing
-    return Outcome(
-        job.model_id,
-        True,
-        axes=job.axes,
-        result=to_dict(result),
-        preprocessing={
-            "factor": prep.factor,
-            "band_hz": prep.band_hz,
-            "held_inputs": prep.held_inputs,
-            "smoothing_s": prep.smoothing_s,
-        },
-        **extra,
-    )
+        return Outcome(model_id=job.model_id, ok=False, reason=str(exc), axes=job.axes, **extra)
+    return Outcome(model_id=job.model_id, ok=True, axes=job.axes, result=result.document(), **extra)
 
 
 def _input_roles(job: Job) -> tuple[str | None, ...] | None:
@@ -225,7 +171,7 @@ def _input_roles(job: Job) -> tuple[str | None, ...] | None:
 
 
 def prepared(
-    preprocessing: dict,
+    preprocessing: PreprocessingDocument,
     record_dt: float,
     experiments: tuple[tuple[np.ndarray, np.ndarray], ...],
 ):
@@ -233,28 +179,26 @@ def prepared(
     return preprocess(
         [Experiment(u, y) for u, y in experiments],
         record_dt,
-        decimation=preprocessing["factor"],
-        band_hz=preprocessing["band_hz"],
-        held_inputs=preprocessing["held_inputs"],
-        smoothing_s=preprocessing["smoothing_s"],
+        decimation=preprocessing.decimation,
+        band_hz=preprocessing.band_hz,
+        held_inputs=preprocessing.held_inputs_shifted,
+        smoothing_s=preprocessing.smoothing_s,
     )
 
 
 def cross_tic(
-    result: dict,
-    preprocessing: dict,
+    result: ResultDocument,
     record_dt: float,
     experiments: tuple[tuple[np.ndarray, np.ndarray], ...],
 ) -> float:
     """TIC_avg of an identified model (its discrete A, B, C, D) on other data, preprocessed
     as the model's own data was (thesis 5.3: TIC_jN, TIC_Nj)."""
-    batch, _ = prepared(preprocessing, record_dt, experiments)
-    model = StateSpace(*(np.asarray(result[k], dtype=float) for k in ("A", "B", "C", "D")))
-    return fit(model, batch).tic_avg
+    batch, _ = prepared(result.preprocessing, record_dt, experiments)
+    return fit(result.model(), batch).tic_avg
 
 
 def frequency_response(
-    preprocessing: dict,
+    preprocessing: PreprocessingDocument,
     record_dt: float,
     experiments: tuple[tuple[np.ndarray, np.ndarray], ...],
     input_index: int,
@@ -281,40 +225,6 @@ def frequency_response(
         "phase_deg": [round(float(x), 1) for x in np.degrees(np.angle(h))],
         "coherence": [None if not np.isfinite(g) else round(float(g), 3) for g in gamma],
     }
-
-
-# The worker's scheduling below the agent's: on a small flight computer the identification takes
-# the CPU the agent (event loop, drivers, MAVSDK and radio threads) leaves over. SCHED_BATCH at
-# nice +10 (Linux): the scheduler treats it as CPU-bound, so it never preempts a waking agent
-# thread, and its nice weight gives it about a tenth of a busy core's time. Not SCHED_IDLE: a
-# SCHED_IDLE process runs only when nothing else wants the CPU, so on a machine kept busy by
-# other work (two CPU hogs here) the worker never finished even its warm-up, identification
-# stopped, and the agent's shutdown waited for it for ever. Elsewhere: nice +10 alone.
-WORKER_NICE = 10
-
-
-def _die_with_the_agent() -> None:
-    """Linux: the kernel kills the worker when the agent's thread that started it (the event
-    loop's, the main thread) ends, even by SIGKILL; a `kill -9` of the agent otherwise left
-    the worker, idle with its 130 MB, running forever."""
-    import ctypes
-    import signal
-
-    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-    if os.getppid() == 1:  # the agent died before the line above
-        os._exit(0)
-
-
-def start_worker() -> None:
-    """The worker process's initializer: tie its life to the agent's, lower its priority, then
-    warm up."""
-    if sys.platform == "linux":
-        _die_with_the_agent()
-    with contextlib.suppress(OSError, AttributeError):  # not permitted, or not POSIX: go on
-        os.nice(WORKER_NICE)
-    with contextlib.suppress(OSError, AttributeError):  # not Linux: nice +10 alone
-        os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
-    warm()
 
 
 def warm() -> None:

@@ -61,7 +61,7 @@ class HankelFactors:
         return HankelFactors(self.observability @ np.linalg.inv(T), T @ self.controllability)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class EigenvalueStd:
     """1-σ uncertainty of one continuous eigenvalue s = ln(z)/Δt and of what it implies."""
 
@@ -71,7 +71,7 @@ class EigenvalueStd:
     damping: float  # of −Re s/|s|
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Mode:
     """One mode: a real eigenvalue or a complex pair, with its indicators in percent."""
 
@@ -136,7 +136,7 @@ def modal_analysis(
     msv = _pulse_norms(z[keep], Bm[keep], Cm[:, keep], sum(horizon) - 1)
     bnorm = np.linalg.norm(Bm[keep], axis=1)
     cnorm = np.linalg.norm(Cm[:, keep], axis=0)
-    mpcs = _mpc(Cm[:, keep])
+    mpcs = modal_phase_collinearity(Cm[:, keep])
     emac = None
     if factors is not None:
         Pm = (factors.observability / np.tile(sy, horizon[0])[:, None]) @ Psi[:, keep]
@@ -229,7 +229,7 @@ def _emac(z: np.ndarray, Pm: np.ndarray, Qm: np.ndarray, m: int, r: int) -> np.n
     return out * inp
 
 
-def _mpc(Cm: np.ndarray) -> np.ndarray:
+def modal_phase_collinearity(Cm: np.ndarray) -> np.ndarray:
     """Uncentred modal phase collinearity ((λ₁ − λ₂)/(λ₁ + λ₂))² of each shape column (eq.
     5.15–5.18), λ the eigenvalues of XᵀX with X = [Re c, Im c]."""
     a = np.sum(Cm.real**2, axis=0)

@@ -110,7 +110,7 @@ def as_experiments(experiments: Sequence[Experiment] | Experiment) -> list[Exper
     return clean
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ObserverMarkov:
     """Observer Markov parameters (eq. 4.12–4.13) and the regression diagnostics."""
 

@@ -50,7 +50,7 @@ MIN_SAMPLES = 20
 MAX_DECIMATION = 1000
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Preprocessing:
     """What was done to the data before identification."""
 

@@ -15,7 +15,7 @@ import numpy as np
 from agent.ident.convert import discretize
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ReferenceModel:
     """A continuous linear model in measured variables (C = I, D = 0) with its trim point."""
 
@@ -147,7 +147,7 @@ def simulate(
 
 
 # Shaped like convert.StateSpace only: the samples of a flight, not a model.
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Record:
     """A synthetic flight record: time, inputs and outputs in absolute (trim + deviation) units."""
 

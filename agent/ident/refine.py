@@ -42,7 +42,7 @@ similarity orbit (data-driven local coordinates, McKelvey, Helmersson & Ribarits
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.linalg
@@ -57,7 +57,7 @@ from agent.ident.fit import (
     simulate_states,
     state_convolution_from,
 )
-from agent.ident.modal import EigenvalueStd
+from agent.ident.modal import EigenvalueStd, Mode
 from agent.ident.okid import Experiment
 
 # Noise re-weighting passes, and the relative change of every σ_i that ends them.
@@ -70,7 +70,7 @@ RELATIVE_DECREASE = 1e-8
 NOISE_FLOOR = 1e-9
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Refinement:
     """The refined continuous model, its initial states and the Cramér–Rao covariance."""
 
@@ -118,7 +118,7 @@ def _unpack_matrices(v: np.ndarray, n: int, m: int, r: int) -> StateSpace:
     return StateSpace(a.reshape(n, n), b.reshape(n, r), c.reshape(m, n), d.reshape(m, r))
 
 
-def _chain(model: StateSpace, dt: float, hold: str) -> np.ndarray:
+def discretization_jacobian(model: StateSpace, dt: float, hold: str) -> np.ndarray:
     """∂[vec Φ, vec Bd, vec C, vec Dd]/∂[vec Ac, vec Bc, vec C, vec D] of `discretize_hold`.
 
     The derivative of expm(M) along dM is the top-right block of expm([[M, dM], [0, M]]);
@@ -169,9 +169,9 @@ def _chain(model: StateSpace, dt: float, hold: str) -> np.ndarray:
 DIRECT_SENSITIVITY_SIZE = 400
 
 
-# The Jacobian is accumulated over stretches of a record (`_Problem.evaluate`) holding about
-# this many floats of sensitivities each, so its memory does not grow with the record: a
-# record shorter than one stretch is done in one, as before. Stretches are whole numbers of
+# The Jacobian is accumulated over stretches of a record (`OutputErrorProblem.evaluate`)
+# holding about this many floats of sensitivities each, so its memory does not grow with the
+# record: a record shorter than one stretch is done in one. Stretches are whole numbers of
 # the lifted simulation's longest block (fit.BLOCK_MAX), which a streamed record's
 # convolutions then use, so each stretch ends exactly.
 STRETCH_FLOATS = 8_000_000
@@ -190,7 +190,7 @@ def _propagate(
     return out, state
 
 
-def _stretches(length: int, per_sample: int) -> list[tuple[int, int]]:
+def sample_stretches(length: int, per_sample: int) -> list[tuple[int, int]]:
     """[first, last) sample ranges covering `length`, each at most STRETCH_FLOATS floats of
     `per_sample`, every one but the last a multiple of BLOCK_MAX samples."""
     size = max(BLOCK_MAX, STRETCH_FLOATS // max(per_sample, 1) // BLOCK_MAX * BLOCK_MAX)
@@ -199,7 +199,7 @@ def _stretches(length: int, per_sample: int) -> list[tuple[int, int]]:
     return [(first, min(first + size, length)) for first in range(0, length, size)]
 
 
-class _Problem:
+class OutputErrorProblem:
     """The weighted output-error residual and its exact Jacobian for one batch."""
 
     def __init__(
@@ -283,7 +283,7 @@ class _Problem:
         β gives: for `jacobian` "normal", (JᵀJ, Jᵀr); for "triangle", the triangular factor R
         of [J | r] (JᵀJ = RᵀR: J's singular values without J); "full": J itself (for checks;
         its memory grows with the record); None: nothing. J is built and summed stretch by
-        stretch (`_stretches`), whole only when asked for.
+        stretch (`sample_stretches`), whole only when asked for.
 
         Output error: ŷ is the model simulated from the inputs. Innovation form: ŷ is the
         one-step prediction of x̂(k+1) = Φ x̂ + Bd u + K (y − C x̂ − Dd u), i.e. the system
@@ -303,7 +303,7 @@ class _Problem:
         # ∂ŷ/∂discrete are applied as matrix products instead of being built.
         G = None
         if with_jacobian:
-            G = _chain(cont, self.dt, self.hold) @ self.basis[: self.matrix_size]
+            G = discretization_jacobian(cont, self.dt, self.hold) @ self.basis[: self.matrix_size]
             q = G.shape[1]
             k_ab = n * n + n * r
             dPhi = G[: n * n].reshape(n, n, q)
@@ -336,7 +336,7 @@ class _Problem:
                 per_sample = (n * q if direct else m * n * width) + m * q
                 carried = self.basis[rows] if direct else np.zeros((n, n, width))
                 reach = self.basis[rows]  # Ā^first ∂x0: the free response's start
-                stretches = _stretches(exp.u.shape[0], per_sample)
+                stretches = sample_stretches(exp.u.shape[0], per_sample)
                 lifted = BLOCK_MAX if len(stretches) > 1 else None  # divides every stretch
                 for first, last in stretches:
                     length, z = last - first, z_all[first:last]
@@ -389,7 +389,7 @@ class _Problem:
 
 
 def _levenberg_marquardt(
-    problem: _Problem, beta: np.ndarray, max_iterations: int
+    problem: OutputErrorProblem, beta: np.ndarray, max_iterations: int
 ) -> tuple[np.ndarray, int, bool]:
     """Minimise ‖residuals‖² from beta: Marquardt-scaled Levenberg–Marquardt steps.
 
@@ -451,7 +451,7 @@ def refine(
     """
     start = discretize_hold(model.A, model.B, model.C, model.D, dt, hold)
     x0s = [estimate_initial_state(start, e.u, e.y) for e in batch]
-    problem = _Problem(
+    problem = OutputErrorProblem(
         model,
         dt,
         batch,
@@ -518,7 +518,7 @@ def cramer_rao(
     beat on this input. Only the inputs of `batch` matter.
     """
     x0s = initial_states or [np.zeros(model.A.shape[0]) for _ in batch]
-    problem = _Problem(
+    problem = OutputErrorProblem(
         model, dt, batch, x0s, free_c=not output_coordinates, free_d=estimate_d, hold=hold
     )
     problem.weights = 1.0 / np.asarray(noise_std, dtype=float)
@@ -556,7 +556,9 @@ def eigenvalue_std(Ac: np.ndarray, covariance_A: np.ndarray) -> list[EigenvalueS
         def std(g: np.ndarray) -> float:
             return float(np.sqrt(max(g @ covariance_A @ g, 0.0)))
 
-        out.append(EigenvalueStd(std(g_re), std(g_im), std(g_mag), std(g_zeta)))
+        out.append(
+            EigenvalueStd(real=std(g_re), imag=std(g_im), frequency=std(g_mag), damping=std(g_zeta))
+        )
     return out
 
 
@@ -566,3 +568,14 @@ def simulate_refined(refinement: Refinement, batch: Sequence[Experiment]) -> lis
         simulate(refinement.discrete, e.u, x0)
         for e, x0 in zip(batch, refinement.initial_states, strict=True)
     ]
+
+
+def with_uncertainty(modes: Sequence[Mode], refinement: Refinement) -> list[Mode]:
+    """Attach the Cramér–Rao 1-σ of each mode's eigenvalue (nearest eigenvalue of Ac)."""
+    lam = np.linalg.eigvals(refinement.continuous.A)
+    stds = eigenvalue_std(refinement.continuous.A, refinement.covariance_of_a())
+    out = []
+    for mode in modes:
+        k = int(np.argmin(np.abs(lam - mode.eigenvalue)))
+        out.append(replace(mode, uncertainty=stds[k]))
+    return out

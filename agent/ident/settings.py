@@ -3,9 +3,16 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
+
+if TYPE_CHECKING:  # the config's type only: the worker never parses a config
+    from agent.config import IdentificationConfig
+
+Method = Literal["auto", "time", "frequency", "aircraft"]
+NoiseModel = Literal["auto", "output", "innovation"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Settings:
     """How to identify; None means choose automatically."""
 
@@ -25,6 +32,51 @@ class Settings:
     # "time"; "time": OKID regression; "frequency": spectra → FRF (thesis §4.3.1);
     # "aircraft": decoupled axes, states measured, fitted in the frequency domain
     # (agent.ident.aircraft)
-    method: str = "auto"
+    method: Method = "auto"
     period_s: float | None = None  # excitation period for "frequency"; None: detected
-    noise_model: str = "auto"  # refinement: "output" error, "innovation" (PEM), or "auto"
+    noise_model: NoiseModel = "auto"  # refinement: "output" error, "innovation" (PEM), or "auto"
+    # The whole-aircraft method's known nonlinear terms (agent.ident.aircraft.prepare): β² in
+    # V̇'s equation (sideslip drag), and α·β, α·p, α·r in the lateral axis (the lateral
+    # derivatives' change with α). Off only to measure what they do (bench_jsbsim --without).
+    sideslip_drag: bool = True
+    alpha_products: bool = True
+
+    @classmethod
+    def from_config(
+        cls,
+        config: IdentificationConfig,
+        *,
+        sampled_inputs: bool = False,
+        markov: int | None = None,
+        order: int | None = None,
+        decimation: int | None = None,
+        refine: bool | None = None,
+        method: Method | None = None,
+        period_s: float | None = None,
+    ) -> Settings:
+        """The settings of an `[identification]` section; the keywords given (not None)
+        override it, as command-line options do. `sampled_inputs`: the inputs are the agent's
+        own recording of the surfaces' positions (potentiometers sampling moving surfaces),
+        which `held_inputs = "auto"` treats as not held."""
+        held = config.held_inputs
+        return cls(
+            markov=markov if markov is not None else _auto(config.markov),
+            markov_max=config.markov_max,
+            order=order if order is not None else _auto(config.order),
+            order_max=config.order_max,
+            estimate_d=config.estimate_d,
+            regularization=config.regularization,
+            hankel_blocks=config.hankel_blocks,
+            decimation=decimation if decimation is not None else _auto(config.decimation),
+            band_hz=config.band_hz,
+            held_inputs=(not sampled_inputs) if held == "auto" else held,
+            smoothing_s=config.smoothing_s,
+            refine=config.refine if refine is None else refine,
+            method=method or config.method,
+            period_s=period_s if period_s is not None else config.period_s,
+            noise_model=config.noise_model,
+        )
+
+
+def _auto(value: int | str) -> int | None:
+    return None if value == "auto" else int(value)

@@ -1,5 +1,7 @@
 """Bytes on the air: MessagePack encoding, fragmentation into radio-sized frames, HMAC-SHA-256
-authentication, and replay protection.
+authentication, and replay protection. Sans-I/O: the frame counters come from a `FrameCounter`
+and the replay state is handed in and read out as `floors`; keeping them on disk is
+agent.link.store's job.
 
 Frame (each at most the radio's payload, NP):
 
@@ -29,18 +31,13 @@ from __future__ import annotations
 
 import hashlib
 import hmac
-import json
-import logging
-import os
 import struct
-import time
 from collections import Counter, OrderedDict
+from collections.abc import Mapping
 from dataclasses import dataclass
-from pathlib import Path
+from typing import Protocol
 
 import msgpack
-
-log = logging.getLogger(__name__)
 
 VERSION = 2
 GROUND, AIRCRAFT = 0, 1
@@ -53,108 +50,20 @@ MAX_PARTIAL = 8
 # Frames of one message at most: the header's fragment index and count are one byte each.
 MAX_FRAMES = 255
 PARTIAL_TIMEOUT_S = 10.0
-# Counters reserved per write of the counter file: a reboot skips at most this many.
-COUNTER_BLOCK = 1 << 16
-# The header's counter is a uint64; files holding more (or a jump near it) are refused.
-COUNTER_MAX = 1 << 63
 
 
-class CounterStore:
-    """The sender's frame counter, never reused across restarts.
-
-    With a file, counters are reserved in blocks: the file holds the end of the reserved block,
-    written (and fsynced) before any counter of the block is used. A disk that cannot be
-    written costs this end its sending (each attempt to reserve raises OSError, which the
-    session counts; at start it is logged), never its receiving, so an Abort still arrives
-    and acts. Without a file, the counter starts at the wall clock in
-    microseconds (monotonic across restarts while the clock is)."""
-
-    def __init__(self, path: Path | None = None):
-        self._path = path
-        if path is None:
-            self._next, self._reserved = time.time_ns() // 1000, 1 << 63
-        else:
-            start = _read_counter(path) if path.exists() else 0
-            self._next, self._reserved = start, start
-            try:  # the file says from the start that this end has used the key
-                self._reserve()
-            except OSError as exc:
-                log.error("%s: frame counters not reserved (%s); sending waits for it", path, exc)
-
-    def _reserve(self) -> None:
-        end = self._next + COUNTER_BLOCK
-        tmp = self._path.with_suffix(".tmp")
-        with open(tmp, "w") as handle:
-            handle.write(str(end))
-            handle.flush()
-            os.fsync(handle.fileno())
-        tmp.replace(self._path)
-        self._reserved = end  # only once it is on disk
+class FrameCounter(Protocol):
+    """Where a sender's frame counters come from (agent.link.store.CounterStore)."""
 
     def next(self) -> int:
-        """The next counter; OSError when its block cannot be reserved on disk."""
-        if self._next >= self._reserved:
-            self._reserve()
-        value = self._next
-        self._next += 1
-        return value
-
-
-def _read_counter(path: Path) -> int:
-    """The counter file's number; ValueError naming the file when it is not one in range."""
-    try:
-        text = path.read_text().strip()
-        value = int(text) if text.isdigit() and len(text) <= 20 else -1
-    except (OSError, ValueError) as exc:  # UnicodeDecodeError is a ValueError
-        raise ValueError(f"{path}: the frame counter is unreadable ({exc})") from exc
-    if not 0 <= value < COUNTER_MAX:
-        raise ValueError(
-            f"{path}: the frame counter {text[:40]!r} is not a whole number below 2**63: "
-            "restore the file or give both ends a new key (sysid keygen)"
-        )
-    return value
+        """The next counter, never used before under the key; OSError when it cannot be had."""
+        ...
 
 
 def key_fingerprint(key: bytes) -> str:
     """A short public name of a key (it reveals nothing of it): the replay state is bound to
     it, and `sysid keygen` prints it so both ends can be compared."""
     return hashlib.sha256(b"suas-sysid link key fingerprint\0" + key).hexdigest()[:16]
-
-
-def read_floors(path: Path, fingerprint: str) -> dict[bytes, int]:
-    """The highest counter accepted from each source, from the seen file; ValueError naming
-    the file and what to do when it is not a replay state. A state of another key (its
-    fingerprint differs) says nothing of this key's frames: empty."""
-    try:
-        document = json.loads(path.read_text())
-        if isinstance(document, dict) and "floors" in document:
-            if document.get("key") != fingerprint:
-                log.warning("%s: replay state of another key; starting empty", path)
-                return {}
-            document = document["floors"]
-        if not isinstance(document, dict):
-            raise ValueError(f"a map of sources, not {type(document).__name__}")
-        floors = {_address(k): _floor(v) for k, v in document.items()}
-    except (OSError, ValueError, RecursionError) as exc:  # json and Unicode errors included
-        raise ValueError(
-            f"{path}: the replay state is unreadable ({exc}); without it every frame "
-            "recorded under this key would be accepted again: restore the file or "
-            "give both ends a new key (sysid keygen)"
-        ) from exc
-    return floors
-
-
-def _address(text: object) -> bytes:
-    if not isinstance(text, str) or len(text) != 16:
-        raise ValueError(f"{str(text)[:40]!r} is not a 64-bit radio address in hex")
-    return bytes.fromhex(text)
-
-
-def _floor(value: object) -> int:
-    # JSON's Infinity and 1e400 are floats, and a bool is an int to Python: neither is a counter.
-    if type(value) is not int or not -1 <= value < COUNTER_MAX:
-        raise ValueError(f"{str(value)[:40]!r} is not a frame counter (a whole number ≥ -1)")
-    return value
 
 
 class ReplayWindow:
@@ -200,7 +109,9 @@ class _Partial:
 
 
 class LinkCodec:
-    """One end of the link: frames our messages, checks and reassembles the other end's."""
+    """One end of the link: frames our messages, checks and reassembles the other end's.
+    `floors`: the highest counter accepted from each source before (the replay state as
+    loaded from disk), at or below which nothing from that source is accepted again."""
 
     def __init__(
         self,
@@ -208,9 +119,9 @@ class LinkCodec:
         role: int,
         allow: set[bytes],
         *,
-        counter: CounterStore,
+        counter: FrameCounter,
         max_payload: int = 256,
-        seen: Path | None = None,
+        floors: Mapping[bytes, int] | None = None,
         address: bytes = b"",
     ):
         if len(key) < 16:
@@ -221,11 +132,10 @@ class LinkCodec:
         self._counter = counter
         self.max_payload = max_payload
         self._message_number = 0
-        self._seen_path = seen
         self.fingerprint = key_fingerprint(key)
-        floors = read_floors(seen, self.fingerprint) if seen is not None and seen.exists() else {}
-        self._windows: dict[bytes, ReplayWindow] = {a: ReplayWindow(f) for a, f in floors.items()}
-        self._saved: dict[bytes, int] = dict(floors)
+        self._windows: dict[bytes, ReplayWindow] = {
+            a: ReplayWindow(f) for a, f in (floors or {}).items()
+        }
         self._partials: dict[bytes, OrderedDict[int, _Partial]] = {}
         self.last_counter = -1
         self.counters: Counter[str] = Counter()
@@ -301,43 +211,10 @@ class LinkCodec:
         self.last_counter = counter  # the frame counter that completed it (the session's epochs)
         return message
 
-    def save_seen(self) -> bool:
-        """Write the highest counter accepted from each source, so a restarted receiver refuses
-        frames it accepted before (True: written; False: nothing new). OSError when the disk
-        refuses: the state is then still unsaved, and the next call tries again."""
-        snapshot = self.seen_snapshot()
-        if snapshot is None:
-            return False
-        self.write_seen(snapshot)
-        self.mark_saved(snapshot)
-        return True
-
-    def seen_snapshot(self) -> dict[bytes, int] | None:
-        """What save_seen would write, taken on the caller's thread; None: nothing new."""
-        current = {a: w.highest for a, w in self._windows.items()}
-        if self._seen_path is None or current == self._saved:
-            return None
-        return current
-
-    def write_seen(self, snapshot: dict[bytes, int]) -> None:
-        """Write a snapshot, fsynced, through a temporary file (file-system work: the session
-        runs it off the event loop). Raises OSError as the disk does."""
-        tmp = self._seen_path.with_suffix(".tmp")
-        floors = {a.hex(): h for a, h in snapshot.items()}
-        with open(tmp, "w") as handle:
-            handle.write(json.dumps({"key": self.fingerprint, "floors": floors}))
-            handle.flush()
-            os.fsync(handle.fileno())
-        tmp.replace(self._seen_path)
-
-    def mark_saved(self, snapshot: dict[bytes, int]) -> None:
-        """A snapshot is on disk (call only once write_seen has returned)."""
-        self._saved = snapshot
-
-    @property
-    def unsaved(self) -> bool:
-        """Frames accepted that the seen file does not cover yet."""
-        return self.seen_snapshot() is not None
+    def floors(self) -> dict[bytes, int]:
+        """The highest counter accepted from each source: what the replay state on disk must
+        cover (agent.link.store.SeenStore) for a restarted receiver to refuse them again."""
+        return {a: w.highest for a, w in self._windows.items()}
 
     def _drop(self, reason: str) -> None:
         self.counters[reason] += 1

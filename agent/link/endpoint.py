@@ -8,8 +8,9 @@ from pathlib import Path
 
 from agent.clock import Clock
 from agent.config import Link, load_key
-from agent.link.codec import CounterStore, LinkCodec, key_fingerprint, read_floors
+from agent.link.codec import LinkCodec, key_fingerprint
 from agent.link.session import Guard, LinkSession
+from agent.link.store import CounterStore, SeenStore
 from drivers.xbee.driver import XBeeRadio
 
 log = logging.getLogger(__name__)
@@ -44,17 +45,17 @@ def build_endpoint(
     first = not seen.exists()
     for state in (counter, seen):
         state.parent.mkdir(parents=True, exist_ok=True)
-    if not first:  # refused before anything is written (the counter reserves a block)
-        read_floors(seen, key_fingerprint(key))
-    codec = LinkCodec(key, role, {peer}, counter=CounterStore(counter), seen=seen)
+    store = SeenStore(seen, key_fingerprint(key))
+    floors = store.load()  # refused before anything is written (the counter reserves a block)
+    codec = LinkCodec(key, role, {peer}, counter=CounterStore(counter), floors=floors)
     if first:  # a first start under this key: the state starts here, saved and bound to it
-        codec.write_seen({})
+        store.write({})
         log.info(
             "%s: a first start under key %s: its replay state starts empty. A key used "
             "before, from another directory, would accept every frame recorded under it "
             "again: make a new key for new state (sysid keygen)",
             seen,
-            codec.fingerprint,
+            store.fingerprint,
         )
     sessions: list[LinkSession] = []
 
@@ -80,6 +81,7 @@ def build_endpoint(
         peer,
         clock,
         on_message,
+        seen=store,
         heartbeat_s=cfg.heartbeat_s,
         deadline_s=cfg.deadline_s,
         guard=guard,

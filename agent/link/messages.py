@@ -13,7 +13,9 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 
+from agent.channels import AxisSet
 from agent.excitation.plan import Plan
+from agent.ident.document import ModeDocument
 
 VERSION = 1
 
@@ -52,7 +54,9 @@ class IdentSettings(Message):
     """Identification settings (thesis B.2 4.1.1: the operator sets the update period)."""
 
     kind: Literal["settings"] = "settings"
-    axes: Literal["lateral", "longitudinal", "full"] = "lateral"
+    axes: AxisSet | None = None
+    """The axes every window is identified on, whatever its plan; None: each run on its own
+    plan's axes (a periodic window on the configured `[identification] axes`)."""
     markov: int | Literal["auto"] = "auto"
     order: int | Literal["auto"] = "auto"
     batch: bool = False
@@ -121,6 +125,9 @@ class Status(Message):
     link_fault: str | None = Field(None, max_length=200)
     """Why the aircraft's link cannot obey state-changing commands now (its replay state
     cannot be saved: a full or failing disk); None: it can. An Abort is obeyed regardless."""
+    settings: IdentSettings | None = None
+    """The identification settings in effect onboard, p and order as they will be used (the
+    ground's, else the configuration's); None: an aircraft that does not report them."""
 
 
 class ExcitationEvent(Message):
@@ -131,30 +138,10 @@ class ExcitationEvent(Message):
     detail: str = ""
 
 
-class ModeReport(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-    name: str | None
-    real: float
-    imag: float
-    frequency_hz: float | None
-    damping: float | None
-    time_constant_s: float | None
-    msv: float | None
-    mci: float | None
-    moi: float | None
-    emac: float | None
-    mpc: float | None
-    cmi: float | None
-    real_std: float | None = None
-    """Cramér–Rao 1-σ of the eigenvalue's real and imaginary parts and of the damping (None
-    without refinement)."""
-    imag_std: float | None = None
-    damping_std: float | None = None
-
-
 class Result(Message):
     """One identification: modes with their quality indexes, fit, stability, the update
-    suggestion and the model matrices (discrete A, B, C, D at dt)."""
+    suggestion and the model matrices (discrete A, B, C, D at dt). The modes are the
+    result document's (agent.ident.document.ModeDocument), as the model store keeps them."""
 
     kind: Literal["result"] = "result"
     model_id: str = Field(max_length=32)
@@ -162,7 +149,7 @@ class Result(Message):
     dt: float
     inputs: list[str]
     outputs: list[str]
-    modes: list[ModeReport]
+    modes: list[ModeDocument]
     tic: list[float]
     tic_avg: float
     stable: bool

@@ -40,6 +40,7 @@ from typing import Protocol
 from agent.clock import Clock
 from agent.link import messages
 from agent.link.codec import LinkCodec, MessageTooLarge, pack
+from agent.link.store import SeenStore
 
 log = logging.getLogger(__name__)
 
@@ -119,12 +120,14 @@ class LinkSession:
         clock: Clock,
         on_message: Callable[[messages.Message, int | None], None],
         *,
+        seen: SeenStore | None = None,
         heartbeat_s: float = 1.0,
         deadline_s: float = 3.0,
         guard: Guard | None = None,
         max_age_s: float | None = None,
     ):
         self._codec, self._transport, self._peer, self._clock = codec, transport, peer, clock
+        self._seen = seen  # None: no replay state kept (nothing is written)
         self._on_message = on_message
         self._heartbeat_s, self._deadline_s = heartbeat_s, deadline_s
         self._guard, self._max_age_s = guard, max_age_s
@@ -201,6 +204,12 @@ class LinkSession:
     def codec(self) -> LinkCodec:
         """The framing underneath: its counters say what was dropped, and why."""
         return self._codec
+
+    @property
+    def unsaved(self) -> bool:
+        """Frames accepted that the replay state on disk does not cover yet (False without
+        one)."""
+        return self._seen is not None and self._seen.changed(self._codec.floors()) is not None
 
     @property
     def link_up(self) -> bool:
@@ -346,12 +355,13 @@ class LinkSession:
     async def _save(self) -> bool:
         """Write the replay state if anything is new; False when the disk refused (counted,
         and the reason kept in `persist_error` until a write succeeds)."""
-        snapshot = self._codec.seen_snapshot()
+        seen = self._seen
+        snapshot = None if seen is None else seen.changed(self._codec.floors())
         if snapshot is None:
             return True
         try:
             # A rename can wait on the disk (ext4 flushes the data first): off the loop.
-            await asyncio.to_thread(self._codec.write_seen, snapshot)
+            await asyncio.to_thread(seen.write, snapshot)
         except OSError as exc:
             self.counters["seen_write_failures"] += 1
             if self.persist_error is None:
@@ -361,7 +371,7 @@ class LinkSession:
                 "obeyed until it can"
             )
             return False
-        self._codec.mark_saved(snapshot)
+        seen.mark_saved(snapshot)
         if self.persist_error is not None:
             log.warning("link: the replay state is saved again")
             self.persist_error = None
@@ -377,8 +387,9 @@ class LinkSession:
         try:
             await self._serve()
         finally:  # stopping: the replay state as it stands, whatever the last save was
-            with contextlib.suppress(OSError):
-                self._codec.save_seen()
+            if self._seen is not None:
+                with contextlib.suppress(OSError):
+                    self._seen.save(self._codec.floors())
 
     async def _serve(self) -> None:
         while True:

@@ -31,7 +31,7 @@ from agent.recorder import Recorder
 from agent.runtime.commands import Commands
 from agent.runtime.downlink import Downlink
 from agent.runtime.health import Health
-from agent.runtime.identification import Identification
+from agent.runtime.identification import Identifier
 from agent.runtime.live import Live
 from agent.runtime.status import Status
 from agent.runtime.worker import new_worker
@@ -92,28 +92,36 @@ class Agent:
         self.scheduler = Scheduler(excitation, self.autopilot, self.clock)
         self.scheduler.subscribe(self._on_scheduler)
         self.models = ModelStore(self.base / "models")
-        self.identification = Identification(
-            config,
-            self.clock,
-            self.recorder,
-            self.models,
-            self.writer,
-            self.downlink,
-            self.counters,
-            worker,
+        self.identification = Identifier(
+            config=config,
+            clock=self.clock,
+            recorder=self.recorder,
+            models=self.models,
+            writer=self.writer,
+            downlink=self.downlink,
+            counters=self.counters,
+            worker=worker,
         )
-        self.commands = Commands(self.scheduler, self.identification, self.downlink, self.counters)
+        self.commands = Commands(
+            scheduler=self.scheduler,
+            identification=self.identification,
+            downlink=self.downlink,
+            counters=self.counters,
+        )
         self.health = Health(
-            self.clock, self.counters, lambda: self.identification.busy, self._health_sections
+            clock=self.clock,
+            counters=self.counters,
+            busy=lambda: self.identification.busy,
+            sections=self._health_sections,
         )
         self.live = Live(
-            config,
-            self.clock,
-            self.scheduler,
-            self.recorder,
-            self.identification,
-            self.downlink,
-            self.counters,
+            config=config,
+            clock=self.clock,
+            scheduler=self.scheduler,
+            recorder=self.recorder,
+            identification=self.identification,
+            downlink=self.downlink,
+            counters=self.counters,
         )
         self._log_handler = None  # the execution log's handler while running
         sensors = config.sensors
@@ -123,16 +131,16 @@ class Agent:
             if getattr(sensors, name).enabled
         ]
         self.status = Status(
-            self.clock,
-            self.autopilot,
-            self.scheduler,
-            self.drivers,
-            self.recorder,
-            self.writer,
-            self.models,
-            self.identification,
-            self.health,
-            self.downlink,
+            clock=self.clock,
+            autopilot=self.autopilot,
+            scheduler=self.scheduler,
+            drivers=self.drivers,
+            recorder=self.recorder,
+            writer=self.writer,
+            models=self.models,
+            identification=self.identification,
+            health=self.health,
+            downlink=self.downlink,
         )
 
     @property
@@ -280,8 +288,8 @@ class Agent:
             return
         if played is None or played.plan.id != window.plan_id or len(rows) == 0:
             return
-        measured = {c: rows[:, 1 + k] for k, c in enumerate(self.recorder.channels)}
-        for f in following(played.timeline, played.start, rows[:, 0], measured):
+        frames = self.recorder.frames(rows)
+        for f in following(played.timeline, played.start, frames.time, frames.values):
             if f.verdict == "follows":
                 continue
             self.counters[f"surface_{f.verdict.replace(' ', '_')}"] += 1

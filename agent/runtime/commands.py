@@ -8,7 +8,8 @@ hands an abort on the moment it arrives, whatever the disk does, and refuses thr
 command whose replay state could not be saved or that arrived too late. Each message type
 has one handler (`Commands.handlers`): it returns "" when done, or the reason it was not; a
 refusal the handler raises (`PlanRefused`, no such model, no previous nominal) is a reason
-too.
+too. A plan whose run cannot be identified on its axes (an input of them it does not move)
+is armed all the same, and the ground told why in a notice.
 """
 
 from __future__ import annotations
@@ -18,11 +19,12 @@ import logging
 from collections import Counter
 from collections.abc import Awaitable, Callable
 
-from agent.excitation.plan import PlanRefused
+from agent.channels import AXIS_SETS
+from agent.excitation.plan import Plan, PlanRefused
 from agent.excitation.scheduler import Scheduler
 from agent.link import messages
 from agent.runtime.downlink import Downlink
-from agent.runtime.identification import Identification
+from agent.runtime.identification import Identifier
 
 log = logging.getLogger(__name__)
 
@@ -35,8 +37,9 @@ Handler = Callable[[messages.Message], Awaitable[str]]
 class Commands:
     def __init__(
         self,
+        *,
         scheduler: Scheduler,
-        identification: Identification,
+        identification: Identifier,
         downlink: Downlink,
         counters: Counter[str],
     ):
@@ -132,6 +135,9 @@ class Commands:
 
     async def _arm(self, message: messages.Arm) -> str:
         await self.scheduler.arm_checked(message.plan)
+        unmoved = _unmoved_inputs(message.plan, self.identification.settings.axes)
+        if unmoved:  # armed all the same: the excitation is the operator's to fly
+            self.downlink.send(messages.Notice(text=unmoved))
         return ""
 
     async def _start(self, message: messages.Start) -> str:
@@ -154,3 +160,21 @@ class Commands:
 
     async def _frf(self, message: messages.FrfRequest) -> str:
         return await self.identification.request_frf(message)
+
+
+def _unmoved_inputs(plan: Plan, chosen: str | None) -> str:
+    """Why the run of `plan` will not identify ("" when it can): an input of the axes it is
+    identified on (the operator's `chosen`, else the plan's own) that the plan does not move
+    is constant in the record, and the identification fails on it after the flight."""
+    axes = chosen or plan.axes
+    unmoved = [c for c in AXIS_SETS[axes][0] if c not in plan.controls()]
+    if not unmoved:
+        return ""
+    whose = "the ground's settings" if chosen else "the plan's axes"
+    text = (
+        f"{plan.id}: identified as {axes} ({whose}), which needs {', '.join(unmoved)} "
+        f"moved; the plan does not move {'it' if len(unmoved) == 1 else 'them'}"
+    )
+    if chosen:
+        text += ": send settings with each plan's own axes, or arm a plan that moves them"
+    return text[:200]

@@ -125,6 +125,7 @@ class Health:
 
     def __init__(
         self,
+        *,
         clock: Clock,
         counters: Counter[str],
         busy: Callable[[], bool],

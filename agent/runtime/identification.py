@@ -16,7 +16,7 @@ from collections import Counter, deque
 from collections.abc import Callable
 from concurrent.futures import Executor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -26,8 +26,8 @@ from agent.config import Config
 from agent.excitation.scheduler import Window
 from agent.ident import Settings
 from agent.ident import job as jobs
+from agent.ident.document import ResultDocument
 from agent.ident.errors import DataError
-from agent.ident.job import settings_from
 from agent.link import messages
 from agent.logs import LogWriter, log_name
 from agent.models import SELF_CHECK_RATIO, Candidate, ModelStore, Suggestion, suggest
@@ -45,12 +45,13 @@ RESULTS_KEPT = 100
 PERIODIC_IDLE_S = 1.0
 
 
-class Identification:
+class Identifier:
     """Identifies each finished excitation window (and, with an update period set from the
     ground, the data of every period) in the worker; sends each result or failure down."""
 
     def __init__(
         self,
+        *,
         config: Config,
         clock: Clock,
         recorder: Recorder,
@@ -63,7 +64,9 @@ class Identification:
         self.config, self.clock, self.recorder = config, clock, recorder
         self.models, self.writer, self.downlink = models, writer, downlink
         self.counters = counters
-        self.settings = messages.IdentSettings(axes=config.identification.axes)
+        # The ground's settings; until it sends any, each run is identified on its plan's axes.
+        self.settings = messages.IdentSettings()
+        self.last_axes: str = config.identification.axes  # of the last window identified
         self.busy = False  # a window is in the worker
         self.ready = False  # the first worker is up and warmed
         # The stage a busy window is in: (name, since, expected seconds or None).
@@ -71,7 +74,7 @@ class Identification:
         # By (axes, stage): how long the last one took (s) and on how many samples.
         self._took: dict[tuple[str, str], tuple[float, int]] = {}
         self._windows = 0  # windows waiting in the queue
-        self.results: deque[dict] = deque(maxlen=RESULTS_KEPT)
+        self.results: deque[ResultRecord] = deque(maxlen=RESULTS_KEPT)
         # The result log: one JSON object per identification (thesis 2.2.1).
         self._log = writer.open(log_name(writer.next_number(), "results", "jsonl"))
         # Windows to identify and frequency responses asked for: one worker, in order.
@@ -127,7 +130,8 @@ class Identification:
         rows = self.recorder.ring.between(end - period, end)
         if len(rows) < 2:
             return None
-        window = Window(f"periodic@{end:.0f}", self.settings.axes, end - period, end, "finished")
+        axes = self.settings.axes or self.config.identification.axes
+        window = Window(f"periodic@{end:.0f}", axes, end - period, end, "finished")
         return (window, rows) if self.submit(window, rows) else None
 
     async def periodic(self) -> None:
@@ -154,6 +158,22 @@ class Identification:
             self.settings = settings
         return "; ".join(reasons)
 
+    def axes_for(self, window: Window) -> str:
+        """The axes a window is identified on: the operator's, when the ground's settings
+        chose some, else the window's own (its plan's, which its controls belong to)."""
+        return self.settings.axes or window.axes
+
+    def in_effect(self) -> messages.IdentSettings:
+        """The settings as used now, for the ground to show: the ground's, with p and order
+        the configuration's where the ground left them "auto" (axes None: each plan's own)."""
+        cfg, s = self.config.identification, self.settings
+        return s.model_copy(
+            update={
+                "markov": cfg.markov if s.markov == "auto" else s.markov,
+                "order": cfg.order if s.order == "auto" else s.order,
+            }
+        )
+
     async def decide(self, decision: messages.Decision) -> None:
         """The operator accepts a model as nominal or rejects it (KeyError: no such model)."""
         accepted = await self._in_store(self._decide, decision)
@@ -172,8 +192,9 @@ class Identification:
         return accepted.axes, accepted.model_id
 
     async def revert(self) -> None:
-        """The previous nominal of the current axes is nominal again (LookupError: none)."""
-        await self._in_store(self.models.revert, self.settings.axes)
+        """The previous nominal of the current axes (the operator's, else the last window's)
+        is nominal again (LookupError: none)."""
+        await self._in_store(self.models.revert, self.settings.axes or self.last_axes)
 
     async def _in_store(self, function, *args):
         return await asyncio.get_running_loop().run_in_executor(self._store, function, *args)
@@ -215,13 +236,13 @@ class Identification:
                 self._pool = self._new_worker()
                 self._failed(
                     window.plan_id,
-                    self.settings.axes,
+                    self.axes_for(window),
                     "the identification worker process died; a new one is started "
                     "for the next window",
                 )
             except Exception as exc:  # a fault in one identification: a failure result, go on
                 log.exception("identification of %s failed", window.plan_id)
-                self._failed(window.plan_id, self.settings.axes, f"internal error: {exc!r}")
+                self._failed(window.plan_id, self.axes_for(window), f"internal error: {exc!r}")
             finally:
                 self.busy, self._stage = False, None
 
@@ -251,14 +272,14 @@ class Identification:
         """Queue a model's measured frequency response for one pair; why not ("" when queued:
         the FrfReport follows once the worker is free)."""
         candidate = await self._in_store(self.models.find, request.model_id)
-        inputs, outputs = candidate.result["inputs"], candidate.result["outputs"]
+        inputs, outputs = candidate.result.inputs, candidate.result.outputs
         if request.input not in inputs or request.output not in outputs:
             return (
                 f"{request.model_id} has no pair {request.input} → {request.output} "
                 f"(inputs {', '.join(inputs)}; outputs {', '.join(outputs)})"
             )
         i, j = inputs.index(request.input), outputs.index(request.output)
-        job = _FrfJob(request, candidate, i, j)
+        job = _FrfJob(request=request, candidate=candidate, input_index=i, output_index=j)
         try:
             self._queue.put_nowait(job)
         except asyncio.QueueFull:
@@ -272,7 +293,7 @@ class Identification:
             answer = await loop.run_in_executor(
                 self._pool,
                 jobs.frequency_response,
-                c.preprocessing,
+                c.result.preprocessing,
                 c.record_dt,
                 c.experiments,
                 job.input_index,
@@ -297,7 +318,8 @@ class Identification:
         send the result (or the failure, with its reason) down."""
         self.start_worker()
         loop = asyncio.get_running_loop()
-        axes, ident = self.settings.axes, self.settings
+        axes, ident = self.axes_for(window), self.settings
+        self.last_axes = axes
         channels = self.config.identification.channels
         inputs, outputs = channels.axis_set(axes)
         # Never given twice on this aircraft (the model store's numbering): an id never names
@@ -305,18 +327,18 @@ class Identification:
         model_id = await self._in_store(self.models.reserve_id, axes)
         navigation = channels.navigation()
         needed = {*inputs, *outputs, *navigation}
-        columns = {c: rows[:, 1 + k] for k, c in enumerate(self.recorder.channels) if c in needed}
+        columns = {c: v for c, v in self.recorder.frames(rows).values.items() if c in needed}
         dt = 1.0 / self.config.recorder.rate_hz
         batch = self._batch.setdefault(axes, []) if ident.batch else []
         job = jobs.Job(
-            model_id,
-            axes,
-            dt,
-            inputs,
-            outputs,
-            AXIS_SETS[axes][1],
-            tuple(batch),
-            onboard_settings(self.config, ident),
+            model_id=model_id,
+            axes=axes,
+            record_dt=dt,
+            inputs=inputs,
+            outputs=outputs,
+            roles=AXIS_SETS[axes][1],
+            experiments=tuple(batch),
+            settings=onboard_settings(self.config, ident),
             window=columns,
             trim_s=self.config.identification.trim_seconds,
             navigation=navigation,
@@ -329,27 +351,27 @@ class Identification:
         if ident.batch:
             batch.append(outcome.experiment)
         candidate = Candidate(
-            model_id,
-            axes,
-            dt,
-            outcome.result,
-            outcome.preprocessing,
-            (*job.experiments, outcome.experiment),
-            extra={"record_s": len(outcome.experiment[0]) * dt, "trim": outcome.trim},
+            model_id=model_id,
+            axes=axes,
+            record_dt=dt,
+            result=outcome.result,
+            experiments=(*job.experiments, outcome.experiment),
+            record_s=len(outcome.experiment[0]) * dt,
+            trim=outcome.trim,
         )
         suggestion = await self._compare(candidate, len(rows))
         await self._in_store(self.models.add, candidate)
-        record = {
-            "model_id": model_id,
-            "axes": axes,
-            "window": [window.start, window.end],
-            "trim": outcome.trim,
-            "suggestion": suggestion.__dict__,
-            "result": outcome.result,
-        }
+        record = ResultRecord(
+            model_id=model_id,
+            axes=axes,
+            window=(window.start, window.end),
+            trim=outcome.trim,
+            suggestion=suggestion,
+            result=outcome.result,
+        )
         self.results.append(record)
         self.counters["identifications"] += 1
-        self.writer.write(self._log, (json.dumps(record) + "\n").encode())
+        self.writer.write(self._log, record.line())
         self.downlink.send(result_message(candidate, suggestion))
 
     async def _compare(self, candidate: Candidate, samples: int) -> Suggestion:
@@ -372,7 +394,6 @@ class Identification:
             self._pool,
             jobs.cross_tic,
             model.result,
-            model.preprocessing,
             data.record_dt,
             data.experiments,
         )
@@ -395,12 +416,13 @@ class Identification:
     def _failed(self, model_id: str, axes: str, reason: str) -> None:
         self.counters["identification_failures"] += 1
         log.warning("identification %s failed: %s", model_id, reason)
-        self.results.append({"model_id": model_id, "axes": axes, "failure": reason})
-        self.writer.write(self._log, (json.dumps(self.results[-1]) + "\n").encode())
+        record = ResultRecord(model_id=model_id, axes=axes, failure=reason)
+        self.results.append(record)
+        self.writer.write(self._log, record.line())
         self.downlink.send(messages.Failure(model_id=model_id, axes=axes, reason=reason[:300]))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class _FrfJob:
     request: messages.FrfRequest
     candidate: Candidate
@@ -409,57 +431,66 @@ class _FrfJob:
 
 
 def onboard_settings(config: Config, ident: messages.IdentSettings) -> Settings:
-    """The identification settings onboard: the config's, with the ground's p and order."""
-    markov = None if ident.markov == "auto" else ident.markov
-    order = None if ident.order == "auto" else ident.order
-    settings = settings_from(config.identification, markov, order)
-    # The surface pots sample continuously moving surfaces: not held inputs.
-    return Settings(**{**settings.__dict__, "held_inputs": False})
+    """The identification settings onboard: the config's, with the ground's p and order. The
+    inputs are the surface pots' samples of moving surfaces (`held_inputs = "auto"`: not
+    held)."""
+    return Settings.from_config(
+        config.identification,
+        sampled_inputs=True,
+        markov=None if ident.markov == "auto" else ident.markov,
+        order=None if ident.order == "auto" else ident.order,
+    )
 
 
 def result_message(c: Candidate, s: Suggestion) -> messages.Result:
     """A result as the link carries it."""
     r = c.result
-    modes = []
-    for m in r["modes"]:
-        re, im = m["eigenvalue"]
-        modes.append(
-            messages.ModeReport(
-                name=m["name"],
-                real=re,
-                imag=im,
-                frequency_hz=m["frequency_rad_s"] / (2 * np.pi),
-                damping=m["damping"],
-                time_constant_s=m["time_constant_s"],
-                msv=m["msv"],
-                mci=m["mci"],
-                moi=m["moi"],
-                emac=m["emac"],
-                mpc=m["mpc"],
-                cmi=m["cmi"],
-                real_std=None if m.get("eigenvalue_std") is None else m["eigenvalue_std"][0],
-                imag_std=None if m.get("eigenvalue_std") is None else m["eigenvalue_std"][1],
-                damping_std=m.get("damping_std"),
-            )
-        )
     return messages.Result(
         model_id=c.model_id,
         axes=c.axes,
-        dt=r["dt"],
-        inputs=r["inputs"],
-        outputs=r["outputs"],
-        modes=modes,
-        tic=[float(r["tic"][o]) for o in r["outputs"]],
-        tic_avg=r["tic_avg"],
-        stable=r["stable"],
+        dt=r.dt,
+        inputs=r.inputs,
+        outputs=r.outputs,
+        modes=r.modes,
+        tic=[r.tic[o] for o in r.outputs],
+        tic_avg=r.tic_avg,
+        stable=r.stable,
         suggest_update=s.update,
         reasons=s.steps,
         checks=s.checks,
         tic_jn=s.tic_jn,
         tic_nn=s.tic_nn,
         tic_nj=s.tic_nj,
-        A=r["A"],
-        B=r["B"],
-        C=r["C"],
-        D=r["D"],
+        A=r.A,
+        B=r.B,
+        C=r.C,
+        D=r.D,
     )
+
+
+@dataclass(frozen=True, kw_only=True)
+class ResultRecord:
+    """One line of the result log (thesis 2.2.1): an identification, or a failure and why."""
+
+    model_id: str
+    axes: str
+    window: tuple[float, float] | None = None  # the excitation window's start and end (s)
+    trim: dict[str, dict[str, float]] | None = None  # "inputs"/"outputs" by channel
+    suggestion: Suggestion | None = None
+    result: ResultDocument | None = None
+    failure: str | None = None
+
+    def line(self) -> bytes:
+        """The record as one line of JSON (the failure's without the identification's keys)."""
+        if self.failure is not None:
+            document = {"model_id": self.model_id, "axes": self.axes, "failure": self.failure}
+        else:
+            document = {
+                "model_id": self.model_id,
+                "axes": self.axes,
+                "window": list(self.window or ()),
+                "trim": self.trim,
+                "suggestion": None if self.suggestion is None else asdict(self.suggestion),
+                "result": None if self.result is None else self.result.model_dump(mode="json"),
+            }
+        return (json.dumps(document) + "\n").encode()

@@ -26,7 +26,7 @@ from agent.excitation.scheduler import Scheduler
 from agent.link import messages
 from agent.recorder import Recorder
 from agent.runtime.downlink import Downlink
-from agent.runtime.identification import Identification
+from agent.runtime.identification import Identifier
 
 # A surface's trim for the live view: its mean over this long before the plan started.
 TRIM_S = 0.5
@@ -41,11 +41,12 @@ class Live:
     # each the wiring of its own part (agent.py builds them).
     def __init__(
         self,
+        *,
         config: Config,
         clock: Clock,
         scheduler: Scheduler,
         recorder: Recorder,
-        identification: Identification,
+        identification: Identifier,
         downlink: Downlink,
         counters: Counter[str],
     ):
@@ -55,7 +56,6 @@ class Live:
         self._axes = config.identification.axes  # of the last plan played
         self._withheld = False  # the live view is held back: the radio is busy
         self._trim: tuple[str, dict[str, float]] = ("", {})  # (plan id, surface → trim)
-        self._columns = {c: 1 + k for k, c in enumerate(recorder.channels)}
 
     async def run(self) -> None:
         period = self.config.live.period_s
@@ -73,11 +73,11 @@ class Live:
         if playing is None:
             return self._trim[1] if self._trim[0] else {}
         if self._trim[0] != playing.plan.id:
-            rows = self.recorder.ring.between(playing.start - TRIM_S, playing.start)
+            frames = self.recorder.window(playing.start - TRIM_S, playing.start)
             trim = {}
             for control in playing.plan.controls():
-                column = self._columns.get(control)
-                value = None if column is None else _trim_value(rows, column)
+                values = frames.values.get(control)
+                value = None if values is None else _trim_value(values)
                 if value is not None:
                     trim[control] = value
             self._trim = (playing.plan.id, trim)
@@ -131,15 +131,15 @@ class Live:
                     for t in times
                 ]
         inputs, outputs = self.config.identification.channels.axis_set(self._axes)
-        rows = self.recorder.ring.between(times[0] - dt, times[-1])
+        frames = self.recorder.window(times[0] - dt, times[-1])
         trim = self._trim_of(playing)
         for name in (*inputs, *outputs):
-            column = self._columns.get(name)
-            if column is None:
+            values = frames.values.get(name)
+            if values is None:
                 continue
             scale = TO_DISPLAY.get(SENSOR_CHANNELS.get(name, ("", ""))[0], 1.0)
             offset = trim.get(name, 0.0)
-            tenths[name] = [_nearest(rows, column, t, dt, scale, offset) for t in times]
+            tenths[name] = [_nearest(frames.time, values, t, dt, scale, offset) for t in times]
         return messages.Live(
             time=float(times[0]),
             dt=dt,
@@ -153,8 +153,7 @@ class Live:
         )
 
 
-def _trim_value(rows: np.ndarray, column: int) -> float | None:
-    values = rows[:, column] if len(rows) else np.empty(0)
+def _trim_value(values: np.ndarray) -> float | None:
     values = values[np.isfinite(values)]
     return float(values.mean()) if values.size else None
 
@@ -164,13 +163,13 @@ def _tenths(value: float) -> int | None:
 
 
 def _nearest(
-    rows: np.ndarray, column: int, t: float, dt: float, scale: float, offset: float = 0.0
+    time: np.ndarray, values: np.ndarray, t: float, dt: float, scale: float, offset: float = 0.0
 ) -> int | None:
     """The channel's value less `offset` in the frame nearest `t` (within half a sample), in
     tenths of its display unit."""
-    if not len(rows):
+    if not len(time):
         return None
-    k = int(np.argmin(np.abs(rows[:, 0] - t)))
-    if abs(rows[k, 0] - t) > dt / 2:
+    k = int(np.argmin(np.abs(time - t)))
+    if abs(time[k] - t) > dt / 2:
         return None
-    return _tenths((float(rows[k, column]) - offset) * scale)
+    return _tenths((float(values[k]) - offset) * scale)

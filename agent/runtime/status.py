@@ -17,7 +17,7 @@ from agent.models import ModelStore
 from agent.recorder import Recorder
 from agent.runtime.downlink import Downlink
 from agent.runtime.health import Health
-from agent.runtime.identification import Identification
+from agent.runtime.identification import Identifier
 from drivers.autopilot.driver import AutopilotLink
 
 log = logging.getLogger(__name__)
@@ -28,6 +28,7 @@ STATUS_S = 1.0
 class Status:
     def __init__(
         self,
+        *,
         clock: Clock,
         autopilot: AutopilotLink,
         scheduler: Scheduler,
@@ -35,7 +36,7 @@ class Status:
         recorder: Recorder,
         writer: LogWriter,
         models: ModelStore,
-        identification: Identification,
+        identification: Identifier,
         health: Health,
         downlink: Downlink,
     ):
@@ -107,6 +108,7 @@ class Status:
             },
             sensors=sensors,
             link_fault=self._link_fault(),
+            settings=self.identification.in_effect(),
         )
 
     def _link_fault(self) -> str | None:

@@ -1,6 +1,6 @@
 """An emulated ArduPlane in MANUAL, speaking real MAVLink (pymavlink) over UDP.
 
-What it does, as ArduPlane does it (PROTOCOLS.md):
+What it does, as ArduPlane does it (docs/protocols.md, *ArduPlane through MAVSDK*):
 - HEARTBEAT at 1 Hz as a fixed-wing ArduPilot (custom mode 0 = MANUAL, armed).
 - Telemetry at per-message intervals, changed by MAV_CMD_SET_MESSAGE_INTERVAL (511) with a
   COMMAND_ACK: ATTITUDE, VFR_HUD, AOA_SSA, RC_CHANNELS, SERVO_OUTPUT_RAW, GLOBAL_POSITION_INT.
@@ -158,6 +158,12 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
             for ch in OUTPUTS
         }
         self.outputs: dict[int, int] = {ch: normalised_to_pwm(ch, start[ch]) for ch in OUTPUTS}
+
+    @property
+    def overrides(self) -> dict[int, tuple[int, float]]:
+        """The RC overrides held now, {channel: (PWM, when last refreshed)} (a copy); one
+        past RC_OVERRIDE_TIME goes at the next tick, when the pilot gets the channel back."""
+        return dict(self._overrides)
 
     async def reboot(self, silent_s: float = 2.0) -> None:
         """ArduPlane restarting (a brown-out, a watchdog reset): silent both ways for

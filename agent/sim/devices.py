@@ -109,7 +109,11 @@ class Emitter:
         seed: int = 0,
     ):
         self.port, self._encode, self._rate, self._clock = port, encode, rate_hz, clock
-        self._corrupt, self._dropout = corrupt, dropout
+        self.corrupt = corrupt
+        """The chance that a frame goes out with one bit flipped (a fault test may change it
+        while the emitter runs)."""
+        self.dropout = dropout
+        """The chance that a frame is not sent at all (likewise)."""
         self._rng = random.Random(seed)
         self.sent = 0
         self.corrupted = 0
@@ -135,10 +139,10 @@ class Emitter:
         """Encode and write frame k sampled at time t (a simulator calls this in step with
         its physics, so every frame carries the state of its own time stamp)."""
         frame = self._encode(t, k)
-        if self._rng.random() < self._dropout:
+        if self._rng.random() < self.dropout:
             self.dropped += 1
         elif self.port.plugged:
-            if self._rng.random() < self._corrupt:
+            if self._rng.random() < self.corrupt:
                 frame = self._spoil(frame)
                 self.corrupted += 1
             else:

@@ -27,7 +27,7 @@ from agent.config import (
     Config,
     Envelope,
     Excitation,
-    Identification,
+    IdentificationConfig,
     Link,
     Recorder,
     Runtime,
@@ -144,7 +144,7 @@ ENVELOPE_SPEED = (0.6, 1.3)
 ENVELOPE_HEIGHT_S = 3.0
 
 
-def _config(
+def agent_config(
     tmp: Path,
     ports: Path,
     mavlink: tuple[str, int],
@@ -152,6 +152,10 @@ def _config(
     realtime_priority: int | None = None,
     speed_kts: float = 60.0,
 ) -> Config:
+    """The simulated flight's agent configuration: the defaults but for the sensor ports under
+    `ports`, the autopilot at `mavlink`, the link's files under `tmp`, the log directory, the
+    identification's axes, the real-time priority, and an envelope fitting the simulated
+    aircraft at `speed_kts`."""
     trim = speed_kts * KT
     return Config(
         runtime=Runtime(realtime_priority=realtime_priority),
@@ -162,7 +166,7 @@ def _config(
                 max_altitude_loss_m=max(40.0, ENVELOPE_HEIGHT_S * trim),
             )
         ),
-        identification=Identification(axes=axes),
+        identification=IdentificationConfig(axes=axes),
         sensors=Sensors(
             vn200=VectorNav(port=str(ports / "vn200")),
             airdata=AirDataPort(port=str(ports / "airdata")),
@@ -296,9 +300,12 @@ async def _parts(
     clock = LoopClock()
     ports = tmp / "ports"
     ports.mkdir(parents=True, exist_ok=True)
-    key = secrets.token_bytes(32)
-    (tmp / "link.key").write_text(key.hex())
-    (tmp / "link.key").chmod(0o600)
+    # A new key for each flight, in a file created readable by its owner alone, as `sysid
+    # keygen` makes it: `load_key` refuses a key other users can read, on both ends.
+    (tmp / "link.key").unlink(missing_ok=True)
+    fd = os.open(tmp / "link.key", os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(fd, "w") as handle:
+        handle.write(secrets.token_bytes(32).hex() + "\n")
     plane = replace(options.plane, params=params, dataflash=tmp / "ardupilot.bin")
     aircraft = SimAircraft(plane, clock, ports)
     channel, air, ground_module = module_pair(
@@ -330,7 +337,7 @@ async def _parts(
             CONNECT_S,
         )
         axes = preset(options.preset).axes
-        config = _config(
+        config = agent_config(
             tmp, ports, aircraft.mavlink_address, axes, options.realtime_priority, plane.speed_kts
         )
         if agent_process:
@@ -340,7 +347,9 @@ async def _parts(
             agent = Agent(config, base=tmp, clock=clock)
             tasks.append(asyncio.create_task(agent.run(), name="agent"))
         if operator:
-            ground = await ground_station(ground_module, tmp, clock, tasks)
+            ground = await ground_station(
+                module=ground_module, directory=tmp, clock=clock, tasks=tasks
+            )
             ground.pace = pace
         say(f"simulated {plane.aircraft} at {plane.speed_kts:g} kt; agent up")
 
@@ -378,7 +387,9 @@ async def _parts(
         await asyncio.gather(*tasks, return_exceptions=True)
 
 
-async def ground_station(module: EmulatedXBee, directory: Path, clock, tasks) -> Ground:
+async def ground_station(
+    *, module: EmulatedXBee, directory: Path, clock: LoopClock, tasks: list[asyncio.Task]
+) -> Ground:
     """The scripted operator's end: the link as the ground console builds it (`build_endpoint`,
     the flight's key, its own counter and replay state), on the ground's emulated module."""
     config = Link(
@@ -389,7 +400,9 @@ async def ground_station(module: EmulatedXBee, directory: Path, clock, tasks) ->
         seen_file="ground.seen",
     )
     ground = Ground(None, None)  # type: ignore[arg-type]
-    radio, ground.session = build_endpoint(config, GROUND, directory, clock, ground.on_message)
+    radio, ground.session = build_endpoint(
+        cfg=config, role=GROUND, base=directory, clock=clock, on_message=ground.on_message
+    )
     ground.radio = radio
     for attempt in range(OPEN_ATTEMPTS):
         try:

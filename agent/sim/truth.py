@@ -53,7 +53,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.linalg
 
-from agent.ident.aircraft import kinematic_jacobian
+from agent.ident.aircraft.kinematics import kinematic_jacobian
 from agent.sim.plant import FT, INPUTS, Plant
 
 STATES = ("Vt", "alpha", "q", "theta", "beta", "p", "r", "phi", "rpm", "alt", "map")

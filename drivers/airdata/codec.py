@@ -1,4 +1,4 @@
-"""Aeroprobe µADC ASCII lines (PROTOCOLS.md): one sample per line,
+"""Aeroprobe µADC ASCII lines (docs/protocols.md, *µADC*): one sample per line,
 
     NNNNN, XX.XX, +XX.XX, +XX.XX, +XXXX, XXXXXX, XXXXXX, CC\\r\\n
 

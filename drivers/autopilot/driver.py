@@ -2,11 +2,11 @@
 `mavlink_direct` plugin), and the scheduler's surface sink (RC_CHANNELS_OVERRIDE).
 
 MAVSDK delivers messages on its own threads. They cross into the event loop in exactly one
-place (`_Seam`, STYLE.md item 8): the callback stores the newest message of each kind and
-schedules at most one pending drain, so a slow loop sees the latest values, never a backlog
-(MAVSDK's own asyncio subscriptions queue without bound). Commands that wait for an ack run
-on one worker thread this driver owns. Overrides are sent from the loop (a non-blocking UDP or
-serial write of ~30 µs).
+place (`MessageSeam`; docs/contributing.md, *One seam per threaded library*): the callback
+stores the newest message of each kind and schedules at most one pending drain, so a slow loop
+sees the latest values, never a backlog (MAVSDK's own asyncio subscriptions queue without
+bound). Commands that wait for an ack run on one worker thread this driver owns. Overrides are
+sent from the loop (a non-blocking UDP or serial write of ~30 µs).
 """
 
 from __future__ import annotations
@@ -79,7 +79,7 @@ class AutopilotError(RuntimeError):
     """No usable link to the autopilot (the scheduler aborts a run on it)."""
 
 
-class _Seam:
+class MessageSeam:
     """MAVSDK's threads → the loop: newest message per name, at most one pending drain. The
     callback takes no lock and logs nothing (docs/hardening.md, *Reliability*): it stores into
     dicts, one atomic operation each under the GIL, and the drain pops what it finds."""
@@ -135,7 +135,7 @@ class AutopilotLink:
         self._on_switch, self._on_state, self._on_servos = on_switch, on_state, on_servos
         self._on_sample, self._on_link = on_sample, on_link
         self._direct = None
-        self._seam: _Seam | None = None
+        self._seam: MessageSeam | None = None
         self._boot_clock = DeviceClock()
         self._last_message: float | None = None
         self.connected = False
@@ -185,7 +185,7 @@ class AutopilotLink:
                         False, f"no autopilot on {cfg.url} after {cfg.connect_timeout_s:g} s"
                     )
             self._direct = MavlinkDirect(system._system)
-            self._seam = _Seam(loop, self._deliver)
+            self._seam = MessageSeam(loop, self._deliver)
             handles = [self._direct.subscribe_message(n, self._seam.callback) for n in MESSAGES]
             self._last_message = self._clock.now()
             self._report(True, "connected")

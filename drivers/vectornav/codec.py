@@ -1,4 +1,4 @@
-"""VectorNav VN-200 codecs: binary output packets and ASCII $VNYMR / $VNINS (PROTOCOLS.md).
+"""VectorNav VN-200 codecs: binary output packets and ASCII $VNYMR / $VNINS (docs/protocols.md).
 
 Binary packet: 0xFA sync, a group byte, one little-endian uint16 field mask per group bit
 set, the payload (fields in group order, then bit order, little-endian, no padding), and a

@@ -16,7 +16,7 @@ from drivers.vectornav.codec import AsciiCodec, BinaryCodec, VnAscii, VnPacket, 
 # Unix time of the GPS epoch, 1980-01-06T00:00:00Z.
 GPS_EPOCH_UNIX = 315_964_800
 SECONDS_PER_WEEK = 604_800
-# The register 75 rate divisor divides this base rate (PROTOCOLS.md).
+# The register 75 rate divisor divides this base rate, the IMU's (docs/protocols.md, *VN-200*).
 BASE_RATE_HZ = 800
 DEG = math.pi / 180
 # Three-axis outputs taken as they are: their channels, then the binary field in the common

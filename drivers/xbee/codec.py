@@ -1,5 +1,5 @@
-"""XBee API frames (PROTOCOLS.md), sans-I/O, for the emulated radios and for tests; the radio
-transport itself talks through digi-xbee.
+"""XBee API frames (docs/protocols.md, *XBee*), sans-I/O, for the emulated radios and for
+tests; the radio transport itself talks through digi-xbee.
 
 Frame: 0x7E, length (2 bytes big-endian, frame data only), frame data, checksum =
 0xFF − (sum of frame data & 0xFF). AP=2 (escaped): every byte after the 0x7E that is 0x7E,

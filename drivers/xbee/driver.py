@@ -3,14 +3,15 @@
 
 Why digi-xbee and not our own frame codec on the port: it is the vendor's maintained library
 (API modes, AT parameters, the module zoo), and the design card names it. Its pitfalls
-(PROTOCOLS.md) are handled here: `open()` and AT reads block, so they run on a worker thread;
-the blocking `send_data` can stall 4 s, so frames go out with `send_packet(sync=False)` (on a
-writer thread: the UART write itself blocks) and our own frame ids, and each 0x8B Transmit
-Status resolves the matching send; callbacks arrive
-on digi-xbee's thread pool in any order, so they cross into the loop in exactly one place
-(`loop.call_soon_threadsafe`), with a bound on how many may wait (drops counted), and the link
-layer above carries its own sequence numbers. That callback takes no lock and logs nothing: it
-appends to a deque and counts in a plain attribute, and the loop does the rest.
+(docs/protocols.md, *What digi-xbee 1.5.0 does*) are handled here: `open()` and AT reads
+block, so they run on a worker thread; the blocking `send_data` can stall 4 s, so frames go out
+with `send_packet(sync=False)` (on a writer thread: the UART write itself blocks) and our own
+frame ids, and each 0x8B Transmit Status resolves the matching send; callbacks arrive on
+digi-xbee's thread pool in any order, so they cross into the loop in exactly one place
+(`PacketSeam`, `loop.call_soon_threadsafe`; docs/contributing.md, *One seam per threaded
+library*), with a bound on how many may wait (drops counted), and the link layer above
+carries its own sequence numbers. That callback takes no lock and logs nothing: it appends to
+a deque and counts in a plain attribute, and the loop does the rest.
 """
 
 from __future__ import annotations
@@ -75,6 +76,38 @@ class SendResult:
         return DELIVERY.get(self.status, f"status 0x{self.status:02X}")
 
 
+class PacketSeam:
+    """digi-xbee's callback threads → the loop, in exactly one place: `callback` (what
+    digi-xbee is given) appends the packet to a deque and schedules one `deliver(packet)` on
+    the loop. It takes no lock and logs nothing (docs/hardening.md, *Reliability*): deque
+    append, len and popleft are atomic, and past `bound` packets waiting a packet is dropped
+    and counted in a plain attribute (`dropped`) that the loop publishes. With several callback
+    threads the bound may be passed by as many, and two drops at the same instant may count
+    one."""
+
+    def __init__(
+        self, loop: asyncio.AbstractEventLoop, deliver: Callable[[object], None], bound: int = INBOX
+    ):
+        self.loop, self._deliver, self._bound = loop, deliver, bound
+        self._inbox: deque = deque()
+        self.dropped = 0
+
+    def callback(self, packet) -> None:  # on a digi-xbee callback thread
+        if len(self._inbox) >= self._bound:
+            self.dropped += 1
+            return
+        self._inbox.append(packet)
+        with contextlib.suppress(RuntimeError):  # a closed loop: shutting down
+            self.loop.call_soon_threadsafe(self._drain)
+
+    def _drain(self) -> None:
+        try:
+            packet = self._inbox.popleft()
+        except IndexError:
+            return
+        self._deliver(packet)
+
+
 class XBeeRadio:
     """One XBee module on a serial port."""
 
@@ -101,10 +134,8 @@ class XBeeRadio:
         self._writer = ThreadPoolExecutor(1, thread_name_prefix="xbee-tx")
         self._pending: dict[int, asyncio.Future] = {}
         self._next_id = 0
-        # Frames handed over by digi-xbee's threads, waiting for the loop (deque append, len and
-        # popleft are atomic: no lock), and those dropped because INBOX were waiting.
-        self._inbox: deque = deque()
-        self._inbox_dropped = 0
+        # Where digi-xbee's threads hand frames to the loop (made at the first open).
+        self._seam: PacketSeam | None = None
         self.max_payload = 0
         self.address = b""
         self.counters: Counter[str] = Counter()
@@ -127,7 +158,9 @@ class XBeeRadio:
             raise RadioError(
                 f"{self.port}: the XBee did not answer in {OPEN_TIMEOUT_S:g} s"
             ) from exc
-        device.add_packet_received_callback(self._packet)
+        if self._seam is None or self._seam.loop is not loop:
+            self._seam = PacketSeam(loop, self._dispatch)
+        device.add_packet_received_callback(self._seam.callback)
         self._device = device
         if self.encrypted is False:
             self.counters["unencrypted_opens"] += 1
@@ -174,6 +207,11 @@ class XBeeRadio:
             )
         self.max_payload, self.address, self.encrypted = max_payload, address, encrypted
         return device
+
+    @property
+    def is_open(self) -> bool:
+        """A module is open here (it may since have been lost: `healthy` looks)."""
+        return self._device is not None
 
     def healthy(self) -> bool:
         """The module's port is open, digi-xbee's reader is serving it, and the device behind
@@ -256,26 +294,11 @@ class XBeeRadio:
         self._writer.shutdown(wait=True)
         self._executor.shutdown(wait=True)
 
-    # -- the seam: digi-xbee's threads → the loop -----------------------------------------
+    # -- on the loop: what digi-xbee's threads handed over (PacketSeam) --------------------
 
-    def _packet(self, packet) -> None:  # on a digi-xbee callback thread
-        # No lock, no logging (docs/hardening.md, *Reliability*): the bound is checked without
-        # one, so with several callback threads it may be passed by as many; two drops at the
-        # same instant may count one.
-        if len(self._inbox) >= INBOX:
-            self._inbox_dropped += 1
-            return
-        self._inbox.append(packet)
-        with contextlib.suppress(RuntimeError):  # a closed loop: shutting down
-            self._loop.call_soon_threadsafe(self._dispatch)
-
-    def _dispatch(self) -> None:
-        if self._inbox_dropped:
-            self.counters["inbox_dropped"] = self._inbox_dropped
-        try:
-            packet = self._inbox.popleft()
-        except IndexError:
-            return
+    def _dispatch(self, packet) -> None:
+        if self._seam is not None and self._seam.dropped:
+            self.counters["inbox_dropped"] = self._seam.dropped
         kind = packet.get_frame_type()
         if kind == ApiFrameType.TRANSMIT_STATUS:
             future = self._pending.pop(packet.frame_id, None)

@@ -20,10 +20,12 @@ import numpy as np
 import pytest
 
 from agent.analysis import analyze as an
+from agent.analysis import findings
 from agent.analysis.identify import Request
 from agent.config import Config
 from agent.ident import reference
-from agent.ident.job import settings_from
+from agent.ident.document import ResultDocument
+from agent.ident.settings import Settings
 from tests.capped import sysid
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -60,7 +62,8 @@ def cases_for(paths, **kwargs):
     inputs, outputs = config.channels.axis_set("lateral")
     request = Request(tuple(paths), inputs, outputs)
     roles = [config.channels.role_of(n) for n in outputs]
-    settings = settings_from(config, None, None, refine=False)
+    # The agent's own logs: the surfaces' sampled positions, as `sysid analyze` reads them.
+    settings = Settings.from_config(config, sampled_inputs=True, refine=False)
     return an.build_cases(request, roles, settings, **kwargs)[0]
 
 
@@ -70,29 +73,33 @@ def test_per_excitation_sweep_and_recommendation(tmp_path):
     assert len(cases) == 12
     outcomes = an.run_cases(cases, workers=2)  # two spawned processes
     assert all(o.ok for o in outcomes)
-    table = an.sweep_table(cases, outcomes)
-    assert [row["setting"] for row in table] == [{"markov": p} for p in (1, 2, 3, 4)]
-    assert all(row["identified"] == 3 for row in table)
+    table = findings.sweep_table(cases, outcomes)
+    assert [row.setting for row in table] == [{"markov": p} for p in (1, 2, 3, 4)]
+    assert all(row.identified == 3 for row in table)
+    assert [row.markov for row in table] == [[p] for p in (1, 2, 3, 4)]
     dr = truth()["Dutch roll"]
     for row in table:
-        for lam in row["modes"]["Dutch roll"]:
+        for lam in row.modes["Dutch roll"]:
             assert abs(complex(*lam) - dr) / abs(dr) < 0.15
-    best = an.recommend(table, excitations=3)
+    best = findings.recommend(table, excitations=3)
     assert best is not None
-    tics = [row["tic_avg"] for row in table]
-    assert best["tic_avg"] <= min(tics) * (1 + an.TIC_MARGIN)
-    assert best["spread"]["Dutch roll"] < an.CONSISTENT
+    tics = [row.tic_avg for row in table]
+    assert best.tic_avg <= min(tics) * (1 + findings.TIC_MARGIN)
+    assert best.spread["Dutch roll"] < findings.CONSISTENT
+    text = findings.analysed(paths, cases, outcomes, excitations=3, sweep=True).text()
+    assert "excitation 1 (markov=1): p 1, n " in text
+    assert f"recommended: markov={best.setting['markov']}" in text
 
 
 def test_cross_validation_and_batch(tmp_path):
     paths = excitation_logs(tmp_path)
     cases = cases_for(paths, batch=False, sweep=None)
     outcomes = an.run_cases(cases)
-    matrix = an.cross_validation(cases, outcomes)
+    matrix = findings.cross_validation(cases, outcomes)
     assert len(matrix) == 3
     assert all(len(row) == 3 for row in matrix)
     for i in range(3):  # each model on its own data is what its result says
-        assert matrix[i][i] == pytest.approx(outcomes[i].result["tic_avg"], rel=0.05)
+        assert matrix[i][i] == pytest.approx(outcomes[i].result.tic_avg, rel=0.05)
     assert max(max(row) for row in matrix) < 0.3  # same aircraft: every model fits all data
     (batch,) = cases_for(paths, batch=True, sweep=None)
     assert len(batch.job.experiments) == 3
@@ -142,7 +149,10 @@ def test_command_line_with_a_dask_cluster(tmp_path):
     report = json.loads(done.stdout)
     assert [Path(p).name[:4] for p in report["logs"]] == ["0002", "0004"]
     assert len(report["cases"]) == 4
-    assert all(c["converged"] is None for c in report["cases"])  # --no-refine: no refinement
+    # Each case carries its identification's document, as `sysid identify --json` prints it.
+    results = [ResultDocument.model_validate(c["result"]) for c in report["cases"]]
+    assert all(r.refinement is None for r in results)  # --no-refine: no refinement
+    assert [r.okid.markov for r in results] == [1, 1, 2, 2]
     assert report["recommended"]["setting"]["markov"] in (1, 2)
 
 

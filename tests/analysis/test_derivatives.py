@@ -10,8 +10,8 @@ import io
 import numpy as np
 
 from agent.analysis.derivatives import POOR, from_matrices, from_result, to_csv, to_html
-
-OUTPUTS, INPUTS = ("beta", "p", "r", "phi"), ("aileron", "rudder")
+from agent.ident.document import RefinementDocument, ResultDocument
+from tests.documents import INPUTS, OUTPUTS, lateral_document
 
 
 def lateral(n: int = 4):
@@ -52,9 +52,30 @@ def test_the_csv_and_html_say_what_is_fixed_unknown_and_poor():
     assert "±" not in to_html(unknown)
 
 
+def document(Ac=None, Bc=None, refinement=None) -> ResultDocument:
+    """An identification's document with the continuous model (Ac, Bc) given, if any."""
+    return lateral_document(
+        Ac=None if Ac is None else Ac.tolist(),
+        Bc=None if Bc is None else Bc.tolist(),
+        coordinates="era" if Ac is None else "outputs",
+        refinement=refinement,
+    )
+
+
 def test_a_model_not_in_output_coordinates_has_no_table():
-    Ac, Bc, *_ = lateral()
-    result = {"outputs": list(OUTPUTS), "inputs": list(INPUTS), "Ac": None, "Bc": None}
-    assert from_result(result) is None
-    result |= {"Ac": Ac.tolist(), "Bc": Bc.tolist(), "refinement": None}
-    assert from_result(result).value.shape == (4, 6)
+    Ac, Bc, Ac_std, Bc_std = lateral()
+    assert from_result(document()) is None
+    unrefined = from_result(document(Ac, Bc))
+    assert unrefined.value.shape == (4, 6)
+    assert np.isnan(unrefined.std).all()
+    refinement = RefinementDocument(
+        criterion="output error",
+        hold="zoh",
+        iterations=3,
+        converged=True,
+        noise_std=dict.fromkeys(OUTPUTS, 0.001),
+        Ac_std=Ac_std.tolist(),
+        Bc_std=Bc_std.tolist(),
+    )
+    refined = from_result(document(Ac, Bc, refinement))
+    np.testing.assert_array_equal(refined.std, np.hstack([Ac_std, Bc_std]))

@@ -22,7 +22,7 @@ import pytest
 from scipy.io import loadmat
 
 from agent.analysis.export import ExportError, load_models, to_json, to_mat, variable_name
-from agent.config import Config, Identification, Recorder
+from agent.config import Config, IdentificationConfig, Recorder
 from agent.excitation.scheduler import Window
 from agent.link import messages
 from agent.runtime import Agent
@@ -42,7 +42,7 @@ def flight(tmp_path):
         table = list(csv.DictReader(handle))
     config = Config(
         recorder=Recorder(log_dir=str(tmp_path / "logs"), rate_hz=50.0),
-        identification=Identification(trim_seconds=0.5),
+        identification=IdentificationConfig(trim_seconds=0.5),
     )
     # The store's numbering in a known series, so the ids are known: LAT1, LAT2.
     (tmp_path / "models").mkdir()
@@ -169,6 +169,50 @@ def test_sources_without_models_are_refused(tmp_path, bad):
     path.write_text('{"level": "INFO"}\n' if bad == "no models" else '{"model_id": "a"')
     with pytest.raises(ExportError, match=path.name.replace(".", r"\.")):
         load_models(path)
+
+
+def test_a_store_file_of_the_earlier_layout_exports_with_its_trim(tmp_path):
+    """Input: a model store file as written before the result had typed parts (Markov
+    parameters and singular values at the top level, the OKID/ERA fit in the refinement, the
+    trim under "extra"): it is read, its trim and data set exported as from a store of now."""
+    from agent.ident import Experiment, Settings, identify, reference
+
+    model, dt = reference.LATERAL, 0.02
+    record = reference.make_record(model, dt=dt, duration=10.0)
+    u, y = record.inputs, record.outputs
+    found = identify(
+        Experiment(u, y),
+        dt,
+        input_names=model.inputs,
+        output_names=model.outputs,
+        settings=Settings(markov=2, method="time"),
+    )
+    now = found.document().model_dump(mode="json")
+    earlier = {k: v for k, v in now.items() if k not in ("okid", "aircraft")}
+    okid = now["okid"]
+    earlier |= {k: okid[k] for k in ("markov", "markov_auto", "singular_values", "frequency")}
+    earlier["refinement"] = now["refinement"] | {"okid_tic_avg": okid["tic_avg"]}
+    trim = {"inputs": {"aileron": 1.5, "rudder": 0.0}, "outputs": dict.fromkeys(model.outputs, 0.1)}
+    store = tmp_path / "lateral_nominal.json"
+    store.write_text(
+        json.dumps(
+            {
+                "model_id": "lat-1",
+                "axes": "lateral",
+                "record_dt": dt,
+                "result": earlier,
+                "tic_nn": now["tic_avg"],
+                "count": 1,
+                "extra": {"trim": trim, "record_s": 10.0},
+            }
+        )
+    )
+    np.savez(store.with_suffix(".npz"), u0=u, y0=y)
+    (exported,) = load_models(store)
+    np.testing.assert_array_equal(exported["A"], np.array(now["A"]))
+    np.testing.assert_array_equal(exported["Ac_std"], np.array(now["refinement"]["Ac_std"]))
+    assert list(exported["u0"]) == [1.5, 0.0]
+    np.testing.assert_array_equal(exported["u"][0], u)
 
 
 def test_matlab_names():

@@ -165,7 +165,7 @@ def test_the_imported_record_identifies_the_known_pole(tmp_path):
     assert done.returncode == 0, done.stderr
     sweep = json.loads(done.stdout)
     for case in sweep["cases"]:
-        assert case["modes"][0]["eigenvalue"][0] == pytest.approx(POLE, rel=0.05)
+        assert case["result"]["modes"][0]["eigenvalue"][0] == pytest.approx(POLE, rel=0.05)
     done = run(
         "report",
         str(csv),

@@ -123,7 +123,7 @@ def test_imported_px4_record_through_the_post_flight_tools(tmp_path):
             "--json",
         )
     )
-    pole = out["cases"][0]["modes"][0]["eigenvalue"][0]
+    pole = out["cases"][0]["result"]["modes"][0]["eigenvalue"][0]
     assert pole == pytest.approx(POLE, rel=0.05)
     sysid(
         "report",

@@ -1,4 +1,4 @@
-"""Byte-vector tests of every sans-I/O codec (STYLE.md item 3).
+"""Byte-vector tests of every sans-I/O codec (docs/contributing.md, *Byte-vector tests*).
 
 Each codec's vectors are fed whole, split in halves, one byte at a time, concatenated, and
 corrupted. Bad input tried: a flipped bit in the payload and in the checksum, a frame cut in

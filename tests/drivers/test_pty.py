@@ -41,7 +41,7 @@ async def test_each_driver_decodes_every_frame_on_time(tmp_path):
 async def test_corrupted_frames_are_counted_and_the_rest_delivered(tmp_path):
     rig = Rig(tmp_path)
     await rig.start(names=("surfaces",), emit=False)
-    rig.emitters["surfaces"]._corrupt = 0.1
+    rig.emitters["surfaces"].corrupt = 0.1
     rig.tasks.append(asyncio.create_task(rig.emitters["surfaces"].run(), name="emitter"))
     try:
         await asyncio.sleep(1.5)
@@ -125,7 +125,7 @@ async def test_vn200_output_register_is_written_on_connect(tmp_path):
 async def test_dropouts_show_as_gaps(tmp_path):
     rig = Rig(tmp_path)
     await rig.start(names=("airdata",), emit=False)
-    rig.emitters["airdata"]._dropout = 0.05
+    rig.emitters["airdata"].dropout = 0.05
     rig.tasks.append(asyncio.create_task(rig.emitters["airdata"].run(), name="emitter"))
     try:
         await asyncio.sleep(1.5)

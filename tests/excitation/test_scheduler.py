@@ -75,15 +75,16 @@ def feed(s: Scheduler, now: float, switch=HIGH, state=CRUISE) -> None:
     )
 
 
-def make(clock, script=None, config=CONFIG):
+def make(clock, script=None, config=CONFIG, servos=True):
     ref: list[Scheduler] = []
     sink = FakeAutopilot(clock, ref, script)
     s = Scheduler(config, sink, clock)
     ref.append(s)
     events: list[Event | Window] = []
     s.subscribe(events.append)
-    # Trimmed flight before the run: servo outputs and telemetry, switch low.
-    for i in range(25):
+    # Trimmed flight before the run: servo outputs (unless `servos` is false) and telemetry,
+    # switch low.
+    for i in range(25 if servos else 0):
         s.update_servos(clock.now() - 0.5 + i * 0.02, TRIM)
     feed(s, clock.now(), LOW)
     return s, sink, events
@@ -183,7 +184,7 @@ async def test_trim_is_captured_and_commands_are_trim_plus_plan():
     await fly(s, sink, plan)
     commands = sink.commands()
     ail = np.array([p[AIL] for _, p in commands])
-    values = s._config.surfaces["aileron"].us_per_unit * 4.0  # 4° doublet at 20 µs/°
+    values = CONFIG.surfaces["aileron"].us_per_unit * 4.0  # 4° doublet at 20 µs/°
     assert set(np.unique(ail)) == {1520, round(1520 + values), round(1520 - values)}
     assert commands[-1][1] == {AIL: TRIM[AIL], RUD: TRIM[RUD]}
     assert sink.calls[-1][1:] == ("release", [AIL, RUD])
@@ -289,8 +290,7 @@ async def test_start_is_refused_outside_the_envelope_or_without_trim():
     assert not sink.calls
     refused = [e for e in events if isinstance(e, Event) and e.kind == "refused"]
     assert "not started: envelope: bank 50.0°" in refused[0].detail
-    s2, sink2, events2 = make(VirtualClock(1000.0))
-    s2._servos.clear()
+    s2, sink2, events2 = make(VirtualClock(1000.0), servos=False)
     await fly(s2, sink2, preset("lateral"))
     assert not sink2.calls
     assert "no servo output on channel 1 (aileron)" in events2[-1].detail

@@ -15,11 +15,13 @@ from agent.clock import LoopClock
 from agent.config import Link
 from agent.ground.config import GroundConfig
 from agent.ident.convert import discretize
+from agent.ident.document import ModeDocument
 from agent.ident.frf import model_response
 from agent.ident.reference import LATERAL
 from agent.link import messages
-from agent.link.codec import AIRCRAFT, CounterStore, LinkCodec
+from agent.link.codec import AIRCRAFT, LinkCodec
 from agent.link.session import LinkSession
+from agent.link.store import CounterStore
 from agent.sim.radio import EmulatedXBee, RfChannel
 from drivers.xbee.driver import XBeeRadio
 
@@ -29,13 +31,12 @@ AIR = bytes.fromhex("0013A20040000001")
 GROUND = bytes.fromhex("0013A20040000002")
 
 
-def mode(name, real, imag=0.0, emac=95.0, std=None) -> messages.ModeReport:
+def mode(name, real, imag=0.0, emac=95.0, std=None) -> ModeDocument:
     w = abs(complex(real, imag))
-    return messages.ModeReport(
+    return ModeDocument(
         name=name,
-        real=real,
-        imag=imag,
-        frequency_hz=w / 6.283185307179586,
+        eigenvalue=(real, imag),
+        frequency_rad_s=w,
         damping=-real / w,
         time_constant_s=None if imag else -1 / real,
         msv=0.4,
@@ -44,8 +45,8 @@ def mode(name, real, imag=0.0, emac=95.0, std=None) -> messages.ModeReport:
         emac=emac,
         mpc=60.0,
         cmi=76.0,
-        real_std=None if std is None else std[0],
-        imag_std=None if std is None else std[1],
+        eigenvalue_std=None if std is None else std,
+        frequency_std_rad_s=None if std is None else 0.1,
         damping_std=None if std is None else 0.03,
     )
 
@@ -111,6 +112,8 @@ class ScriptedAircraft:
     nominal: list[str] = field(default_factory=list)  # the nominal history, latest last
     excitation: str = "idle"
     airspeed: float = 22.0
+    settings: messages.IdentSettings | None = field(default_factory=messages.IdentSettings)
+    """The settings in effect its status reports (None: an older agent, which does not)."""
 
     def on_message(self, message, seq) -> None:
         self.inbox.append(message)
@@ -122,6 +125,8 @@ class ScriptedAircraft:
                 self.excitation = "armed"
             elif isinstance(message, messages.Abort):
                 self.excitation = "idle"
+            elif isinstance(message, messages.IdentSettings) and self.settings is not None:
+                self.settings = message
             elif isinstance(message, messages.Decision) and message.accept:
                 self.nominal.append(message.model_id)
             elif isinstance(message, messages.Revert):
@@ -147,6 +152,7 @@ class ScriptedAircraft:
             excitation=self.excitation,
             loop_lag_ms=0.9,
             nominal={"lateral": self.nominal[-1]} if self.nominal else {},
+            settings=self.settings,
             recorder={"frames": 1200.0},
             sensors={
                 "vn200": {

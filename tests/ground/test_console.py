@@ -169,27 +169,118 @@ async def test_a_result_renders_and_accept_reject_revert_round_trip(console, tmp
     assert any(x["dir"] == "tx" and x["message"]["kind"] == "decision" for x in records)
 
 
-async def test_settings_are_sent_and_bad_ones_are_not(console):
+async def test_the_settings_shown_are_those_in_effect_and_an_edit_says_it_is_not_sent(console):
     app, pilot, r, _ = console
     await pilot.press("3")
+    # Nothing sent yet: the aircraft's status says what is in effect, and the form shows it.
+    await until(pilot, lambda: "reported by the aircraft" in text_of(app, "#settings-now"), "it")
+    assert "each plan's own axes, p auto, n auto, batch off" in text_of(app, "#settings-now")
+    assert app.query_one("#axes").value == "plan"
+    assert text_of(app, "#settings-pending") == ""
+    # A press stays on the button longer than the edits below take (Textual's "active" effect,
+    # 0.2 s by default, which ignores a second click meanwhile as a double click): the click
+    # after the edits must still send them.
+    app.query_one("#send-settings").active_effect_duration = 30.0
+    # Bad input tried: a p that is not a number is not sent.
     app.query_one("#markov").value = "twelve"
     await pilot.click("#send-settings")
-    await pilot.pause(0.2)
-    assert "not sent" in text_of(app, "#settings-error")
+    await until(pilot, lambda: "not sent" in text_of(app, "#settings-error"), "the error")
+    await until(pilot, lambda: "not valid" in text_of(app, "#settings-pending"), "marked")
+    # An edit is marked, field by field, until the aircraft reports it in effect.
     app.query_one("#markov").value = "12"
     app.query_one("#period").value = "30"
     app.query_one("#batch").value = True
+    app.query_one("#axes").value = "lateral"
+    await until(
+        pilot,
+        lambda: (
+            "not sent: type, p, batch, update period differ from the settings in effect"
+            in text_of(app, "#settings-pending")
+        ),
+        "the edit marked",
+    )
     await pilot.click("#send-settings")
     await until(pilot, lambda: "settings lateral: acknowledged" in log_text(app), "ack")
     settings = [m for m in r.aircraft.inbox if isinstance(m, messages.IdentSettings)][-1]
-    assert (settings.markov, settings.order, settings.batch, settings.update_period_s) == (
+    assert (settings.axes, settings.markov, settings.order, settings.batch) == (
+        "lateral",
         12,
         "auto",
         True,
-        30.0,
     )
+    assert settings.update_period_s == 30.0
     await until(pilot, lambda: "p 12" in text_of(app, "#settings-now"), "in effect")
+    assert "lateral" in text_of(app, "#settings-now")
     assert "every 30 s" in text_of(app, "#settings-now")
+    await until(pilot, lambda: text_of(app, "#settings-pending") == "", "nothing pending")
+
+
+async def test_an_aircraft_that_does_not_report_its_settings_shows_them_as_not_known(tmp_path):
+    async with rig(tmp_path) as r:
+        r.aircraft.settings = None  # an older agent's status
+        station = GroundStation(r.config, LoopClock(), base=tmp_path)
+        app = Console(station)
+        async with app.run_test(size=(110, 36)) as pilot:
+            await until(pilot, lambda: station.heard.status is not None, "status")
+            await pilot.press("3")
+            assert "not known here yet" in text_of(app, "#settings-now")
+            assert "not sent" in text_of(app, "#settings-pending")
+            await pilot.click("#send-settings")
+            await until(
+                pilot,
+                lambda: "acknowledged by the aircraft" in text_of(app, "#settings-now"),
+                "ack",
+            )
+            assert "each plan's own axes" in text_of(app, "#settings-now")
+            assert text_of(app, "#settings-pending") == ""
+
+
+async def test_what_is_heard_is_drawn_without_any_timer(console):
+    """A status, and a result, each redraw their tab as they are heard: the app's one
+    timer (the link's liveness, the status's age) is stopped meanwhile."""
+    app, pilot, r, _ = console
+    await until(pilot, lambda: "22.0 m/s" in text_of(app, "#flight"), "status")
+    app.ticker.pause()
+    try:
+        r.aircraft.airspeed = 27.5
+        await until(pilot, lambda: "27.5 m/s" in text_of(app, "#flight"), "the next status")
+        await pilot.press("4")
+        r.aircraft.session.send_reliable(result("lat-7"))
+        await until(pilot, lambda: "lat-7" in text_of(app, "#summary"), "the result")
+        assert app.query_one("#results").row_count == 1
+        assert app.query_one("#modes").row_count == 3
+    finally:
+        app.ticker.resume()
+
+
+async def test_results_of_earlier_sessions_are_listed_at_start(tmp_path):
+    logs = tmp_path / "ground-logs"
+    logs.mkdir()
+    record = {"dir": "rx", "message": messages.to_dict(result("lat-3"))}
+    (logs / "0001_ground_2026-01-01.jsonl").write_text(json.dumps(record) + "\n")
+    async with rig(tmp_path) as r:
+        station = GroundStation(r.config, LoopClock(), base=tmp_path)
+        app = Console(station)
+        async with app.run_test(size=(110, 36)) as pilot:
+            await pilot.press("4")
+            await until(pilot, lambda: "lat-3" in text_of(app, "#summary"), "the earlier result")
+            assert app.query_one("#results").row_count == 1
+
+
+def test_a_status_or_live_frame_still_waiting_gives_way_to_the_next():
+    from agent.ground import events, posted
+
+    status = [posted.posted(events.StatusHeard(messages.Status(time=t), t)) for t in (1.0, 2.0)]
+    assert status[0].can_replace(status[1])
+    frames = [posted.posted(events.LiveFrame(live(k))) for k in (0, 1)]
+    assert frames[0].can_replace(frames[1])
+    assert frames[0].can_replace(posted.posted(events.LiveFrame(None)))
+    # Each result, answer and log line counts.
+    results = [posted.posted(events.ResultHeard(result(m))) for m in ("lat-1", "lat-2")]
+    assert not results[0].can_replace(results[1])
+    assert not status[0].can_replace(results[0])
+    line = events.Noted(events.Line(1.0, "info", "x"))
+    assert not posted.posted(line).can_replace(posted.posted(line))
 
 
 async def test_a_silent_link_is_shown_as_lost_and_status_as_stale(console):
@@ -197,7 +288,7 @@ async def test_a_silent_link_is_shown_as_lost_and_status_as_stale(console):
     await until(pilot, lambda: "LINK UP" in text_of(app, "#top"), "link up")
     r.channel.outage = True
     await until(pilot, lambda: "LINK LOST" in text_of(app, "#top"), "lost")
-    await until(pilot, lambda: "STALE" in text_of(app, "#flight"), "stale")
+    await until(pilot, lambda: "STALE" in text_of(app, "#status-age"), "stale")
     r.channel.outage = False
     await until(pilot, lambda: "LINK UP" in text_of(app, "#top"), "back")
 

@@ -8,17 +8,10 @@ import pytest
 
 from agent.excitation.plan import preset, render
 from agent.ident import Experiment, Identification, Settings, identify
-from agent.ident.aircraft import (
-    COUPLED,
-    SMOOTH_BINS,
-    SMOOTH_FLOOR,
-    Spectra,
-    _sigma,
-    excited,
-    kinematic_jacobian,
-    kinematic_remainder,
-    measured_gust,
-)
+from agent.ident.aircraft.fit import COUPLED, SMOOTH_BINS, SMOOTH_FLOOR, bin_sigma
+from agent.ident.aircraft.kinematics import kinematic_jacobian, kinematic_remainder
+from agent.ident.aircraft.transforms import Transforms, excited
+from agent.ident.aircraft.wind import measured_gust
 from agent.ident.convert import discretize_foh
 from agent.ident.errors import DataError, IdentificationFailed
 from agent.ident.fit import simulate
@@ -53,16 +46,16 @@ def full_preset_record(A, B, C):
     return Experiment(u, simulate(model, u))
 
 
-def aircraft_identify(record, inputs=INPUTS) -> Identification:
+def aircraft_identify(record, inputs=INPUTS, **options) -> Identification:
     """The whole record identified as the agent does for `--axes full`: every channel named
-    by its role, the inputs sampled (not held)."""
+    by its role, the inputs sampled (not held); `options`: other settings."""
     return identify(
         record,
         DT,
         input_names=inputs,
         output_names=OUTPUTS,
         output_roles=OUTPUTS,
-        settings=Settings(held_inputs=False),
+        settings=Settings(held_inputs=False, **options),
     )
 
 
@@ -72,13 +65,13 @@ def test_noise_free_aircraft_is_recovered_with_its_engine_lag_and_no_coupling():
     result = aircraft_identify(record)
     assert result.method == "aircraft"  # chosen by "auto" for both axes' outputs
     report = result.aircraft
-    assert report["model"] == "decoupled"
+    assert report.model == "decoupled"
     # The lag shows only in the throttle's band (< 0.12 Hz, ωτ < 0.3), and the per-band weights
     # of a noise-free fit are set by the transforms' own small errors: 2.0 % measured.
-    assert report["engine_lag_s"]["longitudinal"]["throttle"] == pytest.approx(TAU, rel=3e-2)
+    assert report.engine_lag_s["longitudinal"]["throttle"] == pytest.approx(TAU, rel=3e-2)
     for axis in ("longitudinal", "lateral"):  # the last digits of a perfect fit: no coupling
-        assert report["coupling"][axis]["response_by_inputs"] < COUPLED
-        assert report["coupling"][axis]["response_by_states"] < COUPLED
+        assert report.coupling[axis].response_by_inputs < COUPLED
+        assert report.coupling[axis].response_by_states < COUPLED
     found = np.sort_complex(np.linalg.eigvals(result.continuous.A[:8, :8]))
     true = np.sort_complex(np.linalg.eigvals(A[:8, :8]))
     # The transforms of samples stand in for continuous ones: (ωΔt)²/12 ≈ 0.3 % at 3 Hz.
@@ -236,15 +229,15 @@ def test_the_measured_wind_turns_the_gust_from_bias_into_excitation():
     blind = aircraft_identify(Experiment(u, air))
     measured = aircraft_identify(Experiment(u, air, operating_point=op, navigation=navigation))
     report = measured.aircraft
-    assert report["wind"]["measured"]
-    assert report["kinematics"]
-    assert report["wind"]["gust_rms"]["airspeed"] == pytest.approx(0.03, rel=0.3)
-    assert not blind.aircraft["wind"]["measured"]
+    assert report.wind.measured
+    assert report.kinematics
+    assert report.wind.gust_rms["airspeed"] == pytest.approx(0.03, rel=0.3)
+    assert not blind.aircraft.wind.measured
     assert worst(blind) > 0.3
     assert worst(measured) < 0.01
     # The model's inputs are the controls; the gusts drove the fit only.
     assert measured.continuous.B.shape[1] == len(INPUTS)
-    assert any("gust alpha" in axis["inputs"] for axis in report["axes"])
+    assert any("gust alpha" in axis.inputs for axis in report.axes)
 
 
 def test_the_pitch_rate_gust_is_modelled_from_the_alpha_gusts_rate():
@@ -257,24 +250,23 @@ def test_the_pitch_rate_gust_is_modelled_from_the_alpha_gusts_rate():
     result = aircraft_identify(Experiment(u, air, operating_point=op, navigation=navigation))
     found = np.linalg.eigvals(result.continuous.A[:8, :8])
     worst = max(np.min(np.abs(found - t)) / max(abs(t), 1.0) for t in true)
-    longitudinal = next(a for a in result.aircraft["axes"] if a["name"] == "longitudinal")
-    assert "gust alpha rate" in longitudinal["inputs"]
+    longitudinal = next(a for a in result.aircraft.axes if a.name == "longitudinal")
+    assert "gust alpha rate" in longitudinal.inputs
     assert worst < 0.01
     assert result.continuous.A.shape == (10, 10)  # the gust rate's lag is no state of the model
 
 
-def test_sideslip_drag_is_a_known_input_of_the_airspeeds_equation(monkeypatch):
+def test_sideslip_drag_is_a_known_input_of_the_airspeeds_equation():
     """The aircraft's V̇ loses 10 m/s² per rad² of β² (sideslip drag), the lateral controls at
     100 times the longitudinal share (β to 3°): the β² input of V̇'s equation gives the gain
     back and the modes with it (measured: worst eigenvalue 0.08 % off with the term, 0.87 %
     without it). Without drag the gain is nought within its standard error."""
-    import agent.ident.aircraft as method
-
     scale = np.array([0.0015, 0.0015, 0.15, 0.15])
 
-    def worst(drag: float):
+    def worst(drag: float, **options):
         u, air, op, navigation, A = gusty_record(seed=5, drag=drag, scale=scale)
-        result = aircraft_identify(Experiment(u, air, operating_point=op, navigation=navigation))
+        record = Experiment(u, air, operating_point=op, navigation=navigation)
+        result = aircraft_identify(record, **options)
         found = np.linalg.eigvals(result.continuous.A[:8, :8])
         true = np.linalg.eigvals(A[:8, :8])
         error = max(np.min(np.abs(found - t)) / max(abs(t), 1.0) for t in true)
@@ -282,15 +274,14 @@ def test_sideslip_drag_is_a_known_input_of_the_airspeeds_equation(monkeypatch):
 
     error, report = worst(10.0)
     assert error < 0.002
-    assert report["sideslip_drag"]["gain"] == pytest.approx(-10.0, rel=0.02)
-    longitudinal, lateral = report["axes"]
-    assert "beta²" in longitudinal["inputs"]
-    assert "beta²" not in lateral["inputs"]
+    assert report.sideslip_drag.gain == pytest.approx(-10.0, rel=0.02)
+    longitudinal, lateral = report.axes
+    assert "beta²" in longitudinal.inputs
+    assert "beta²" not in lateral.inputs
     _, still = worst(0.0)
-    assert abs(still["sideslip_drag"]["gain"]) < 3 * still["sideslip_drag"]["std"]
-    monkeypatch.setattr(method, "SIDESLIP_DRAG", False)
-    blind, report = worst(10.0)
-    assert "sideslip_drag" not in report
+    assert abs(still.sideslip_drag.gain) < 3 * still.sideslip_drag.std
+    blind, report = worst(10.0, sideslip_drag=False)
+    assert report.sideslip_drag is None
     assert blind > 4 * error
 
 
@@ -302,28 +293,28 @@ def test_the_rolling_moments_change_with_alpha_is_a_known_input_of_the_lateral_a
     controls left out (α barely moves) neither has the lateral one."""
     scale = np.full(4, 0.03)
 
-    def identified(roll_ab: float, inputs=INPUTS) -> dict:
+    def identified(roll_ab: float, inputs=INPUTS):
         u, air, op, navigation, _ = gusty_record(seed=5, scale=scale, roll_ab=roll_ab)
         columns = [INPUTS.index(name) for name in inputs]
         record = Experiment(u[:, columns], air, operating_point=op, navigation=navigation)
         return aircraft_identify(record, inputs).aircraft
 
     report = identified(-50.0)
-    products = report["alpha_products"]
+    products = report.alpha_products
     assert set(products) == {"alpha·beta", "alpha·p", "alpha·r"}
     assert set(products["alpha·beta"]) == {"beta", "p", "r"}  # φ̇ is kinematics
-    assert products["alpha·beta"]["p"]["gain"] == pytest.approx(-50.0, rel=0.04)
-    longitudinal, lateral = report["axes"]
-    assert "alpha·beta" in lateral["inputs"]
-    assert not any(name.startswith("alpha·") for name in longitudinal["inputs"])
-    still = identified(0.0)["alpha_products"]
+    assert products["alpha·beta"]["p"].gain == pytest.approx(-50.0, rel=0.04)
+    longitudinal, lateral = report.axes
+    assert "alpha·beta" in lateral.inputs
+    assert not any(name.startswith("alpha·") for name in longitudinal.inputs)
+    still = identified(0.0).alpha_products
     for rows in still.values():
         for gain in rows.values():
-            assert abs(gain["gain"]) < 3 * gain["std"]
+            assert abs(gain.gain) < 3 * gain.std
     alone = identified(-50.0, ("aileron", "rudder"))
-    assert [axis["name"] for axis in alone["axes"]] == ["lateral"]
-    assert "alpha_products" not in alone
-    assert not any(name.startswith("alpha·") for name in alone["axes"][0]["inputs"])
+    assert [axis.name for axis in alone.axes] == ["lateral"]
+    assert alone.alpha_products == {}
+    assert not any(name.startswith("alpha·") for name in alone.axes[0].inputs)
 
 
 def test_a_dead_alpha_vane_is_a_clear_failure_naming_it():
@@ -340,14 +331,14 @@ def test_a_dead_alpha_vane_is_a_clear_failure_naming_it():
     with pytest.raises(IdentificationFailed, match="on alpha: an output with no response"):
         aircraft_identify(Experiment(u, air, operating_point=op))
     job = Job(
-        "ful-1",
-        "full",
-        DT,
-        INPUTS,
-        OUTPUTS,
-        OUTPUTS,
-        ((u, air),),
-        Settings(held_inputs=False),
+        model_id="ful-1",
+        axes="full",
+        record_dt=DT,
+        inputs=INPUTS,
+        outputs=OUTPUTS,
+        roles=OUTPUTS,
+        experiments=((u, air),),
+        settings=Settings(held_inputs=False),
         contexts=((op, None),),
         input_roles=INPUTS,
     )
@@ -385,9 +376,9 @@ def test_a_propellers_gyroscopic_coupling_is_found_as_a_coupling_block_of_a():
     record = full_preset_record(A, B, C)
     result = aircraft_identify(record)
     report = result.aircraft
-    assert "longitudinal" in report["model"]
-    assert "coupled" in report["model"]
-    assert report["coupling"]["longitudinal"]["response_by_states"] > COUPLED
+    assert "longitudinal" in report.model
+    assert "coupled" in report.model
+    assert report.coupling["longitudinal"].response_by_states > COUPLED
     assert result.continuous.A[2, 6] == pytest.approx(-0.5, rel=0.02)
     found = np.sort_complex(np.linalg.eigvals(result.continuous.A[:8, :8]))
     true = np.sort_complex(np.linalg.eigvals(A[:8, :8]))
@@ -407,25 +398,25 @@ def test_the_throttle_and_the_longitudinal_states_join_the_lateral_axis_each_on_
     record = full_preset_record(A, B, C)
     result = aircraft_identify(record)
     report = result.aircraft
-    coupling = report["coupling"]["lateral"]
-    assert coupling["response_by_inputs"] > COUPLED
-    assert coupling["response_by_states"] > COUPLED  # both qualify, both join
-    lateral = next(a for a in report["axes"] if a["name"] == "lateral")
-    assert "throttle" in lateral["inputs"]
-    assert "elevator" not in lateral["inputs"]
-    assert all(name in lateral["inputs"] for name in ("airspeed", "alpha", "q"))
-    assert "lateral coupled by the throttle and the other axis's states" in report["model"]
-    assert "throttle" in report["engine_lag_s"]["lateral"]
+    coupling = report.coupling["lateral"]
+    assert coupling.response_by_inputs > COUPLED
+    assert coupling.response_by_states > COUPLED  # both qualify, both join
+    lateral = next(a for a in report.axes if a.name == "lateral")
+    assert "throttle" in lateral.inputs
+    assert "elevator" not in lateral.inputs
+    assert all(name in lateral.inputs for name in ("airspeed", "alpha", "q"))
+    assert "lateral coupled by the throttle and the other axis's states" in report.model
+    assert "throttle" in report.engine_lag_s["lateral"]
     found = np.sort_complex(np.linalg.eigvals(result.continuous.A[:8, :8]))
     true = np.sort_complex(np.linalg.eigvals(A[:8, :8]))
     assert np.max(np.abs(found - true) / np.abs(true)) < 3e-3
 
 
-def _spectra(U: np.ndarray, record: np.ndarray, Y: np.ndarray | None = None) -> Spectra:
+def _transforms(U: np.ndarray, record: np.ndarray, Y: np.ndarray | None = None) -> Transforms:
     counts = [int(np.sum(record == e)) for e in np.unique(record)]
     s = 2j * np.pi * np.concatenate([np.arange(1, c + 1) / 10.0 for c in counts])
     Y = np.zeros((s.size, 1), dtype=complex) if Y is None else Y
-    return Spectra(s, Y, U.astype(complex), record, (0.1, 1.0))
+    return Transforms(s=s, Y=Y, U=U.astype(complex), record=record, band_hz=(0.1, 1.0))
 
 
 def test_excited_keeps_each_records_bins_where_a_chosen_control_has_power():
@@ -439,7 +430,7 @@ def test_excited_keeps_each_records_bins_where_a_chosen_control_has_power():
     U[3, 2] = 5.0  # control 2: not chosen
     U[12 + 4, 0] = 0.01  # record 1: control 0's only line, far below record 0's
     U[12 + 6, 1] = 2.0
-    kept = excited(_spectra(U, record), [0, 1])
+    kept = excited(_transforms(U, record), [0, 1])
     harmonics = np.round(kept.s.imag / (2 * np.pi) * 10).astype(int)
     assert list(zip(kept.record.tolist(), harmonics.tolist(), strict=True)) == [
         (0, 3),
@@ -453,7 +444,7 @@ def test_excited_keeps_each_records_bins_where_a_chosen_control_has_power():
 
 
 def test_each_bins_weight_follows_its_neighbourhoods_residual_level():
-    """_sigma: the residual's rms over the SMOOTH_BINS nearest bins, so a band 10 times
+    """bin_sigma: the residual's rms over the SMOOTH_BINS nearest bins, so a band 10 times
     noisier gets a σ 3 times larger (a single σ per output would weight both alike); a band
     fitted exactly is held at SMOOTH_FLOOR of the output's rms, not at zero. (The floor also
     caps the contrast: a band 10 times quieter than the rest would sit on it.)"""
@@ -463,7 +454,7 @@ def test_each_bins_weight_follows_its_neighbourhoods_residual_level():
     level = np.where(np.arange(F) < F // 2, 3.0, 1.0)
     noise = level * (rng.standard_normal(F) + 1j * rng.standard_normal(F)) / np.sqrt(2)
     exact = np.where(np.arange(F) < F // 2, noise, 0.0)
-    sigma = _sigma(np.column_stack([noise, exact]), s)
+    sigma = bin_sigma(np.column_stack([noise, exact]), s)
     margin = 4 * SMOOTH_BINS  # away from the step between the bands
     deep = slice(margin, F // 2 - margin), slice(F // 2 + margin, F - margin)
     ratio = np.median(sigma[deep[0], 0]) / np.median(sigma[deep[1], 0])

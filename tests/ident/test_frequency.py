@@ -74,7 +74,7 @@ def test_observer_fit_to_the_sparse_frf_recovers_the_model():
         DT,
         settings=Settings(method="frequency", markov=1, order=4, decimation=1, refine=False),
     )
-    assert result.markov == 1
+    assert result.okid.markov == 1
     assert omp.Ybar1.shape == (1, 4, 2)
     found = [m.eigenvalue for m in result.modes]
     found += [m.eigenvalue.conjugate() for m in result.modes if m.pair]

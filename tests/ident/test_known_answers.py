@@ -50,7 +50,7 @@ def test_given_markov_count_above_deadbeat_order_is_still_exact(p):
     result = identify(exp, DT, settings=Settings(markov=p))
     found = [m.eigenvalue for m in result.modes]
     found += [m.eigenvalue.conjugate() for m in result.modes if m.pair]
-    assert result.markov == p
+    assert result.okid.markov == p
     assert matched_relative_errors(np.array(found), true_eigenvalues(model)).max() < 1e-6
 
 
@@ -95,7 +95,7 @@ def test_observer_gain_is_deadbeat_for_noise_free_full_state_data():
     exp = detrimmed(reference.make_record(reference.LATERAL))
     result = identify(exp, DT, settings=Settings(markov=1))
     model = result.discrete
-    observer = model.A + result.observer_gain @ model.C
+    observer = model.A + result.okid.observer_gain @ model.C
     assert np.abs(np.linalg.eigvals(observer)).max() < 1e-6
 
 

@@ -9,7 +9,7 @@ import pytest
 
 from agent.ident import identify, reference
 from agent.ident.convert import StateSpace, discretize
-from agent.ident.modal import HankelFactors, Mode, _mpc, modal_analysis
+from agent.ident.modal import HankelFactors, Mode, modal_analysis, modal_phase_collinearity
 from agent.ident.naming import name_modes
 from tests.conftest import DT, detrimmed
 
@@ -44,16 +44,21 @@ def test_real_modes_have_full_mpc_and_cmi_equals_emac_times_mpc(lateral):
 
 
 def test_mpc_of_known_shapes():
-    assert _mpc(np.array([1.0, 2.0, -3.0], dtype=complex)) == pytest.approx(1.0)
-    assert _mpc(np.array([1, 2, -3], dtype=complex) * np.exp(0.7j)) == pytest.approx(1.0)
-    assert _mpc(np.array([1.0, 1.0j])) == pytest.approx(0.0, abs=1e-12)  # circular
+    assert modal_phase_collinearity(np.array([1.0, 2.0, -3.0], dtype=complex)) == pytest.approx(1.0)
+    assert modal_phase_collinearity(
+        np.array([1, 2, -3], dtype=complex) * np.exp(0.7j)
+    ) == pytest.approx(1.0)
+    assert modal_phase_collinearity(np.array([1.0, 1.0j])) == pytest.approx(
+        0.0, abs=1e-12
+    )  # circular
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_eigenvalues_and_indicators_do_not_depend_on_state_coordinates(lateral, seed):
     rng = np.random.default_rng(seed)
-    model = StateSpace(lateral.era.A, lateral.era.B, lateral.era.C, lateral.era.D)
-    factors = HankelFactors(lateral.era.observability, lateral.era.controllability)
+    era = lateral.okid.era
+    model = StateSpace(era.A, era.B, era.C, era.D)
+    factors = HankelFactors(era.observability, era.controllability)
     T = rng.normal(size=(4, 4)) + 4 * np.eye(4)
     moved, moved_factors = model.transformed(T), factors.transformed(T)
     scales = {"input_scale": np.array([2.0, 3.0]), "output_scale": np.array([0.05, 0.1, 0.1, 0.05])}

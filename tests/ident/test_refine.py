@@ -13,7 +13,7 @@ from agent.ident import Experiment, Settings, identify, reference
 from agent.ident.convert import StateSpace, discretize_hold
 from agent.ident.fit import free_response_basis, simulate, state_convolution
 from agent.ident.modal import modal_subspace
-from agent.ident.refine import _chain, eigenvalue_std, refine
+from agent.ident.refine import discretization_jacobian, eigenvalue_std, refine
 from tests.conftest import DT, matched_relative_errors, true_eigenvalues
 
 LAT = reference.LATERAL
@@ -72,7 +72,7 @@ def test_discretisation_jacobian_matches_finite_differences(hold):
     numeric = np.column_stack(
         [(discrete(v + 1e-6 * e) - discrete(v - 1e-6 * e)) / 2e-6 for e in np.eye(v.size)]
     )
-    assert np.allclose(_chain(StateSpace(*mats), dt, hold), numeric, atol=1e-8)
+    assert np.allclose(discretization_jacobian(StateSpace(*mats), dt, hold), numeric, atol=1e-8)
 
 
 def _record(noise: float, seed: int = 0) -> Experiment:
@@ -245,14 +245,14 @@ def _process_noise_record(seed: int, gust: float = 0.3) -> Experiment:
 
 
 def test_innovation_form_jacobian_matches_finite_differences():
-    from agent.ident.refine import _Problem
+    from agent.ident.refine import OutputErrorProblem
 
     exp = _process_noise_record(0)
     short = Experiment(exp.u[:200], exp.y[:200])
     model = StateSpace(LAT.A * 1.02, LAT.B, np.eye(4), np.zeros((4, 2)))
     K = 0.1 * np.random.default_rng(1).normal(size=(4, 4))
     for hold, free_c in [("zoh", False), ("foh", True)]:
-        problem = _Problem(
+        problem = OutputErrorProblem(
             model, DT, [short], [np.zeros(4)], free_c=free_c, free_d=False, hold=hold, gain=K
         )
         beta = 1e-3 * np.random.default_rng(2).normal(size=problem.basis.shape[1])
@@ -306,7 +306,7 @@ def test_a_model_without_continuous_equivalent_is_reported_unrefined_with_the_re
     assert any("negative real axis" in w for w in result.warnings)
     assert any("no refinement" in w for w in result.warnings)
     assert all(m.uncertainty is None for m in result.modes)
-    assert result.fit is result.okid_fit
+    assert result.fit is result.okid.fit
 
 
 def test_refinement_refuses_a_start_whose_simulation_diverges():
@@ -329,7 +329,7 @@ def test_the_jacobian_summed_stretch_by_stretch_is_the_whole_records(monkeypatch
     sensitivities carry across each seam exactly, by per-entry convolution (4 states) and by
     the one-recursion path (8 states, n·q above DIRECT_SENSITIVITY_SIZE)."""
     from agent.ident import refine as refine_module
-    from agent.ident.refine import _Problem
+    from agent.ident.refine import OutputErrorProblem
 
     rng = np.random.default_rng(4)
     exp = _process_noise_record(0)
@@ -341,7 +341,7 @@ def test_the_jacobian_summed_stretch_by_stretch_is_the_whole_records(monkeypatch
         A = np.kron(np.eye(2), LAT.A) + 0.01 * rng.normal(size=(8, 8))
         model = StateSpace(A, np.vstack([LAT.B, LAT.B]), rng.normal(size=(4, 8)), np.zeros((4, 2)))
         free_c = True
-    problem = _Problem(
+    problem = OutputErrorProblem(
         model, DT, batch, [np.zeros(states)] * 2, free_c=free_c, free_d=False, hold="foh"
     )
     assert (states * problem.basis.shape[1] > refine_module.DIRECT_SENSITIVITY_SIZE) == (
@@ -350,7 +350,7 @@ def test_the_jacobian_summed_stretch_by_stretch_is_the_whole_records(monkeypatch
     beta = 1e-3 * rng.normal(size=problem.basis.shape[1])
     res, whole = problem.evaluate(beta, "full")
     monkeypatch.setattr(refine_module, "STRETCH_FLOATS", 1)  # one BLOCK_MAX stretch each
-    assert len(refine_module._stretches(500, 1)) == 6
+    assert len(refine_module.sample_stretches(500, 1)) == 6
     streamed_res, (H, g) = problem.evaluate(beta, "normal")
     _, triangle = problem.evaluate(beta, "triangle")
     scale = np.abs(whole.T @ whole).max()

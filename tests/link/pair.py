@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from agent.clock import LoopClock
-from agent.link.codec import AIRCRAFT, GROUND, CounterStore, LinkCodec
+from agent.link.codec import AIRCRAFT, GROUND, LinkCodec, key_fingerprint
 from agent.link.session import Guard, LinkSession
+from agent.link.store import CounterStore, SeenStore
 from agent.sim.radio import EmulatedXBee, RfChannel
 from drivers.xbee.driver import XBeeRadio
 from tests import waiting
@@ -26,6 +28,9 @@ class End:
     codec: LinkCodec
     session: LinkSession
     inbox: list = field(default_factory=list)
+    on_frame: Callable[[bytes, bytes, float], None] | None = None
+    """Where the radio's frames go (the session's `receive`): a test replaces it to hold
+    frames back, record them, or hand them to another session."""
 
 
 @dataclass
@@ -68,16 +73,17 @@ async def link_pair(
     ):
         inbox: list = []
         state = (air_state or tmp_path) if name == "air" else tmp_path
+        seen = SeenStore(state / f"{name}.seen", key_fingerprint(KEY))
         codec = LinkCodec(
             KEY,
             role,
             {peer},
             counter=CounterStore(state / f"{name}.counter"),
-            seen=state / f"{name}.seen",
+            floors=seen.load(),
         )
-        holder: list[LinkSession] = []
+        holder: list[End] = []
         radio = XBeeRadio(
-            str(module.path), 115200, clock, lambda s, p, t, h=holder: h[0].receive(s, p, t)
+            str(module.path), 115200, clock, lambda s, p, t, h=holder: h[0].on_frame(s, p, t)
         )
         await radio.open()
         codec.max_payload = radio.max_payload
@@ -88,14 +94,15 @@ async def link_pair(
             peer,
             clock,
             lambda m, _seq, box=inbox: box.append(m),
+            seen=seen,
             deadline_s=deadline_s,
             guard=air_guard if name == "air" else None,
             max_age_s=air_max_age_s if name == "air" else None,
         )
-        holder.append(session)
+        ends[name] = End(radio, codec, session, inbox, on_frame=session.receive)
+        holder.append(ends[name])
         tasks.append(asyncio.create_task(session.run(), name=f"session-{name}"))
         tasks.append(asyncio.create_task(radio.watch(), name=f"radio-{name}"))
-        ends[name] = End(radio, codec, session, inbox)
     pair = Pair(channel, ends["air"], ends["ground"], (air_module, ground_module), tasks)
     try:
         yield pair

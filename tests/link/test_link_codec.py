@@ -9,17 +9,20 @@ version, and a flood of fragments that never complete.
 
 from __future__ import annotations
 
+import ast
+from pathlib import Path
+
 import pytest
 
-from agent.link import messages
+from agent.link import codec, messages
 from agent.link.codec import (
     AIRCRAFT,
     GROUND,
     MAX_PARTIAL,
     PARTIAL_TIMEOUT_S,
-    CounterStore,
     LinkCodec,
 )
+from agent.link.store import CounterStore, SeenStore
 
 # A fixed key drawn at random (a patterned one, as bytes(range(32)) was, is refused).
 KEY = bytes.fromhex("5f1e9c27d4a0b38e61c7f2094ad35be8c06f1a729e4d83b5f02c6e917ad4b358")
@@ -136,17 +139,24 @@ def test_short_keys_are_refused(tmp_path):
 
 
 def test_a_restarted_receiver_still_refuses_old_frames(tmp_path):
-    seen = tmp_path / "seen"
+    seen = SeenStore(tmp_path / "seen", "fingerprint")
     air = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(tmp_path / "a"), address=AIR)
     ground = LinkCodec(
-        KEY, GROUND, {AIR}, counter=CounterStore(tmp_path / "g"), seen=seen, address=GROUND_ADDR
+        KEY, GROUND, {AIR}, counter=CounterStore(tmp_path / "g"), address=GROUND_ADDR
     )
     frames = [air.encode({"kind": "ping", "v": 1, "n": k})[0] for k in range(3)]
     for frame in frames:
         assert ground.decode(AIR, frame, 0) is not None
-    assert ground.save_seen()
+    assert seen.save(ground.floors())
+    assert not seen.save(ground.floors())  # nothing new
+    reloaded = SeenStore(tmp_path / "seen", "fingerprint").load()
     restarted = LinkCodec(
-        KEY, GROUND, {AIR}, counter=CounterStore(tmp_path / "g"), seen=seen, address=GROUND_ADDR
+        KEY,
+        GROUND,
+        {AIR},
+        counter=CounterStore(tmp_path / "g"),
+        floors=reloaded,
+        address=GROUND_ADDR,
     )
     assert all(restarted.decode(AIR, f, 0) is None for f in frames)  # replayed after restart
     assert restarted.counters["replayed"] + restarted.counters["stale"] == 3
@@ -167,3 +177,23 @@ def test_a_counter_jump_far_past_the_window_is_accepted_without_blowing_up(tmp_p
     assert [ground.decode(AIR, f, 0) is not None for f in frames] == [True] * 3
     assert ground.decode(AIR, frames[0], 0) is None  # and the window works after the jump
     assert ground.counters["replayed"] == 1
+
+
+def test_the_codec_does_no_file_io():
+    """The codec stays sans-I/O, as the drivers' codecs are: its counters come from a
+    FrameCounter and its replay state goes in and out as floors; the files are
+    agent/link/store.py's."""
+    tree = ast.parse(Path(codec.__file__).read_text())
+    imported = {
+        a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names
+    }
+    imported |= {
+        n.module.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module
+    }
+    assert not imported & {"os", "io", "pathlib", "json", "shutil", "tempfile", "time"}
+    called = {
+        n.func.id
+        for n in ast.walk(tree)
+        if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)
+    }
+    assert "open" not in called

@@ -16,6 +16,7 @@ import pytest
 
 from agent.clock import LoopClock
 from agent.excitation.plan import preset
+from agent.ident.document import ModeDocument
 from agent.link import messages
 from agent.sim.radio import EmulatedXBee, RfChannel
 from tests.link.pair import link_pair, wait_for
@@ -26,11 +27,10 @@ pytestmark = pytest.mark.usefixtures("no_leaked_tasks")
 def full_result(model_id: str = "m1") -> messages.Result:
     """A full-model result: eight states, four inputs, eight outputs."""
     rng = np.random.default_rng(0)
-    mode = messages.ModeReport(
+    mode = ModeDocument(
         name="Dutch roll",
-        real=-0.6,
-        imag=2.2,
-        frequency_hz=0.36,
+        eigenvalue=(-0.6, 2.2),
+        frequency_rad_s=2.28,
         damping=0.26,
         time_constant_s=None,
         msv=0.3,
@@ -39,8 +39,8 @@ def full_result(model_id: str = "m1") -> messages.Result:
         emac=0.95,
         mpc=0.3,
         cmi=0.7,
-        real_std=0.021,
-        imag_std=0.048,
+        eigenvalue_std=(0.021, 0.048),
+        frequency_std_rad_s=0.05,
         damping_std=0.012,
     )
     m = lambda r, c: rng.normal(size=(r, c)).tolist()  # noqa: E731
@@ -204,8 +204,9 @@ async def test_an_unplugged_radio_is_reopened_and_the_message_sent_meanwhile_arr
 async def test_a_restarted_receiver_takes_the_senders_next_message(tmp_path):
     """Bad input tried: the aircraft's session replaced by a new one (the agent restarted
     after a crash) while the ground's numbering goes on: it used to wait forever for message 1."""
-    from agent.link.codec import AIRCRAFT, CounterStore, LinkCodec
+    from agent.link.codec import AIRCRAFT, LinkCodec
     from agent.link.session import LinkSession
+    from agent.link.store import CounterStore
     from tests.link.pair import GROUND_ADDR, KEY
 
     async with link_pair(tmp_path) as pair:
@@ -228,7 +229,7 @@ async def test_a_restarted_receiver_takes_the_senders_next_message(tmp_path):
             lambda m, _seq: inbox.append(m),
         )
         pair.air.session = session
-        pair.air.radio._on_frame = session.receive
+        pair.air.on_frame = session.receive
         task = asyncio.create_task(session.run(), name="session-air-restarted")
         try:
             pair.ground.session.send_reliable(messages.Notice(text="two"))
@@ -354,7 +355,7 @@ async def test_an_open_given_up_leaves_no_reader_on_the_port(tmp_path, monkeypat
         assert ticks[0] > 0  # the loop ran while close waited for the open
         readers = [t for t in threading.enumerate() if type(t).__name__ == "PacketListener"]
         assert not [t for t in readers if t.is_alive()], readers
-        assert radio._device is None
+        assert not radio.is_open
     finally:
         running.cancel()
         await asyncio.gather(running, return_exceptions=True)
@@ -365,18 +366,19 @@ async def test_a_command_acted_on_is_refused_when_replayed_after_a_reboot(tmp_pa
     right after it rebooted. The replay state is written (fsynced) before a command is acted
     on, so the restarted end refuses every recorded frame; it used to be saved about once a
     second, so a reboot within that second accepted the Revert again."""
-    from agent.link.codec import AIRCRAFT, CounterStore, LinkCodec
+    from agent.link.codec import AIRCRAFT, LinkCodec, key_fingerprint
+    from agent.link.store import CounterStore, SeenStore
     from tests.link.pair import AIR_ADDR, GROUND_ADDR, KEY
 
     async with link_pair(tmp_path) as pair:
         heard: list[tuple[bytes, bytes]] = []
-        deliver = pair.air.radio._on_frame
+        deliver = pair.air.on_frame
 
         def record(source, payload, t):
             heard.append((source, payload))
             deliver(source, payload, t)
 
-        pair.air.radio._on_frame = record
+        pair.air.on_frame = record
         pair.ground.session.send_reliable(messages.Revert())
         assert await wait_for(lambda: any(isinstance(m, messages.Revert) for m in pair.air.inbox))
         # The reboot, at once: a new end from the files the old one left.
@@ -385,7 +387,7 @@ async def test_a_command_acted_on_is_refused_when_replayed_after_a_reboot(tmp_pa
             AIRCRAFT,
             {GROUND_ADDR},
             counter=CounterStore(tmp_path / "r"),
-            seen=tmp_path / "air.seen",
+            floors=SeenStore(tmp_path / "air.seen", key_fingerprint(KEY)).load(),
             address=AIR_ADDR,
         )
         replayed = [rebooted.decode(source, payload, 0.0) for source, payload in heard]
@@ -448,7 +450,8 @@ def test_a_missing_or_damaged_replay_state_refuses_the_link(tmp_path):
     # The state of another key says nothing of this one's frames: it starts empty.
     (tmp_path / "air.seen").write_text(json.dumps({"key": "0" * 16, "floors": {peer: 99}}))
     _, session = build_endpoint(cfg, AIRCRAFT, tmp_path, LoopClock(), lambda *_: None)
-    assert session.codec.seen_snapshot() is None  # nothing held: no floor for the peer
+    assert session.codec.floors() == {}  # nothing held: no floor for the peer
+    assert not session.unsaved
 
 
 async def test_a_queued_abort_survives_a_full_outbox(tmp_path):
@@ -474,7 +477,8 @@ async def test_a_frame_of_an_older_session_reordered_behind_a_new_one_is_dropped
     after the restarted session's first frame. It used to switch the aircraft's session back
     to the old epoch and deliver the old session's message; the sender's frame counter never
     goes back across restarts, so the older epoch is recognised and dropped."""
-    from agent.link.codec import GROUND, CounterStore, LinkCodec
+    from agent.link.codec import GROUND, LinkCodec
+    from agent.link.store import CounterStore
     from tests.link.pair import AIR_ADDR, GROUND_ADDR, KEY
 
     # The ground's codec under both of its sessions (a session restarted on the same codec):

@@ -28,11 +28,11 @@ from agent.link.codec import (
     HEADER,
     TAG,
     VERSION,
-    CounterStore,
     LinkCodec,
     MessageTooLarge,
 )
 from agent.link.session import LinkSession
+from agent.link.store import CounterStore
 from agent.runtime.downlink import Downlink
 from tests.link.pair import AIR_ADDR, GROUND_ADDR, KEY, link_pair, wait_for
 from tests.sim.test_sim_hardening import fill
@@ -82,7 +82,7 @@ async def test_an_abort_acts_at_once_while_the_replay_state_cannot_be_written(tm
         assert not any(isinstance(m, messages.Revert) for m in air.inbox)  # never acted
         assert air.session.persist_error is not None
         assert air.session.counters["seen_write_failures"] >= 1
-        assert air.codec.unsaved  # the failed write did not count as saved
+        assert air.session.unsaved  # the failed write did not count as saved
         # The session serves on: the ground still hears it, and its acks clear the outbox.
         assert await wait_for(lambda: ground.session.pending == 0)
         heard = ground.session.last_heard
@@ -108,12 +108,12 @@ async def test_a_command_held_for_the_disk_and_overtaken_by_an_abort_is_handed_o
         assert await wait_for(lambda: air.session.link_up)
         # One window of the loop: both messages are decoded before the session's task runs.
         frames: list[tuple[bytes, bytes]] = []
-        deliver = air.radio._on_frame
-        air.radio._on_frame = lambda s, p, t: frames.append((s, p))
+        deliver = air.on_frame
+        air.on_frame = lambda s, p, t: frames.append((s, p))
         ground.session.send_reliable(messages.Start())
         ground.session.send_reliable(messages.Abort(reason="stop"))
         assert await wait_for(lambda: len(frames) >= 2)
-        air.radio._on_frame = deliver
+        air.on_frame = deliver
         now = LoopClock().now()
         for source, payload in frames:
             deliver(source, payload, now)
@@ -224,8 +224,8 @@ async def test_a_command_held_back_on_the_way_and_injected_later_is_refused(tmp_
         air, ground = pair.air, pair.ground
         assert await wait_for(lambda: air.session.link_up and ground.session.link_up)
         recorded: list[tuple[bytes, bytes]] = []
-        deliver = air.radio._on_frame
-        air.radio._on_frame = lambda s, p, t: recorded.append((s, p))  # jammed, and recorded
+        deliver = air.on_frame
+        air.on_frame = lambda s, p, t: recorded.append((s, p))  # jammed, and recorded
         ground.session.send_reliable(messages.Revert())
         # The attacker, holding the key for the test's sake, picks the Revert out.
         reader = LinkCodec(KEY, AIRCRAFT, {GROUND_ADDR}, counter=CounterStore(None))
@@ -252,7 +252,7 @@ async def test_a_command_held_back_on_the_way_and_injected_later_is_refused(tmp_
         message, reason = guard.refused[0]
         assert isinstance(message, messages.Revert)
         assert re.search(r"sent \d+\.\d s ago \(at most 1 s", reason), reason
-        air.radio._on_frame = deliver  # the jamming ends: the ground's retries are as old
+        air.on_frame = deliver  # the jamming ends: the ground's retries are as old
         assert await wait_for(lambda: ground.session.pending == 0)
         assert not any(isinstance(m, messages.Revert) for m in air.inbox)
         ground.session.send_reliable(messages.Revert())  # afresh

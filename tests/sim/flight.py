@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -12,6 +13,7 @@ from agent.config import Autopilot as AutopilotConfig
 from agent.sim.aircraft import AircraftOptions, SimAircraft
 from agent.sim.ardupilot import Params
 from drivers.autopilot.driver import AutopilotLink
+from drivers.values import FlightState
 
 SWITCH = 7
 
@@ -20,10 +22,36 @@ SWITCH = 7
 class Flight:
     aircraft: SimAircraft
     link: AutopilotLink
+    clock: LoopClock
     tasks: list[asyncio.Task] = field(default_factory=list)
     switch: list[tuple[int, float]] = field(default_factory=list)
     links: list[tuple[bool, str, float]] = field(default_factory=list)
     states: list = field(default_factory=list)
+    # The driver's callbacks, after the recording above: a test sets them to wire its own
+    # consumer (a scheduler) to the link, as the agent does at construction.
+    on_switch: Callable[[int, float], None] | None = None
+    on_state: Callable[[FlightState], None] | None = None
+    on_servos: Callable[[float, dict[int, int]], None] | None = None
+    on_link: Callable[[bool, str], None] | None = None
+
+    def switched(self, pwm: int, t: float) -> None:
+        self.switch.append((pwm, t))
+        if self.on_switch is not None:
+            self.on_switch(pwm, t)
+
+    def state(self, state: FlightState) -> None:
+        self.states.append(state)
+        if self.on_state is not None:
+            self.on_state(state)
+
+    def servos(self, t: float, pwm: dict[int, int]) -> None:
+        if self.on_servos is not None:
+            self.on_servos(t, pwm)
+
+    def linked(self, up: bool, why: str) -> None:
+        self.links.append((up, why, self.clock.now()))
+        if self.on_link is not None:
+            self.on_link(up, why)
 
 
 @contextlib.asynccontextmanager
@@ -51,11 +79,12 @@ async def flight(
         config,
         clock,
         switch_channel=SWITCH,
-        on_switch=lambda pwm, t: holder[0].switch.append((pwm, t)),
-        on_state=lambda s: holder[0].states.append(s),
-        on_link=lambda up, why: holder[0].links.append((up, why, clock.now())),
+        on_switch=lambda pwm, t: holder[0].switched(pwm, t),
+        on_state=lambda s: holder[0].state(s),
+        on_servos=lambda t, pwm: holder[0].servos(t, pwm),
+        on_link=lambda up, why: holder[0].linked(up, why),
     )
-    f = Flight(aircraft, link, [sim_task])
+    f = Flight(aircraft, link, clock, [sim_task])
     holder.append(f)
     f.tasks.append(asyncio.create_task(link.run(), name="autopilot-link"))
     try:

@@ -12,6 +12,7 @@ import asyncio
 
 import numpy as np
 import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from agent.sim.ardupilot import Params
 from drivers.autopilot.driver import AutopilotError
@@ -28,6 +29,17 @@ async def _override(link, pwm: dict[int, int], seconds: float, rate: float = 50.
         last = asyncio.get_running_loop().time()
         await asyncio.sleep(1 / rate)
     return last
+
+
+def _raw_override(f, pwm: dict[int, int]) -> None:
+    """RC_CHANNELS_OVERRIDE with these channels, as the driver's system sends it but without
+    the driver's refusal of the switch channel, arriving at the emulated ArduPlane from the
+    driver's address (every other channel left alone: 65535 on 1–8, 0 on 9–18)."""
+    ap = f.aircraft.autopilot
+    mav = mavlink.MAVLink(None, srcSystem=ap.params.sysid_mygcs, srcComponent=190)
+    values = [pwm.get(ch, 65535 if ch <= 8 else 0) for ch in range(1, 19)]
+    message = mav.rc_channels_override_encode(ap.params.sysid, 1, *values)
+    ap.datagram_received(message.pack(mav), next(iter(ap.peers)))
 
 
 async def test_telemetry_arrives_at_the_configured_rates(tmp_path):
@@ -54,12 +66,12 @@ async def test_overrides_move_the_jsbsim_surfaces_through_the_servo_model(tmp_pa
 
         async def watch():
             while True:
-                trace.append((f.aircraft._clock.now(), plant.state()["rudder"]))
+                trace.append((f.clock.now(), plant.state()["rudder"]))
                 await asyncio.sleep(0.005)
 
         f.aircraft.pilot.set_switch(True)  # RCx_OPTION 46: overrides enabled
         watcher = asyncio.create_task(watch(), name="watch")
-        t0 = f.aircraft._clock.now()
+        t0 = f.clock.now()
         await _override(f.link, {4: 1900}, 0.8)  # rudder: full deflection one way
         watcher.cancel()
         await asyncio.gather(watcher, return_exceptions=True)
@@ -116,7 +128,7 @@ async def test_stopped_overrides_return_to_the_pilot_after_rc_override_time(tmp_
     async with flight(tmp_path, params=params) as f:
         f.aircraft.pilot.set_switch(True)
         stopped = await _override(f.link, {2: 1800}, 0.4)
-        clock = f.aircraft._clock
+        clock = f.clock
         assert f.aircraft.autopilot.outputs[2] == 1800
         while f.aircraft.autopilot.outputs[2] == 1800 and clock.now() - stopped < 2.0:
             await asyncio.sleep(0.005)
@@ -141,7 +153,7 @@ async def test_the_switch_is_read_and_never_overridden(tmp_path):
             await f.link.command({SWITCH: 1000, 1: 1600})
         # Even sent raw, the autopilot never overrides the switch channel.
         for _ in range(10):
-            f.link._send_override({SWITCH: 1000})
+            _raw_override(f, {SWITCH: 1000})
             await asyncio.sleep(0.02)
         await asyncio.sleep(0.1)
         assert f.switch[-1][0] >= 1700
@@ -150,7 +162,7 @@ async def test_the_switch_is_read_and_never_overridden(tmp_path):
 async def test_killing_the_autopilot_reports_link_loss_within_the_deadline(tmp_path):
     async with flight(tmp_path, link_timeout_s=0.4) as f:
         await asyncio.sleep(0.5)
-        clock = f.aircraft._clock
+        clock = f.clock
         f.tasks[0].cancel()  # the emulator dies mid-run
         killed = clock.now()
         while f.link.connected and clock.now() - killed < 3.0:
@@ -168,11 +180,11 @@ async def test_a_run_aborts_when_the_autopilot_link_is_lost(tmp_path):
     from agent.excitation.scheduler import Scheduler, Window
 
     async with flight(tmp_path, link_timeout_s=0.4) as f:
-        clock = f.aircraft._clock
+        clock = f.clock
         scheduler = Scheduler(Config().excitation, f.link, clock)
-        f.link._on_switch, f.link._on_state = scheduler.update_switch, scheduler.update_state
-        f.link._on_servos = scheduler.update_servos
-        f.link._on_link = lambda up, why: None if up else scheduler.abort(f"autopilot link: {why}")
+        f.on_switch, f.on_state = scheduler.update_switch, scheduler.update_state
+        f.on_servos = scheduler.update_servos
+        f.on_link = lambda up, why: None if up else scheduler.abort(f"autopilot link: {why}")
         windows: list[Window] = []
         scheduler.subscribe(lambda e: windows.append(e) if isinstance(e, Window) else None)
         f.tasks.append(asyncio.create_task(scheduler.run(), name="scheduler"))

@@ -49,7 +49,7 @@ HARMONICS = (3, 5, 7, 9, 11, 13)
 def heavy(plan_id: str) -> Plan:
     """A lateral multisine whose arming is CPU-bound: its phases are optimised afresh (the
     optimiser's cache cleared), about a second of CPU."""
-    signals._optimised.cache_clear()
+    signals.forget_phases()
     sine = Multisine(harmonics=HARMONICS, period_s=20.0, periods=1.0, amplitude=2.0)
     return Plan(id=plan_id, axes="lateral", segments=(Segment(signals={"aileron": sine}),))
 

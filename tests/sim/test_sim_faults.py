@@ -82,7 +82,7 @@ async def test_switch_dropped_mid_run_trims_within_one_period_then_releases(tmp_
         )
         await asyncio.sleep(0.5)  # anything the agent still sends after the release
         wire = list(ap.wire)
-        overrides_held = dict(ap._overrides)
+        overrides_held = ap.overrides
         rc, pilot = ap.rc_inputs(sim.clock.now()), sim.aircraft.pilot(sim.clock.now())
 
     assert "switch" in aborted[0].detail
@@ -173,7 +173,7 @@ async def test_sensor_replugged_and_result_delivered_after_radio_outage(tmp_path
         restored = sim.clock.now()
         result = await answer(sim, seen)
         assert isinstance(result, messages.Result), result
-        assert result.model_id == agent.identification.results[-1]["model_id"]
+        assert result.model_id == agent.identification.results[-1].model_id
         delivered = sim.clock.now()
         retransmissions = agent.session.counters["retransmissions"]
     assert delivered >= restored

@@ -102,7 +102,7 @@ def assert_trimmed_then_released(
     rest = after[after.index(trim) + 1 :]
     release = {ch: RELEASE_LOW for ch in trim}
     assert rest[-RELEASE_REPEATS:] == [release] * RELEASE_REPEATS
-    assert ap._overrides == {}
+    assert ap.overrides == {}
 
 
 async def finished_or_aborted(sim: SimFlight, seen: int):
@@ -169,7 +169,7 @@ async def test_a_hostile_transmitter_and_half_the_frames_lost_change_nothing(tmp
         sim.aircraft.pilot.set_switch(False)
         await asyncio.sleep(0.5)
         ap = sim.aircraft.autopilot
-        overrides = dict(ap._overrides)
+        overrides = ap.overrides
     assert 0 < delivered < sent  # half the attempts lost, MAC retries bring most through
     # Every hostile frame that arrived was dropped and counted, none reached the agent.
     assert dropped - dropped_before == delivered, counters
@@ -277,7 +277,7 @@ async def test_kill_9_mid_run_lets_the_pilot_back_and_loses_no_logged_byte(tmp_p
         ap, agent = sim.aircraft.autopilot, sim.agent
         await start_run(sim, "kill-9")
         await asyncio.sleep(1.5)  # inside the aileron doublet: overrides held
-        assert ap._overrides
+        assert ap.overrides
         children = Path(f"/proc/{agent.pid}/task/{agent.pid}/children").read_text().split()
         worker = next(
             int(c) for c in children if b"spawn_main" in Path(f"/proc/{c}/cmdline").read_bytes()
@@ -287,7 +287,7 @@ async def test_kill_9_mid_run_lets_the_pilot_back_and_loses_no_logged_byte(tmp_p
         # Nothing of ours can act now: ArduPilot's RC_OVERRIDE_TIME hands every channel back
         # to the pilot.
         timeout = ap.params.rc_override_time_s
-        await until(lambda: not ap._overrides, "the overrides lapsing")
+        await until(lambda: not ap.overrides, "the overrides lapsing")
         lapsed = sim.clock.now() - killed
         # The worker died with the agent (PR_SET_PDEATHSIG), not left running orphaned.
         await until(lambda: _dead(worker), "the worker to die")
@@ -326,7 +326,7 @@ async def test_an_ins_dropout_and_a_corrupted_stream_during_an_excitation(tmp_pa
         surfaces = sim.aircraft.emitters["surfaces"]
         vn200 = next(d for d in agent.drivers if d.name == "vn200")
         box = next(d for d in agent.drivers if d.name == "surfaces")
-        surfaces._corrupt = 0.05
+        surfaces.corrupt = 0.05
         seen = await start_run(sim, "sensors")
         await asyncio.sleep(2.0)
         sim.aircraft.ports["vn200"].unplug()
@@ -335,11 +335,11 @@ async def test_an_ins_dropout_and_a_corrupted_stream_during_an_excitation(tmp_pa
         await until(lambda: vn200.health().state == "open", "the INS back")
         end = await finished_or_aborted(sim, seen)
         outcome = await answer(sim, seen)
-        surfaces._corrupt = 0.0
+        surfaces.corrupt = 0.0
         corrupted, crc = surfaces.corrupted, box.health().crc_errors
         sim.aircraft.pilot.set_switch(False)
         await asyncio.sleep(0.5)
-        overrides = dict(sim.aircraft.autopilot._overrides)
+        overrides = sim.aircraft.autopilot.overrides
     assert corrupted > 10
     assert crc + box.health().rejected >= corrupted - 3  # each bad frame counted
     assert vn200.health().gaps >= 1
@@ -381,7 +381,7 @@ async def test_an_autopilot_reboot_mid_run_aborts_to_trim_and_the_agent_reconnec
             for t, kind, values, accepted in (e for e in ap.wire if e[1] == "override")
             if t >= rebooted and accepted
         ]
-        overrides = dict(ap._overrides)
+        overrides = ap.overrides
     assert ap.counters["reboots"] == 1
     assert "autopilot" in end.detail or "stale" in end.detail, end.detail
     # The reboot dropped the excitation's overrides; what the agent sent the rebooted ArduPlane
@@ -403,13 +403,13 @@ async def test_an_agent_stopped_mid_run_trims_and_releases_before_its_link_close
         seen = await start_run(sim, "shutdown")
         started = received(sim, messages.ExcitationEvent, seen, event="started")[0]
         await asyncio.sleep(1.5)
-        assert sim.aircraft.autopilot._overrides
+        assert sim.aircraft.autopilot.overrides
         agent_task = next(t for t in asyncio.all_tasks() if t.get_name() == "agent")
         agent_task.cancel()
         await asyncio.gather(agent_task, return_exceptions=True)
         held = sim.agent.autopilot.counters["closed_holding_override"]
         await asyncio.sleep(0.2)
-        overrides = dict(sim.aircraft.autopilot._overrides)
+        overrides = sim.aircraft.autopilot.overrides
     assert held == 0
     assert_trimmed_then_released(sim, started, started.time)
     assert overrides == {}

@@ -45,7 +45,7 @@ def _dutch_roll(options) -> complex:
 async def test_lateral_preset_through_the_whole_chain_finds_the_dutch_roll(tmp_path):
     config = Config()
     async with flight(tmp_path) as f:
-        clock = f.aircraft._clock
+        clock = f.clock
         sensors = Sensors(
             vn200=VectorNav(port=str(tmp_path / "vn200")),
             airdata=AirDataPort(port=str(tmp_path / "airdata")),
@@ -53,9 +53,9 @@ async def test_lateral_preset_through_the_whole_chain_finds_the_dutch_roll(tmp_p
         )
         recorder = Recorder(config.recorder, clock)
         scheduler = Scheduler(config.excitation, f.link, clock)
-        f.link._on_switch = scheduler.update_switch
-        f.link._on_state = scheduler.update_state
-        f.link._on_servos = scheduler.update_servos
+        f.on_switch = scheduler.update_switch
+        f.on_state = scheduler.update_state
+        f.on_servos = scheduler.update_servos
         windows: list[Window] = []
         scheduler.subscribe(lambda e: windows.append(e) if isinstance(e, Window) else None)
         for make in (vn200_driver, airdata_driver, surfaces_driver):
@@ -96,7 +96,7 @@ async def test_sensors_at_400_hz_subdivide_the_autopilot_tick(tmp_path):
     # and each of the three devices writes a frame every 2.5 ms, stamped with its own time,
     # through the real drivers into a 400 Hz recorder.
     async with flight(tmp_path, sensor_rate_hz=400.0) as f:
-        clock, aircraft = f.aircraft._clock, f.aircraft
+        clock, aircraft = f.clock, f.aircraft
         sensors = Sensors(
             vn200=VectorNav(port=str(tmp_path / "vn200"), rate_hz=400.0),
             airdata=AirDataPort(port=str(tmp_path / "airdata"), rate_hz=400.0),

@@ -23,7 +23,8 @@ from agent.cli import main
 from agent.config import Channels, Config
 from agent.excitation.plan import preset
 from agent.ident import Settings
-from agent.ident.job import Job, run, settings_from
+from agent.ident.document import ResultDocument
+from agent.ident.job import Job, run
 from agent.sim.offline import INS_CHANNELS, fly
 
 CHANNELS = Channels()
@@ -47,32 +48,32 @@ def window() -> dict[str, np.ndarray]:
 
 def _job(values: dict[str, np.ndarray]) -> dict:
     job = Job(
-        "ful-1",
-        "full",
-        0.01,
-        INPUTS,
-        OUTPUTS,
-        ROLES,
-        (),
-        Settings(held_inputs=False),
+        model_id="ful-1",
+        axes="full",
+        record_dt=0.01,
+        inputs=INPUTS,
+        outputs=OUTPUTS,
+        roles=ROLES,
+        experiments=(),
+        settings=Settings(held_inputs=False),
         window=values,
         navigation=CHANNELS.navigation(),
     )
     outcome = run(job)
     assert outcome.ok, outcome.reason
-    return outcome.result["aircraft"]
+    return outcome.result.aircraft
 
 
 def test_the_job_measures_the_wind_from_the_ins_channels_in_its_window(window):
     report = _job(window)
-    assert report["kinematics"]
-    assert report["wind"]["measured"]
+    assert report.kinematics
+    assert report.wind.measured
     # Light Dryden turbulence at 1000 ft (MIL-F-8785C's low-altitude model, W20 = 5 ft/s):
     # σ_u = 0.1 W20 / (0.177 + 0.000823 h)^0.4 = 0.15 m/s; the measured gust is the gust
-    # without the sensors' noise (agent.ident.aircraft.measured_gust).
-    assert 0.1 < report["wind"]["gust_rms"]["airspeed"] < 0.3
-    lateral = next(axis for axis in report["axes"] if axis["name"] == "lateral")
-    assert "gust beta" in lateral["inputs"]
+    # without the sensors' noise (agent.ident.aircraft.wind.measured_gust).
+    assert 0.1 < report.wind.gust_rms["airspeed"] < 0.3
+    lateral = next(axis for axis in report.axes if axis.name == "lateral")
+    assert "gust beta" in lateral.inputs
 
 
 def test_an_ins_dropout_or_no_ins_channels_identify_without_the_wind(window):
@@ -80,10 +81,10 @@ def test_an_ins_dropout_or_no_ins_channels_identify_without_the_wind(window):
     dropout["vn"] = window["vn"].copy()
     dropout["vn"][3000:3100] = np.nan
     report = _job(dropout)
-    assert not report["wind"]["measured"]
-    assert report["kinematics"]  # the trim is still known
+    assert not report.wind.measured
+    assert report.kinematics  # the trim is still known
     without = {k: v for k, v in window.items() if k not in CHANNELS.navigation()}
-    assert not _job(without)["wind"]["measured"]
+    assert not _job(without).wind.measured
 
 
 def _csv(path, values: dict[str, np.ndarray], header: str = "") -> None:
@@ -97,23 +98,23 @@ def _identify(capsys, path) -> dict:
     code = main(["identify", str(path), "--axes", "full", "--json"])
     out = capsys.readouterr().out
     assert code == 0, out
-    return json.loads(out)["aircraft"]
+    return ResultDocument.model_validate(json.loads(out)).aircraft
 
 
 def test_sysid_identify_on_a_csv_record_uses_the_trim_and_the_wind(tmp_path, capsys, window):
     _csv(tmp_path / "full.csv", window)
     report = _identify(capsys, tmp_path / "full.csv")
     onboard = _job(window)
-    assert report["kinematics"]
-    assert report["wind"]["measured"]
-    assert report["wind"]["gust_rms"] == pytest.approx(onboard["wind"]["gust_rms"], rel=1e-6)
+    assert report.kinematics
+    assert report.wind.measured
+    assert report.wind.gust_rms == pytest.approx(onboard.wind.gust_rms, rel=1e-6)
     # Without the INS columns the same record is identified without the wind, not refused.
     _csv(
         tmp_path / "no_ins.csv", {k: v for k, v in window.items() if k not in CHANNELS.navigation()}
     )
     report = _identify(capsys, tmp_path / "no_ins.csv")
-    assert report["kinematics"]
-    assert not report["wind"]["measured"]
+    assert report.kinematics
+    assert not report.wind.measured
 
 
 def test_a_damaged_ins_column_in_a_csv_record_leaves_out_the_wind(tmp_path, capsys, window):
@@ -127,8 +128,8 @@ def test_a_damaged_ins_column_in_a_csv_record_leaves_out_the_wind(tmp_path, caps
         lines[row] = ",".join(cells)
     path.write_text("\n".join(lines) + "\n")
     report = _identify(capsys, path)
-    assert report["kinematics"]
-    assert not report["wind"]["measured"]
+    assert report.kinematics
+    assert not report.wind.measured
 
 
 def test_sysid_analyze_replays_an_agent_log_with_the_trim_and_the_wind(tmp_path, window):
@@ -141,14 +142,14 @@ def test_sysid_analyze_replays_an_agent_log_with_the_trim_and_the_wind(tmp_path,
     )
     config = Config().identification
     request = Request((path,), INPUTS, OUTPUTS, navigation=config.channels.navigation())
-    settings = settings_from(config, None, None)
+    settings = Settings.from_config(config, sampled_inputs=True)  # the agent's own log
     cases, dt = an.build_cases(
         request, ROLES, settings, batch=False, sweep=None, input_roles=CHANNELS_ROLES
     )
     assert dt == pytest.approx(DT)
     (outcome,) = an.run_cases(cases)
     assert outcome.ok, outcome.reason
-    report = outcome.result["aircraft"]
-    assert report["kinematics"]
-    assert report["wind"]["measured"]
-    assert report["wind"]["gust_rms"] == pytest.approx(_job(window)["wind"]["gust_rms"], rel=1e-6)
+    report = outcome.result.aircraft
+    assert report.kinematics
+    assert report.wind.measured
+    assert report.wind.gust_rms == pytest.approx(_job(window).wind.gust_rms, rel=1e-6)

@@ -1,5 +1,12 @@
 """Identify (3): the identification settings to send (type, p, order, batch, update period)
-and the settings in effect."""
+and the settings in effect.
+
+What the aircraft's status reports is in effect (an older aircraft's status does not say:
+then the last settings it acknowledged). The form starts from them and follows them until
+the operator edits it; a form that differs from them says so, field by field, until the
+aircraft reports them in effect — no field shows a value as if it were in effect when it is
+not. The type "each plan's own" (the aircraft's default) identifies each run on its plan's
+axes; the others identify every run on the axes chosen, whatever its plan."""
 
 from __future__ import annotations
 
@@ -10,67 +17,187 @@ from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
 from textual.containers import Horizontal, VerticalScroll
+from textual.reactive import var
 from textual.widgets import Button, Checkbox, Input, Label, Select, Static
 
+from agent.ground.events import Command
 from agent.ground.station import GroundStation
 from agent.link import messages
 
+PLAN = "plan"  # the type that leaves each run on its plan's axes (IdentSettings.axes None)
+TYPES = [("each plan's own", PLAN), *((a, a) for a in ("lateral", "longitudinal", "full"))]
+# Each field's name on the screen.
+FIELDS = {
+    "axes": "type",
+    "markov": "p",
+    "order": "n",
+    "batch": "batch",
+    "update_period_s": "update period",
+}
+
 
 class IdentifyTab(VerticalScroll):
+    reported: var[messages.IdentSettings | None] = var(None)
+    """The settings in effect, as the aircraft's status reports them (None: not reported)."""
+    acknowledged: var[messages.IdentSettings | None] = var(None)
+    """The last settings the aircraft acknowledged."""
+
     def __init__(self, station: GroundStation, send: Callable, **kwargs):
         super().__init__(**kwargs)
         self.station, self.send = station, send
+        self._loaded = messages.IdentSettings()  # what the form was last set to
+        self._sent: messages.IdentSettings | None = None  # sent, not yet reported in effect
 
     def compose(self) -> ComposeResult:
-        axes = [(a, a) for a in ("lateral", "longitudinal", "full")]
+        # Kept as attributes: the watchers (first called once mounted) draw into them.
+        self.axes_select = Select(TYPES, value=PLAN, allow_blank=False, id="axes", compact=True)
+        self.markov_input = Input("auto", id="markov", compact=True)
+        self.order_input = Input("auto", id="order", compact=True)
+        self.batch_box = Checkbox("on", id="batch", compact=True)
+        self.period_input = Input("", placeholder="none", id="period", compact=True)
+        self.error = Static(id="settings-error")
+        self.now = Static(id="settings-now")
+        self.pending = Static(id="settings-pending")
         rows = [
-            (
-                "identification type",
-                Select(axes, value="lateral", allow_blank=False, id="axes", compact=True),
-            ),
-            ("Markov parameters p", Input("auto", id="markov", compact=True)),
-            ("model order n", Input("auto", id="order", compact=True)),
-            ("batch (stack runs)", Checkbox("on", id="batch", compact=True)),
-            ("update period s", Input("", placeholder="none", id="period", compact=True)),
+            ("identification type", self.axes_select),
+            ("Markov parameters p", self.markov_input),
+            ("model order n", self.order_input),
+            ("batch (stack runs)", self.batch_box),
+            ("update period s", self.period_input),
         ]
         for label, widget in rows:
             with Horizontal():
                 yield Label(label)
                 yield widget
+        self.send_button = Button(
+            "Send settings", id="send-settings", variant="primary", compact=True
+        )
         with Horizontal(id="settings-buttons"):
-            yield Button("Send settings", id="send-settings", variant="primary", compact=True)
-        yield Static(id="settings-error")
-        yield Static(id="settings-now")
+            yield self.send_button
+        yield self.error
+        yield self.now
+        yield self.pending
 
-    def show(self) -> None:
-        now = self.station.settings_in_effect
-        if now is None:
-            text = "in effect: the aircraft's configured defaults (none sent yet)"
+    def in_effect(self) -> tuple[messages.IdentSettings | None, str]:
+        """The settings in effect and how that is known ("" : not known)."""
+        if self.reported is not None:
+            return self.reported, "reported by the aircraft"
+        if self.acknowledged is not None:
+            return self.acknowledged, "acknowledged by the aircraft"
+        return None, ""
+
+    def answered(self, command: Command) -> None:
+        """The aircraft's answer to settings sent from here."""
+        if command.ack is not None and command.ack.ok:
+            self.acknowledged = command.message
+        elif command.message == self._sent:  # refused: they will not be in effect
+            self._sent = None
+            self._show_pending()
+
+    def watch_reported(self) -> None:
+        self._effect_changed()
+
+    def watch_acknowledged(self) -> None:
+        self._effect_changed()
+
+    def _effect_changed(self) -> None:
+        """Show what is in effect, and bring the form to it unless the operator is editing."""
+        now, how = self.in_effect()
+        form = self.form()
+        if now is not None and form in (self._loaded, now):
+            if form != now:
+                self._load(now)
+            self._loaded = now
+        if now is not None and now == self._sent:
+            self._sent = None
+        self.now.update(_effect_text(now, how))
+        self._show_pending()
+
+    def _load(self, s: messages.IdentSettings) -> None:
+        self.axes_select.value = s.axes or PLAN
+        self.markov_input.value = str(s.markov)
+        self.order_input.value = str(s.order)
+        self.batch_box.value = s.batch
+        self.period_input.value = "" if s.update_period_s is None else f"{s.update_period_s:g}"
+
+    def form(self) -> messages.IdentSettings | None:
+        """The settings the form holds (None: not valid)."""
+        try:
+            return self._read()
+        except (ValidationError, ValueError):
+            return None
+
+    def _read(self) -> messages.IdentSettings:
+        period = self.period_input.value.strip()
+        axes = self.axes_select.value
+        return messages.IdentSettings(
+            axes=None if axes == PLAN else axes,
+            markov=_auto_int(self.markov_input.value),
+            order=_auto_int(self.order_input.value),
+            batch=self.batch_box.value,
+            update_period_s=float(period) if period else None,
+        )
+
+    @on(Input.Changed)
+    @on(Select.Changed)
+    @on(Checkbox.Changed)
+    def _edited(self) -> None:
+        # A press of Send lasts a moment (Textual's "active" effect), and a click meanwhile is
+        # ignored as a double click: an edit ends it, so a click on Send after any change to
+        # the form is a new press and sends what the form now shows.
+        self.send_button.remove_class("-active")
+        self._show_pending()
+
+    def _show_pending(self) -> None:
+        """Say which of the form's fields are not in effect (nothing when all are)."""
+        form = self.form()
+        now, _ = self.in_effect()
+        if form is None:
+            text = Text("the form is not valid: it cannot be sent", "yellow")
+        elif now is None:
+            text = Text("not sent; the settings in effect are not known here", "yellow")
+        elif form == now:
+            text = Text("")
         else:
-            period = f"every {now.update_period_s:g} s" if now.update_period_s else "no period"
-            text = (
-                f"in effect: {now.axes}, p {now.markov}, n {now.order}, "
-                f"batch {'on' if now.batch else 'off'}, {period}"
+            fields = ", ".join(
+                label for key, label in FIELDS.items() if getattr(form, key) != getattr(now, key)
             )
-        self.query_one("#settings-now", Static).update(text)
+            waiting = form == self._sent
+            text = Text(
+                f"sent, not yet in effect: {fields}"
+                if waiting
+                else f"not sent: {fields} differ from the settings in effect",
+                "yellow",
+            )
+        self.pending.update(text)
 
     @on(Button.Pressed, "#send-settings")
     def _send_settings(self) -> None:
-        error = self.query_one("#settings-error", Static)
-        period = self.query_one("#period", Input).value.strip()
         try:
-            settings = messages.IdentSettings(
-                axes=self.query_one("#axes", Select).value,
-                markov=_auto_int(self.query_one("#markov", Input).value),
-                order=_auto_int(self.query_one("#order", Input).value),
-                batch=self.query_one("#batch", Checkbox).value,
-                update_period_s=float(period) if period else None,
-            )
+            settings = self._read()
         except (ValidationError, ValueError) as exc:
-            error.update(Text(f"not sent: {_first_error(exc)}", "red"))
+            self.error.update(Text(f"not sent: {_first_error(exc)}", "red"))
             return
-        error.update("")
+        self.error.update("")
+        self._sent = settings
+        self._show_pending()
         self.send(lambda: self.station.settings(settings))
+
+
+def _effect_text(s: messages.IdentSettings | None, how: str) -> str:
+    if s is None:
+        return "in effect: not known here yet (not reported by the aircraft, none acknowledged)"
+    if s.update_period_s is None:
+        period = "no update period"
+    else:
+        period = f"every {s.update_period_s:g} s"
+        if s.axes is None:
+            period += " (periodic windows on the aircraft's configured axes)"
+    axes = s.axes or "each plan's own axes"
+    return (
+        f"in effect ({how}): {axes}, p {s.markov}, n {s.order}, "
+        f"batch {'on' if s.batch else 'off'}, {period}"
+    )
 
 
 def _auto_int(text: str) -> int | str:

@@ -9,11 +9,13 @@ from __future__ import annotations
 from rich.text import Text
 from textual.app import ComposeResult
 from textual.containers import Horizontal, Vertical, VerticalScroll
+from textual.reactive import var
 from textual.widgets import Label, ProgressBar, Static
 
 from agent.channels import UNITS
 from agent.ground.station import STRIP_S, GroundStation
 from agent.ground.strip import Strip, scale_of
+from agent.link import messages
 
 COMMANDED, MEASURED = "yellow", "cyan"
 # Display units of the live view (`messages.Live`): angles in degrees.
@@ -21,39 +23,44 @@ DISPLAY_UNITS = {"rad": "°", "deg": "°", "rad/s": "°/s"}
 
 
 class LiveTab(Vertical):
+    live: var[messages.Live | None] = var(None, always_update=True)
+    """The latest frame of the run (None: none playing or being identified); each frame's
+    samples are already in the station's strips, so every frame redraws the charts."""
+
     def __init__(self, station: GroundStation, **kwargs):
         super().__init__(**kwargs)
         self.station = station
-        self._channels: list[str] = []  # the strips shown, in order
+        self._rows: dict[str, tuple[Strip, Static]] = {}  # the charts shown, in order
 
     def compose(self) -> ComposeResult:
+        # Kept as attributes: the watcher (first called once mounted) draws into them.
+        self.plan_bar = ProgressBar(total=100, show_eta=False, id="plan-progress")
+        self.plan_text = Static(id="plan-text")
+        self.ident_bar = ProgressBar(total=100, show_eta=False, id="ident-progress")
+        self.ident_text = Static(id="ident-text")
+        self.strips = VerticalScroll(id="strips")
         with Horizontal(classes="progress-row"):
             yield Label("plan", classes="progress-label")
-            yield ProgressBar(total=100, show_eta=False, id="plan-progress")
-            yield Static(id="plan-text")
+            yield self.plan_bar
+            yield self.plan_text
         with Horizontal(classes="progress-row"):
             yield Label("identification", classes="progress-label")
-            yield ProgressBar(total=100, show_eta=False, id="ident-progress")
-            yield Static(id="ident-text")
-        yield VerticalScroll(id="strips")
+            yield self.ident_bar
+            yield self.ident_text
+        yield self.strips
 
-    def show(self) -> None:
-        h = self.station.heard
-        live = h.live
-        plan_bar = self.query_one("#plan-progress", ProgressBar)
-        ident_bar = self.query_one("#ident-progress", ProgressBar)
+    def watch_live(self) -> None:
+        live = self.live
         if live is None or live.plan_fraction is None:
-            plan_bar.update(progress=0 if live is None else 100)
-            self.query_one("#plan-text", Static).update(
-                "no plan playing" if live is None else "played"
-            )
+            self.plan_bar.update(progress=0 if live is None else 100)
+            self.plan_text.update("no plan playing" if live is None else "played")
         else:
-            plan_bar.update(progress=100 * live.plan_fraction)
-            self.query_one("#plan-text", Static).update(
+            self.plan_bar.update(progress=100 * live.plan_fraction)
+            self.plan_text.update(
                 f"{live.plan_id}: {live.plan_fraction * live.plan_s:.0f} of {live.plan_s:.0f} s"
             )
-        ident_bar.update(progress=self._ident_progress(live))
-        self.query_one("#ident-text", Static).update(self._ident_text(live))
+        self.ident_bar.update(progress=self._ident_progress(live))
+        self.ident_text.update(self._ident_text(live))
         self._strips()
 
     def _ident_progress(self, live) -> float:
@@ -73,29 +80,29 @@ class LiveTab(Vertical):
 
     def _strips(self) -> None:
         strips = self.station.heard.strips
-        box = self.query_one("#strips", VerticalScroll)
         names = sorted({n.removesuffix("_cmd") for n in strips}, key=_order)
-        if names != self._channels:
-            box.remove_children()
-            for name in names:
-                box.mount(
-                    Horizontal(
-                        Label(name, classes="strip-label"),
-                        Strip(STRIP_S, id=f"strip-{name}", classes="strip"),
-                        Static(id=f"value-{name}", classes="strip-value"),
-                        classes="strip-row",
-                    )
+        if names != list(self._rows):
+            self.strips.remove_children()
+            self._rows = {
+                name: (
+                    Strip(STRIP_S, id=f"strip-{name}", classes="strip"),
+                    Static(id=f"value-{name}", classes="strip-value"),
                 )
-            self._channels = names
-            return  # drawn on the next refresh, once mounted
-        for name in names:
-            traces = [
-                (strips[key], colour)
-                for key, colour in ((f"{name}_cmd", COMMANDED), (name, MEASURED))
-                if key in strips
-            ]
-            self.query_one(f"#strip-{name}", Strip).show(traces)
-            self.query_one(f"#value-{name}", Static).update(_values(name, strips))
+                for name in names
+            }
+            self.strips.mount_all(
+                Horizontal(Label(name, classes="strip-label"), strip, value, classes="strip-row")
+                for name, (strip, value) in self._rows.items()
+            )
+        for name, (strip, value) in self._rows.items():
+            strip.show(
+                [
+                    (strips[key], colour)
+                    for key, colour in ((f"{name}_cmd", COMMANDED), (name, MEASURED))
+                    if key in strips
+                ]
+            )
+            value.update(_values(name, strips))
 
 
 def _values(name: str, strips) -> Text:

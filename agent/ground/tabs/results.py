@@ -10,6 +10,7 @@ from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
 from textual.containers import Horizontal, VerticalScroll
+from textual.reactive import var
 from textual.widgets import Button, DataTable, Select, Static
 
 from agent.ground.bode import Bode
@@ -20,86 +21,100 @@ from agent.link import messages
 
 
 class ResultsTab(Horizontal):
+    results: var[tuple[str, ...]] = var(())
+    """The results heard (their ids, oldest first; the station holds them)."""
+    selected: var[str | None] = var(None)
+    """The result shown (None: none yet)."""
+    nominal: var[tuple[tuple[str, str], ...]] = var(())
+    """The aircraft's nominal model of each axes, as its status says."""
+    frf: var[tuple[str, str, str] | None] = var(None, always_update=True)
+    """The frequency response heard last: (model id, input, output)."""
+
     def __init__(self, station: GroundStation, send: Callable, **kwargs):
         super().__init__(**kwargs)
         self.station, self.send = station, send
-        self.selected: str | None = None  # the result shown; None: the newest
-        self._shown: list[str] = []  # the results in the table
-        self._detail_key: tuple | None = None  # what the detail shows now
         self._pairs: list[str] = []  # the input → output pairs offered
 
     def compose(self) -> ComposeResult:
-        yield DataTable(id="results", cursor_type="row")
+        # Kept as attributes: the watchers (first called once mounted) draw into them.
+        self.table = DataTable(id="results", cursor_type="row")
+        self.summary = Static(id="summary")
+        self.modes = DataTable(id="modes", cursor_type="row")
+        self.nominal_title = Static(id="nominal-title")
+        self.nominal_modes = DataTable(id="nominal-modes", cursor_type="none")
+        self.splane = SPlane(id="splane")
+        self.pair = Select([], prompt="input → output", id="frf-pair", compact=True)
+        self.bode = Bode(id="bode")
+        yield self.table
         with VerticalScroll(id="detail"):
-            yield Static(id="summary")
-            yield DataTable(id="modes", cursor_type="row")
-            yield Static(id="nominal-title")
-            yield DataTable(id="nominal-modes", cursor_type="none")
-            yield SPlane(id="splane")
+            yield self.summary
+            yield self.modes
+            yield self.nominal_title
+            yield self.nominal_modes
+            yield self.splane
             with Horizontal(id="frf-row"):
-                yield Select([], prompt="input → output", id="frf-pair", compact=True)
+                yield self.pair
                 yield Button("Frequency response f", id="frf-ask", compact=True)
-            yield Bode(id="bode")
+            yield self.bode
             with Horizontal(id="decision"):
                 yield Button("Accept y", id="accept", variant="success", compact=True)
                 yield Button("Reject n", id="reject", variant="warning", compact=True)
                 yield Button("Revert r", id="revert", compact=True)
 
     def on_mount(self) -> None:
-        for table in ("#modes", "#nominal-modes"):
-            self.query_one(table, DataTable).add_columns(*MODE_COLUMNS)
-        self.query_one("#results", DataTable).add_columns("model", "TIC", "sugg.")
+        for table in (self.modes, self.nominal_modes):
+            table.add_columns(*MODE_COLUMNS)
+        self.table.add_columns("model", "TIC", "sugg.")
 
-    def show(self) -> None:
+    def heard(self, model_id: str | None) -> None:
+        """A result was heard (None: those read back at start): list it, and show it."""
+        self.results = tuple(self.station.heard.results)
+        if model_id is not None or self.selected is None:
+            self.selected = model_id or (self.results[-1] if self.results else None)
+
+    def watch_results(self) -> None:
         results = self.station.heard.results
-        ids = list(results)
-        table = self.query_one("#results", DataTable)
-        if ids != self._shown:
-            table.clear()
-            for model_id in reversed(ids):
-                r = results[model_id]
-                table.add_row(
-                    model_id,
-                    f"{r.tic_avg:.3f}",
-                    Text("update", "green") if r.suggest_update else Text("no", "red"),
-                    key=model_id,
-                )
-            self._shown = ids
-        if self.selected is None and ids:
-            self.selected = ids[-1]
+        self.table.clear()
+        for model_id in reversed(self.results):
+            r = results[model_id]
+            self.table.add_row(
+                model_id,
+                f"{r.tic_avg:.3f}",
+                Text("update", "green") if r.suggest_update else Text("no", "red"),
+                key=model_id,
+            )
+
+    def watch_selected(self) -> None:
         self._detail()
 
+    def watch_nominal(self) -> None:
+        self._detail()
+
+    def watch_frf(self) -> None:
+        self._show_frf()
+
     def _detail(self) -> None:
+        """The selected result, its nominal's modes and the s-plane (redrawn only when one of
+        them changed, so the tables keep where the operator scrolled)."""
         result = self.station.heard.results.get(self.selected or "")
-        nominal = self.station.nominal(result.axes) if result is not None else None
-        key = (
-            self.selected,
-            nominal.model_id if nominal else None,
-            len(self.station.heard.results),
-        )
-        if key == self._detail_key:
-            self._show_frf()  # a frequency response may have arrived
-            return  # nothing new: keep the tables (and where the operator scrolled) as they are
-        self._detail_key = key
-        summary_w = self.query_one("#summary", Static)
-        modes = self.query_one("#modes", DataTable)
         if result is None:
-            summary_w.update("no identification result yet")
+            self.summary.update("no identification result yet")
             return
-        summary_w.update(_summary(result))
-        modes.clear()
+        nominal = self.station.nominal(result.axes)
+        self.summary.update(_summary(result))
+        self.modes.clear()
         for m in result.modes:
-            modes.add_row(*mode_row(m))
-        title = self.query_one("#nominal-title", Static)
-        table = self.query_one("#nominal-modes", DataTable)
-        table.clear()
-        table.display = nominal is not None
+            self.modes.add_row(*mode_row(m))
+        self.nominal_modes.clear()
+        self.nominal_modes.display = nominal is not None
         if nominal is None:
-            title.update(Text(f"nominal ({result.axes}): none known here", "grey70"))
+            self.nominal_title.update(Text(f"nominal ({result.axes}): none known here", "grey70"))
         else:
-            title.update(Text(f"nominal {nominal.model_id}: TIC {nominal.tic_avg:.3f}", "bold"))
+            self.nominal_title.update(
+                Text(f"nominal {nominal.model_id}: TIC {nominal.tic_avg:.3f}", "bold")
+            )
             for m in nominal.modes:
-                table.add_row(*mode_row(m))
+                self.nominal_modes.add_row(*mode_row(m))
         points = [
             point
             for r in self.station.heard.results.values()
@@ -109,17 +124,16 @@ class ResultsTab(Horizontal):
         for kind, r in (("nominal", nominal), ("candidate", result)):
             if r is not None:
                 points += _points(r, kind)
-        plane = self.query_one("#splane", SPlane)
-        plane.show(points)
-        plane.select(None)
+        self.splane.show(points)
+        self.splane.select(None)
         pairs = [f"{i} → {o}" for i in result.inputs for o in result.outputs]
         if pairs != self._pairs:
-            self.query_one("#frf-pair", Select).set_options([(p, p) for p in pairs])
+            self.pair.set_options([(p, p) for p in pairs])
             self._pairs = pairs
         self._show_frf()
 
     def _pair(self) -> tuple[str, str] | None:
-        value = self.query_one("#frf-pair", Select).value
+        value = self.pair.value
         if not isinstance(value, str):
             return None
         i, o = value.split(" → ")
@@ -131,7 +145,7 @@ class ResultsTab(Horizontal):
         report = None
         if result is not None and pair is not None:
             report = self.station.heard.frfs.get((result.model_id, *pair))
-        self.query_one("#bode", Bode).show(report, result)
+        self.bode.show(report, result)
 
     def ask_frf(self) -> None:
         """Ask the aircraft for the selected result's measured response of the chosen pair."""
@@ -141,7 +155,7 @@ class ResultsTab(Horizontal):
             return
         model_id = self.selected
         self.send(lambda: self.station.frequency_response(model_id, *pair))
-        self.query_one("#bode", Bode).show(
+        self.bode.show(
             None, None, f"asked the aircraft for {model_id} {pair[0]} → {pair[1]}: waiting"
         )
 
@@ -155,13 +169,12 @@ class ResultsTab(Horizontal):
 
     @on(DataTable.RowHighlighted, "#modes")
     def _mode_picked(self, event: DataTable.RowHighlighted) -> None:
-        self.query_one("#splane", SPlane).select(event.cursor_row)
+        self.splane.select(event.cursor_row)
 
     @on(DataTable.RowHighlighted, "#results")
     def _select(self, event: DataTable.RowHighlighted) -> None:
         if event.row_key is not None and event.row_key.value in self.station.heard.results:
             self.selected = event.row_key.value
-            self._detail()
 
     # -- decisions: each asks first --------------------------------------------------------
 

@@ -1,0 +1,305 @@
+"""One axis's model fitted in the frequency domain: equation error for the start, then output
+error with per-band weights, its covariance, and the coupling tests.
+
+1. Equation error: each state's row, jωX_i = A_i X + B_i U − d_i, by linear least squares
+   over the bins: the start.
+2. Output error: J = Σ_k Σ_i w_i² |Y_i(ω_k) − X_i(ω_k; θ)|², Levenberg–Marquardt with the
+   exact Jacobian, the weights re-estimated from the residuals between passes (the
+   relaxation of Maine & Iliff, NASA RP-1138 §5.3). The output-error estimate is consistent
+   under any noise independent of the inputs, turbulence included, and its covariance is
+   estimated from the residuals bin by bin (the sandwich H⁻¹ (Σ_k g_k g_kᵀ) H⁻¹ with g_k the
+   gradient of bin k): frequency bins are nearly independent for long records, so this holds
+   for coloured noise (turbulence) where the white-noise Cramér–Rao bound (JᵀJ)⁻¹σ² does not.
+3. Inputs: surfaces are measured positions; the throttle reaches the thrust through the
+   engine's spin-up, THROTTLE_LAGS first-order lags whose time constant is estimated
+   (u_eff = u / (1 + jωτ)^THROTTLE_LAGS). Held inputs (commands recorded at the sample) carry
+   the zero-order hold's half-sample delay and sinc; sampled ones are taken at face value.
+
+Coupling (`coupling`): an axis model is fitted again with the other axis's controls added,
+and again with the other axis's measured states (θ and φ aside, which the kinematics already
+carry) as known inputs. Each reports the share of the weighted cost it explains and how much
+it changes the outputs; `agent.ident.aircraft.model` decides from the second which joins.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.ndimage
+
+from agent.ident.aircraft.problem import LAG_START_S, AxisProblem
+from agent.ident.aircraft.transforms import Transforms
+from agent.ident.errors import DataError, IdentificationFailed
+
+# Output error's weights: σ per bin from the residuals of this many bins on either side.
+SMOOTH_BINS = 8
+SMOOTH_FLOOR = 0.3
+# Output error: passes of noise re-weighting, iterations per pass, and their stopping rules.
+PASSES = 4
+ITERATIONS = 40
+RELATIVE_DECREASE = 1e-9
+NOISE_TOLERANCE = 0.02
+# Coupling tests: the throttle or the other axis's states join an axis's inputs when, added,
+# they change its outputs by more than COUPLED of their rms (weighted by the noise). The share
+# of the cost they explain cannot tell: on a perfect fit it is a share of the last digits (a
+# tenth of a 10⁻⁸ residual on a linear aircraft, while the outputs change by 10⁻⁴). Real
+# couplings (the propeller's torque, slipstream and gyroscopic moments) change the outputs by
+# a few per cent (benchmarks/README.md, *The whole-aircraft method's terms*).
+COUPLED = 0.01
+
+
+@dataclass(frozen=True, kw_only=True)
+class AxisFit:
+    """One fitted model: ẋ = A x + B u_eff with the states the outputs `states` (C = I)."""
+
+    name: str  # "longitudinal" or "lateral"
+    states: tuple[int, ...]  # output columns
+    inputs: tuple[int, ...]  # input columns
+    A: np.ndarray
+    B: np.ndarray
+    lags: dict[int, float]  # input column → the time constant of its lags, s
+    transients: np.ndarray  # d per experiment (E, n), complex
+    covariance: np.ndarray  # of [vec A, vec B] (row-major)
+    noise_std: np.ndarray  # σ_i of the frequency-domain residuals, per state (rms over bins)
+    bin_std: np.ndarray  # σ per fitted bin and state, the fit's weights (`bin_sigma`)
+    cost_start: float
+    cost: float
+    iterations: int
+    converged: bool
+    controls: tuple[int, ...] = ()  # the inputs whose excited bins the fit used (`excited`)
+    # Lagged input → its number of lags where it is not THROTTLE_LAGS (a gust rate's one).
+    lag_powers: dict[int, int] = field(default_factory=dict)
+
+
+def equation_error(problem: AxisProblem) -> np.ndarray:
+    """Starting parameters: each row jωX_i = A_i X + B_i U − d_i by least squares, over the
+    row's free entries (the fixed ones' terms move to the left-hand side)."""
+    taus = np.full(problem.nlag, LAG_START_S)
+    s, Y, n, r = problem.s, problem.Y, problem.n, problem.r
+    U = problem.effective_inputs(taus)
+    E = problem.experiments
+    onehot = (problem.record[:, None] == np.arange(E)[None, :]).astype(float)
+    reg = np.hstack([Y, U])
+    A = problem.A0.copy()
+    B = np.zeros((n, r))
+    d = np.zeros((E, n), dtype=complex)
+    known = np.broadcast_to(problem.K, Y.shape)
+    for i in range(n):
+        free = np.concatenate([~problem.fixed_A[i], ~problem.fixed_B[i]])
+        lhs = s * Y[:, i] - known[:, i] - Y @ A[i]
+        sub = reg[:, free]
+        real = np.vstack(
+            [np.hstack([sub.real, -onehot, 0 * onehot]), np.hstack([sub.imag, 0 * onehot, -onehot])]
+        )
+        coef, *_ = np.linalg.lstsq(real, np.concatenate([lhs.real, lhs.imag]), rcond=None)
+        k = int(free.sum())
+        row = np.zeros(n + r)
+        row[free] = coef[:k]
+        A[i] += row[:n] * ~problem.fixed_A[i]
+        B[i] = row[n:]
+        d[:, i] = coef[k : k + E] + 1j * coef[k + E :]
+    return problem.pack(A, B, taus, d)
+
+
+def output_error(problem: AxisProblem, theta: np.ndarray):
+    """Levenberg–Marquardt on the weighted residuals, re-weighting between passes."""
+    X, _ = problem.response(theta)
+    sigma = bin_sigma(problem.Y - X, problem.s)
+    cost_start = _cost(problem.Y - X, sigma)
+    iterations, converged = 0, False
+    for _ in range(PASSES):
+        theta, its, converged = _minimise(problem, theta, sigma)
+        iterations += its
+        X, _ = problem.response(theta)
+        new = bin_sigma(problem.Y - X, problem.s)
+        settled = np.all(np.abs(new - sigma) <= NOISE_TOLERANCE * sigma)
+        sigma = new
+        if settled:
+            break
+    return theta, sigma, cost_start, iterations, converged
+
+
+def bin_sigma(residual: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """σ per bin and output (F, n): the residual's rms over the SMOOTH_BINS nearest bins in
+    frequency on either side. Turbulence's response is coloured, strong at the phugoid's
+    frequencies and weak at the short period's. Weighting each bin by its own neighbourhood's
+    level is the frequency-domain form of the filter-error method's noise model (Jategaonkar,
+    ch. 5): an output's quiet bands then count for what they carry. A single σ per output
+    would let its noisiest band set the weight of all of them."""
+    power = np.abs(residual) ** 2
+    if SMOOTH_BINS > 0 and power.shape[0] > 2 * SMOOTH_BINS + 1:
+        order = np.argsort(np.abs(s), kind="stable")
+        smooth = np.empty_like(power)
+        smooth[order] = scipy.ndimage.uniform_filter1d(
+            power[order], 2 * SMOOTH_BINS + 1, axis=0, mode="nearest"
+        )
+    else:
+        smooth = np.broadcast_to(power.mean(axis=0), power.shape)
+    # No band's weight beyond (1/SMOOTH_FLOOR)² times the output's average: a band the model
+    # happens to fit to the last digits (noise-free data) must not take over the fit.
+    floor = SMOOTH_FLOOR * np.sqrt(power.mean(axis=0))
+    sigma = np.maximum(np.sqrt(np.maximum(smooth, 0.0)), floor)  # the filter rounds to −0
+    return np.maximum(sigma, 1e-12 * max(float(sigma.max()), 1e-300))
+
+
+def _cost(residual: np.ndarray, sigma: np.ndarray) -> float:
+    return float(np.sum(np.abs(residual / sigma) ** 2))
+
+
+def _stack(J: np.ndarray) -> np.ndarray:
+    J = J.reshape(-1, J.shape[-1])
+    return np.vstack([J.real, J.imag])
+
+
+def _minimise(problem: AxisProblem, theta: np.ndarray, sigma: np.ndarray):
+    lam = 1e-3
+    free = problem.free
+    X, J = problem.response(theta, jacobian=True)
+    cost = _cost(problem.Y - X, sigma)
+    for iteration in range(1, ITERATIONS + 1):
+        e = (problem.Y - X) / sigma
+        Jw = _stack(-J[:, :, free] / sigma[:, :, None])
+        er = np.concatenate([e.ravel().real, e.ravel().imag])
+        g, H = Jw.T @ er, Jw.T @ Jw
+        scale = np.sqrt(np.maximum(np.diag(H), 1e-300))
+        Hs = H / np.outer(scale, scale)
+        gs = g / scale
+        while True:
+            try:
+                step = -np.linalg.solve(Hs + lam * np.eye(gs.size), gs) / scale
+            except np.linalg.LinAlgError:
+                step = None
+            if step is not None and np.all(np.isfinite(step)):
+                trial = theta.copy()
+                trial[free] += step
+                Xt, _ = problem.response(trial)
+                new = _cost(problem.Y - Xt, sigma) if np.all(np.isfinite(Xt)) else np.inf
+                if new < cost:
+                    break
+            lam *= 10
+            if lam > 1e10:
+                return theta, iteration, True  # no step lowers the cost: a minimum
+        decrease = (cost - new) / cost
+        theta, cost, lam = trial, new, max(lam / 10, 1e-12)
+        X, J = problem.response(theta, jacobian=True)
+        if decrease < RELATIVE_DECREASE:
+            return theta, iteration, True
+    return theta, ITERATIONS, False
+
+
+def covariance(problem: AxisProblem, theta: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """Sandwich covariance of θ from the bin-wise gradients of the weighted cost."""
+    X, J = problem.response(theta, jacobian=True)
+    e = (problem.Y - X) / sigma
+    free = problem.free
+    Jw = -J[:, :, free] / sigma[:, :, None]
+    H = _stack(Jw).T @ _stack(Jw)
+    # Per bin k: g_k = Re(J_kᴴ e_k), the bin's share of the gradient (outputs together).
+    g = np.einsum("fip,fi->fp", Jw.conj(), e).real
+    Hinv = np.linalg.pinv(H, rcond=1e-12)
+    out = np.zeros((theta.size, theta.size))
+    out[np.ix_(free, free)] = Hinv @ (g.T @ g) @ Hinv  # the fixed entries are exact
+    return out
+
+
+def fit_axis(
+    sp: Transforms,
+    *,
+    name: str,
+    states: Sequence[int],
+    inputs: Sequence[int],
+    lagged: Sequence[int],
+    experiments: int,
+    controls: Sequence[int] = (),
+    powers: Mapping[int, int] | None = None,
+) -> AxisFit:
+    """One axis's model: `lagged` inputs reach it through fitted lags, THROTTLE_LAGS of them
+    unless `powers` (input column → number) says otherwise."""
+    powers = {j: p for j, p in (powers or {}).items() if j in lagged}
+    problem = AxisProblem(
+        sp,
+        states=states,
+        inputs=inputs,
+        lagged=lagged,
+        experiments=experiments,
+        controls=controls,
+        powers=powers,
+    )
+    if problem.s.size * problem.n < problem.size:  # a record too short: bad input
+        raise DataError(
+            f"{name}: {problem.s.size} frequency bins cannot determine {problem.size} "
+            "parameters; record longer or widen the band"
+        )
+    theta = equation_error(problem)
+    theta, sigma, start, iterations, converged = output_error(problem, theta)
+    A, B, taus, d = problem.unpack(theta)
+    if not np.all(np.isfinite(A)):
+        raise IdentificationFailed(f"{name}: the output-error fit diverged")
+    cov = covariance(problem, theta, sigma)
+    k = problem.n * problem.n + problem.n * problem.r
+    lags = {list(inputs)[j]: float(abs(taus[i])) for i, j in enumerate(problem.lagged)}
+    X, _ = problem.response(theta)
+    noise = np.sqrt(np.mean(sigma**2, axis=0))
+    return AxisFit(
+        name=name,
+        states=tuple(states),
+        inputs=tuple(inputs),
+        A=A,
+        B=B,
+        lags=lags,
+        transients=d,
+        covariance=cov[:k, :k],
+        noise_std=noise,
+        bin_std=sigma,
+        cost_start=start,
+        cost=_cost(problem.Y - X, sigma),
+        iterations=iterations,
+        converged=converged,
+        controls=tuple(controls),
+        lag_powers=powers,
+    )
+
+
+def coupling(
+    sp: Transforms, fitted: AxisFit, *, other_inputs: Sequence[int], experiments: int
+) -> tuple[float, float]:
+    """What the other axis's inputs explain of an axis, from the decoupled fit with their
+    columns added (started at zero) and fitted again: the fraction of its weighted cost, and
+    the rms of the outputs' change as a fraction of the outputs' rms (weighted alike). The
+    second tells a coupling the outputs show from the last digits of a perfect fit."""
+    if not other_inputs:
+        return 0.0, 0.0
+    problem = AxisProblem(
+        sp,
+        states=fitted.states,
+        inputs=(*fitted.inputs, *other_inputs),
+        lagged=tuple(fitted.lags),
+        experiments=experiments,
+        controls=fitted.controls,
+        powers=fitted.lag_powers,
+    )
+    B = np.hstack([fitted.B, np.zeros((fitted.B.shape[0], len(other_inputs)))])
+    taus = np.array([fitted.lags[j] for j in fitted.lags])
+    theta = problem.pack(fitted.A, B, taus, fitted.transients)
+    X0 = problem.response(theta)[0]
+    before = _cost(problem.Y - X0, fitted.bin_std)
+    theta, _, _ = _minimise(problem, theta, fitted.bin_std)
+    X1 = problem.response(theta)[0]
+    after = _cost(problem.Y - X1, fitted.bin_std)
+    signal = _cost(problem.Y, fitted.bin_std)
+    fraction = max(0.0, 1.0 - after / before) if before > 0 else 0.0
+    change = float(np.sqrt(_cost(X1 - X0, fitted.bin_std) / signal)) if signal > 0 else 0.0
+    return fraction, change
+
+
+def known_gain(fit: AxisFit, column: int, row: int) -> tuple[float, float] | None:
+    """A fitted input gain and its standard error: B[row, column] of `fit` (input and output
+    columns), or None when the fit has no such input or state."""
+    if column not in fit.inputs or row not in fit.states:
+        return None
+    i, j = fit.states.index(row), fit.inputs.index(column)
+    n, r = len(fit.states), len(fit.inputs)
+    k = n * n + i * r + j
+    return float(fit.B[i, j]), float(np.sqrt(max(fit.covariance[k, k], 0.0)))

@@ -1,0 +1,408 @@
+"""The whole-aircraft model: each axis fitted, coupled where the data show coupling, assembled
+into one model whose first states are the outputs and whose last ones are the engine's lag
+states, with its modes, fit and report.
+
+Coupling (Klein & Morelli, *Aircraft System Identification*, 2006, ch. 9): each axis model is
+fitted again with the other axis's controls added, and again with the other axis's measured
+states, and each joins on its own test, when it changes the outputs by more than COUPLED:
+- where the longitudinal controls reach the lateral axis, the throttle joins it, through the
+  engine's lags (the propeller's torque and slipstream act linearly and at once). The
+  elevator does not: it has no path to the lateral forces but through the longitudinal
+  states. Lateral controls never join the longitudinal axis: its forces and moments are even
+  in the lateral variables (the airframe's symmetry), so what they explain there is
+  even-order (sideslip drag), which a linear term only mimics;
+- the other axis's states (θ and φ aside, which the kinematics carry) join either axis. Their
+  gains are the coupling blocks of the assembled A, so the modes are the coupled aircraft's;
+  the propeller's gyroscopic moments couple pitch and yaw rates however symmetric the
+  airframe.
+At the other axis's lines its states are its controls' response, so the two overlap there:
+letting only the one that explains more of the cost join would make the model's structure
+hang on a near tie, flipping from seed to seed.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from agent.ident.aircraft.axes import AXES
+from agent.ident.aircraft.fit import COUPLED, AxisFit, coupling, fit_axis, known_gain
+from agent.ident.aircraft.prepare import Prepared, prepare
+from agent.ident.aircraft.problem import THROTTLE_LAGS
+from agent.ident.aircraft.transforms import Transforms, input_band, transforms
+from agent.ident.aircraft.wind import GUST_RATE_LAGS
+from agent.ident.convert import StateSpace, discretize, discretize_hold
+from agent.ident.document import (
+    AircraftDocument,
+    AxisDocument,
+    Coupling,
+    Gain,
+    Wind,
+)
+from agent.ident.errors import IdentificationFailed
+from agent.ident.fit import fit
+from agent.ident.modal import Mode, modal_analysis
+from agent.ident.naming import name_modes
+from agent.ident.okid import Experiment, channel_rms
+from agent.ident.preprocess import Preprocessing
+from agent.ident.refine import Refinement, with_uncertainty
+from agent.ident.result import Identification, judged
+from agent.ident.settings import Settings
+
+# The kinematic forcing is the kinematics less their expansion about the trim, taken as the
+# record's first TRIM_S (the job removes the same stretch's mean as the operating point).
+TRIM_S = 0.5
+# The simulation starts each record at the mean of its first INITIAL_S of outputs, with the
+# engine's lag states at rest: estimated by least squares instead, those nearly unobservable
+# states take absurd values that trade one output's fit for another's.
+INITIAL_S = 0.05
+
+
+def identify(
+    raw: Sequence[Experiment],
+    dt: float,
+    *,
+    inputs: tuple[str, ...],
+    outputs: tuple[str, ...],
+    input_roles: Sequence[str | None],
+    output_roles: Sequence[str | None],
+    present: dict[str, tuple[list[int], list[int]]],
+    settings: Settings,
+) -> Identification:
+    """Decoupled longitudinal and lateral models in the frequency domain, coupled where the
+    data show it, assembled into one model (module docstring)."""
+    # The transforms leave out DC, so trim errors do not matter to the fit; the time-domain
+    # simulation (TIC) starts from the records' own trim, as the other methods'.
+    batch = list(raw)
+    ready = prepare(
+        batch,
+        output_roles,
+        trim_samples=max(1, round(TRIM_S / dt)),
+        dt=dt,
+        sideslip_drag=settings.sideslip_drag,
+        alpha_products=settings.alpha_products,
+    )
+    sp = transforms(
+        ready.batch,
+        dt,
+        settings.band_hz or input_band(batch, dt),
+        held_inputs=settings.held_inputs,
+        known=ready.known,
+        kinematics=ready.kinematics,
+        attitude=ready.attitude,
+        rows=ready.rows,
+    )
+    throttle = [j for j, role in enumerate(input_roles) if role == "throttle"]
+    fits = _fit_axes(sp, ready, present, throttle, len(batch))
+    couplings: dict[str, Coupling] = {}
+    structure = fits[0].name
+    if len(fits) == 2:
+        fits, couplings, structure = _coupled(
+            sp, fits, ready, throttle, r=len(inputs), experiments=len(batch)
+        )
+    width = sp.U.shape[1]
+    model, covariance = assemble(
+        fits, r=len(inputs), m=len(outputs), states_of={width + c: c for c in range(len(outputs))}
+    )
+    report = _report(sp, fits, ready, couplings, structure, inputs=inputs, outputs=outputs)
+    hold = "zoh" if settings.held_inputs else "foh"
+    discrete = _sampled(model, dt, hold, outputs)
+    start = max(1, round(INITIAL_S / dt))
+    n_model = model.A.shape[0]
+    initial = [
+        np.concatenate([e.y[:start].mean(axis=0), np.zeros(n_model - len(outputs))]) for e in batch
+    ]
+    fitted = fit(discrete, batch, initial)
+    residuals = np.vstack([e.y - p for e, p in zip(batch, fitted.predictions, strict=True)])
+    refinement = Refinement(
+        gain=None,
+        continuous=model,
+        discrete=discrete,
+        dt=dt,
+        hold=hold,
+        initial_states=fitted.initial_states,
+        noise_std=residuals.std(axis=0),
+        covariance=covariance,
+        cost_initial=sum(f.cost_start for f in fits),
+        cost=sum(f.cost for f in fits),
+        iterations=sum(f.iterations for f in fits),
+        passes=1,
+        converged=all(f.converged for f in fits),
+    )
+    modes = _modes(model, fits, refinement, batch, dt, r=len(inputs), output_roles=output_roles)
+    warnings = (
+        [] if refinement.converged else ["the output-error fit stopped at its iteration limit"]
+    )
+    prep = Preprocessing(
+        record_dt=dt,
+        dt=dt,
+        factor=1,
+        band_hz=sp.band_hz[1],
+        held_inputs=settings.held_inputs,
+        smoothing_s=None,
+        dropped_samples=0,
+    )
+    return Identification(
+        dt=dt,
+        preprocessing=prep,
+        input_names=inputs,
+        output_names=outputs,
+        discrete=discrete,
+        continuous=model,
+        coordinates="outputs",
+        modes=tuple(modes),
+        fit=fitted,
+        refinement=refinement,
+        warnings=(*warnings, *judged(modes, fitted)),
+        method="aircraft",
+        aircraft=report,
+    )
+
+
+def _fit_axes(
+    sp: Transforms,
+    ready: Prepared,
+    present: dict[str, tuple[list[int], list[int]]],
+    throttle: list[int],
+    experiments: int,
+) -> list[AxisFit]:
+    """Each present axis fitted alone, with its controls and the known inputs that act on it;
+    the throttle and the gust rates through fitted lags."""
+    known = {axis: [j for j, a in ready.extra_axes.items() if a == axis] for axis in AXES}
+    if "longitudinal" not in present:  # α barely moves: its products only add unknowns
+        known["lateral"] = [j for j in known["lateral"] if j not in ready.bilinear]
+    fits = []
+    for axis, (states, ins) in present.items():
+        rated = [j for j in known[axis] if j in ready.rates]  # gust rates: one lag each
+        fits.append(
+            fit_axis(
+                sp,
+                name=axis,
+                states=states,
+                inputs=[*ins, *known[axis]],
+                lagged=[j for j in ins if j in throttle] + rated,
+                experiments=experiments,
+                controls=ins,
+                powers=dict.fromkeys(rated, GUST_RATE_LAGS),
+            )
+        )
+    return fits
+
+
+def _coupled(
+    sp: Transforms,
+    fits: list[AxisFit],
+    ready: Prepared,
+    throttle: list[int],
+    *,
+    r: int,
+    experiments: int,
+) -> tuple[list[AxisFit], dict[str, Coupling], str]:
+    """Both axes with what couples them joined (module docstring), what each test found, and
+    the model's structure in words. The other axis's measured states are known inputs: their
+    gains are A's coupling blocks."""
+    width = sp.U.shape[1]
+    augmented = replace(sp, U=np.hstack([sp.U, sp.Y]))
+    own = [[j for j in f.inputs if j < r] for f in fits]  # each axis's own controls
+    found: dict[str, Coupling] = {}
+    fits = list(fits)
+    for k, fitted in enumerate(fits):
+        other = own[1 - k]
+        cross = [width + c for c in fits[1 - k].states if c not in ready.attitude]
+        by_inputs, moved_inputs = coupling(sp, fitted, other_inputs=other, experiments=experiments)
+        by_states, moved_states = coupling(
+            augmented, fitted, other_inputs=cross, experiments=experiments
+        )
+        found[fitted.name] = Coupling(
+            by_inputs=by_inputs,
+            by_states=by_states,
+            response_by_inputs=moved_inputs,
+            response_by_states=moved_states,
+        )
+        ins, controls, lags = list(fitted.inputs), list(fitted.controls), list(fitted.lags)
+        if moved_inputs > COUPLED and fitted.name == "lateral":
+            # The throttle reaches the lateral axis as it reaches the longitudinal one:
+            # through the engine's lags (its torque and slipstream follow the thrust).
+            thrust = [j for j in other if j in throttle]
+            ins, controls, lags = ins + thrust, controls + thrust, lags + thrust
+        if moved_states > COUPLED:
+            ins += cross
+        if ins != list(fitted.inputs):
+            fits[k] = fit_axis(
+                augmented,
+                name=fitted.name,
+                states=fitted.states,
+                inputs=ins,
+                lagged=tuple(lags),
+                experiments=experiments,
+                controls=controls,
+                powers=fitted.lag_powers,
+            )
+    joined = []
+    for k, f in enumerate(fits):
+        by = ["the throttle"] if any(j < r and j not in own[k] for j in f.inputs) else []
+        by += ["the other axis's states"] if any(j >= width for j in f.inputs) else []
+        if by:
+            joined.append(f"{f.name} coupled by {' and '.join(by)}")
+    return fits, found, "decoupled" + (f", {' and '.join(joined)}" if joined else "")
+
+
+def _report(
+    sp: Transforms,
+    fits: list[AxisFit],
+    ready: Prepared,
+    couplings: dict[str, Coupling],
+    structure: str,
+    *,
+    inputs: tuple[str, ...],
+    outputs: tuple[str, ...],
+) -> AircraftDocument:
+    """What the method found: band, axes, coupling, engine lags, wind and known gains."""
+    r, width = len(inputs), sp.U.shape[1]
+    names = [*inputs, *ready.extra_names]
+    drag = None
+    for column, row in ready.rows.items():  # sideslip drag: V̇ = … + X_β² β²
+        for f in fits:
+            gain = known_gain(f, column, row)
+            if gain is not None:
+                drag = Gain(gain=gain[0], std=gain[1])
+    products: dict[str, dict[str, Gain]] = {}
+    for column in ready.bilinear:  # the lateral derivatives' change with α
+        for f in fits:
+            for row in f.states:
+                gain = known_gain(f, column, row)
+                if gain is not None and row not in ready.attitude:
+                    products.setdefault(names[column], {})[outputs[row]] = Gain(
+                        gain=gain[0], std=gain[1]
+                    )
+    return AircraftDocument(
+        band_hz=(float(sp.band_hz[0]), float(sp.band_hz[1])),
+        bins=int(sp.s.size),
+        kinematics=ready.known is not None,
+        wind=Wind(measured=bool(ready.gusts), gust_rms=ready.gust_rms),
+        model=structure,
+        axes=[
+            AxisDocument(
+                name=f.name,
+                outputs=[outputs[i] for i in f.states],
+                inputs=[names[j] if j < width else outputs[j - width] for j in f.inputs],
+                iterations=f.iterations,
+                converged=f.converged,
+            )
+            for f in fits
+        ],
+        coupling=couplings,
+        engine_lag_s={
+            f.name: {inputs[j]: tau for j, tau in f.lags.items() if j < r} for f in fits if f.lags
+        },
+        sideslip_drag=drag,
+        alpha_products=products,
+    )
+
+
+def _modes(
+    model: StateSpace,
+    fits: list[AxisFit],
+    refinement: Refinement,
+    batch: list[Experiment],
+    dt: float,
+    *,
+    r: int,
+    output_roles: Sequence[str | None],
+) -> list[Mode]:
+    """Modes of the aircraft states alone (the lag states are the engine's, two equal poles
+    with no modal decomposition), with each lagged input at its steady gain, their Cramér–Rao
+    1-σ and their names."""
+    m, n = model.C.shape[0], model.A.shape[0]
+    Bm = model.B[:m].copy()
+    for f in fits:
+        for c, j in enumerate(f.inputs):
+            if j < r:  # a control (the gusts are not the model's inputs)
+                Bm[list(f.states), j] = f.B[:, c]
+    states_only = StateSpace(model.A[:m, :m], Bm, np.eye(m), np.zeros((m, r)))
+    index = np.arange(n * n).reshape(n, n)[:m, :m].ravel()
+    for_modes = replace(
+        refinement,
+        continuous=states_only,
+        covariance=refinement.covariance[np.ix_(index, index)],
+    )
+    Am, Bmd = discretize(states_only.A, states_only.B, dt)
+    input_rms, output_rms = channel_rms(batch)
+    modes = modal_analysis(
+        Am, Bmd, states_only.C, dt, input_scale=input_rms, output_scale=output_rms
+    )
+    modes = with_uncertainty(modes, for_modes)
+    if any(role is not None for role in output_roles):
+        modes = name_modes(modes, output_roles, min_msv=0.0)
+    return modes
+
+
+def _sampled(model: StateSpace, dt: float, hold: str, outputs: Sequence[str]) -> StateSpace:
+    """The whole-aircraft model sampled at dt. An output with no response above its noise (a
+    dead sensor's noise alone) gets gains of 10¹⁰ in the other equations and the model a pole
+    millions of 1/s fast, which no sampling survives: a clear failure naming that output, not
+    an overflow deep in the modal analysis."""
+    with np.errstate(all="ignore"):
+        discrete = discretize_hold(model.A, model.B, model.C, model.D, dt, hold)
+    if all(np.all(np.isfinite(x)) for x in (discrete.A, discrete.B)):
+        return discrete
+    pole = np.max(np.abs(np.linalg.eigvals(model.A)))
+    m = len(outputs)
+    gains = np.max(np.abs(model.A[:m, :m]), axis=0)  # what each output's changes are worth
+    where = outputs[int(np.argmax(gains))]
+    raise IdentificationFailed(
+        f"the identified model has a pole of {pole:.3g} 1/s, far beyond what sampling at "
+        f"{dt:g} s can show, and gains up to {gains.max():.3g} on {where}: an output with no "
+        f"response above its noise (a dead sensor) does that; check {where}'s signal or "
+        "leave it out of the outputs"
+    )
+
+
+def assemble(
+    fits: Sequence[AxisFit], *, r: int, m: int, states_of: dict[int, int] | None = None
+) -> tuple[StateSpace, np.ndarray]:
+    """One continuous model (states: the m outputs, then THROTTLE_LAGS lag states per lagged
+    input of each axis) and the covariance of [vec Ac, vec Bc, vec C, vec D] (zero where
+    fixed). `states_of`: an input column that is another axis's state → that state."""
+    states_of = states_of or {}
+    lagged = [(f, j) for f in fits for j in f.lags if j < r]  # the gust rates' are no state
+    n = m + THROTTLE_LAGS * len(lagged)
+    A, B = np.zeros((n, n)), np.zeros((n, r))
+    index_a = np.arange(n * n).reshape(n, n)
+    index_b = n * n + np.arange(n * r).reshape(n, r)
+    size = n * n + n * r + m * n + m * r
+    cov = np.zeros((size, size))
+    extra = m
+    for f in fits:
+        st = list(f.states)
+        A[np.ix_(st, st)] = f.A
+        where_b = np.full((len(st), len(f.inputs)), -1)  # where each B entry went
+        for c, j in enumerate(f.inputs):
+            if j >= r and j in states_of:  # another axis's state: a coupling of A
+                A[st, states_of[j]] = f.B[:, c]
+                where_b[:, c] = index_a[st, states_of[j]]
+                continue
+            if j >= r:  # a measured gust: it drove the fit, it is not an input of the model
+                continue
+            if j in f.lags:  # u → lag → lag → the axis: B's column acts on the last lag state
+                tau = f.lags[j]
+                chain = list(range(extra, extra + THROTTLE_LAGS))
+                B[chain[0], j] = 1.0 / tau
+                for a, b in itertools.pairwise(chain):
+                    A[b, a] = 1.0 / tau
+                for k in chain:
+                    A[k, k] = -1.0 / tau
+                A[st, chain[-1]] = f.B[:, c]
+                where_b[:, c] = index_a[st, chain[-1]]
+                extra += THROTTLE_LAGS
+            else:
+                B[st, j] = f.B[:, c]
+                where_b[:, c] = index_b[st, j]
+        pos = np.concatenate([index_a[np.ix_(st, st)].ravel(), where_b.ravel()])
+        kept = pos >= 0
+        cov[np.ix_(pos[kept], pos[kept])] = f.covariance[np.ix_(kept, kept)]
+    C = np.hstack([np.eye(m), np.zeros((m, n - m))])
+    return StateSpace(A, B, C, np.zeros((m, r))), cov

@@ -1,0 +1,215 @@
+"""A batch made ready for the fit: the kinematic forcing, the measured wind as known inputs, and
+the known nonlinear terms (sideslip drag, the lateral derivatives' change with α).
+
+Kinematics: with the trim (`Experiment.operating_point`), the equations of θ and φ are pure
+kinematics (θ̇ = q cos φ − r sin φ, φ̇ = p + tan θ (q sin φ + r cos φ)); their rows of A and
+the θ, φ columns of the other rows are fixed at the kinematics' linear part at the trim
+(`AxisProblem`), and their nonlinear rest is a known forcing K, X = (sI − A)⁻¹(B U + K − d).
+So the bank of a lateral manoeuvre stops biasing the phugoid: with the lateral inputs
+playing, the r sin φ of θ̇ can be larger than q itself. V̇, α̇ and β̇ get no such forcing: their
+kinematic nonlinearities share factors such as 1/(V cos β) with the unknown aerodynamic
+force, so half of a nonlinear equation is not nearer the truth than none.
+
+Wind: with the INS's heading and velocities too, the gust g is the still-air V, α, β
+(`inertial_air_data`) less the air data's. The forces depend on the air-relative states x − g
+but the states move as the inertial ones, ẋ_i = A(x_i − g) + B u, so the model is fitted on
+the inertial outputs with the gusts as known inputs of their own (free) gains: the vanes'
+reading of the gust stops being noise that biases the fit and becomes excitation, and A is
+the still-air aircraft's. Each gust is its conditional mean given the noisy measurement
+(`measured_gust`), and the α gust's rate, through GUST_RATE_LAGS fitted lags, is a known
+input of the longitudinal axis: Dryden's pitch-rate gust s α_g/(1 + τs), τ = 4b/πV
+(MIL-F-8785C), the gust's gradient along the airframe, which otherwise biases the short
+period's damping.
+
+Sideslip drag (`sideslip_drag`): where β is measured, β² (the vane's air-relative β, from
+trim) is a known input of V̇'s equation alone, with a fitted gain: drag due to sideslip,
+C_D ∝ β² (Klein & Morelli, *Aircraft System Identification*, 2006, ch. 3's drag models).
+Odd-harmonic inputs keep even-order effects off the longitudinal lines only while β stays
+periodic; when the bank drifts (the spiral mode), the sideslip's slow wander puts sideslip
+drag on the throttle's lines. Free on every longitudinal row instead, its gains are collinear
+with the short period's.
+
+The lateral derivatives' change with α (`alpha_products`): where both axes are fitted
+together, α·β, α·p and α·r (the still-air states, from trim) are known inputs of the lateral
+axis, with fitted gains. The longitudinal manoeuvre moves α while the lateral one plays, and
+C_lβ, C_nβ, C_lp, C_lr and C_nr vary with α (JSBSim's Cub tabulates C_lβ and C_lr against
+it); the products fall on the sum and difference frequencies of the two axes' lines, some of
+which are the lateral axis's own. A lateral record alone moves α too little: no products.
+
+What each term does on the benchmark aircraft: benchmarks/README.md, *The whole-aircraft
+method's terms* (`make bench-jsbsim`, with `--without` to leave one out).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from agent.ident.aircraft.axes import ATTITUDE
+from agent.ident.aircraft.kinematics import (
+    KINEMATIC_STATES,
+    kinematic_jacobian,
+    kinematic_remainder,
+)
+from agent.ident.aircraft.wind import GUST_RATES, GUSTS, inertial_air_data, measured_gust
+from agent.ident.okid import Experiment
+
+# The lateral states whose products with α are known inputs (`alpha_products`).
+BILINEAR = ("beta", "p", "r")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Prepared:
+    """A batch made ready for the fit: outputs on their inertial footing where the wind is
+    measured, the measured gusts appended to the inputs, and the kinematic forcing."""
+
+    batch: list[Experiment]  # u: the controls, then the known inputs
+    known: list[np.ndarray] | None = None  # kinematic remainder per experiment, or None
+    gusts: tuple[str, ...] = ()  # the gust columns' outputs ("airspeed", "alpha", "beta")
+    extra_names: tuple[str, ...] = ()  # the known inputs' names ("gust alpha", "beta²", ...)
+    extra_axes: dict[int, str] = field(default_factory=dict)  # known input → its axis
+    gust_rms: dict[str, float] = field(default_factory=dict)
+    kinematics: np.ndarray | None = None  # see Transforms.kinematics (mean over experiments)
+    attitude: tuple[int, ...] = ()  # output columns of θ and φ
+    rates: tuple[int, ...] = ()  # known input columns of gust rates (GUST_RATE_LAGS lags each)
+    rows: dict[int, int] = field(default_factory=dict)  # see Transforms.rows
+    bilinear: tuple[int, ...] = ()  # known input columns of α·β, α·p, α·r (BILINEAR)
+
+
+@dataclass(frozen=True, kw_only=True)
+class _Terms:
+    """Which known inputs a batch gets, in their column order after the controls."""
+
+    gusts: tuple[str, ...]  # measured gusts, by the output they correct
+    rated: tuple[str, ...]  # gusts whose rate is an input too
+    drag: bool  # β², sideslip drag
+    bilinear: bool  # α·β, α·p, α·r
+
+
+def prepare(
+    batch: Sequence[Experiment],
+    output_roles: Sequence[str | None],
+    *,
+    trim_samples: int = 1,
+    dt: float = 1.0,
+    sideslip_drag: bool = True,
+    alpha_products: bool = True,
+) -> Prepared:
+    """Use the operating point and the INS's velocities when every experiment carries them:
+    the kinematic forcing with the first, the measured wind with both (module docstring).
+    `trim_samples`: the records' first samples whose mean is the trim; `dt` (s): the records'
+    sample time, for the gust rates."""
+    index = {role: k for k, role in enumerate(output_roles) if role is not None}
+    if "airspeed" not in index or any(e.operating_point is None for e in batch):
+        return Prepared(batch=[Experiment(e.u, e.y) for e in batch])
+    measured = "theta" in index and all(e.navigation is not None for e in batch)
+    gusts = tuple(role for role, _ in GUSTS if role in index) if measured else ()
+    terms = _Terms(
+        gusts=gusts,
+        rated=tuple(role for role in GUST_RATES if role in gusts),
+        drag=sideslip_drag and "beta" in index,
+        bilinear=alpha_products and all(role in index for role in ("alpha", *BILINEAR)),
+    )
+    out, known, jacobians = [], [], []
+    squares, count = dict.fromkeys(gusts, 0.0), 0
+    for e in batch:
+        u, y, x, gust_columns = _known_inputs(e, index, terms, trim_samples, dt)
+        for role, gust in zip(gusts, gust_columns, strict=False):
+            squares[role] += float(np.sum((gust - gust.mean()) ** 2))
+        count += y.shape[0]
+        trim = x[:trim_samples].mean(axis=0)
+        jacobians.append(kinematic_jacobian(trim))
+        out.append(Experiment(u, y))
+        known.append(_attitude_forcing(x, trim, index, y.shape))
+    r, m = batch[0].u.shape[1], batch[0].y.shape[1]
+    names, axes, rates, rows, products = _columns(terms, index, r)
+    return Prepared(
+        batch=out,
+        known=known,
+        gusts=gusts,
+        extra_names=names,
+        extra_axes=axes,
+        gust_rms={role: float(np.sqrt(v / count)) for role, v in squares.items()},
+        kinematics=_output_jacobian(np.mean(jacobians, axis=0), index, m),
+        attitude=tuple(index[role] for role in ATTITUDE if role in index),
+        rates=rates,
+        rows=rows,
+        bilinear=products,
+    )
+
+
+def _columns(terms: _Terms, index: dict[str, int], r: int):
+    """The known inputs' names, axes (by input column), and the columns of the gust rates, of
+    the one-equation inputs (→ their output column) and of the α products."""
+    where = dict(GUSTS)
+    names = tuple(f"gust {role}" for role in terms.gusts)
+    axes = [where[role] for role in terms.gusts]
+    rates = tuple(r + len(names) + k for k in range(len(terms.rated)))
+    names = (*names, *(f"gust {role} rate" for role in terms.rated))
+    axes = [*axes, *(where[role] for role in terms.rated)]
+    rows = {}
+    if terms.drag:
+        rows[r + len(names)] = index["airspeed"]
+        names = (*names, "beta²")
+        axes = [*axes, "longitudinal"]
+    products: tuple[int, ...] = ()
+    if terms.bilinear:
+        products = tuple(r + len(names) + k for k in range(len(BILINEAR)))
+        names = (*names, *(f"alpha·{role}" for role in BILINEAR))
+        axes = [*axes, *(["lateral"] * len(BILINEAR))]
+    return names, {r + k: a for k, a in enumerate(axes)}, rates, rows, products
+
+
+def _output_jacobian(mean: np.ndarray, index: dict[str, int], m: int) -> np.ndarray:
+    """The kinematics' Jacobian (KINEMATIC_STATES order) in the record's output columns."""
+    J = np.zeros((m, m))
+    present = [(k, index[role]) for k, role in enumerate(KINEMATIC_STATES) if role in index]
+    for a, ca in present:
+        for b, cb in present:
+            J[ca, cb] = mean[a, b]
+    return J
+
+
+def _known_inputs(e: Experiment, index: dict[str, int], terms: _Terms, trim_samples: int, dt):
+    """One experiment's inputs with the known ones appended, its outputs (the inertial ones
+    where the wind is measured), its absolute states, and its gusts."""
+    x = np.zeros((e.y.shape[0], len(KINEMATIC_STATES)))
+    for k, role in enumerate(KINEMATIC_STATES):
+        if role in index:
+            x[:, k] = e.y[:, index[role]] + e.operating_point[index[role]]
+    u, y = e.u, e.y.copy()
+    # Sideslip drag's regressor: the air-relative β (the vane's), before the wind's
+    # correction below puts the inertial β in its place.
+    beta = x[:, KINEMATIC_STATES.index("beta")]
+    beta = beta - beta[:trim_samples].mean()
+    gusts = []
+    if terms.gusts:
+        still = inertial_air_data(x, e.navigation)
+        for role in terms.gusts:
+            k = KINEMATIC_STATES.index(role)
+            inertial = still[:, ("airspeed", "alpha", "beta").index(role)]
+            gusts.append(measured_gust(inertial - x[:, k]))
+            x[:, k] = inertial
+            y[:, index[role]] = inertial - e.operating_point[index[role]]
+        rates = [np.gradient(gusts[terms.gusts.index(role)], dt) for role in terms.rated]
+        u = np.hstack([u, np.column_stack([*gusts, *rates])])
+    if terms.drag:
+        u = np.hstack([u, (beta * beta)[:, None]])
+    if terms.bilinear:  # on the still-air states, as the model's (x − trim)
+        deviation = x - x[:trim_samples].mean(axis=0)
+        alpha = deviation[:, KINEMATIC_STATES.index("alpha")]
+        lateral = [KINEMATIC_STATES.index(role) for role in BILINEAR]
+        u = np.hstack([u, alpha[:, None] * deviation[:, lateral]])
+    return u, y, x, gusts
+
+
+def _attitude_forcing(x: np.ndarray, trim: np.ndarray, index: dict[str, int], shape):
+    """The kinematics' nonlinear remainder in the θ and φ equations (zero elsewhere)."""
+    remainder = kinematic_remainder(x, trim)
+    forcing = np.zeros(shape)
+    for role in ATTITUDE:
+        if role in index:
+            forcing[:, index[role]] = remainder[:, KINEMATIC_STATES.index(role)]
+    return forcing

@@ -1,0 +1,270 @@
+"""An identification as one document: what `sysid identify --json` prints, what the worker hands
+the agent, what the model store keeps and what the link's result message carries a part of.
+
+Typed (pydantic), serialised once, read back by every consumer: no dict of string keys travels
+between layers. The parts that belong to one method are optional: `okid` (Markov parameters,
+Hankel singular values, the OKID/ERA model's own fit, the frequency-domain variant's spectra)
+is None for the whole-aircraft method, `aircraft` (band, axes, coupling, engine lags, wind) is
+None for OKID. `Identification.document` (agent.ident.result) builds one.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, model_validator
+
+from agent.ident.convert import StateSpace
+from agent.ident.modal import Mode
+
+Matrix = list[list[float]]
+Method = Literal["time", "frequency", "aircraft"]
+
+
+class Document(BaseModel):
+    """A part of the document: frozen, unknown keys refused, NaN and ∞ kept as JSON's
+    NaN / Infinity (as Python's json module writes them) rather than silently null."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", ser_json_inf_nan="constants")
+
+
+class ModeDocument(Document):
+    """One mode with its quality indicators and, after refinement, its Cramér–Rao 1-σ."""
+
+    name: str | None
+    eigenvalue: tuple[float, float]  # real, imaginary (1/s)
+    frequency_rad_s: float
+    damping: float
+    time_constant_s: float | None
+    msv: float | None
+    mci: float | None
+    moi: float | None
+    emac: float | None
+    mpc: float | None
+    cmi: float | None
+    eigenvalue_std: tuple[float, float] | None = None
+    frequency_std_rad_s: float | None = None
+    damping_std: float | None = None
+
+    @classmethod
+    def of(cls, mode: Mode) -> ModeDocument:
+        """The document of an analysed mode."""
+        u = mode.uncertainty
+        return cls(
+            name=mode.name,
+            eigenvalue=(float(mode.eigenvalue.real), float(mode.eigenvalue.imag)),
+            frequency_rad_s=float(mode.frequency),
+            damping=float(mode.damping),
+            time_constant_s=_num(mode.time_constant),
+            msv=float(mode.msv),
+            mci=float(mode.mci),
+            moi=float(mode.moi),
+            emac=_num(mode.emac),
+            mpc=float(mode.mpc),
+            cmi=_num(mode.cmi),
+            eigenvalue_std=None if u is None else (float(u.real), float(u.imag)),
+            frequency_std_rad_s=None if u is None else float(u.frequency),
+            damping_std=None if u is None else float(u.damping),
+        )
+
+    @property
+    def frequency_hz(self) -> float:
+        return self.frequency_rad_s / (2 * np.pi)
+
+    @property
+    def real(self) -> float:
+        return self.eigenvalue[0]
+
+    @property
+    def imag(self) -> float:
+        return self.eigenvalue[1]
+
+    @property
+    def real_std(self) -> float | None:
+        return None if self.eigenvalue_std is None else self.eigenvalue_std[0]
+
+    @property
+    def imag_std(self) -> float | None:
+        return None if self.eigenvalue_std is None else self.eigenvalue_std[1]
+
+    @property
+    def pair(self) -> bool:
+        """One of a complex pair (the document holds the one with positive imaginary part)."""
+        return self.eigenvalue[1] != 0.0
+
+
+class MarkovTry(Document):
+    """One Markov-parameter count tried by the automatic choice, and what it gave."""
+
+    markov: int
+    order: int
+    tic_avg: float
+
+
+class FrequencyDocument(Document):
+    """The frequency-domain OKID's spectra (thesis §4.3.1)."""
+
+    periodic: bool
+    segment_s: float
+    segments: int
+    leakage: float | None
+    markov_from: Literal["inverse FFT", "observer fit to the FRF"]
+
+
+class OkidDocument(Document):
+    """OKID/ERA's part: the Markov parameters, the Hankel singular values and the OKID/ERA
+    model's own fit (before refinement)."""
+
+    markov: int
+    markov_auto: list[MarkovTry] | None  # None when p was given
+    singular_values: list[float]
+    tic_avg: float
+    frequency: FrequencyDocument | None = None  # method "frequency"
+
+
+class Gain(Document):
+    """A fitted gain and its standard error."""
+
+    gain: float
+    std: float
+
+
+class Wind(Document):
+    measured: bool  # the gusts were measured (INS velocities) and were known inputs
+    gust_rms: dict[str, float]  # by the output each gust corrects
+
+
+class Coupling(Document):
+    """What the other axis explains of one axis: the share of its weighted cost, and the change
+    of its outputs as a share of their rms, with the other axis's controls or states added."""
+
+    by_inputs: float
+    by_states: float
+    response_by_inputs: float
+    response_by_states: float
+
+
+class AxisDocument(Document):
+    name: Literal["longitudinal", "lateral"]
+    outputs: list[str]
+    inputs: list[str]  # its controls, known inputs and coupling states
+    iterations: int
+    converged: bool
+
+
+class AircraftDocument(Document):
+    """The whole-aircraft method's part (agent.ident.aircraft)."""
+
+    band_hz: tuple[float, float]
+    bins: int
+    kinematics: bool  # the kinematics were known (the trim was)
+    wind: Wind
+    model: str  # "lateral", "longitudinal", "decoupled", "decoupled, lateral coupled by …"
+    axes: list[AxisDocument]
+    coupling: dict[str, Coupling] = {}
+    engine_lag_s: dict[str, dict[str, float]] = {}  # axis → input → the lags' time constant
+    sideslip_drag: Gain | None = None  # V̇'s gain on β²
+    alpha_products: dict[str, dict[str, Gain]] = {}  # "alpha·beta" → output → gain
+
+
+class PreprocessingDocument(Document):
+    record_dt: float
+    decimation: int
+    band_hz: float
+    held_inputs_shifted: bool
+    smoothing_s: float | None
+    dropped_samples_per_end: int
+
+
+class RefinementDocument(Document):
+    criterion: Literal["output error", "prediction error (innovation form)"]
+    hold: Literal["zoh", "foh"]
+    iterations: int
+    converged: bool
+    noise_std: dict[str, float]
+    Ac_std: Matrix | None  # None unless the model is in output coordinates
+    Bc_std: Matrix | None
+
+
+class StateSpaceDocument(Document):
+    A: Matrix
+    B: Matrix
+    C: Matrix
+    D: Matrix
+
+    def model(self) -> StateSpace:
+        return StateSpace(*(np.asarray(m, dtype=float) for m in (self.A, self.B, self.C, self.D)))
+
+
+class ResultDocument(Document):
+    """One identification. The discrete model (A, B, C, D at dt) and the contract's keys first,
+    then the parts; `sysid identify --json` prints exactly this."""
+
+    dt: float
+    order: int
+    inputs: list[str]
+    outputs: list[str]
+    A: Matrix
+    B: Matrix
+    C: Matrix
+    D: Matrix
+    Ac: Matrix | None  # the continuous model in output coordinates, when it exists
+    Bc: Matrix | None
+    stable: bool
+    tic: dict[str, float]
+    tic_avg: float
+    modes: list[ModeDocument]
+    method: Method
+    coordinates: Literal["outputs", "era"]
+    continuous: StateSpaceDocument | None
+    trim: list[dict[str, float]] = []
+    preprocessing: PreprocessingDocument
+    refinement: RefinementDocument | None = None
+    okid: OkidDocument | None = None
+    aircraft: AircraftDocument | None = None
+    warnings: list[str] = []
+
+    @model_validator(mode="before")
+    @classmethod
+    def _earlier_layout(cls, data: Any) -> Any:
+        """Read a document written before the method's parts were typed (a model store kept
+        across an update): Markov parameters, singular values and the spectra were top-level
+        keys, the OKID/ERA fit was the refinement's, and the aircraft method wrote p = 0."""
+        if not isinstance(data, dict) or "markov" not in data:
+            return data
+        data = dict(data)
+        markov, singular = data.pop("markov"), data.pop("singular_values", [])
+        tried, spectra = data.pop("markov_auto", None), data.pop("frequency", None)
+        refinement = data.get("refinement")
+        if isinstance(refinement, dict):
+            refinement = dict(refinement)
+            okid_tic = refinement.pop("okid_tic_avg", data.get("tic_avg"))
+            data["refinement"] = refinement
+        else:
+            okid_tic = data.get("tic_avg")
+        if data.get("method") != "aircraft":
+            data["okid"] = {
+                "markov": markov,
+                "markov_auto": tried,
+                "singular_values": singular,
+                "tic_avg": okid_tic,
+                "frequency": spectra,
+            }
+        return data
+
+    def model(self) -> StateSpace:
+        """The discrete model (at dt)."""
+        return StateSpace(*(np.asarray(m, dtype=float) for m in (self.A, self.B, self.C, self.D)))
+
+    def mode(self, name: str) -> ModeDocument | None:
+        """The mode of that name, if identified."""
+        return next((m for m in self.modes if m.name == name), None)
+
+
+def rows(matrix: np.ndarray) -> Matrix:
+    return [[float(v) for v in row] for row in np.asarray(matrix)]
+
+
+def _num(value: float | None) -> float | None:
+    return None if value is None else float(value)
