@@ -1,7 +1,8 @@
 """Abort latency: the pilot drops the excitation switch mid-run; how long until the agent's trim
 override is on the MAVLink wire.
 
-    .venv/bin/python benchmarks/bench_abort.py --drops 30
+    .venv/bin/python benchmarks/bench_abort.py --drops 30 [--realtime 10] [--json]
+    .venv/bin/python benchmarks/bench_abort.py --drops 1 --json   # the smoke test
 
 The whole simulated flight (JSBSim J-3 Cub, the emulated ArduPlane on UDP, sensor ptys, radios,
 the scripted ground) runs here; the agent is the real `sysid agent` in its own process. The
@@ -15,22 +16,30 @@ For each drop (a lateral preset armed, the switch flipped high, dropped at a ran
 - report → trim: from the first RC_CHANNELS carrying the low switch to the first override
   holding the trim (the agent's reaction: MAVSDK, the loop, one command period of 20 ms);
 - flip → trim: from the pilot's flip (what the pilot feels; adds the telemetry period).
+
+It stops with exit code 1 when no drop could be measured (every run ended before its drop);
+the flight's directory (the agent's logs) is then kept and named.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import json
 import math
 import os
 import random
 import re
+import shutil
 import statistics
 import sys
+import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 os.environ.setdefault("JSBSIM_DEBUG", "0")  # no JSBSim banner on stdout
+
+from common import BenchError
 
 from agent.excitation.plan import preset
 from agent.link import messages
@@ -80,10 +89,26 @@ def _events(ground, since: int, event: str) -> list:
 
 
 async def measure(drops: int, seed: int = 0, realtime: int | None = None) -> list[dict]:
-    """One dict per drop: report_to_trim_s, flip_to_trim_s, commands_before_trim."""
+    """One dict per drop: report_to_trim_s, flip_to_trim_s, commands_before_trim (or
+    other_end: a run that ended before its drop). The flight's directory is removed after a
+    measurement and kept, and named on stderr, after an error."""
+    directory = Path(tempfile.mkdtemp(prefix="bench-abort-"))
+    try:
+        out = await _drops(directory, drops, seed, realtime)
+    except BaseException:
+        print(f"bench_abort: the logs are kept in {directory}", file=sys.stderr)
+        raise
+    if not any("other_end" not in d for d in out):
+        print(f"bench_abort: the logs are kept in {directory}", file=sys.stderr)
+        raise BenchError(f"no drop was measured: every run ended before it ({out})")
+    shutil.rmtree(directory, ignore_errors=True)
+    return out
+
+
+async def _drops(directory: Path, drops: int, seed: int, realtime: int | None) -> list[dict]:
     rng = random.Random(seed)
     params = Params(switch_channel=7, switch_option_46=False)
-    options = SimOptions(preset="lateral", realtime_priority=realtime)
+    options = SimOptions(preset="lateral", realtime_priority=realtime, directory=directory)
     out = []
     async with simulated(options, params, agent_process=True) as sim:
         ap, ground, pilot, clock = sim.aircraft.autopilot, sim.ground, sim.aircraft.pilot, sim.clock
@@ -178,14 +203,23 @@ def report(s: dict) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--drops", type=int, default=30)
-    parser.add_argument("--seed", type=int, default=0)
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--drops", type=int, default=30, help="runs, each with one drop")
+    parser.add_argument("--seed", type=int, default=0, help="of the drops' moments")
     parser.add_argument(
         "--realtime", type=int, metavar="PRIORITY", help="the agent's [runtime] realtime_priority"
     )
+    parser.add_argument("--json", action="store_true", help="one JSON object on stdout")
     args = parser.parse_args()
-    print(report(summary(asyncio.run(measure(args.drops, args.seed, args.realtime)))))
+    if args.drops < 1:
+        parser.error("--drops: at least 1")
+    try:
+        s = summary(asyncio.run(measure(args.drops, args.seed, args.realtime)))
+    except BenchError as exc:
+        sys.exit(f"bench_abort: {exc}")
+    print(json.dumps(s) if args.json else report(s))
 
 
 if __name__ == "__main__":

@@ -12,7 +12,16 @@ Three processes, as in the field:
   a minute) from its execution log.
 
 --rate 400 runs the three sensors and the recorder at 400 Hz (the VN-200's IMU rate) instead
-of 100 Hz. --realtime 10 sets the agent's [runtime] realtime_priority.
+of 100 Hz. --realtime 10 sets the agent's [runtime] realtime_priority. --until-runs N ends the
+flight once N excitations are over (the smoke test flies one); the lag percentiles come from
+the agent's health records, one a minute, so a flight shorter than that measures CPU, memory
+and the identification but not the lag.
+
+It stops with an error and exit code 1 when it cannot measure what it is for: the world or the
+agent does not start or stops early, the link does not come up, or no excitation is
+identified. Its working directory (the key, the configuration, world.log, agent.log and the
+agent's logs in logs/) is then kept, and named; after a measured flight it is removed unless
+--keep named it.
 
 Nothing is accelerated: a 45-minute flight takes 45 minutes. Linux only (/proc). With
 --world-nice 10 (what `make bench-agent` uses) the world runs below the agent's priority: in the
@@ -21,6 +30,7 @@ measured as the agent's lag.
 
     .venv/bin/python benchmarks/bench_agent.py --minutes 45 --world-nice 10  # make bench-agent
     .venv/bin/python benchmarks/bench_agent.py --minutes 3      # a quick look
+    .venv/bin/python benchmarks/bench_agent.py --minutes 3 --until-runs 1 --settle 2  # smoke test
     .venv/bin/python benchmarks/bench_agent.py --minutes 10 --rate 400 --realtime 10
 """
 
@@ -31,21 +41,33 @@ import asyncio
 import contextlib
 import json
 import os
-import secrets
+import shutil
 import signal
 import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from common import BenchError, tail, write_key
+
 from agent.runtime import lag_percentile
+from agent.runtime.health import HEALTH_S
 
 HERE = Path(__file__).resolve().parent
 SAMPLE_S = 5.0
+TICK_S = 0.5  # how often the parent looks at the processes and the runs between samples
+# The world's start: JSBSim's trim, the emulated autopilot, sensors and radios (about 5 s
+# here; a busy machine takes several times that).
+WORLD_START_S = 120.0
+# From the agent's start to the link's first exchange: its imports, the worker's warm-up, the
+# radios' opening and the session's handshake (about 10 s here).
+LINK_S = 90.0
+STOP_S = 30.0  # SIGTERM to exit: the agent aborts any run and flushes its logs
 TICKS = os.sysconf("SC_CLK_TCK")
 PAGE = os.sysconf("SC_PAGE_SIZE")
 
@@ -53,8 +75,30 @@ PAGE = os.sysconf("SC_PAGE_SIZE")
 # -- the world ---------------------------------------------------------------------------------
 
 
-async def world(directory: Path, every: float, rate: float = 100.0) -> None:
-    """Aircraft, radios and ground operator; writes `world.json` once the parts are up."""
+@dataclass(frozen=True, kw_only=True)
+class Flight:
+    """What to fly and how (the command line's options)."""
+
+    minutes: float = 45.0
+    """Real-time length; the flight ends sooner with `until_runs`."""
+    every: float = 60.0
+    """Seconds from one excitation's start to the next's."""
+    until_runs: int | None = None
+    """End once this many excitations are over (identified or not)."""
+    settle: float = 5.0
+    """Seconds of trimmed flight, once the link is up, before the first excitation."""
+    world_nice: int = 0
+    """The world's nice value (it is not on the flight computer)."""
+    realtime: int | None = None
+    """The agent's [runtime] realtime_priority."""
+    rate: float = 100.0
+    """Sensor and recorder rate (Hz)."""
+
+
+async def world(directory: Path, every: float, rate: float = 100.0, settle: float = 5.0) -> None:
+    """Aircraft, radios and ground operator; writes `world.json` once the parts are up,
+    `link.json` once the ground hears the agent, `runs.json` after each excitation. SIGTERM
+    ends it between runs, or while it waits for the link."""
     from agent.clock import LoopClock
     from agent.sim.aircraft import AircraftOptions, SimAircraft
     from agent.sim.ardupilot import Params
@@ -64,7 +108,6 @@ async def world(directory: Path, every: float, rate: float = 100.0) -> None:
     clock = LoopClock()
     ports = directory / "ports"
     ports.mkdir(parents=True, exist_ok=True)
-    key = bytes.fromhex((directory / "link.key").read_text())
     options = AircraftOptions(params=Params(switch_channel=7), sensor_rate_hz=rate)
     aircraft = SimAircraft(options, clock, ports)
     _, air, ground_module = module_pair(
@@ -82,19 +125,24 @@ async def world(directory: Path, every: float, rate: float = 100.0) -> None:
     try:
         while aircraft.mavlink_address is None or not air.port.plugged:
             await asyncio.sleep(0.05)
-        (directory / "world.json").write_text(
-            json.dumps({"mavlink": list(aircraft.mavlink_address), "ports": str(ports)})
+        _publish(
+            directory / "world.json",
+            {"mavlink": list(aircraft.mavlink_address), "ports": str(ports)},
         )
-        ground = await ground_station(ground_module, key, clock, tasks)
+        ground = await ground_station(
+            module=ground_module, directory=directory, clock=clock, tasks=tasks
+        )
         options = SimOptions(preset="lateral")
         while not ground.session.link_up:
-            await asyncio.sleep(0.5)
+            if await _stopped_within(stop, 0.5):
+                return
+        _publish(directory / "link.json", {"up_at": clock.now()})
         # As a pilot would: a few seconds of trimmed flight with the agent up (it must see the
         # switch low and the servo outputs for trim) before the first excitation.
-        await asyncio.sleep(5.0)
+        await _stopped_within(stop, settle)
         while not stop.is_set():
             if not ground.session.link_up:
-                await asyncio.sleep(0.5)
+                await _stopped_within(stop, 0.5)
                 continue
             began, seen = clock.now(), len(ground.inbox)
             try:
@@ -104,19 +152,33 @@ async def world(directory: Path, every: float, rate: float = 100.0) -> None:
                         "t": began,
                         "ok": "result" in outcome,
                         "result_after_s": _result_after(ground, seen),
+                        **({"error": outcome["failure"]} if "failure" in outcome else {}),
                     }
                 )
-            except Exception as exc:  # a missed run is counted, the flight goes on
+            except Exception as exc:  # a missed run is counted and said, the flight goes on
                 aircraft.pilot.set_switch(False)
-                runs.append({"t": began, "ok": False, "error": str(exc)})
-            (directory / "runs.json").write_text(json.dumps(runs))
-            with contextlib.suppress(TimeoutError):
-                async with asyncio.timeout(max(0.0, began + every - clock.now())):
-                    await stop.wait()
+                runs.append({"t": began, "ok": False, "error": f"{type(exc).__name__}: {exc}"})
+            _publish(directory / "runs.json", runs)
+            await _stopped_within(stop, max(0.0, began + every - clock.now()))
     finally:
         for task in tasks:
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
+
+
+def _publish(path: Path, value) -> None:
+    """`value` as JSON in `path`, whole: the parent reads these files while the world runs."""
+    part = path.with_suffix(".part")
+    part.write_text(json.dumps(value))
+    part.replace(path)
+
+
+async def _stopped_within(stop: asyncio.Event, seconds: float) -> bool:
+    """Wait `seconds`, or less if `stop` is set; whether it is."""
+    with contextlib.suppress(TimeoutError):
+        async with asyncio.timeout(seconds):
+            await stop.wait()
+    return stop.is_set()
 
 
 def _result_after(ground, seen: int) -> float | None:
@@ -210,44 +272,49 @@ async def probe(lags: list[float]) -> None:
         lags.append(loop.time() - start - 0.01)
 
 
-async def measure(
-    minutes: float,
-    every: float,
-    keep: Path | None,
-    world_nice: int,
-    realtime: int | None = None,
-    rate: float = 100.0,
-) -> dict:
+async def measure(flight: Flight, keep: Path | None = None) -> dict:
+    """The flight measured (see `summarise`). Raises BenchError when it could not be; its
+    directory is then kept (`keep`, or a new temporary one) and named on stderr."""
+    directory = keep or Path(tempfile.mkdtemp(prefix="bench-agent-"))
+    directory.mkdir(parents=True, exist_ok=True)
+    measured = False
+    try:
+        result = await _fly(directory, flight)
+        measured = True
+    finally:
+        if not measured:
+            print(f"bench_agent: the logs are kept in {directory}", file=sys.stderr)
+        elif keep is None:
+            shutil.rmtree(directory, ignore_errors=True)
+    return {
+        "rate_hz": flight.rate,
+        "realtime": flight.realtime,
+        "world_nice": flight.world_nice,
+        "flight": asdict(flight),
+        **result,
+    }
+
+
+async def _fly(directory: Path, flight: Flight) -> dict:
+    write_key(directory / "link.key")
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
     with contextlib.ExitStack() as stack:
-        directory = keep or Path(stack.enter_context(tempfile.TemporaryDirectory()))
-        directory.mkdir(parents=True, exist_ok=True)
-        (directory / "link.key").write_text(secrets.token_bytes(32).hex())
-        env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
         log = stack.enter_context(open(directory / "world.log", "w"))
         world_proc = subprocess.Popen(
             [
-                sys.executable,
-                __file__,
-                "world",
-                str(directory),
-                "--every",
-                str(every),
-                "--rate",
-                str(rate),
+                *(sys.executable, __file__, "--world", str(directory)),
+                *("--every", str(flight.every), "--rate", str(flight.rate)),
+                *("--settle", str(flight.settle)),
             ],
             env=env,
-            preexec_fn=(lambda: os.nice(world_nice)) if world_nice else None,
+            preexec_fn=(lambda: os.nice(flight.world_nice)) if flight.world_nice else None,
             stdout=log,
             stderr=subprocess.STDOUT,
         )
         agent_proc = None
         try:
-            for _ in range(600):
-                if (directory / "world.json").exists() or world_proc.poll() is not None:
-                    break
-                await asyncio.sleep(0.1)
-            info = json.loads((directory / "world.json").read_text())
-            config = agent_config(directory, info["mavlink"], realtime, rate)
+            info = await _world_up(directory, world_proc)
+            config = agent_config(directory, info["mavlink"], flight.realtime, flight.rate)
             (directory / "agent.toml").write_text(config)
             agent_log = stack.enter_context(open(directory / "agent.log", "w"))
             agent_proc = subprocess.Popen(
@@ -265,29 +332,106 @@ async def measure(
                 stdout=agent_log,
                 stderr=subprocess.STDOUT,
             )
-            result = await sample(directory, agent_proc, world_proc, minutes)
-            return {"rate_hz": rate, "realtime": realtime, "world_nice": world_nice, **result}
+            await _link_up(directory, agent_proc, world_proc)
+            result = await sample(
+                directory, agent_proc, world_proc, flight.minutes, flight.until_runs
+            )
         finally:
             for proc in (agent_proc, world_proc):
                 if proc is not None and proc.poll() is None:
                     proc.send_signal(signal.SIGTERM)
                     try:
-                        proc.wait(30)
+                        proc.wait(STOP_S)
                     except subprocess.TimeoutExpired:
                         proc.kill()
+                        proc.wait()
+    _check(result, flight.minutes, flight.until_runs)
+    return result
 
 
-async def sample(directory: Path, agent_proc, world_proc, minutes: float) -> dict:
+def _stopped(directory: Path, agent_proc, world_proc) -> None:
+    """BenchError, with the end of its log, if the agent or the world has stopped."""
+    for name, proc in (("agent", agent_proc), ("world", world_proc)):
+        if proc is not None and proc.poll() is not None:
+            raise BenchError(
+                f"the {name} process stopped early (exit code {proc.returncode}); the end of "
+                f"{directory / f'{name}.log'}:\n{tail(directory / f'{name}.log')}"
+            )
+
+
+async def _world_up(directory: Path, world_proc) -> dict:
+    """The world's `world.json` (its MAVLink address), once it is up."""
+    deadline = time.monotonic() + WORLD_START_S
+    while not (directory / "world.json").exists():
+        _stopped(directory, None, world_proc)
+        if time.monotonic() > deadline:
+            raise BenchError(f"the world did not start in {WORLD_START_S:g} s")
+        await asyncio.sleep(0.1)
+    return json.loads((directory / "world.json").read_text())
+
+
+async def _link_up(directory: Path, agent_proc, world_proc) -> None:
+    """Return once the world's ground end has heard the agent over the link."""
+    deadline = time.monotonic() + LINK_S
+    while not (directory / "link.json").exists():
+        _stopped(directory, agent_proc, world_proc)
+        if time.monotonic() > deadline:
+            said = [
+                line
+                for path in [directory / "agent.log", *(directory / "logs").glob("*_exec_*")]
+                for line in _lines(path)
+                if "link refused" in line
+            ]
+            why = f"; the agent said: {said[-1].strip()}" if said else ""
+            raise BenchError(
+                f"the link did not come up in {LINK_S:g} s of the agent's start{why}; the end "
+                f"of {directory / 'agent.log'}:\n{tail(directory / 'agent.log')}"
+            )
+        await asyncio.sleep(TICK_S)
+
+
+def _lines(path: Path) -> list[str]:
+    try:
+        return path.read_text(errors="replace").splitlines()
+    except OSError:
+        return []
+
+
+def _runs(directory: Path) -> list[dict]:
+    """The world's record of each excitation so far (written whole after each)."""
+    path = directory / "runs.json"
+    return json.loads(path.read_text()) if path.exists() else []
+
+
+def _check(result: dict, minutes: float, until_runs: int | None) -> None:
+    """BenchError when the flight did not measure what it is for."""
+    if result["runs_identified"] == 0:
+        errors = sorted({r["error"] for r in result["run_errors"]})
+        raise BenchError(
+            f"no excitation was identified and delivered ({result['runs']} flown"
+            + (f"; {'; '.join(errors)}" if errors else "")
+            + ")"
+        )
+    if until_runs is None and minutes * 60 >= 2 * HEALTH_S and not result["lag"]["minutes"]:
+        raise BenchError("the agent wrote no health record: the loop lag was not measured")
+
+
+async def sample(
+    directory: Path, agent_proc, world_proc, minutes: float, until_runs: int | None = None
+) -> dict:
     baseline: list[float] = []
     probe_task = asyncio.create_task(probe(baseline))
     samples = []
     start = time.monotonic()
-    end = start + 60.0 * minutes
+    end, due = start + 60.0 * minutes, start + SAMPLE_S
     try:
         while time.monotonic() < end:
-            await asyncio.sleep(SAMPLE_S)
-            if agent_proc.poll() is not None or world_proc.poll() is not None:
-                raise RuntimeError(f"a process stopped early; see the logs in {directory}")
+            await asyncio.sleep(TICK_S)
+            _stopped(directory, agent_proc, world_proc)
+            over = until_runs is not None and len(_runs(directory)) >= until_runs
+            if time.monotonic() < due and not over:
+                continue
+            due += SAMPLE_S
             agent, world_now = proc_sample(agent_proc.pid), proc_sample(world_proc.pid)
             workers = [s for k in children(agent_proc.pid) if (s := proc_sample(k))]
             samples.append(
@@ -300,20 +444,22 @@ async def sample(directory: Path, agent_proc, world_proc, minutes: float) -> dic
             )
             done = int((time.monotonic() - start) / 60)
             print(f"\r{done}/{minutes:g} min", end="", file=sys.stderr, flush=True)
+            if over:
+                break
     finally:
         probe_task.cancel()
         print(file=sys.stderr)
+    if len(samples) < 2:
+        raise BenchError(f"the flight was too short to measure: {len(samples)} sample(s)")
     agent_proc.send_signal(signal.SIGTERM)
-    stopped = agent_proc.wait(30)
+    stopped = agent_proc.wait(STOP_S)
     health = []
-    for path in (directory / "logs").glob("*_exec_*"):
+    for path in sorted((directory / "logs").glob("*_exec_*")):
         for line in path.read_text().splitlines():
             event = json.loads(line)
             if event["message"].startswith("health "):
                 health.append(json.loads(event["message"][len("health ") :]))
-    runs_path = directory / "runs.json"
-    runs = json.loads(runs_path.read_text()) if runs_path.exists() else []
-    return summarise(samples, health, baseline, runs, stopped)
+    return summarise(samples, health, baseline, _runs(directory), stopped)
 
 
 def summarise(samples, health, baseline, runs, exit_code) -> dict:
@@ -355,6 +501,9 @@ def summarise(samples, health, baseline, runs, exit_code) -> dict:
         "minutes": wall / 60,
         "runs": len(runs),
         "runs_identified": sum(r["ok"] for r in runs),
+        "run_errors": [
+            {"t": r["t"], "error": r.get("error", "no result")} for r in runs if not r["ok"]
+        ],
         "result_after_s": {"median": float(np.median(after)), "max": float(max(after))}
         if after
         else None,
@@ -402,6 +551,17 @@ def _after_line(after: dict | None) -> str:
     )
 
 
+def _lag_lines(r: dict) -> list[str]:
+    if not r["lag"]["minutes"]:
+        return [
+            f"  agent: not measured (no health record; the agent writes one every {HEALTH_S:g} s)"
+        ]
+    return [
+        _lag_line("agent, all drivers", r["lag"]),
+        _lag_line("agent, identifying", r["lag_identifying"]),
+    ]
+
+
 def report(r: dict) -> str:
     lag, base = r["lag"], r["baseline_lag"]
     rss, slope = r["agent_rss_mb"], r["agent_rss_slope_mb_per_h_second_half"]
@@ -409,11 +569,11 @@ def report(r: dict) -> str:
         f"simulated flight: {r['minutes']:.1f} min real time, sensors and recorder at "
         f"{r.get('rate_hz', 100):g} Hz, {r['runs']} lateral excitations, "
         f"{r['runs_identified']} identified and delivered over the radio",
+        *(f"  not identified at {e['t']:.0f} s: {e['error']}" for e in r["run_errors"]),
         _after_line(r["result_after_s"]),
         "event-loop lag (10 ms probe, from the agent's health records; percentiles of all "
         "samples are bin upper edges, 0.05 ms bins):",
-        _lag_line("agent, all drivers", lag),
-        _lag_line("agent, identifying", r["lag_identifying"]),
+        *_lag_lines(r),
         f"  {'idle loop, same box':<20}: p50 {base['p50_ms']:.2f} ms, p99 {base['p99_ms']:.2f} "
         f"ms, max {base['max_ms']:.1f} ms",
         f"  ratio agent/idle p99: {lag.get('p99_ms_median', float('nan')) / base['p99_ms']:.2f}",
@@ -440,14 +600,25 @@ def report(r: dict) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    sub = parser.add_subparsers(dest="mode")
-    w = sub.add_parser("world")
-    w.add_argument("directory", type=Path)
-    w.add_argument("--every", type=float, default=60.0)
-    w.add_argument("--rate", type=float, default=100.0)
-    parser.add_argument("--minutes", type=float, default=45.0)
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--world", type=Path, metavar="DIR", help=argparse.SUPPRESS)  # a child
+    parser.add_argument("--minutes", type=float, default=45.0, help="real-time minutes to fly")
     parser.add_argument("--every", type=float, default=60.0, help="s between excitations")
+    parser.add_argument(
+        "--until-runs",
+        type=int,
+        metavar="N",
+        help="end the flight once N excitations are over (or at --minutes, if sooner)",
+    )
+    parser.add_argument(
+        "--settle",
+        type=float,
+        default=5.0,
+        metavar="S",
+        help="s of trimmed flight before the first excitation, once the link is up",
+    )
     parser.add_argument("--keep", type=Path, help="keep the logs in this directory")
     parser.add_argument(
         "--world-nice",
@@ -468,14 +639,24 @@ def main() -> None:
         metavar="HZ",
         help="sensor and recorder rate (100, or 400 as the VN-200's IMU rate)",
     )
-    parser.add_argument("--json", action="store_true")
+    parser.add_argument("--json", action="store_true", help="one JSON object on stdout")
     args = parser.parse_args()
-    if args.mode == "world":
-        asyncio.run(world(args.directory, args.every, args.rate))
+    if args.world is not None:
+        asyncio.run(world(args.world, args.every, args.rate, args.settle))
         return
-    result = asyncio.run(
-        measure(args.minutes, args.every, args.keep, args.world_nice, args.realtime, args.rate)
+    flight = Flight(
+        minutes=args.minutes,
+        every=args.every,
+        until_runs=args.until_runs,
+        settle=args.settle,
+        world_nice=args.world_nice,
+        realtime=args.realtime,
+        rate=args.rate,
     )
+    try:
+        result = asyncio.run(measure(flight, args.keep))
+    except BenchError as exc:
+        sys.exit(f"bench_agent: {exc}")
     print(json.dumps(result, default=float) if args.json else report(result))
 
 

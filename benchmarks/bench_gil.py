@@ -3,12 +3,14 @@ excitation log, at several switch intervals (`sys.setswitchinterval`, the agent'
 `SWITCH_INTERVAL_S`).
 
     .venv/bin/python benchmarks/bench_gil.py [--cycles 40] [--intervals 1,0.5,0.25,0.1]
+    .venv/bin/python benchmarks/bench_gil.py --cycles 2 --intervals 0.25   # the smoke test
 
 Each interval runs in its own process (the loop thread at SCHED_FIFO 10 when allowed, as the
 agent with `realtime_priority`): the real `LogWriter` and `Logbook` write a 19 s, 83-column
 excitation log at 100 Hz (the agent's window with its margins) every 0.45 s, and a 10 ms sleep
 probe, the agent's lag probe, measures how late the loop wakes in the 0.15 s after each hand-
 over (writing) and in the 0.3 s after that (idle). Prints p50, p99 and max of both, in ms.
+A child that fails stops the benchmark (exit code 1) with its error output.
 """
 
 from __future__ import annotations
@@ -70,11 +72,15 @@ async def _one(interval_s: float, cycles: int) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--cycles", type=int, default=40)
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--cycles", type=int, default=40, help="excitation logs written")
     parser.add_argument("--intervals", default="1,0.5,0.25,0.1", help="ms, comma-separated")
     parser.add_argument("--one", type=float, help=argparse.SUPPRESS)  # a child: one interval
     args = parser.parse_args()
+    if args.cycles < 1:
+        parser.error("--cycles: at least 1")
     if args.one is not None:
         print(asyncio.run(_one(args.one / 1000, args.cycles)))
         return
@@ -90,8 +96,13 @@ def main() -> None:
             capture_output=True,
             text=True,
             env=env,
-            check=True,
+            check=False,
         )
+        if done.returncode:
+            sys.exit(
+                f"bench_gil: the {ms} ms child failed (exit code {done.returncode}):\n"
+                f"{done.stdout}{done.stderr}"
+            )
         print(done.stdout.strip(), flush=True)
 
 

@@ -2,6 +2,7 @@
 
     make bench                                   # 20 seeds, 0 / 5 / 20 % noise (~10 min)
     .venv/bin/python benchmarks/bench_identify.py --seeds 3    # a quick look
+    .venv/bin/python benchmarks/bench_identify.py --seeds 1 --noise 0.05 --scaling --no-peers
 
 The thesis's appendix A.2 lateral model (continuous, zero-order hold at
 50 Hz) driven by the thesis's flown excitation — Schroeder multisines with four harmonics per
@@ -17,6 +18,8 @@ Methods, all on the same records:
   no refinement, at the p (from 1…20) with the lowest median error — an oracle choice.
 - python-control 0.10: `markov` (m = 100, 2 s of FIR) + `eigensys_realization` (n = 4).
 - SIPPY (sippy_unipi 1.0): N4SID, MOESP, PARSIM-K at the true order 4 (f = p = 20).
+The peers are the `bench` extra (`pip install -e '.[bench]'`, which `make bench` does);
+`--no-peers` leaves them out.
 
 Printed per noise level and method: the relative eigenvalue error of each named mode (Dutch
 roll, roll, spiral; median and worst over seeds), the median error divided by the Cramér–Rao
@@ -35,15 +38,15 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import argparse
+import importlib.util
+import json
 import statistics
 import time
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import control
 import numpy as np
-import sippy_unipi
 
 from agent.excitation.signals import doublet
 from agent.ident import Experiment, Settings, identify, reference
@@ -59,6 +62,7 @@ MODEL = reference.LATERAL
 ROLES = {"input_names": MODEL.inputs, "output_names": MODEL.outputs, "output_roles": MODEL.outputs}
 TRUE_MODES = {"Dutch roll": 0, "roll": 1, "spiral": 2}  # index into _true_modes()
 TEXTBOOK_P = (1, 2, 3, 4, 6, 8, 10, 15, 20)
+PEER_MODULES = {"control": "python-control", "sippy_unipi": "SIPPY"}
 
 
 def _true_modes() -> np.ndarray:
@@ -112,7 +116,14 @@ def run_ours(settings: Settings, **names) -> Callable[[Experiment], Outcome]:
     return method
 
 
+def missing_peers() -> list[str]:
+    """The peers' libraries that are not installed (the `bench` extra)."""
+    return [name for module, name in PEER_MODULES.items() if not importlib.util.find_spec(module)]
+
+
 def run_python_control(exp: Experiment) -> Outcome:
+    import control
+
     t0 = time.perf_counter()
     H = control.markov(exp.y.T, exp.u.T, m=100, dt=True)
     sys_, _ = control.eigensys_realization(H, 4, dt=True)
@@ -122,6 +133,8 @@ def run_python_control(exp: Experiment) -> Outcome:
 
 def run_sippy(method_name: str) -> Callable[[Experiment], Outcome]:
     def method(exp: Experiment) -> Outcome:
+        import sippy_unipi
+
         t0 = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -210,14 +223,10 @@ def fmt_pct(x: float) -> str:
     return f"{100 * x:.2f}" if x < 10 else f"{100 * x:.0f}"
 
 
-def scaling(durations: list[float]) -> None:
+def scaling(durations: list[float]) -> list[dict]:
     """Time per identification against record length: A.4 (8 outputs, 4 inputs), 100 Hz."""
     model, dt = reference.FULL, 0.01
-    print()
-    print("record length scaling: A.4 full model (4 inputs, 8 outputs), 100 Hz, 5 % noise")
-    print(
-        f"{'seconds':>8}{'samples':>9}{'no refinement ms':>18}{'default ms':>12}{'decimation':>12}"
-    )
+    rows = []
     for seconds in durations:
         u = reference.multisine_inputs(model.inputs, dt, seconds, 1, (0.05, 1.5))
         y = reference.with_output_noise(reference.simulate(model, u, dt), 0.05, 1)
@@ -231,25 +240,20 @@ def scaling(durations: list[float]) -> None:
                 result = identify(exp, dt, settings=settings)
                 times.append(time.perf_counter() - t0)
             row.append(1e3 * statistics.median(times))
-        print(
-            f"{seconds:>8.0f}{u.shape[0]:>9}{row[0]:>18.1f}{row[1]:>12.1f}"
-            f"{result.preprocessing.factor:>12}"
+        rows.append(
+            {
+                "seconds": seconds,
+                "samples": u.shape[0],
+                "no_refinement_ms": row[0],
+                "default_ms": row[1],
+                "decimation": result.preprocessing.factor,
+            }
         )
+    return rows
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=20)
-    parser.add_argument("--noise", type=float, nargs="+", default=[0.0, 0.05, 0.2])
-    parser.add_argument(
-        "--scaling",
-        type=float,
-        nargs="*",
-        default=[30.0, 60.0, 150.0, 300.0],
-        help="record lengths (s) for the time-versus-length table; none to skip",
-    )
-    args = parser.parse_args()
-    methods: list[tuple[str, Callable[[Experiment], Outcome]]] = [
+def methods(peers: bool) -> list[tuple[str, Callable[[Experiment], Outcome]]]:
+    ours = [
         ("suas-sysid default (OKID/ERA + output error)", run_ours(Settings())),
         ("suas-sysid OKID/ERA, no refinement", run_ours(Settings(refine=False))),
         ("suas-sysid frequency OKID + output error", run_ours(Settings(method="frequency"))),
@@ -261,54 +265,122 @@ def main() -> None:
             "suas-sysid aircraft (channels named by role)",
             run_ours(Settings(method="aircraft"), **ROLES),
         ),
+    ]
+    if not peers:
+        return ours
+    return [
+        *ours,
         ("python-control markov+ERA", run_python_control),
         ("SIPPY N4SID", run_sippy("N4SID")),
         ("SIPPY MOESP", run_sippy("MOESP")),
         ("SIPPY PARSIM-K", run_sippy("PARSIM-K")),
     ]
-    # Warm up every method once (imports, caches) before timing.
-    warm, _ = records(0.05, 999)
-    for _, method in methods:
-        method(warm)
+
+
+def noise_level(noise: float, seeds: int, peers: bool) -> dict:
+    """Every method on `seeds` records at one noise level: errors, TIC and time per method."""
+    bound = crb_relative(noise)
+    data = [records(noise, seed) for seed in range(seeds)]
+    train, val = [d[0] for d in data], [d[1] for d in data]
+    true_model = StateSpace(MODEL.A, MODEL.B, np.eye(4), np.zeros((4, 2)))
+    floor = statistics.median(validation_tic(Outcome(TRUTH, true_model, 0.0), v) for v in val)
+    rows = [(name, [method(exp) for exp in train]) for name, method in methods(peers)]
+    p, textbook = textbook_okid(train)
+    rows.append((f"textbook OKID/ERA (oracle p = {p}, n = 4)", textbook))
+    out = []
+    for name, outcomes in rows:
+        errors = np.array([mode_errors(o.eigenvalues) for o in outcomes])
+        pairs = zip(outcomes, val, strict=True)
+        out.append(
+            {
+                "method": name,
+                "median": np.median(errors, axis=0).tolist(),
+                "worst": errors.max(axis=0).tolist(),
+                "worst_mode": float(np.median(errors.max(axis=1))),
+                "tic": statistics.median(validation_tic(o, v) for o, v in pairs),
+                "ms": 1e3 * statistics.median(o.seconds for o in outcomes),
+            }
+        )
+    return {"noise": noise, "crb": bound.tolist(), "tic_floor": floor, "rows": out}
+
+
+def print_level(level: dict) -> None:
+    noise, bound = level["noise"], level["crb"]
+    print()
     print(
-        f"A.2 lateral, thesis multisine (30 s, 50 Hz), {args.seeds} seeds; eigenvalue error "
-        "in % (median/worst over seeds; 'worst' = median over seeds of the worst mode), "
-        "×CRB = median error / Cramér–Rao 1-σ"
+        f"noise {100 * noise:.0f} %: Cramér–Rao 1-σ Dutch roll {100 * bound[0]:.2f} %, "
+        f"roll {100 * bound[1]:.2f} %, spiral {100 * bound[2]:.2f} %; "
+        f"validation TIC noise floor {level['tic_floor']:.3f}"
     )
-    header = (
+    print(
         f"{'method':<46}{'Dutch roll':>13}{'roll':>13}{'spiral':>13}{'worst':>10}"
         f"{'×CRB DR/roll/spiral':>22}{'val TIC':>9}{'ms':>8}"
     )
-    for noise in args.noise:
-        bound = crb_relative(noise)
-        data = [records(noise, seed) for seed in range(args.seeds)]
-        train, val = [d[0] for d in data], [d[1] for d in data]
-        true_model = StateSpace(MODEL.A, MODEL.B, np.eye(4), np.zeros((4, 2)))
-        floor = statistics.median(validation_tic(Outcome(TRUTH, true_model, 0.0), v) for v in val)
-        print()
+    for row in level["rows"]:
+        med, worst = row["median"], row["worst"]
+        cells = "".join(f"{' ' + fmt_pct(med[k]) + '/' + fmt_pct(worst[k]):>13}" for k in (0, 1, 2))
+        ratio = "/".join(f"{med[k] / bound[k]:.1f}" for k in (0, 1, 2)) if noise > 0 else "—"
         print(
-            f"noise {100 * noise:.0f} %: Cramér–Rao 1-σ Dutch roll {100 * bound[0]:.2f} %, "
-            f"roll {100 * bound[1]:.2f} %, spiral {100 * bound[2]:.2f} %; "
-            f"validation TIC noise floor {floor:.3f}"
+            f"{row['method']:<46}{cells}{fmt_pct(row['worst_mode']):>10}{ratio:>22}"
+            f"{row['tic']:>9.3f}{row['ms']:>8.1f}"
         )
-        print(header)
-        rows = [(name, [method(exp) for exp in train]) for name, method in methods]
-        p, textbook = textbook_okid(train)
-        rows.append((f"textbook OKID/ERA (oracle p = {p}, n = 4)", textbook))
-        for name, outcomes in rows:
-            errors = np.array([mode_errors(o.eigenvalues) for o in outcomes])
-            med, worst = np.median(errors, axis=0), errors.max(axis=0)
-            cells = "".join(
-                f"{' ' + fmt_pct(med[k]) + '/' + fmt_pct(worst[k]):>13}" for k in (0, 1, 2)
-            )
-            ratio = "/".join(f"{med[k] / bound[k]:.1f}" for k in (0, 1, 2)) if noise > 0 else "—"
-            pairs = zip(outcomes, val, strict=True)
-            tic = statistics.median(validation_tic(o, v) for o, v in pairs)
-            worst_mode = float(np.median(errors.max(axis=1)))
-            ms = 1e3 * statistics.median(o.seconds for o in outcomes)
-            print(f"{name:<46}{cells}{fmt_pct(worst_mode):>10}{ratio:>22}{tic:>9.3f}{ms:>8.1f}")
-    if args.scaling:
-        scaling(args.scaling)
+
+
+def print_scaling(rows: list[dict]) -> None:
+    print()
+    print("record length scaling: A.4 full model (4 inputs, 8 outputs), 100 Hz, 5 % noise")
+    print(
+        f"{'seconds':>8}{'samples':>9}{'no refinement ms':>18}{'default ms':>12}{'decimation':>12}"
+    )
+    for r in rows:
+        print(
+            f"{r['seconds']:>8.0f}{r['samples']:>9}{r['no_refinement_ms']:>18.1f}"
+            f"{r['default_ms']:>12.1f}{r['decimation']:>12}"
+        )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--seeds", type=int, default=20)
+    parser.add_argument("--noise", type=float, nargs="+", default=[0.0, 0.05, 0.2])
+    parser.add_argument(
+        "--scaling",
+        type=float,
+        nargs="*",
+        default=[30.0, 60.0, 150.0, 300.0],
+        help="record lengths (s) for the time-versus-length table; none to skip",
+    )
+    parser.add_argument("--no-peers", action="store_true", help="suas-sysid's methods only")
+    parser.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    args = parser.parse_args()
+    missing = [] if args.no_peers else missing_peers()
+    if missing:
+        parser.error(
+            f"{' and '.join(missing)} not installed: pip install -e '.[bench]' (make bench "
+            "does), or --no-peers"
+        )
+    # Warm up every method once (imports, caches) before timing.
+    warm, _ = records(0.05, 999)
+    for _, method in methods(not args.no_peers):
+        method(warm)
+    if not args.json:
+        print(
+            f"A.2 lateral, thesis multisine (30 s, 50 Hz), {args.seeds} seeds; eigenvalue error "
+            "in % (median/worst over seeds; 'worst' = median over seeds of the worst mode), "
+            "×CRB = median error / Cramér–Rao 1-σ"
+        )
+    levels = []
+    for noise in args.noise:
+        levels.append(noise_level(noise, args.seeds, not args.no_peers))
+        if not args.json:
+            print_level(levels[-1])
+    rows = scaling(args.scaling) if args.scaling else []
+    if args.json:
+        print(json.dumps({"seeds": args.seeds, "levels": levels, "scaling": rows}))
+    elif rows:
+        print_scaling(rows)
 
 
 if __name__ == "__main__":

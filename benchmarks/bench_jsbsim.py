@@ -5,6 +5,8 @@ through the full preset by suas-sysid and by the peers, in one process.
     .venv/bin/python benchmarks/bench_jsbsim.py --seeds 2 --no-peers          # a quick look
     .venv/bin/python benchmarks/bench_jsbsim.py --aircraft pa28 --turbulence 1
     .venv/bin/python benchmarks/bench_jsbsim.py --no-peers --without alpha-products
+    .venv/bin/python benchmarks/bench_jsbsim.py --aircraft J3Cub --turbulence 0 --seeds 1 \
+        --no-peers                                               # the smoke test: one flight
 
 Each seed is one offline flight (`agent.sim.offline.fly`: JSBSim trimmed as `sysid sim` trims
 it, the emulated ArduPlane's servos, the sensors' noise, 100 Hz). It holds the full preset
@@ -29,8 +31,10 @@ per aircraft, condition and method:
 - the median seconds per identification.
 
 The peers get the same records (inputs and outputs less the trim) and the truth's order
-without engine, altitude and heading (8 aircraft states + 1). The "validated truth" row gives
-the truth's own validation TIC: the best a linear model can score on those records.
+without engine, altitude and heading (8 aircraft states + 1); python-control and SIPPY are the
+`bench` extra (`pip install -e '.[bench]'`, which `make bench-jsbsim` does). The "validated
+truth" row gives the truth's own validation TIC: the best a linear model can score on those
+records.
 """
 
 from __future__ import annotations
@@ -42,6 +46,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import argparse
 import dataclasses
+import importlib.util
 import time
 import warnings
 
@@ -58,7 +63,7 @@ from agent.excitation.plan import (
     preset,
     render,
 )
-from agent.ident import Experiment, Settings, aircraft, identify
+from agent.ident import Experiment, Settings, identify
 from agent.ident.convert import StateSpace
 from agent.ident.errors import DataError, IdentificationFailed
 from agent.ident.fit import simulate
@@ -76,6 +81,9 @@ QUIET_SEED = 1500
 SNR_REQUIRED = 3.0
 MAX_VALIDATION_SCALE = 2.0
 COMMAND_HZ = 50.0  # `fly`'s command rate
+# suas-sysid as the agent runs it on these records: the surfaces' positions are sampled by
+# their potentiometers while they move, so the inputs are not held between samples.
+OURS = Settings(held_inputs=False)
 
 
 def experiment(rec: Record, wind: bool = True) -> Experiment:
@@ -188,7 +196,7 @@ def named_by_truth(eigenvalues: np.ndarray, truth: dict[str, list[complex]]) -> 
     return found
 
 
-def ours(exp: Experiment, dt: float, rec: Record):
+def ours(exp: Experiment, dt: float, rec: Record, settings: Settings = OURS):
     start = time.perf_counter()
     result = identify(
         exp,
@@ -197,7 +205,7 @@ def ours(exp: Experiment, dt: float, rec: Record):
         output_names=rec.outputs,
         input_roles=INPUT_ROLES,
         output_roles=OUTPUT_ROLES,
-        settings=Settings(held_inputs=False),
+        settings=settings,
     )
     seconds = time.perf_counter() - start
     found: dict[str, list[complex]] = {}
@@ -279,24 +287,21 @@ def validation_tic(model: StateSpace, records: list[tuple[Experiment, tuple]]) -
     return float(np.mean(tics))
 
 
-def _without_alpha_products() -> None:
-    aircraft.BILINEAR = ()
-
-
-def _without_sideslip_drag() -> None:
-    aircraft.SIDESLIP_DRAG = False
-
-
-# Terms of the whole-aircraft method that `--without` leaves out (docs/identification.md).
-ABLATIONS = {"alpha-products": _without_alpha_products, "sideslip-drag": _without_sideslip_drag}
+# Terms of the whole-aircraft method that `--without` leaves out (docs/identification.md):
+# the Settings field that holds each.
+ABLATIONS = {"alpha-products": "alpha_products", "sideslip-drag": "sideslip_drag"}
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--aircraft", nargs="*", default=list(AIRCRAFT))
-    parser.add_argument("--turbulence", type=float, nargs="*", default=[0.0, 1.0])
-    parser.add_argument("--seeds", type=int, default=10)
-    parser.add_argument("--no-peers", action="store_true")
+    parser = argparse.ArgumentParser(
+        description=__doc__.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--aircraft", nargs="*", choices=list(AIRCRAFT), default=list(AIRCRAFT))
+    parser.add_argument(
+        "--turbulence", type=float, nargs="*", default=[0.0, 1.0], help="1: W20 = 5 ft/s"
+    )
+    parser.add_argument("--seeds", type=int, default=10, help=f"seeds from {FIRST_SEED}")
+    parser.add_argument("--no-peers", action="store_true", help="suas-sysid alone")
     parser.add_argument(
         "--without",
         nargs="*",
@@ -305,8 +310,17 @@ def main() -> None:
         help="leave out a term of the whole-aircraft method, to see what it does",
     )
     args = parser.parse_args()
-    for term in args.without:
-        ABLATIONS[term]()
+    missing = [
+        name
+        for module, name in (("control", "python-control"), ("sippy_unipi", "SIPPY"))
+        if not args.no_peers and not importlib.util.find_spec(module)
+    ]
+    if missing:
+        parser.error(
+            f"{' and '.join(missing)} not installed: pip install -e '.[bench]' (make "
+            "bench-jsbsim does), or --no-peers"
+        )
+    settings = dataclasses.replace(OURS, **{ABLATIONS[term]: False for term in args.without})
     plan = preset("full")
     print(
         "cells: median / worst over seeds; errors in %; ≤10 %: seeds with every named mode "
@@ -325,7 +339,7 @@ def main() -> None:
                     plan, aircraft=name, speed_kts=AIRCRAFT[name], turbulence=turbulence, seed=seed
                 )
                 exp = experiment(rec)
-                found, model, seconds, spiral = ours(exp, rec.dt, rec)
+                found, model, seconds, spiral = ours(exp, rec.dt, rec, settings)
                 check, scales = validation(name, turbulence, seed, model)
                 sizes.extend(scales)
                 rows.setdefault("validated truth", []).append(

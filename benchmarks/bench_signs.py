@@ -3,6 +3,7 @@
     .venv/bin/python benchmarks/bench_signs.py                       # the Cub, calm, seeds 2–3
     .venv/bin/python benchmarks/bench_signs.py --aircraft c182 --turbulence 1 --seeds 4
     .venv/bin/python benchmarks/bench_signs.py --scale-lateral 0.5 --scale-longitudinal 0.5
+    .venv/bin/python benchmarks/bench_signs.py --seeds 1 --signs ++    # one flight
 
 Flies the full preset four times per seed, with the aileron's and the rudder's amplitudes each
 as is or negated (the same waveforms, mirrored), through `agent.sim.offline.fly` as
@@ -15,7 +16,8 @@ amplitudes of aileron and rudder, and of elevator and throttle: what moves with 
 nonlinearity. The truth's spiral is printed beside FGLinearization's, an independent check,
 and, per seed, the spiral identified from the truth's own linear response to the first
 flight's recorded inputs (held over each step, as `Truth.simulate` holds them): what the
-method gives where nothing is nonlinear.
+method gives where nothing is nonlinear. `--signs` flies some of the four (aileron's sign, then
+the rudder's: ++, -+, +-, --).
 """
 
 from __future__ import annotations
@@ -38,17 +40,27 @@ from agent.sim.offline import OUTPUTS, Record, fly
 from agent.sim.plant import INPUTS, Plant
 from agent.sim.truth import STATES, Truth, linear_truth
 
-SIGNS = ((1, 1), (-1, 1), (1, -1), (-1, -1))
+SIGN_NAMES = {"++": (1, 1), "-+": (-1, 1), "+-": (1, -1), "--": (-1, -1)}
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--aircraft", default="J3Cub", choices=list(AIRCRAFT))
-    parser.add_argument("--turbulence", type=float, default=0.0)
-    parser.add_argument("--seeds", type=int, default=2)
+    parser.add_argument("--turbulence", type=float, default=0.0, help="1: light (W20 = 5 ft/s)")
+    parser.add_argument("--seeds", type=int, default=2, help=f"seeds from {FIRST_SEED}")
+    parser.add_argument(
+        "--signs",
+        nargs="+",
+        choices=list(SIGN_NAMES),
+        default=list(SIGN_NAMES),
+        help="the aileron's and the rudder's signs to fly",
+    )
     parser.add_argument("--scale-lateral", type=float, default=1.0)
     parser.add_argument("--scale-longitudinal", type=float, default=1.0)
     args = parser.parse_args()
+    signs = [SIGN_NAMES[name] for name in args.signs]
     speed = AIRCRAFT[args.aircraft]
     reference = linear_truth(args.aircraft, speed)
     truth = reference.modes()
@@ -65,7 +77,8 @@ def main() -> None:
     print(f"{'seed':>4} {'aileron':>7} {'rudder':>6} {head}  spiral z  bank mean / max (deg)")
     phi = OUTPUTS.index("phi")
     for seed in range(FIRST_SEED, FIRST_SEED + args.seeds):
-        for aileron, rudder in SIGNS:
+        first = None
+        for aileron, rudder in signs:
             lateral, longitudinal = args.scale_lateral, args.scale_longitudinal
             amplitude = {
                 "aileron": aileron * lateral * FULL_AMPLITUDE["aileron"],
@@ -90,7 +103,7 @@ def main() -> None:
                 f"{bank.mean():+.1f} / {np.abs(bank).max():.1f}",
                 flush=True,
             )
-            if (aileron, rudder) == SIGNS[0]:
+            if first is None:  # the truth's linear response is to this flight's inputs
                 first = rec
         print(
             f"{seed:>4} the truth's linear response: spiral {linear_spiral(reference, first):+.5f}"

@@ -3,6 +3,8 @@ as Markdown with the date, the machine and the commit, for benchmarks/README.md.
 
     make bench-table                                  # 20-25 minutes here
     .venv/bin/python benchmarks/table.py --quick      # fewer samples
+    .venv/bin/python benchmarks/table.py --sections identification link --seeds 1 \
+        --no-peers --link-results 1                   # the smoke test: seconds
 
 Sections, each from its own benchmark (run alone for more detail):
 1. identification time and accuracy against python-control and SIPPY, side by side in this
@@ -17,6 +19,8 @@ Sections, each from its own benchmark (run alone for more detail):
 The agent runs as it would fly: [runtime] realtime_priority = 10 (SCHED_FIFO for its event
 loop; refused without root or CAP_SYS_NICE, and then said so in the table), the world (JSBSim,
 emulated autopilot, sensors, radios, ground) at nice 10 since it is not on the flight computer.
+`--sections` measures some of the four; `--no-peers` leaves python-control and SIPPY out (they
+are the `bench` extra, which `make bench-table` installs).
 """
 
 from __future__ import annotations
@@ -39,11 +43,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-import bench_abort  # noqa: E402
-import bench_agent  # noqa: E402
 import bench_identify as bi  # noqa: E402
 import bench_link  # noqa: E402
 import numpy as np  # noqa: E402
+from common import BenchError  # noqa: E402
 
 from agent.ident import Settings  # noqa: E402
 
@@ -80,15 +83,21 @@ def machine() -> str:
     )
 
 
-def identification(seeds: int, noise: float = 0.05) -> list[str]:
+SECTIONS = ("identification", "link", "abort", "lag")
+
+
+def identification(seeds: int, noise: float = 0.05, peers: bool = True) -> list[str]:
     methods = [
         ("suas-sysid default (OKID/ERA + output error)", bi.run_ours(Settings())),
         ("suas-sysid OKID/ERA, no refinement", bi.run_ours(Settings(refine=False))),
-        ("python-control 0.10 markov + ERA", bi.run_python_control),
-        ("SIPPY N4SID", bi.run_sippy("N4SID")),
-        ("SIPPY MOESP", bi.run_sippy("MOESP")),
-        ("SIPPY PARSIM-K", bi.run_sippy("PARSIM-K")),
     ]
+    if peers:
+        methods += [
+            ("python-control 0.10 markov + ERA", bi.run_python_control),
+            ("SIPPY N4SID", bi.run_sippy("N4SID")),
+            ("SIPPY MOESP", bi.run_sippy("MOESP")),
+            ("SIPPY PARSIM-K", bi.run_sippy("PARSIM-K")),
+        ]
     warm, _ = bi.records(noise, 999)
     for _, method in methods:
         method(warm)
@@ -120,8 +129,20 @@ def identification(seeds: int, noise: float = 0.05) -> list[str]:
 def loop_lag(
     minutes: float, every: float, rates: tuple[float, ...], realtime: int | None
 ) -> list[str]:
+    import bench_agent  # the simulated flight and the agent: only for this section
+
     results = [
-        asyncio.run(bench_agent.measure(minutes, every, None, WORLD_NICE, realtime, rate))
+        asyncio.run(
+            bench_agent.measure(
+                bench_agent.Flight(
+                    minutes=minutes,
+                    every=every,
+                    world_nice=WORLD_NICE,
+                    realtime=realtime,
+                    rate=rate,
+                )
+            )
+        )
         for rate in rates
     ]
     refused = any(
@@ -176,7 +197,7 @@ def loop_lag(
     return lines
 
 
-def link() -> list[str]:
+def link(results: int = bench_link.RUNS) -> list[str]:
     size = len(
         bench_link.msgpack.packb(
             bench_link.messages.to_dict(bench_link.full_result()), use_bin_type=True
@@ -186,14 +207,14 @@ def link() -> list[str]:
         f"**Bytes on air per result** — one full-model result (8 states, 4 inputs, 8 outputs, "
         f"5 modes with every quality index; {size} bytes of MessagePack) through the real "
         "digi-xbee transport and the emulated 900HP radios; median of "
-        f"{bench_link.RUNS} results, retries, link acks, heartbeats and status in that interval "
+        f"{results} results, retries, link acks, heartbeats and status in that interval "
         "included (30 bytes of radio overhead per frame).",
         "",
         "| RF rate | loss per attempt | frames | bytes on air | delivery median | worst |",
         "|---:|---:|---:|---:|---:|---:|",
     ]
     for rate, loss in ((200_000.0, 0.0), (200_000.0, 0.2), (10_000.0, 0.0)):
-        frames, air, median, worst = asyncio.run(bench_link.measure(rate, loss))
+        frames, air, median, worst = asyncio.run(bench_link.measure(rate, loss, results))
         lines.append(
             f"| {rate / 1000:g} kb/s | {100 * loss:g} % | {frames} | {air:.0f} | {median:.2f} s "
             f"| {worst:.2f} s |"
@@ -202,6 +223,8 @@ def link() -> list[str]:
 
 
 def abort(drops: int, realtime: int | None) -> list[str]:
+    import bench_abort  # the simulated flight and the agent: only for this section
+
     s = bench_abort.summary(asyncio.run(bench_abort.measure(drops, realtime=realtime)))
     a, b = s["report_to_trim"], s["flip_to_trim"]
     return [
@@ -223,9 +246,18 @@ def abort(drops: int, realtime: int | None) -> list[str]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--quick", action="store_true", help="3 seeds, 3 min per rate, 10 drops")
+    parser.add_argument(
+        "--sections", nargs="+", choices=SECTIONS, default=list(SECTIONS), help="what to measure"
+    )
     parser.add_argument("--seeds", type=int)
+    parser.add_argument("--no-peers", action="store_true", help="no python-control, no SIPPY")
+    parser.add_argument(
+        "--link-results", type=int, default=bench_link.RUNS, help="results per rate and loss"
+    )
     parser.add_argument("--minutes", type=float, help="per sensor rate")
     parser.add_argument("--every", type=float, default=30.0, help="s between excitations")
     parser.add_argument("--drops", type=int)
@@ -238,19 +270,29 @@ def main() -> None:
         help="the agent's realtime_priority (default 10; 0: normal scheduling)",
     )
     args = parser.parse_args()
+    missing = [] if args.no_peers or "identification" not in args.sections else bi.missing_peers()
+    if missing:
+        parser.error(
+            f"{' and '.join(missing)} not installed: pip install -e '.[bench]' (make "
+            "bench-table does), or --no-peers"
+        )
     realtime = args.realtime or None
     seeds = args.seeds or (3 if args.quick else 10)
     minutes = args.minutes or (3.0 if args.quick else 8.0)
     drops = args.drops or (10 if args.quick else 20)
-    sections = [
-        lambda: [machine(), "", "Command: `make bench-table` (`benchmarks/table.py`)."],
-        lambda: identification(seeds),
-        lambda: link(),
-        lambda: abort(drops, realtime),
-        lambda: loop_lag(minutes, args.every, tuple(args.rates), realtime),
-    ]
-    for k, section in enumerate(sections):
-        print(("\n" if k else "") + "\n".join(section()), flush=True)  # each as it is measured
+    sections = {
+        "identification": lambda: identification(seeds, peers=not args.no_peers),
+        "link": lambda: link(args.link_results),
+        "abort": lambda: abort(drops, realtime),
+        "lag": lambda: loop_lag(minutes, args.every, tuple(args.rates), realtime),
+    }
+    print(f"{machine()}\n\nCommand: `make bench-table` (`benchmarks/table.py`).", flush=True)
+    try:
+        for name in SECTIONS:  # each printed as it is measured
+            if name in args.sections:
+                print("\n" + "\n".join(sections[name]()), flush=True)
+    except BenchError as exc:
+        sys.exit(f"table: {exc}")
 
 
 if __name__ == "__main__":

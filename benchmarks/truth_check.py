@@ -1,16 +1,20 @@
 """The truth check for each benchmark aircraft, JSBSim's `FGLinearization` beside ours.
 
-    .venv/bin/python benchmarks/truth_check.py          # about a minute
+    .venv/bin/python benchmarks/truth_check.py                  # about a minute
+    .venv/bin/python benchmarks/truth_check.py --aircraft J3Cub   # one aircraft
 
 For a doublet on each surface and a throttle step, each flown as a ± pair (the odd part of
 JSBSim's response), it prints the worst TIC over the outputs the test moves (agent.sim.truth
 says which count). FGLinearization's model is driven by the commands, which its B is for;
-ours by the surface and throttle positions. Both are held to TIC ≤ 0.05.
+ours by the surface and throttle positions. Both are held to TIC ≤ 0.05; a test on which ours
+is over that bound is marked, and the command then exits with code 1.
 """
 
 from __future__ import annotations
 
+import argparse
 import os
+import sys
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
@@ -49,19 +53,36 @@ def fg_worst(aircraft: str, speed: float, ours: list[T.Check]) -> dict[str, floa
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    names = [name for name, _ in BENCHMARK]
+    parser.add_argument(
+        "--aircraft", nargs="+", choices=names, default=names, help="which aircraft to check"
+    )
+    args = parser.parse_args()
     print(f"worst TIC over the outputs each test moves (bound {T.CHECK_TIC})")
     print(f"{'aircraft':<8}{'test':<10}{'FGLinearization':>17}{'agent.sim.truth':>17}")
+    over = []
     for aircraft, speed in BENCHMARK:
+        if aircraft not in args.aircraft:
+            continue
         truth = T.linear_truth(aircraft, speed)
         ours = T.check(truth)
         theirs = fg_worst(aircraft, speed, ours)
         for check in ours:
+            mark = " over the bound" if check.worst > T.CHECK_TIC else ""
             print(
-                f"{aircraft:<8}{check.test:<10}{theirs[check.test]:>17.3f}{check.worst:>17.3f}",
+                f"{aircraft:<8}{check.test:<10}{theirs[check.test]:>17.3f}{check.worst:>17.3f}"
+                f"{mark}",
                 flush=True,
             )
+            if mark:
+                over.append(f"{aircraft} {check.test}")
         modes = ", ".join(f"{k} {v[0]:.3f}" for k, v in truth.modes().items() if v)
         print(f"  truth modes: {modes}")
+    if over:
+        sys.exit(f"truth_check: agent.sim.truth over TIC {T.CHECK_TIC} on {', '.join(over)}")
 
 
 if __name__ == "__main__":

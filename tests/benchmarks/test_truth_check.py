@@ -1,0 +1,22 @@
+"""Smoke test of benchmarks/truth_check.py, as far as it runs in seconds: its help, and its
+arguments checked before anything is flown.
+
+What it cannot do briefly: it is the check of the validated linear truth itself, whose
+linearisation of JSBSim takes about 15 s per aircraft here; one aircraft
+(`--aircraft J3Cub`) takes 19 s, more than its share of the suite's smoke-test budget.
+tests/sim/test_truth.py checks the truth against JSBSim in the suite; the whole benchmark
+runs by hand (benchmarks/README.md)."""
+
+from __future__ import annotations
+
+from tests.benchmarks.bench import help_text, run
+
+
+def test_help():
+    assert "--aircraft" in help_text("truth_check.py")
+
+
+def test_arguments_are_checked_before_flying():
+    done = run("truth_check.py", "--aircraft", "f16", timeout_s=60, ok=False)
+    assert done.returncode == 2
+    assert "invalid choice: 'f16'" in done.stderr, done.stderr
