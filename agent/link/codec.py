@@ -57,7 +57,6 @@ class FrameCounter(Protocol):
 
     def next(self) -> int:
         """The next counter, never used before under the key; OSError when it cannot be had."""
-        ...
 
 
 def key_fingerprint(key: bytes) -> str:
