@@ -7,9 +7,12 @@ is files (JSON + NumPy) in a directory, so the nominal model survives restarts.
 Update suggestion, in the thesis's order; any NO suggests not updating:
 1. the candidate is stable (a mode doubling in 10 s or more is tolerated, see
 DIVERGENCE_LIMIT); 2. its quality indexes hold (every named mode's EMAC ≥ 50 %);
-3. TIC_jj (its own data) averages below 0.3; 4.–7. with a nominal model: TIC_jN (candidate on
-the nominal's data) no worse than TIC_NN (nominal on its own), and TIC_jj + TIC_jN below
-TIC_NN + TIC_Nj (nominal on the candidate's data).
+2b. (ours, not the thesis's) it has the modes its axes must have (agent.ident.naming.
+expected_modes; a missing spiral is reported, not judged: see NOT_JUDGED_WHEN_MISSING) and no
+pole beyond what the record can show (POLE_BAND_FACTOR); 3. TIC_jj (its own data) averages
+below 0.3; 4.–7. with a nominal model: TIC_jN (candidate on the nominal's data) no worse than
+TIC_NN (nominal on its own), and TIC_jj + TIC_jN below TIC_NN + TIC_Nj (nominal on the
+candidate's data).
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ import numpy as np
 
 from agent.channels import AXIS_SETS
 from agent.ident.document import ModeDocument, ResultDocument
+from agent.ident.naming import expected_modes
 
 log = logging.getLogger(__name__)
 
@@ -40,6 +44,19 @@ EMAC_MIN = 50.0
 # more than this share of it (CIFER's guideline for an identified parameter, CR ≤ 20 %:
 # Tischler & Remple, Aircraft and Rotorcraft System Identification, 2nd ed., 2012, ch. 11).
 CR_MAX = 0.2
+# Step 2b: a pole faster than this many times the top of the band the record excites
+# (preprocessing.band_hz: where the inputs' power ends, or the whole-aircraft fit's top bin) is
+# no aircraft mode the record determined. A first-order pole a decade above the highest
+# excited frequency changes the response inside the band by under 0.5 % in magnitude and 6° in
+# phase, less than a flight record's noise resolves, so the data do not place it: the fit may
+# put it anywhere above (candidates.BAND_MULTIPLE cuts ERA's modes at 5 × the band for the
+# same reason; this bound is the looser one). Nor can it lie beyond the Nyquist frequency of
+# the samples the model was fitted to (π/dt): they show nothing faster.
+POLE_BAND_FACTOR = 10.0
+# A missing spiral is reported but does not fail step 2b: its time constant can be minutes
+# (JSBSim's J-3 Cub: about 4 min) and is unbounded when the spiral stability is neutral, so no
+# record is sure to be long enough to resolve it (see _resolved).
+NOT_JUDGED_WHEN_MISSING = ("spiral",)
 # Self-check (requirement 6.3.1): a new nominal predicting the next excitation this much worse
 # (TIC_avg ratio) than the model it replaced is rolled back.
 SELF_CHECK_RATIO = 1.5
@@ -69,8 +86,9 @@ class Suggestion:
     steps: list[str]
     """Each step's outcome as a line for the operator."""
     checks: dict[str, bool]
-    """Each step's outcome for a program: "stability", "quality", "fit" (TIC_jj), and with a
-    nominal model "no worse" (TIC_jN against TIC_NN) and "combined" (steps 6–7)."""
+    """Each step's outcome for a program: "stability", "quality", "modes" (step 2b), "fit"
+    (TIC_jj), and with a nominal model "no worse" (TIC_jN against TIC_NN) and "combined"
+    (steps 6–7)."""
     tic_jj: float
     tic_jn: float | None = None
     tic_nn: float | None = None
@@ -91,6 +109,79 @@ def _resolved(mode: ModeDocument, span: float) -> bool:
     return bool(abs(mode.eigenvalue[0]) * span / 2 >= 1.0)
 
 
+def pole_limit(result: ResultDocument) -> tuple[float, str]:
+    """The fastest pole (|s|, rad/s) an aircraft mode identified from this record can have
+    (POLE_BAND_FACTOR), and what bounds it, in words."""
+    band_hz, dt = result.preprocessing.band_hz, result.dt
+    by_band, nyquist = POLE_BAND_FACTOR * 2 * np.pi * band_hz, np.pi / dt
+    if by_band <= nyquist:
+        return by_band, f"{POLE_BAND_FACTOR:g} × the excited band's top, {band_hz:.3g} Hz"
+    return nyquist, f"the Nyquist frequency of samples {dt:g} s apart"
+
+
+def _pole(mode: ModeDocument) -> str:
+    re, im = mode.eigenvalue
+    return (
+        f"{re:.4g} 1/s" if im == 0 else f"{re:.4g} ± {im:.4g}j 1/s (ωn {mode.frequency_rad_s:.4g})"
+    )
+
+
+def _modes_step(candidate: Candidate, span: float) -> tuple[bool, str]:
+    """Step 2b: the modes the axes must have are there, and no pole is beyond the record."""
+    have, named, missing = _expected(candidate, span)
+    within, beyond = _in_range(candidate.result)
+    if have and within:
+        return True, "; ".join([f"{named or 'none'} named", *missing, *beyond])
+    return False, "; ".join(missing + ([] if within else beyond))  # what failed, and why
+
+
+def _expected(candidate: Candidate, span: float) -> tuple[bool, str, list[str]]:
+    """Whether no mode the axes must have is missing (a spiral aside), those named, and a part
+    of the line per missing one: the result's reason, or why it is not judged."""
+    result = candidate.result
+    roles = AXIS_SETS[candidate.axes][1] if candidate.axes in AXIS_SETS else ()
+    expected = expected_modes(roles)
+    named = {m.name for m in result.modes if m.name}
+    why = {m.name: m.reason for m in result.missing_modes}
+    missing = [n for n in expected if n not in named]
+    judged = [n for n in missing if n not in NOT_JUDGED_WHEN_MISSING]
+    parts = []
+    if judged:
+        parts.append(
+            "MISSING " + "; ".join(f"{n} ({why.get(n, 'no mode is named so')})" for n in judged)
+        )
+    record = f", beyond what a {span:.0f} s record resolves" if np.isfinite(span) else ""
+    parts += [
+        f"{n} missing, not judged: its time constant can be minutes (unbounded when its "
+        f"stability is neutral){record}"
+        for n in missing
+        if n in NOT_JUDGED_WHEN_MISSING
+    ]
+    return not judged, ", ".join(n for n in expected if n in named), parts
+
+
+def _in_range(result: ResultDocument) -> tuple[bool, list[str]]:
+    """Whether every pole is within `pole_limit`, and a part of the line saying so or naming
+    the poles beyond it (those left out at z ≈ 0 too)."""
+    limit, bound = pole_limit(result)
+    fast = [m for m in result.modes if m.frequency_rad_s > limit]
+    delays = len(result.poles_left_out)
+    if not fast and not delays:
+        return True, [f"every pole within {limit:.0f} rad/s ({bound})"]
+    parts = []
+    if fast:
+        parts.append(
+            f"OUT OF RANGE: pole {', '.join(_pole(m) for m in fast)} faster than {limit:.0f} "
+            f"rad/s ({bound}): not an aircraft mode this record determined"
+        )
+    if delays:
+        parts.append(
+            f"OUT OF RANGE: {delays} pole(s) at z ≈ 0, a pure sample delay or faster than the "
+            "samples show, with no continuous-time eigenvalue: not an aircraft mode"
+        )
+    return False, parts
+
+
 def suggest(
     candidate: Candidate, nominal: Candidate | None, tic_jn: float | None, tic_nj: float | None
 ) -> Suggestion:
@@ -103,7 +194,7 @@ def suggest(
     span = np.inf if candidate.record_s is None else candidate.record_s
     modes = candidate.result.modes
     judged = [m for m in modes if _resolved(m, span)]
-    fastest = max(m.eigenvalue[0] for m in modes)
+    fastest = max((m.eigenvalue[0] for m in modes), default=-np.inf)
     judged_fastest = max((m.eigenvalue[0] for m in judged), default=-np.inf)
     stable = bool(judged_fastest < DIVERGENCE_LIMIT)
     state = (
@@ -136,10 +227,18 @@ def suggest(
         text += f"; {', '.join(slow)} slower than the record, not judged"
     steps.append("2 quality: " + text)
     ok &= quality
+    have, text = _modes_step(candidate, span)
+    steps.append("2b modes: " + text)
+    ok &= have
     tic_jj = candidate.tic_jj
     steps.append(f"3 TIC_jj {tic_jj:.3f} {'<' if tic_jj < TIC_LIMIT else '≥'} {TIC_LIMIT}")
     ok &= tic_jj < TIC_LIMIT
-    checks = {"stability": stable, "quality": quality, "fit": bool(tic_jj < TIC_LIMIT)}
+    checks = {
+        "stability": stable,
+        "quality": quality,
+        "modes": have,
+        "fit": bool(tic_jj < TIC_LIMIT),
+    }
     if nominal is None:
         steps.append("4–7 no nominal model yet")
         return Suggestion(update=bool(ok), steps=steps, checks=checks, tic_jj=tic_jj)

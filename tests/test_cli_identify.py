@@ -200,6 +200,34 @@ def test_frequency_method_from_the_command_line(capsys, tmp_path):
         assert message in doc["error"]["message"]
 
 
+def test_a_pole_at_z_0_is_left_out_of_the_json_with_a_note_never_a_null_eigenvalue(
+    capsys, tmp_path
+):
+    """Bad input tried: a record whose aileron reaches the plant one sample late, identified
+    at order 5: ERA realises the delay as a pole at z ≈ 0, which `--json` printed as a mode of
+    eigenvalue [null, null] with "divide by zero in log" on stderr, and exit 0. Now the mode
+    is left out, the document says why, and no numpy warning is raised."""
+    model, dt = reference.LATERAL, 0.02
+    record = reference.make_record(model, dt=dt)
+    late = record.inputs.copy()
+    late[1:, 0] = record.inputs[:-1, 0]
+    y = reference.simulate(model, late - np.asarray(model.trim_inputs), dt)
+    columns = record.columns() | dict(zip(model.outputs, y.T, strict=True))
+    path = write(tmp_path / "late.csv", columns)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        code = main(["identify", str(path), *LAT, "--method", "time", "--order", "5", "--json"])
+    out = capsys.readouterr().out
+    assert code == 0
+    doc = json.loads(out)
+    assert all(isinstance(v, float) for m in doc["modes"] for v in m["eigenvalue"])
+    assert {m["name"] for m in doc["modes"]} == {"Dutch roll", "roll", "spiral"}
+    (note,) = doc["poles_left_out"]
+    assert "a pole at z ≈ 0" in note
+    assert "left out of the modes" in note
+    assert doc["missing_modes"] == []
+
+
 def test_text_output_has_the_mode_table(capsys, lateral_csv):
     assert main(["identify", str(lateral_csv), *LAT, "--markov", "2"]) == 0
     out = capsys.readouterr().out

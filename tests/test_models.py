@@ -2,7 +2,9 @@
 
 Bad input tried: a decision on a model that does not exist, a revert with no previous nominal,
 a nominal model file truncated mid-write and one whose data file is missing (set aside, the
-agent carries on as with no nominal), more undecided candidates than are kept.
+agent carries on as with no nominal), more undecided candidates than are kept; candidates
+without a mode their axes must have, without a spiral, with a pole far beyond the band their
+record excites, and with a pole left out at z ≈ 0 (step 2b).
 """
 
 from __future__ import annotations
@@ -60,8 +62,12 @@ def test_first_candidate_steps_and_the_slow_spiral_is_not_judged():
     assert s.update
     assert s.steps[0].startswith("1 stability: slowly divergent")  # spiral +0.004 1/s
     assert "; spiral slower than the record, not judged" in s.steps[1]
-    assert s.steps[2] == "3 TIC_jj 0.100 < 0.3"
-    assert s.steps[3] == "4–7 no nominal model yet"
+    assert s.steps[2] == (
+        "2b modes: Dutch roll, roll, spiral named; every pole within 126 rad/s "
+        "(10 × the excited band's top, 2 Hz)"
+    )
+    assert s.steps[3] == "3 TIC_jj 0.100 < 0.3"
+    assert s.steps[4] == "4–7 no nominal model yet"
 
 
 def test_a_divergence_the_record_cannot_resolve_is_reported_not_judged():
@@ -82,22 +88,28 @@ def test_a_divergence_the_record_cannot_resolve_is_reported_not_judged():
     assert long.steps[0] == "1 stability: UNSTABLE (doubles in 7.4 s)"
 
 
+def lateral(roll: ModeDocument | None = None, **more: ModeDocument) -> list[ModeDocument]:
+    """The three lateral modes, the roll (or all) replaced as given."""
+    modes = {
+        "Dutch roll": mode("Dutch roll", (-0.8, 3.0), 95.0),
+        "roll": roll or mode("roll", (-9.0, 0.0), 90.0),
+        "spiral": mode("spiral", (-0.2, 0.0), 80.0),
+    }
+    return list((modes | more).values())
+
+
 @pytest.mark.parametrize(
     ("change", "step", "text", "check"),
     [
+        ({"modes": lateral(mode("roll", (0.2, 0.0), 90.0))}, 0, "UNSTABLE", "stability"),
         (
-            {"modes": [mode("roll", (0.2, 0.0), 90.0)]},
-            0,
-            "UNSTABLE",
-            "stability",
-        ),
-        (
-            {"modes": [mode("roll", (-9.0, 0.0), 30.0)]},
+            {"modes": lateral(mode("roll", (-9.0, 0.0), 30.0))},
             1,
             "weak: roll (EMAC below 50 %",
             "quality",
         ),
-        ({"tic": 0.45}, 2, "≥ 0.3", "fit"),
+        ({"modes": lateral()[1:]}, 2, "MISSING Dutch roll (no mode is named so)", "modes"),
+        ({"tic": 0.45}, 3, "≥ 0.3", "fit"),
     ],
 )
 def test_each_failing_step_says_no(change, step, text, check):
@@ -107,7 +119,86 @@ def test_each_failing_step_says_no(change, step, text, check):
     assert text in s.steps[step]
     assert s.checks[check] is False
     assert all(passed for name, passed in s.checks.items() if name != check)
-    assert set(s.checks) == {"stability", "quality", "fit"}  # no nominal: steps 1–3
+    assert set(s.checks) == {"stability", "quality", "modes", "fit"}  # no nominal: steps 1–3
+
+
+def _with(c: Candidate, **changes) -> Candidate:
+    """The candidate with its result document changed (and validated again)."""
+    fields = c.result.model_dump() | changes
+    c.result = ResultDocument.model_validate(fields)
+    return c
+
+
+def test_a_missing_mode_fails_the_modes_step_with_the_reason_the_result_gives():
+    """Bad input tried: a longitudinal model with a short period and no phugoid, whose result
+    says why; and one with neither. Each missing mode is named with its reason, and the
+    suggestion is not to update though every other step passes."""
+    short = mode("short period", (-5.0, 4.0), 95.0)
+    c = _with(
+        candidate("a", modes=[short]),
+        inputs=["throttle", "elevator"],
+        outputs=["airspeed", "alpha", "q", "theta"],
+        tic=dict.fromkeys(["airspeed", "alpha", "q", "theta"], 0.1),
+        missing_modes=[{"name": "phugoid", "reason": "no named mode: no longitudinal pair"}],
+    )
+    c.axes = "longitudinal"
+    s = suggest(c, None, None, None)
+    assert not s.update
+    assert s.checks == {"stability": True, "quality": True, "modes": False, "fit": True}
+    assert s.steps[2] == "2b modes: MISSING phugoid (no named mode: no longitudinal pair)"
+    c = _with(c, modes=[])
+    s = suggest(c, None, None, None)
+    assert "MISSING short period (no mode is named so); phugoid (no named mode" in s.steps[2]
+    c.axes = "full"  # all five expected
+    s = suggest(c, None, None, None)
+    for name in ("short period", "phugoid", "Dutch roll", "roll"):
+        assert name in s.steps[2]
+    assert "spiral missing, not judged" in s.steps[2]
+
+
+@pytest.mark.parametrize("record_s", [15.0, 600.0, None])
+def test_a_missing_spiral_is_reported_but_not_judged(record_s):
+    """Bad input tried: a lateral model without a spiral from a 15 s record, a 10 min one and
+    one of unknown length. A spiral's time constant can be minutes, or unbounded: its absence
+    is said, and the suggestion still says update."""
+    c = candidate("a", modes=lateral()[:2], record_s=record_s)
+    s = suggest(c, None, None, None)
+    assert s.update
+    assert s.checks["modes"] is True
+    assert "spiral missing, not judged: its time constant can be minutes" in s.steps[2]
+    if record_s is not None:
+        assert f"beyond what a {record_s:.0f} s record resolves" in s.steps[2]
+
+
+def test_a_pole_faster_than_the_record_shows_is_refused_and_named():
+    """Bad input tried: a real pole at −2008 1/s (unnamed) beside the three lateral modes, on a
+    100 Hz record excited up to 2 Hz: ten times the band is 126 rad/s. Then the same band at
+    20 Hz samples, where the Nyquist frequency (62.8 rad/s) is the lower bound, and a pair
+    beyond it; then a result that left a pole at z ≈ 0 out of its modes."""
+    fast = mode(None, (-2008.0, 0.0), None)
+    c = candidate("a", modes=[*lateral(), fast])
+    c = _with(c, dt=0.01)
+    s = suggest(c, None, None, None)
+    assert not s.update
+    assert s.checks["modes"] is False
+    assert s.steps[2] == (
+        "2b modes: OUT OF RANGE: pole -2008 1/s faster than 126 rad/s (10 × the excited "
+        "band's top, 2 Hz): not an aircraft mode this record determined"
+    )
+    pair = mode(None, (-20.0, 60.0), 90.0)  # ωn 63.2 rad/s
+    c = _with(candidate("a", modes=[*lateral(), pair]), dt=0.05)
+    s = suggest(c, None, None, None)
+    assert (
+        "pole -20 ± 60j 1/s (ωn 63.25) faster than 63 rad/s (the Nyquist frequency of "
+        in (s.steps[2])
+    )
+    assert s.checks["modes"] is False
+    within = _with(candidate("a", modes=[*lateral(), mode(None, (-60.0, 0.0), 90.0)]), dt=0.05)
+    assert suggest(within, None, None, None).checks["modes"] is True
+    delayed = _with(candidate("a"), poles_left_out=["a pole at z ≈ 0 …"])
+    s = suggest(delayed, None, None, None)
+    assert s.checks["modes"] is False
+    assert "OUT OF RANGE: 1 pole(s) at z ≈ 0" in s.steps[2]
 
 
 def test_against_a_nominal_the_tic_comparison_decides():
@@ -115,22 +206,23 @@ def test_against_a_nominal_the_tic_comparison_decides():
     nominal.tic_nn = 0.2
     better = suggest(new, nominal, tic_jn=0.15, tic_nj=0.3)
     assert better.update
-    assert "no worse" in better.steps[3]
-    assert "better" in better.steps[4]
+    assert "no worse" in better.steps[4]
+    assert "better" in better.steps[5]
     assert better.checks == {
         "stability": True,
         "quality": True,
+        "modes": True,
         "fit": True,
         "no worse": True,
         "combined": True,
     }
     worse = suggest(new, nominal, tic_jn=0.25, tic_nj=0.3)  # worse on the nominal's data
     assert not worse.update
-    assert "WORSE" in worse.steps[3]
+    assert "WORSE" in worse.steps[4]
     assert worse.checks["no worse"] is False
     combined = suggest(new, nominal, tic_jn=0.2, tic_nj=0.05)  # 0.1 + 0.2 vs 0.2 + 0.05
     assert not combined.update
-    assert "NOT better" in combined.steps[4]
+    assert "NOT better" in combined.steps[5]
 
 
 def test_accept_persist_revert_and_reject(tmp_path):

@@ -132,14 +132,16 @@ def supported_modes(
     # judged among the consistent, in-band modes only.
     plausible = [m for m in modes if (m.emac or 0.0) >= MIN_EMAC and m.frequency <= limit]
     top = max((m.msv for m in plausible), default=0.0)
-    keep = [m.discrete for m in plausible if top > 0 and 100.0 * m.msv / top >= MIN_MSV]
-    if not keep:
+    kept = [m for m in plausible if top > 0 and 100.0 * m.msv / top >= MIN_MSV]
+    if not kept:
         raise IdentificationFailed(
             f"none of the {len(modes)} modes is consistent (EMAC ≥ {MIN_EMAC:.0f} %) and "
             f"below {limit:.1f} rad/s"
         )
-    if len(keep) == len(modes):
+    # Counted in states: a pair holds two, and a deadbeat pole (no mode) is cut with the rest.
+    if sum(2 if m.pair else 1 for m in kept) == realised.order:
         return realised
+    keep = [m.discrete for m in kept]
     V, W = modal_subspace(realised.A, keep)
     return replace(
         realised,

@@ -28,6 +28,12 @@ NEGATIVE_AXIS_TOLERANCE = 1e-9
 LOGM_MAX_ERROR = 1e-6
 # C with a condition number above this is not trusted to map states onto outputs.
 OUTPUT_COORDINATES_MAX_COND = 1e8
+# A discrete eigenvalue this close to 0 is a deadbeat pole: a pure sample delay, with no
+# continuous-time eigenvalue. √ε, for two reasons: a pole at 0 of multiplicity two (a delay of
+# two samples) is computed up to about √ε from 0 in double precision, so a smaller modulus is
+# rounding, and its logarithm a number of the rounding's making; and a pole that small decays
+# 10⁸-fold within one sample, so no sampled record shows its rate, only the delay.
+DEADBEAT_MODULUS = float(np.sqrt(np.finfo(float).eps))
 
 
 def discretize(Ac: np.ndarray, Bc: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -82,9 +88,22 @@ def discretize_foh(
     return StateSpace(Phi, Phi @ G2 + Ga - G2, C, D + C @ G2)
 
 
+def deadbeat(discrete: np.ndarray) -> np.ndarray:
+    """Which discrete eigenvalues are at z = 0 for all the samples show (DEADBEAT_MODULUS)."""
+    return np.abs(np.asarray(discrete)) <= DEADBEAT_MODULUS
+
+
 def continuous_eigenvalues(discrete: np.ndarray, dt: float) -> np.ndarray:
-    """s = ln(z)/Δt, principal branch (a negative real z maps to the Nyquist line Im s = π/Δt)."""
-    return np.log(np.asarray(discrete, dtype=complex)) / dt
+    """s = ln(z)/Δt, principal branch (a negative real z maps to the Nyquist line Im s = π/Δt).
+
+    A deadbeat z (`deadbeat`) has none: ContinuousConversionError; leave such poles out first.
+    """
+    z = np.asarray(discrete, dtype=complex)
+    if np.any(deadbeat(z)):
+        raise ContinuousConversionError(
+            "a discrete pole at z = 0 (a pure sample delay) has no continuous-time eigenvalue"
+        )
+    return np.log(z) / dt
 
 
 def negative_axis_eigenvalues(A: np.ndarray) -> np.ndarray:
@@ -100,12 +119,14 @@ def to_continuous(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, 
         raise DataError(f"sample time must be positive, got {dt}")
     bad = negative_axis_eigenvalues(A)
     if bad.size:
+        delays = int(np.count_nonzero(deadbeat(bad)))
         raise ContinuousConversionError(
             "the discrete model has eigenvalue(s) "
             + ", ".join(f"{z.real:.4g}" for z in bad)
             + " on the negative real axis: no real continuous-time model has them. They are "
-            "usually a spurious mode at the Nyquist frequency; lower the order or the "
-            "number of Markov parameters"
+            "usually a spurious mode at the Nyquist frequency"
+            + (f" ({delays} at z ≈ 0: a pure sample delay)" if delays else "")
+            + "; lower the order or the number of Markov parameters"
         )
     n, r = B.shape
     block = np.eye(n + r)

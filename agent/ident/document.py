@@ -30,7 +30,11 @@ class Document(BaseModel):
 
 
 class ModeDocument(Document):
-    """One mode with its quality indicators and, after refinement, its Cramér–Rao 1-σ."""
+    """One mode with its quality indicators and, after refinement, its Cramér–Rao 1-σ. Every
+    number is finite: a mode has a continuous-time eigenvalue (a pole at z = 0 has none and is
+    no mode, see agent.ident.modal), so NaN or ∞ here is a fault, refused where it is made."""
+
+    model_config = Document.model_config | ConfigDict(allow_inf_nan=False)
 
     name: str | None
     eigenvalue: tuple[float, float]  # real, imaginary (1/s)
@@ -63,9 +67,9 @@ class ModeDocument(Document):
             emac=_num(mode.emac),
             mpc=float(mode.mpc),
             cmi=_num(mode.cmi),
-            eigenvalue_std=None if u is None else (float(u.real), float(u.imag)),
-            frequency_std_rad_s=None if u is None else float(u.frequency),
-            damping_std=None if u is None else float(u.damping),
+            eigenvalue_std=None if u is None else _pair(u.real, u.imag),
+            frequency_std_rad_s=None if u is None else _finite(u.frequency),
+            damping_std=None if u is None else _finite(u.damping),
         )
 
     @property
@@ -92,6 +96,14 @@ class ModeDocument(Document):
     def pair(self) -> bool:
         """One of a complex pair (the document holds the one with positive imaginary part)."""
         return self.eigenvalue[1] != 0.0
+
+
+class MissingMode(Document):
+    """A mode the run's axes must have (agent.ident.naming.expected_modes) that no identified
+    mode was named as, and why."""
+
+    name: str
+    reason: str
 
 
 class MarkovTry(Document):
@@ -224,6 +236,32 @@ class ResultDocument(Document):
     okid: OkidDocument | None = None
     aircraft: AircraftDocument | None = None
     warnings: list[str] = []
+    missing_modes: list[MissingMode] = []
+    """The modes the run's axes must have that were not identified, each with why."""
+    poles_left_out: list[str] = []
+    """The model's poles left out of the modes, each with why (a discrete pole at z ≈ 0, a
+    pure sample delay, has no continuous-time eigenvalue)."""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _modes_without_eigenvalue(cls, data: Any) -> Any:
+        """Read a document written before poles at z = 0 were left out of the modes: such a
+        mode has no finite eigenvalue (NaN, ∞ or null) and is left out now, with a note; a
+        standard error that is not finite is unknown (None)."""
+        if not isinstance(data, dict) or not isinstance(data.get("modes"), list):
+            return data
+        modes, left_out = [], list(data.get("poles_left_out", []))
+        for mode in data["modes"]:
+            if not isinstance(mode, dict):
+                modes.append(mode)
+            elif _no_eigenvalue(mode.get("eigenvalue")):
+                left_out.append(
+                    "a mode with no finite eigenvalue (a discrete pole at z = 0, written before "
+                    "such poles were left out): left out of the modes"
+                )
+            else:
+                modes.append(_finite_stds(mode))
+        return {**data, "modes": modes, "poles_left_out": left_out}
 
     @model_validator(mode="before")
     @classmethod
@@ -268,3 +306,38 @@ def rows(matrix: np.ndarray) -> Matrix:
 
 def _num(value: float | None) -> float | None:
     return None if value is None else float(value)
+
+
+def _finite(value: float) -> float | None:
+    """A standard error, None (unknown) when it is not finite (a singular covariance)."""
+    return float(value) if np.isfinite(value) else None
+
+
+def _pair(real: float, imag: float) -> tuple[float, float] | None:
+    return (float(real), float(imag)) if np.isfinite(real) and np.isfinite(imag) else None
+
+
+_STDS = ("eigenvalue_std", "frequency_std_rad_s", "damping_std")
+
+
+def _no_eigenvalue(value: Any) -> bool:
+    """Whether a mode's eigenvalue, as read, is a pair with a null, NaN or ∞ in it."""
+    return (
+        isinstance(value, list | tuple)
+        and len(value) == 2
+        and any(v is None or (isinstance(v, float) and not np.isfinite(v)) for v in value)
+    )
+
+
+def _all_finite(*values: Any) -> bool:
+    """Every value given, flattened, is a finite number (a missing one or null is not)."""
+    flat = [v for value in values for v in (value if isinstance(value, list | tuple) else [value])]
+    return all(isinstance(v, int | float) and np.isfinite(v) for v in flat)
+
+
+def _finite_stds(mode: dict) -> dict:
+    """The mode's standard errors, those not finite as None (unknown)."""
+    return {
+        k: None if k in _STDS and v is not None and not _all_finite(v) else v
+        for k, v in mode.items()
+    }

@@ -2,7 +2,9 @@
 
 In modal coordinates (eq. 5.1) Λ = Ψ⁻¹ A Ψ, B_m = Ψ⁻¹ B (rows b_i), C_m = C Ψ (columns c_i).
 A complex pair is one mode (reported once, Im s > 0); a real eigenvalue is its own mode and
-is never merged with another into a fake pair.
+is never merged with another into a fake pair. A deadbeat pole (z ≈ 0, convert.deadbeat: a
+pure sample delay, or a pole too fast for the samples to show) has no continuous-time
+eigenvalue and is no mode: it is left out, and `left_out` says so.
 
 Indicators, each in percent (0–100):
 - MSV, modal singular value: the norm of the mode's share of the pulse response,
@@ -39,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from agent.ident.convert import continuous_eigenvalues
+from agent.ident.convert import DEADBEAT_MODULUS, continuous_eigenvalues, deadbeat
 from agent.ident.errors import IdentificationFailed
 
 # An eigenvalue with |Im z| below this fraction of |z| is real.
@@ -108,7 +110,8 @@ def modal_analysis(
     horizon: tuple[int, int] = (20, 20),
     balance: bool = True,
 ) -> list[Mode]:
-    """Modes of the discrete model (A, B, C) sorted by natural frequency, with indicators.
+    """Modes of the discrete model (A, B, C) sorted by natural frequency, with indicators;
+    its deadbeat poles (z ≈ 0) are no modes and are left out (`left_out` says why).
 
     `horizon` (α, β) is the Hankel span for balancing and MSV; with `factors` it is taken
     from their shapes. Without `factors`, EMAC and CMI are None. `balance=False` skips the
@@ -132,7 +135,10 @@ def modal_analysis(
         Psi = Psi / _balanced_norms(A, Bs, Cs, Psi, horizon)
     Psi_inv = np.linalg.inv(Psi)
     Bm, Cm = Psi_inv @ Bs, Cs @ Psi
-    keep = [i for i in range(z.size) if z[i].imag >= -REAL_TOLERANCE * abs(z[i])]
+    delays = deadbeat(z)
+    keep = [i for i in range(z.size) if z[i].imag >= -REAL_TOLERANCE * abs(z[i]) and not delays[i]]
+    if not keep:
+        return []
     msv = _pulse_norms(z[keep], Bm[keep], Cm[:, keep], sum(horizon) - 1)
     bnorm = np.linalg.norm(Bm[keep], axis=1)
     cnorm = np.linalg.norm(Cm[:, keep], axis=0)
@@ -166,6 +172,31 @@ def modal_analysis(
             )
         )
     return sorted(modes, key=lambda mode: (mode.frequency, mode.eigenvalue.imag))
+
+
+def left_out(A: np.ndarray, dt: float, Ac: np.ndarray | None = None) -> list[str]:
+    """Why each pole of the discrete A that `modal_analysis` leaves out (z ≈ 0) is no mode,
+    one line each; `Ac`, the continuous model A is the sampling of, names the pole it was."""
+    z = np.linalg.eigvals(A)
+    delays = sorted(z[deadbeat(z)], key=abs)
+    if not delays:
+        return []
+    fastest = (
+        [None] * len(delays) if Ac is None else sorted(np.linalg.eigvals(Ac), key=lambda s: s.real)
+    )
+    lines = []
+    for zi, s in zip(delays, fastest, strict=False):
+        pole = "" if s is None else f"; {_pole(s)} in the continuous model"
+        lines.append(
+            f"a pole at z ≈ 0 (|z| = {abs(zi):.1e} < {DEADBEAT_MODULUS:.1e}{pole}): a pure "
+            f"sample delay, or a pole too fast for samples {dt:g} s apart, with no "
+            "continuous-time eigenvalue: left out of the modes"
+        )
+    return lines
+
+
+def _pole(s: complex) -> str:
+    return f"{s.real:.4g} 1/s" if s.imag == 0 else f"{s.real:.4g} ± {abs(s.imag):.4g}j 1/s"
 
 
 def _balanced_norms(

@@ -12,14 +12,20 @@ Rules (thesis §4.1.3; Klein & Morelli, *Aircraft System Identification*, 2006, 
    split in two, and counts as one real mode at its natural frequency.
 3. Longitudinal: of two or more complex pairs the fastest is the short period and the slowest
    the phugoid; a single pair is the short period when α and q dominate its shape, the phugoid
-   when V and θ do. With a single pair that is the phugoid, the two fastest real modes, when
-   α and q dominate both, are an overdamped short period (both named so). Other real
-   longitudinal modes (relaxed stability) get no standard name.
+   when V and θ do. Without a short-period pair, the two fastest real modes (faster than a
+   phugoid pair), when α and q dominate both, are an overdamped short period (both named
+   so). Without a phugoid pair, once a short period is named, the two slowest real modes
+   slower than it, when V and θ dominate both, are an overdamped phugoid (both named so: a
+   phugoid damped past ζ = 1 is two slow real poles). Other real longitudinal modes (relaxed
+   stability) get no standard name.
 4. Only modes that could be rigid-body aircraft modes are named: MSV ≥ `MIN_MSV` (they carry
    a real share of the response), EMAC ≥ `MIN_EMAC` when known (temporally consistent, not
    noise), and natural frequency ≤ `MAX_FREQUENCY` (small-aircraft rigid-body modes lie well
    below it; noise modes of an over-sampled record sit near the Nyquist frequency).
    Anything the rules do not settle stays unnamed (None).
+
+The modes an aircraft must have (`expected_modes`) are those of the axes its outputs measure;
+`missing_modes` lists those no mode was named as, each with the reason the rules give.
 """
 
 from __future__ import annotations
@@ -38,6 +44,13 @@ MIN_EMAC = 50.0  # percent
 MAX_FREQUENCY = 30.0  # rad/s
 ROLL_MAX_TIME_CONSTANT = 1.0  # s
 SPIRAL_MIN_TIME_CONSTANT = 3.0  # s
+LATERAL_MODES = ("Dutch roll", "roll", "spiral")
+LONGITUDINAL_MODES = ("short period", "phugoid")
+# Modes whose time scale a short record may not hold: a missing one's reason says how slow a
+# mode the record resolves.
+SLOW_MODES = ("spiral", "phugoid")
+SHORT_PERIOD_ROLES = ("alpha", "q")
+PHUGOID_ROLES = ("airspeed", "theta")
 # A complex pair this damped is two nearly real poles (noise splitting a real mode, seen in
 # the simulator: ζ = 0.999 at the roll pole), not an oscillation: never the Dutch roll. Real
 # Dutch rolls stay well below (the J-3 Cub's 0.29; the thesis's appendix A.2 model's 0.77).
@@ -69,8 +82,7 @@ def _axis(mode: Mode, roles: Sequence[str | None]) -> str | None:
 
 
 def _plausible(mode: Mode, min_msv: float) -> bool:
-    consistent = mode.emac is None or mode.emac >= MIN_EMAC
-    return mode.msv >= min_msv and consistent and mode.frequency <= MAX_FREQUENCY
+    return not _implausible(mode, min_msv)
 
 
 def name_modes(
@@ -119,29 +131,123 @@ def _name_longitudinal(
     modes: Sequence[Mode], lon: list[int], roles: Sequence[str | None], names: dict[int, str]
 ) -> None:
     pairs = sorted((i for i in lon if modes[i].pair), key=lambda i: modes[i].frequency)
+    short = phugoid = None
     if len(pairs) >= 2:
-        names[pairs[-1]] = "short period"
-        names[pairs[0]] = "phugoid"
+        short, phugoid = pairs[-1], pairs[0]
     elif len(pairs) == 1:
-        mode = modes[pairs[0]]
-        short = _energy(mode, roles, ("alpha", "q"))
-        long_ = _energy(mode, roles, ("airspeed", "theta"))
-        if short > long_:
-            names[pairs[0]] = "short period"
-        elif long_ > short:
-            names[pairs[0]] = "phugoid"
-            # An overdamped short period: the two fastest real modes, faster than the
-            # phugoid and mostly α and q (JSBSim's J-3 Cub: −6.4 and −10.1 1/s).
-            reals = sorted(
-                (i for i in lon if not modes[i].pair and modes[i].frequency > mode.frequency),
-                key=lambda i: -modes[i].frequency,
+        if _dominated(modes[pairs[0]], roles, SHORT_PERIOD_ROLES, PHUGOID_ROLES):
+            short = pairs[0]
+        elif _dominated(modes[pairs[0]], roles, PHUGOID_ROLES, SHORT_PERIOD_ROLES):
+            phugoid = pairs[0]
+    reals = sorted((i for i in lon if not modes[i].pair), key=lambda i: modes[i].frequency)
+    shorts = [short] if short is not None else []
+    if short is None:
+        # An overdamped short period: the two fastest real modes, faster than the phugoid
+        # and mostly α and q (JSBSim's J-3 Cub: −6.4 and −10.1 1/s).
+        above = modes[phugoid].frequency if phugoid is not None else 0.0
+        fast = [i for i in reals if modes[i].frequency > above][-2:]
+        shorts = _both(modes, fast, roles, SHORT_PERIOD_ROLES, PHUGOID_ROLES)
+    phugoids = [phugoid] if phugoid is not None else []
+    if phugoid is None and shorts:
+        # An overdamped phugoid: the two slowest real modes, slower than the short period and
+        # mostly V and θ.
+        below = min(modes[i].frequency for i in shorts)
+        slow = [i for i in reals if i not in shorts and modes[i].frequency < below][:2]
+        phugoids = _both(modes, slow, roles, PHUGOID_ROLES, SHORT_PERIOD_ROLES)
+    names.update(dict.fromkeys(shorts, "short period"))
+    names.update(dict.fromkeys(phugoids, "phugoid"))
+
+
+def _dominated(
+    mode: Mode, roles: Sequence[str | None], by: Sequence[str], over: Sequence[str]
+) -> bool:
+    return _energy(mode, roles, by) > _energy(mode, roles, over)
+
+
+def _both(
+    modes: Sequence[Mode],
+    two: list[int],
+    roles: Sequence[str | None],
+    by: Sequence[str],
+    over: Sequence[str],
+) -> list[int]:
+    """`two` when they are two real modes that `by`'s outputs dominate, else none."""
+    if len(two) == 2 and all(_dominated(modes[i], roles, by, over) for i in two):
+        return two
+    return []
+
+
+def expected_modes(roles: Sequence[str | None]) -> tuple[str, ...]:
+    """The modes an aircraft must have, for the axes whose outputs `roles` include: the
+    short period and phugoid (longitudinal), the Dutch roll, roll and spiral (lateral)."""
+    lon = any(role in LONGITUDINAL_OUTPUTS for role in roles)
+    lat = any(role in LATERAL_OUTPUTS for role in roles)
+    return (LONGITUDINAL_MODES if lon else ()) + (LATERAL_MODES if lat else ())
+
+
+# What each rule looked for, for a mode it did not find (the module docstring's rules).
+_LOOKED_FOR = {
+    "Dutch roll": f"no lateral pair damped below ζ = {DUTCH_ROLL_MAX_DAMPING:g}",
+    "roll": "no fast real lateral mode (the faster of two, or a single one with τ < "
+    f"{ROLL_MAX_TIME_CONSTANT:g} s)",
+    "spiral": "no slow real lateral mode (the slower of two, or a single one with τ > "
+    f"{SPIRAL_MIN_TIME_CONSTANT:g} s)",
+    "short period": "no longitudinal pair, nor two fast real modes, dominated by α and q",
+    "phugoid": "no longitudinal pair, nor two real modes slower than the short period, "
+    "dominated by airspeed and θ",
+}
+
+
+def missing_modes(
+    modes: Sequence[Mode],
+    output_roles: Sequence[str | None],
+    *,
+    span_s: float | None = None,
+    min_msv: float = MIN_MSV,
+) -> list[tuple[str, str]]:
+    """The expected modes (`expected_modes`) that no mode of `modes` (named by `name_modes`
+    with the same `min_msv`) is named as, each with why: what the rule looked for, the modes of
+    that axis it set aside as implausible (and why) or left unnamed, and for a slow mode how
+    slow a mode the record, `span_s` seconds long, resolves."""
+    named = {mode.name for mode in modes}
+    found = []
+    for name in expected_modes(output_roles):
+        if name in named:
+            continue
+        axis = "lat" if name in LATERAL_MODES else "lon"
+        mine = [m for m in modes if _axis(m, output_roles) == axis]
+        reason = "no named mode: " + _LOOKED_FOR[name]
+        aside = [
+            f"{_eigenvalue(m)} ({_implausible(m, min_msv)})"
+            for m in mine
+            if _implausible(m, min_msv)
+        ]
+        unnamed = [_eigenvalue(m) for m in mine if m.name is None and not _implausible(m, min_msv)]
+        if aside:
+            reason += "; set aside: " + ", ".join(aside)
+        if unnamed:
+            reason += "; unnamed: " + ", ".join(unnamed)
+        if name in SLOW_MODES and span_s:
+            reason += (
+                f"; a {span_s:.3g} s record resolves time constants up to {span_s / 2:.3g} s "
+                f"and frequencies down to {2 * np.pi / span_s:.2g} rad/s"
             )
-            fast = [
-                i
-                for i in reals[:2]
-                if _energy(modes[i], roles, ("alpha", "q"))
-                > _energy(modes[i], roles, ("airspeed", "theta"))
-            ]
-            if len(fast) == 2:
-                for i in fast:
-                    names[i] = "short period"
+        found.append((name, reason))
+    return found
+
+
+def _eigenvalue(mode: Mode) -> str:
+    s = mode.eigenvalue
+    return f"{s.real:.3g} ± {abs(s.imag):.3g}j 1/s" if mode.pair else f"{s.real:.3g} 1/s"
+
+
+def _implausible(mode: Mode, min_msv: float) -> str:
+    """Why `_plausible` refuses the mode ("" when it does not)."""
+    why = []
+    if mode.msv < min_msv:
+        why.append(f"MSV {mode.msv:.2g} % < {min_msv:g} %")
+    if mode.emac is not None and mode.emac < MIN_EMAC:
+        why.append(f"EMAC {mode.emac:.0f} % < {MIN_EMAC:.0f} %")
+    if mode.frequency > MAX_FREQUENCY:
+        why.append(f"ωn {mode.frequency:.3g} > {MAX_FREQUENCY:.0f} rad/s")
+    return ", ".join(why)

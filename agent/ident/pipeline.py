@@ -31,8 +31,8 @@ from agent.ident.errors import (
     IdentificationFailed,
 )
 from agent.ident.fit import Fit, fit, theil
-from agent.ident.modal import HankelFactors, Mode, modal_analysis
-from agent.ident.naming import name_modes
+from agent.ident.modal import HankelFactors, Mode, left_out, modal_analysis
+from agent.ident.naming import missing_modes, name_modes
 from agent.ident.preprocess import Preprocessing, preprocess
 from agent.ident.refine import (
     MAX_PASSES,
@@ -184,8 +184,11 @@ def identify(
             A, B = _zoh(continuous, dt)
             model = StateSpace(A, B, continuous.C, continuous.D)
     modes = _modes(model, okid_model, factors, candidate, batch, dt, refinement)
+    missing: list[tuple[str, str]] = []
     if output_roles is not None:
         modes = name_modes(modes, output_roles)
+        span = max(e.length for e in batch) * dt
+        missing = missing_modes(modes, output_roles, span_s=span)
     return Identification(
         dt=dt,
         preprocessing=prep,
@@ -207,6 +210,8 @@ def identify(
             fit=candidate.fit,
             frequency_data=freq,
         ),
+        missing=tuple(missing),
+        left_out=tuple(left_out(model.A, dt, None if continuous is None else continuous.A)),
     )
 
 

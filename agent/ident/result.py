@@ -15,6 +15,7 @@ from agent.ident.document import (
     FrequencyDocument,
     MarkovTry,
     Method,
+    MissingMode,
     ModeDocument,
     OkidDocument,
     PreprocessingDocument,
@@ -61,6 +62,11 @@ class Identification:
     method: Method
     okid: OkidDetails | None = None  # methods "time" and "frequency"
     aircraft: AircraftDocument | None = None  # method "aircraft"
+    missing: tuple[tuple[str, str], ...] = ()
+    """The modes the outputs' axes must have that no mode is named as: (name, why)
+    (agent.ident.naming.missing_modes)."""
+    left_out: tuple[str, ...] = ()
+    """The model's poles that are no mode, each with why (agent.ident.modal.left_out)."""
 
     @property
     def order(self) -> int:
@@ -101,6 +107,8 @@ class Identification:
             okid=self._okid(),
             aircraft=self.aircraft,
             warnings=list(self.warnings),
+            missing_modes=[MissingMode(name=n, reason=why) for n, why in self.missing],
+            poles_left_out=list(self.left_out),
         )
 
     def _preprocessing(self) -> PreprocessingDocument:

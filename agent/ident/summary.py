@@ -1,5 +1,6 @@
 """An identification as a text table (`sysid identify` without --json): the settings and what
-the method found, the modes with their indicators, the fit."""
+the method found, the modes with their indicators, the fit, the expected modes not identified
+and the poles left out of the modes."""
 
 from __future__ import annotations
 
@@ -50,6 +51,8 @@ def format_text(result: Identification, records: int, samples: int) -> str:
         f"TIC: {tic}  (average {result.fit.tic_avg:.3f}; below 0.3 is a decent fit)",
         f"Stable: {'yes' if result.stable else 'no'}",
     ]
+    lines += [f"not identified: {name}: {why}" for name, why in result.missing]
+    lines += [f"left out: {why}" for why in result.left_out]
     lines += [f"warning: {w}" for w in result.warnings]
     return "\n".join(lines)
 

@@ -3,14 +3,22 @@
 from __future__ import annotations
 
 import dataclasses
+import warnings
 
 import numpy as np
 import pytest
 
 from agent.ident import identify, reference
-from agent.ident.convert import StateSpace, discretize
-from agent.ident.modal import HankelFactors, Mode, modal_analysis, modal_phase_collinearity
-from agent.ident.naming import name_modes
+from agent.ident.convert import StateSpace, continuous_eigenvalues, discretize
+from agent.ident.errors import ContinuousConversionError
+from agent.ident.modal import (
+    HankelFactors,
+    Mode,
+    left_out,
+    modal_analysis,
+    modal_phase_collinearity,
+)
+from agent.ident.naming import expected_modes, missing_modes, name_modes
 from tests.conftest import DT, detrimmed
 
 
@@ -169,3 +177,70 @@ def test_a_lightly_damped_pair_is_preferred_for_the_dutch_roll():
     heavy = _mode(-3.69 + 3.18j, [1, 0.5, 0.9, 0.2], msv=30.0)
     assert [m.name for m in name_modes([split_roll, heavy], roles)] == [None, "Dutch roll"]
     assert name_modes([split_roll], roles)[0].name == "Dutch roll"
+
+
+def test_an_overdamped_short_period_and_phugoid_are_named_from_their_real_poles():
+    """Bad input tried: real longitudinal poles only (no pair at all), a short-period pair with
+    two slow real poles, and slow real poles that α and q dominate, or that are not slower
+    than the short period: only the first two are named."""
+    roles = ("airspeed", "alpha", "q", "theta")
+    short = [_mode(-10.1 + 0j, [0.1, 1, 0.9, 0.2]), _mode(-6.4 + 0j, [0.1, 0.8, 1, 0.3])]
+    slow = [_mode(-0.05 + 0j, [1, 0.05, 0.02, 0.9]), _mode(-0.3 + 0j, [0.9, 0.1, 0.05, 1])]
+    named = name_modes([*slow, *short], roles)
+    assert [m.name for m in named] == ["phugoid", "phugoid", "short period", "short period"]
+    pair = _mode(-4 + 3j, [0.05, 1, 0.9, 0.2])
+    named = name_modes([*slow, pair], roles)
+    assert [m.name for m in named] == ["phugoid", "phugoid", "short period"]
+    alpha_q = [_mode(-0.05 + 0j, [0.1, 1, 0.5, 0.1]), _mode(-0.3 + 0j, [0.9, 0.1, 0.05, 1])]
+    assert [m.name for m in name_modes([*alpha_q, pair], roles)] == [None, None, "short period"]
+    fast = [_mode(-6 + 0j, [1, 0.05, 0.02, 0.9]), _mode(-7 + 0j, [0.9, 0.1, 0.05, 1])]
+    assert [m.name for m in name_modes([*fast, pair], roles)] == [None, None, "short period"]
+    # A phugoid pair keeps its name; the slow real poles beside it stay unnamed.
+    phugoid = _mode(-0.05 + 0.4j, [1, 0.01, 0.05, 0.8])
+    named = name_modes([*slow, phugoid, pair], roles)
+    assert [m.name for m in named] == [None, None, "phugoid", "short period"]
+
+
+def test_the_missing_expected_modes_are_listed_with_why():
+    """Bad input tried: a full record's modes with no phugoid, no spiral and a Dutch roll whose
+    EMAC is too low, and a record of unknown roles (nothing is expected, nothing missing)."""
+    roles = ("airspeed", "alpha", "q", "theta", "beta", "p", "r", "phi")
+    lon, lat = [1, 1, 1, 1, 0, 0, 0, 0], [0, 0, 0, 0, 1, 1, 1, 1]
+    short = _mode(-4 + 3j, [0.05, 1, 0.9, 0.2, 0, 0, 0, 0])
+    roll = _mode(-9 + 0j, [0, 0, 0, 0, 0.05, 1, 0.1, 0.3])
+    weak_dutch = _mode(-0.7 + 2.2j, lat, emac=20.0)
+    slow = _mode(-0.6 + 0j, lon)  # one real pole: no overdamped phugoid
+    modes = name_modes([slow, weak_dutch, short, roll], roles)
+    missing = dict(missing_modes(modes, roles, span_s=20.0))
+    assert list(missing) == ["phugoid", "Dutch roll", "spiral"]
+    assert missing["phugoid"].startswith(
+        "no named mode: no longitudinal pair, nor two real modes slower than the short period, "
+        "dominated by airspeed and θ; unnamed: -0.6 1/s; a 20 s record resolves time "
+        "constants up to 10 s and frequencies down to 0.31 rad/s"
+    )
+    assert "set aside: -0.7 ± 2.2j 1/s (EMAC 20 % < 50 %)" in missing["Dutch roll"]
+    assert "no slow real lateral mode" in missing["spiral"]
+    assert expected_modes(roles) == ("short period", "phugoid", "Dutch roll", "roll", "spiral")
+    assert missing_modes(modes, [None] * 8) == []
+
+
+def test_a_pole_at_z_0_is_left_out_of_the_modes_without_a_warning():
+    """Bad input tried: a discrete model with an eigenvalue of exactly 0 (a one-sample delay)
+    and one at 1e-12 (numerically 0): ln(0) used to give −∞ + NaN j, a mode of NaNs and
+    "divide by zero in log". Both are left out, the note says so, and no warning is raised."""
+    for zero in (0.0, 1e-12):
+        A = np.diag([zero, 0.9, 0.5])
+        B, C = np.ones((3, 1)), np.eye(3)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            modes = modal_analysis(A, B, C, DT)
+            notes = left_out(A, DT)
+        assert sorted(m.discrete.real for m in modes) == pytest.approx([0.5, 0.9])
+        assert all(np.isfinite(m.eigenvalue) and np.isfinite(m.damping) for m in modes)
+        assert len(notes) == 1
+        assert "a pole at z ≈ 0" in notes[0]
+        assert "pure sample delay" in notes[0]
+        assert "left out of the modes" in notes[0]
+    assert modal_analysis(np.zeros((1, 1)), np.ones((1, 1)), np.eye(1), DT) == []
+    with pytest.raises(ContinuousConversionError, match="no continuous-time eigenvalue"):
+        continuous_eigenvalues(np.array([0.0]), DT)

@@ -44,8 +44,8 @@ from agent.ident.document import (
 )
 from agent.ident.errors import IdentificationFailed
 from agent.ident.fit import fit
-from agent.ident.modal import Mode, modal_analysis
-from agent.ident.naming import name_modes
+from agent.ident.modal import Mode, left_out, modal_analysis
+from agent.ident.naming import missing_modes, name_modes
 from agent.ident.okid import Experiment, channel_rms
 from agent.ident.preprocess import Preprocessing
 from agent.ident.refine import Refinement, with_uncertainty
@@ -132,7 +132,11 @@ def identify(
         passes=1,
         converged=all(f.converged for f in fits),
     )
-    modes = _modes(model, fits, refinement, batch, dt, r=len(inputs), output_roles=output_roles)
+    modes, poles_left_out = _modes(
+        model, fits, refinement, batch, dt, r=len(inputs), output_roles=output_roles
+    )
+    span = max(e.length for e in batch) * dt
+    missing = missing_modes(modes, output_roles, span_s=span, min_msv=0.0)
     warnings = (
         [] if refinement.converged else ["the output-error fit stopped at its iteration limit"]
     )
@@ -159,6 +163,8 @@ def identify(
         warnings=(*warnings, *judged(modes, fitted)),
         method="aircraft",
         aircraft=report,
+        missing=tuple(missing),
+        left_out=tuple(poles_left_out),
     )
 
 
@@ -312,10 +318,10 @@ def _modes(
     *,
     r: int,
     output_roles: Sequence[str | None],
-) -> list[Mode]:
+) -> tuple[list[Mode], list[str]]:
     """Modes of the aircraft states alone (the lag states are the engine's, two equal poles
     with no modal decomposition), with each lagged input at its steady gain, their Cramér–Rao
-    1-σ and their names."""
+    1-σ and their names; and the poles left out of them (`modal.left_out`)."""
     m, n = model.C.shape[0], model.A.shape[0]
     Bm = model.B[:m].copy()
     for f in fits:
@@ -337,7 +343,7 @@ def _modes(
     modes = with_uncertainty(modes, for_modes)
     if any(role is not None for role in output_roles):
         modes = name_modes(modes, output_roles, min_msv=0.0)
-    return modes
+    return modes, left_out(Am, dt, states_only.A)
 
 
 def _sampled(model: StateSpace, dt: float, hold: str, outputs: Sequence[str]) -> StateSpace:
