@@ -1,13 +1,15 @@
 """The truth check for each benchmark aircraft, JSBSim's `FGLinearization` beside ours.
 
-    .venv/bin/python benchmarks/truth_check.py                  # about a minute
+    .venv/bin/python benchmarks/truth_check.py                  # about two minutes
     .venv/bin/python benchmarks/truth_check.py --aircraft J3Cub   # one aircraft
 
 For a doublet on each surface and a throttle step, each flown as a ± pair (the odd part of
 JSBSim's response), it prints the worst TIC over the outputs the test moves (agent.sim.truth
 says which count). FGLinearization's model is driven by the commands, which its B is for;
 ours by the surface and throttle positions. Both are held to TIC ≤ 0.05; a test on which ours
-is over that bound is marked, and the command then exits with code 1.
+is over that bound is marked, and the command then exits with code 1. The aircraft are
+`make bench-jsbsim`'s (bench_jsbsim.AIRCRAFT); FGLinearization has nothing for a glider
+(JSBSim's crashes on an aircraft without engines: "–").
 """
 
 from __future__ import annotations
@@ -20,16 +22,20 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 import scipy.linalg
+from bench_jsbsim import AIRCRAFT
 
 from agent.sim import truth as T  # noqa: N812 — T for truth, as in the docs
 from agent.sim.plant import FT, INPUTS, LINEAR_INPUTS, LINEAR_STATES, Plant
 
-BENCHMARK = [("J3Cub", 60.0), ("c182", 90.0), ("pa28", 90.0)]
+BENCHMARK = [(name, f.speed_kts, f.altitude_ft) for name, f in AIRCRAFT.items()]
 
 
-def fg_worst(aircraft: str, speed: float, ours: list[T.Check]) -> dict[str, float]:
-    """FGLinearization's worst TIC per test, over the outputs our check counted."""
-    lin = Plant(aircraft, airspeed_kts=speed).linearisation
+def fg_worst(aircraft: str, speed: float, altitude: float, ours: list[T.Check]) -> dict:
+    """FGLinearization's worst TIC per test, over the outputs our check counted (NaN: it has
+    no linearisation of this aircraft)."""
+    lin = Plant(aircraft, airspeed_kts=speed, altitude_ft=altitude).linearisation
+    if lin is None:
+        return {name: float("nan") for name in INPUTS}
     names = list(lin.state_names)
     B = lin.B[:, [lin.input_names.index(LINEAR_INPUTS[i]) for i in INPUTS]]
     rate = 200.0
@@ -40,7 +46,7 @@ def fg_worst(aircraft: str, speed: float, ours: list[T.Check]) -> dict[str, floa
     worst = {}
     for name, check in zip(INPUTS, ours, strict=True):
         commands = T.check_commands(name, rate)
-        x, _, _ = T.odd_response(aircraft, speed, commands)
+        x, _, _ = T.odd_response(aircraft, speed, commands, altitude_ft=altitude)
         state = np.zeros(len(names))
         predicted = np.empty((len(commands), len(T.OUTPUTS)))
         for k, row in enumerate(commands):
@@ -56,7 +62,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    names = [name for name, _ in BENCHMARK]
+    names = [name for name, _, _ in BENCHMARK]
     parser.add_argument(
         "--aircraft", nargs="+", choices=names, default=names, help="which aircraft to check"
     )
@@ -64,12 +70,12 @@ def main() -> None:
     print(f"worst TIC over the outputs each test moves (bound {T.CHECK_TIC})")
     print(f"{'aircraft':<8}{'test':<10}{'FGLinearization':>17}{'agent.sim.truth':>17}")
     over = []
-    for aircraft, speed in BENCHMARK:
+    for aircraft, speed, altitude in BENCHMARK:
         if aircraft not in args.aircraft:
             continue
-        truth = T.linear_truth(aircraft, speed)
+        truth = T.linear_truth(aircraft, speed, altitude_ft=altitude)
         ours = T.check(truth)
-        theirs = fg_worst(aircraft, speed, ours)
+        theirs = fg_worst(aircraft, speed, altitude, ours)
         for check in ours:
             mark = " over the bound" if check.worst > T.CHECK_TIC else ""
             print(

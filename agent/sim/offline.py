@@ -50,6 +50,7 @@ class Record:
     ins: np.ndarray  # INS_CHANNELS
     inputs: tuple[str, ...] = INPUT_CHANNELS
     outputs: tuple[str, ...] = OUTPUTS
+    height: np.ndarray | None = None  # above the ground (m), the truth's
 
 
 def fly(
@@ -59,16 +60,22 @@ def fly(
     speed_kts: float = 60.0,
     turbulence: float = 0.0,
     seed: int = 0,
+    altitude_ft: float = 1000.0,
     noise: bool = True,
     margin_s: float = 2.0,
     settle_s: float = 1.0,
     rate_hz: float = 50.0,
     plant: Plant | None = None,
 ) -> Record:
-    """Fly `plan` (or a timeline already rendered) once from trim; `settle_s` of trimmed flight
-    precede the recorded margin."""
+    """Fly `plan` (or a timeline already rendered) once from trim at `altitude_ft` above the
+    ground; `settle_s` of trimmed flight precede the recorded margin."""
     plant = plant or Plant(
-        aircraft, airspeed_kts=speed_kts, turbulence=turbulence, seed=seed, linearise=False
+        aircraft,
+        airspeed_kts=speed_kts,
+        altitude_ft=altitude_ft,
+        turbulence=turbulence,
+        seed=seed,
+        linearise=False,
     )
     surfaces = Excitation().surfaces
     params = Params()
@@ -89,6 +96,7 @@ def fly(
     u = np.empty((total, len(INPUT_CHANNELS)))
     y = np.empty((total, len(OUTPUTS)))
     ins = np.empty((total, len(INS_CHANNELS)))
+    height = np.empty(total)
     per_command = round(timeline.dt / tick)
     for k in range(total):
         j = (k - lead) // per_command
@@ -107,6 +115,7 @@ def fly(
         u[k] = [pwm["throttle"], s["elevator"], s["aileron"], s["rudder"]]
         y[k] = [s[name] for name in OUTPUTS]
         ins[k] = [s[name] for name in INS_CHANNELS]
+        height[k] = s["agl"]
         if noise:
             u[k, 1:] += rng.normal(size=3) * [
                 NOISE["elevator"],
@@ -116,4 +125,4 @@ def fly(
             y[k] += rng.normal(size=len(OUTPUTS)) * [NOISE[OUTPUT_NOISE[n]] for n in OUTPUTS]
             ins[k] += rng.normal(size=len(INS_CHANNELS)) * [NOISE[n] for n in INS_CHANNELS]
     keep = round(settle_s / tick)
-    return Record(u[keep:], y[keep:], tick, ins[keep:])
+    return Record(u[keep:], y[keep:], tick, ins[keep:], height=height[keep:])

@@ -69,6 +69,24 @@ INTEGRATORS = {
     "simulation/integrator/position/rotational": 3,
 }
 LIGHT_TURBULENCE_WIND_FPS = 5.0  # light turbulence: W20 = 5 ft/s
+# The powerplant's kinds, told from the properties JSBSim gives the first engine: a piston engine
+# (engine speed and manifold pressure), a turboprop (a gas generator's N1 driving a propeller),
+# a turbine's direct thrust (spools N1 and N2, no propeller), or none (a glider). Each kind's
+# slow states, for the truth's regression (agent.sim.truth): (name, property).
+ENGINE_STATES = {
+    "piston": (("rpm", "propulsion/engine/engine-rpm"), ("map", "propulsion/engine/map-inhg")),
+    "turboprop": (("rpm", "propulsion/engine/engine-rpm"), ("n1", "propulsion/engine/n1")),
+    # JSBSim's turbine moves its spools at a limited rate toward the throttle's setting: a 3 %
+    # step is reached in 70 ms (the T-6 at 150 kt), so its thrust follows the throttle at once
+    # and the spools are no slow state (as states, the truth's throttle check scored TIC 0.11).
+    "turbine": (),
+    "none": (),
+}
+# An unpowered aircraft flies a steady glide, found by Newton's method on the longitudinal
+# accelerations (JSBSim's own trim needs a throttle for u̇): the iterations allowed, and the
+# residual accepted (ft/s², and rad/s² for q̇).
+GLIDE_ITERATIONS = 30
+GLIDE_RESIDUAL = 1e-6
 
 
 @contextlib.contextmanager
@@ -88,6 +106,19 @@ def _stdout_to_stderr():
 
 class PlantError(RuntimeError):
     """JSBSim could not load, trim or linearise the aircraft."""
+
+
+def powerplant(fdm) -> tuple[str, int]:
+    """The kind of the aircraft's engines (ENGINE_STATES) and how many there are."""
+    engines = int(fdm.get_propulsion().get_num_engines())
+    if engines == 0:
+        return "none", 0
+    names = {k.split(" ")[0] for k in fdm.get_property_catalog()}
+    if "propulsion/engine/map-inhg" in names:
+        return "piston", engines
+    if "propulsion/engine/propeller-rpm" in names:
+        return "turboprop", engines
+    return "turbine", engines
 
 
 @dataclass(frozen=True)
@@ -139,25 +170,45 @@ class Plant:
         self.fdm["ic/vc-kts"] = airspeed_kts
         self.fdm["ic/gamma-deg"] = 0.0
         self.fdm["ic/psi-true-deg"] = heading_deg
+        self.kind, self.engines = powerplant(self.fdm)
+        # The controls this aircraft has (a glider has no throttle), each on its JSBSim
+        # commands: the throttle on every engine's, as one lever moves them all.
+        self.commands = {
+            name: (prop,) for name, prop in COMMAND_PROPERTY.items() if name != "throttle"
+        }
+        if self.engines:
+            self.commands["throttle"] = tuple(
+                f"fcs/throttle-cmd-norm[{k}]" if k else "fcs/throttle-cmd-norm"
+                for k in range(self.engines)
+            )
         if not self.fdm.run_ic():
             raise PlantError("JSBSim rejected the initial conditions")
-        self.fdm["propulsion/set-running"] = -1
-        self.fdm.run()
         self.dt = self.fdm.get_delta_t()
-        try:
-            self.fdm["simulation/do_simple_trim"] = 1
-        except Exception as exc:  # JSBSim raises its own TrimFailureException
-            raise PlantError(
-                f"JSBSim could not trim {aircraft} at {airspeed_kts} kt: {exc}"
-            ) from exc
-        self.trim = {name: float(self.fdm[prop]) for name, prop in COMMAND_PROPERTY.items()}
+        with _stdout_to_stderr():  # JSBSim prints its trim's complaints with printf
+            if self.engines:
+                self.fdm["propulsion/set-running"] = -1
+                self.fdm.run()
+                try:
+                    self.fdm["simulation/do_simple_trim"] = 1
+                except Exception as exc:  # JSBSim raises its own TrimFailureException
+                    raise PlantError(
+                        f"JSBSim could not trim {aircraft} at {airspeed_kts} kt: {exc}"
+                    ) from exc
+            else:
+                self._trim_glide(aircraft, airspeed_kts)
+        self.trim = {
+            name: float(self.fdm[self.commands[name][0]]) if name in self.commands else 0.0
+            for name in COMMAND_PROPERTY
+        }
         # Each command's ramp (from, to) over _ramp_steps steps, _ramp_done of them flown
         # (set_normalised); _settled: the surfaces are where the ramps have them now.
         self._ramp = {name: (value, value) for name, value in self.trim.items()}
         self._ramp_steps, self._ramp_done, self._settled = 1, 1, True
         # FGLinearization at the trim (slow on some aircraft: ten seconds for the PA-28);
         # agent.sim.truth explains why it is not the truth identified models are judged by.
-        self.linearisation = self._linearise() if linearise else None
+        # JSBSim 1.3.3's FGLinearization crashes the process (a segmentation fault) on an
+        # aircraft without engines: a glider has none.
+        self.linearisation = self._linearise() if linearise and self.engines else None
         if turbulence > 0:
             self.fdm["atmosphere/turb-type"] = 3
             self.fdm["atmosphere/turbulence/milspec/severity"] = int(
@@ -170,6 +221,55 @@ class Plant:
             # (with none it resets it to north) and `step` can align them with the aircraft.
             self.fdm["atmosphere/wind-mag-fps"] = 1e-6
         self.turbulence = turbulence
+
+    def _trim_glide(self, aircraft: str, airspeed_kts: float) -> None:
+        """A steady wings-level glide at the airspeed: α, the flight-path angle γ and the
+        elevator such that u̇, ẇ and q̇ vanish (Newton's method, central-difference Jacobian);
+        the aircraft is assumed symmetric (no lateral trim). Left at the solution."""
+        f = self.fdm
+
+        def residual(x: np.ndarray) -> np.ndarray:
+            f["ic/alpha-deg"], f["ic/gamma-deg"] = x[0], x[1]
+            f["ic/vc-kts"] = airspeed_kts
+            f["fcs/elevator-cmd-norm"] = x[2]
+            if not f.run_ic():
+                raise PlantError("JSBSim rejected the initial conditions")
+            f.suspend_integration()  # the flight controls at the command, time frozen
+            try:
+                f.run()
+            finally:
+                f.resume_integration()
+            return np.array(
+                [
+                    f["accelerations/udot-ft_sec2"],
+                    f["accelerations/wdot-ft_sec2"],
+                    f["accelerations/qdot-rad_sec2"],
+                ]
+            )
+
+        x, step = np.array([2.0, -3.0, 0.0]), np.array([1e-3, 1e-3, 1e-4])
+        for _ in range(GLIDE_ITERATIONS):
+            r = residual(x)
+            if np.max(np.abs(r)) < GLIDE_RESIDUAL:
+                break
+            J = np.empty((3, 3))
+            for j in range(3):
+                d = np.zeros(3)
+                d[j] = step[j]
+                J[:, j] = (residual(x + d) - residual(x - d)) / (2 * step[j])
+            try:
+                x = x - np.linalg.solve(J, r)
+            except np.linalg.LinAlgError as exc:
+                raise PlantError(f"could not trim {aircraft} in a glide: {exc}") from exc
+            if not np.all(np.isfinite(x)) or abs(x[0]) > 20 or abs(x[1]) > 30 or abs(x[2]) > 1:
+                break
+        r = residual(x)
+        if np.max(np.abs(r)) >= GLIDE_RESIDUAL:
+            raise PlantError(
+                f"could not trim {aircraft} in a steady glide at {airspeed_kts:g} kt "
+                f"(residual accelerations {np.array2string(r, precision=3)})"
+            )
+        self.glide_deg = float(x[1])
 
     def _linearise(self) -> Linearisation:
         import jsbsim
@@ -194,7 +294,7 @@ class Plant:
         for name, delta in deltas.items():
             value = self._clip(name, self.trim[name] + delta)
             self._ramp[name] = (value, value)
-            self.fdm[COMMAND_PROPERTY[name]] = value
+            self._set(name, value)
 
     def set_normalised(self, commands: Mapping[str, float], steps: int = 1) -> None:
         """Move commands to absolute normalised values (servo outputs), clipped to range,
@@ -216,6 +316,11 @@ class Plant:
             self._ramp[name] = (self._value(name, now), self._clip(name, value))
         self._ramp_steps, self._ramp_done, self._settled = steps, 0, False
 
+    def _set(self, name: str, value: float) -> None:
+        """One control's JSBSim commands (none: the aircraft has no such control)."""
+        for prop in self.commands.get(name, ()):
+            self.fdm[prop] = value
+
     @staticmethod
     def _clip(name: str, value: float) -> float:
         return float(np.clip(value, 0.0 if name == "throttle" else -1.0, 1.0))
@@ -234,7 +339,7 @@ class Plant:
             return
         now = self._fraction()
         for name in self._ramp:
-            self.fdm[COMMAND_PROPERTY[name]] = self._value(name, now)
+            self._set(name, self._value(name, now))
         self.fdm.suspend_integration()
         try:
             if not self.fdm.run():
@@ -252,6 +357,7 @@ class Plant:
         values.update(
             psi=float(f["attitude/psi-rad"]),
             alt=float(f["position/h-sl-meters"]),
+            agl=float(f["position/h-agl-ft"]) * FT,
             lat=float(f["position/lat-geod-deg"]),
             lon=float(f["position/long-gc-deg"]),
             vn=float(f["velocities/v-north-fps"]) * FT,
@@ -265,9 +371,10 @@ class Plant:
             aileron_right=float(f["fcs/right-aileron-pos-deg"]),
             elevator=float(f["fcs/elevator-pos-deg"]),
             rudder=float(f["fcs/rudder-pos-deg"]),
-            throttle=float(f["fcs/throttle-pos-norm"]),
-            rpm=float(f["propulsion/engine/engine-rpm"]),
+            throttle=float(f["fcs/throttle-pos-norm"]) if self.engines else 0.0,
         )
+        if self.kind in ("piston", "turboprop"):  # the surface box's tachometer
+            values["rpm"] = float(f["propulsion/engine/engine-rpm"])
         values["aileron"] = 0.5 * (values["aileron_right"] - values["aileron_left"])
         return values
 
@@ -284,7 +391,7 @@ class Plant:
             self.fdm["atmosphere/psiw-rad"] = float(-self.fdm["attitude/psi-rad"]) % (2 * np.pi)
         middle = (self._ramp_done + 0.5) / self._ramp_steps
         for name in self._ramp:
-            self.fdm[COMMAND_PROPERTY[name]] = self._value(name, middle)
+            self._set(name, self._value(name, middle))
         self._ramp_done += 1
         self._settled = middle >= 1.0  # the step held the ramp's end: the surfaces are there
         if not self.fdm.run():

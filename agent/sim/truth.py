@@ -21,8 +21,10 @@ Schoukens, *System Identification: A Frequency Domain Approach*, 2nd ed., 2012, 
 2. Each control's multisine holds its own harmonics of 1/300 s, log-spaced from 0.01 to 2 Hz
    and disjoint between the controls, so their effects can be told apart. The phugoid and the
    spiral are in the band.
-3. The states are the eight measured outputs plus the unmeasured engine speed, manifold
-   pressure and altitude (density). The inputs are the surfaces' positions, as the potentiometer
+3. The states are the eight measured outputs plus the unmeasured altitude (density) and the
+   engine's slow states, as its kind has them (agent.sim.plant.ENGINE_STATES: a piston
+   engine's speed and manifold pressure, a turboprop's speed and N1, a turbine's spools N1
+   and N2, nothing on a glider). The inputs are the surfaces' positions, as the potentiometer
    box measures them, and the throttle's. Actuator dynamics therefore stay outside the truth,
    as they stay outside what is identified.
 4. A least-squares regression of the state derivatives (central differences at the 200 Hz
@@ -54,10 +56,10 @@ import numpy as np
 import scipy.linalg
 
 from agent.ident.aircraft.kinematics import kinematic_jacobian
-from agent.sim.plant import FT, INPUTS, Plant
+from agent.sim.plant import ENGINE_STATES, FT, INPUTS, Plant
 
-STATES = ("Vt", "alpha", "q", "theta", "beta", "p", "r", "phi", "rpm", "alt", "map")
-OUTPUTS = STATES[:8]
+OUTPUTS = ("Vt", "alpha", "q", "theta", "beta", "p", "r", "phi")
+BODY = (*OUTPUTS, "alt")  # the states every aircraft has; its engine's follow (states())
 LONGITUDINAL, LATERAL = ("Vt", "alpha", "q", "theta"), ("beta", "p", "r", "phi")
 # The multisine: its period (s), its band (Hz), harmonics per control, and the amplitude of each
 # control's command (normalised; about 0.5–1° of surface and 3 % of throttle).
@@ -88,16 +90,19 @@ _PROPERTIES = (
     ("velocities/p-rad_sec", 1.0),
     ("velocities/r-rad_sec", 1.0),
     ("attitude/phi-rad", 1.0),
-    ("propulsion/engine/engine-rpm", 1.0),
     ("position/h-sl-meters", 1.0),
-    ("propulsion/engine/map-inhg", 1.0),
 )
+
+
+def states(kind: str) -> tuple[str, ...]:
+    """The truth's states for an aircraft whose powerplant is of `kind` (ENGINE_STATES)."""
+    return (*BODY, *(name for name, _ in ENGINE_STATES[kind]))
 
 
 @dataclass(frozen=True)
 class Truth:
-    """ẋ = A x + B u about the trim: x in STATES (SI, rpm, inHg), u in INPUTS as positions
-    (throttle 0–1, surfaces in degrees)."""
+    """ẋ = A x + B u about the trim: x in `states` (SI, and the engine's in JSBSim's units:
+    rpm, inHg, percent), u in INPUTS as positions (throttle 0–1, surfaces in degrees)."""
 
     A: np.ndarray
     B: np.ndarray
@@ -106,10 +111,12 @@ class Truth:
     aircraft: str
     airspeed_kts: float
     conditions: dict  # the Plant's other settings at this trim (altitude, rate)
+    states: tuple[str, ...] = states("piston")
+    powerplant: str = "piston"  # ENGINE_STATES's kind
 
     def modes(self) -> dict[str, list[complex]]:
         """The aircraft's modes by name (one eigenvalue per pair, upper half-plane)."""
-        return name_modes(self.A, self.trim_state)
+        return name_modes(self.A, self.trim_state, self.states)
 
     def eigenvalues(self) -> np.ndarray:
         return np.linalg.eigvals(self.A)
@@ -131,7 +138,8 @@ class Truth:
 
 def _states(plant: Plant) -> np.ndarray:
     f = plant.fdm
-    return np.array([float(f[name]) * scale for name, scale in _PROPERTIES])
+    engine = [(prop, 1.0) for _, prop in ENGINE_STATES[plant.kind]]
+    return np.array([float(f[name]) * scale for name, scale in (*_PROPERTIES, *engine)])
 
 
 def _positions(plant: Plant) -> np.ndarray:
@@ -142,7 +150,7 @@ def _positions(plant: Plant) -> np.ndarray:
 def _fly(plant: Plant, commands: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Commands (normalised deltas, one row per integration step) in; states and positions
     after each step out."""
-    x = np.empty((len(commands), len(STATES)))
+    x = np.empty((len(commands), len(BODY) + len(ENGINE_STATES[plant.kind])))
     u = np.empty((len(commands), len(INPUTS)))
     for k, row in enumerate(commands):
         plant.command(dict(zip(INPUTS, row, strict=True)))
@@ -186,6 +194,8 @@ def linear_truth(aircraft: str, airspeed_kts: float, **plant) -> Truth:
     """JSBSim's best linear approximation at the trim (module docstring); about 10 s, so kept
     for the process (JSBSim is deterministic: the same trim gives the same truth)."""
     rate = float(plant.get("integration_hz", 200.0))
+    kind = Plant(aircraft, airspeed_kts=airspeed_kts, linearise=False, **plant).kind
+    names = states(kind)
     derivatives, rows = [], []
     for m in range(REALISATIONS):
         x, u, (x0, u0) = odd_response(
@@ -197,10 +207,10 @@ def linear_truth(aircraft: str, airspeed_kts: float, **plant) -> Truth:
         held = (u[1:-1] + u[2:]) / 2
         rows.append(np.hstack([x[1:-1], held, np.ones((len(x) - 2, 1))]))
     derivative, regressors = np.vstack(derivatives), np.vstack(rows)
-    n, r = len(STATES), len(INPUTS)
+    n, r = len(names), len(INPUTS)
     known = kinematic_rows(x0)
-    attitude = [STATES.index(s) for s in ATTITUDE]
-    rows_known = [STATES.index(s) for s in KNOWN_ROWS]
+    attitude = [names.index(s) for s in ATTITUDE]
+    rows_known = [names.index(s) for s in KNOWN_ROWS]
     free = [j for j in range(regressors.shape[1]) if j not in attitude]
     A, B = np.zeros((n, n)), np.zeros((n, r))
     A[rows_known] = known[rows_known]
@@ -216,7 +226,7 @@ def linear_truth(aircraft: str, airspeed_kts: float, **plant) -> Truth:
         row[free] = theta[i]
         row[attitude] = known[i, attitude]
         A[i], B[i] = row[:n], row[n : n + r]
-    return Truth(A, B, x0, u0, aircraft, airspeed_kts, dict(plant))
+    return Truth(A, B, x0, u0, aircraft, airspeed_kts, dict(plant), names, kind)
 
 
 def climb_rate(x: np.ndarray) -> np.ndarray:
@@ -229,10 +239,10 @@ def climb_rate(x: np.ndarray) -> np.ndarray:
 
 
 def kinematic_rows(trim_state: np.ndarray) -> np.ndarray:
-    """The kinematics' linear part at the trim in STATES order (n × n): the rigid body's
-    (agent.ident.aircraft.kinematics) in the first eight rows, the climb rate in the
-    altitude's; zero where only forces act."""
-    n = len(STATES)
+    """The kinematics' linear part at the trim in the truth's state order (n × n, BODY first,
+    then the engine's): the rigid body's (agent.ident.aircraft.kinematics) in the first
+    eight rows, the climb rate in the altitude's; zero where only forces act."""
+    n = len(trim_state)
     out = np.zeros((n, n))
     x8 = np.asarray(trim_state[:8], dtype=float)
     out[:8, :8] = kinematic_jacobian(x8)
@@ -241,7 +251,7 @@ def kinematic_rows(trim_state: np.ndarray) -> np.ndarray:
         up, down = x8.copy(), x8.copy()
         up[j] += step[j]
         down[j] -= step[j]
-        out[STATES.index("alt"), j] = (climb_rate(up) - climb_rate(down)) / (2 * step[j])
+        out[BODY.index("alt"), j] = (climb_rate(up) - climb_rate(down)) / (2 * step[j])
     return out
 
 
@@ -308,24 +318,27 @@ def theil(y: np.ndarray, predicted: np.ndarray) -> np.ndarray:
     return np.divide(num, den, out=np.zeros_like(num), where=den > 0)
 
 
-def name_modes(A: np.ndarray, trim_state: np.ndarray) -> dict[str, list[complex]]:
+def name_modes(
+    A: np.ndarray, trim_state: np.ndarray, names: tuple[str, ...] = states("piston")
+) -> dict[str, list[complex]]:
     """Short period, phugoid, Dutch roll, roll and spiral from the eigenvectors.
 
-    Each state is scaled to a comparable size (airspeed by the trim airspeed, engine speed and
-    manifold pressure by their trim values, altitude as the climb angle |λ| h / V it makes)
-    and a mode belongs to the axis holding most of its scaled eigenvector. Modes mostly in the
-    engine speed, the manifold pressure or the altitude are the engine's and the atmosphere's,
+    Each state (`names`, the truth's) is scaled to a comparable size (airspeed by the trim
+    airspeed, the engine's states by their trim values, altitude as the climb angle |λ| h / V
+    it makes) and a mode belongs to the axis holding most of its scaled eigenvector. Modes
+    mostly in the engine's states or the altitude are the engine's and the atmosphere's,
     not named. Longitudinal: the slowest oscillation is the phugoid; the short period is the
     fastest other oscillation or, when it is overdamped (the J-3 Cub), the two fastest real
     poles. Lateral: the oscillation is the Dutch roll, the fastest real pole the roll, and of
     the others the most purely lateral the spiral (the altitude's slow mode can lean lateral
     through the engine's torque)."""
-    index = {s: k for k, s in enumerate(STATES)}
+    index = {s: k for k, s in enumerate(names)}
+    engine = [k for k, s in enumerate(names) if s not in BODY]
     v0 = trim_state[index["Vt"]]
-    scale = np.ones(len(STATES))
+    scale = np.ones(len(names))
     scale[index["Vt"]] = scale[index["alt"]] = 1.0 / v0
-    scale[index["rpm"]] = 1.0 / trim_state[index["rpm"]]
-    scale[index["map"]] = 1.0 / trim_state[index["map"]]
+    for k in engine:
+        scale[k] = 1.0 / abs(trim_state[k]) if trim_state[k] else 1.0
     values, vectors = np.linalg.eig(A)
     groups: dict[str, list[complex]] = {"long": [], "lat": []}
     purity: dict[complex, float] = {}  # the share of its axis in each mode
@@ -337,7 +350,7 @@ def name_modes(A: np.ndarray, trim_state: np.ndarray) -> dict[str, list[complex]
         share = {
             "long": np.linalg.norm(w[[index[s] for s in LONGITUDINAL]]),
             "lat": np.linalg.norm(w[[index[s] for s in LATERAL]]),
-            "other": np.linalg.norm(w[[index[s] for s in ("rpm", "alt", "map")]]),
+            "other": np.linalg.norm(w[[index["alt"], *engine]]),
         }
         axis = max(share, key=share.get)
         if axis != "other":
