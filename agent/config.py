@@ -283,6 +283,31 @@ class Envelope(Section):
         return self
 
 
+class Sizing(Section):
+    """Plans sized to the aircraft's response before arming (agent/sizing.py,
+    docs/excitation.md): each control's amplitude brings its predicted response to these
+    targets, from the aircraft's own model; with no model yet, a build-up run."""
+
+    bank_deg: float = Field(15.0, gt=0.0, le=60.0)
+    """Largest bank angle change a plan is sized for, degrees."""
+    airspeed_pct: float = Field(5.0, gt=0.0, le=30.0)
+    """Largest airspeed change, percent of the trim airspeed."""
+    alpha_deg: float = Field(3.0, gt=0.0, le=15.0)
+    """Largest angle-of-attack change, degrees (the linear range of the lift curve)."""
+    beta_deg: float = Field(5.0, gt=0.0, le=20.0)
+    """Largest sideslip, degrees."""
+    pitch_deg: float = Field(10.0, gt=0.0, le=45.0)
+    """Largest pitch attitude change, degrees."""
+    load_factor: float = Field(0.5, gt=0.0, le=3.0)
+    """Largest load factor change, g."""
+    build_up: float = Field(0.25, gt=0.0, le=1.0)
+    """With no model of the aircraft yet, the share of the plan's amplitudes flown: that run
+    is the calibration whose model sizes the next."""
+    max_growth: float = Field(2.0, ge=1.0, le=10.0)
+    """A control's sized amplitude is at most this many times the largest deflection in the
+    data its model was identified from (amplitude build-up)."""
+
+
 class Excitation(Section):
     """The excitation scheduler: command rate, staleness, trim capture, controls, envelope."""
 
@@ -300,6 +325,8 @@ class Excitation(Section):
     """Controls that plans may excite, keyed by role: aileron, elevator, rudder, throttle."""
     envelope: Envelope = Envelope()
     """Onboard limits on plans and on the aircraft during a run."""
+    sizing: Sizing = Sizing()
+    """Targets and build-up of the plans' sizing to the aircraft's response."""
 
     @field_validator("surfaces")
     @classmethod

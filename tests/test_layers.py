@@ -22,6 +22,7 @@ LAYERS = (
     ("agent.excitation",),
     ("agent.ident",),
     ("agent.link", "agent.recorder", "agent.models"),
+    ("agent.sizing",),
     ("agent.runtime", "agent.analysis", "agent.ground"),
     ("agent.sim",),
     ("agent.cli",),

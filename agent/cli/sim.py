@@ -29,8 +29,16 @@ def add_parser(sub) -> None:
     parser.add_argument(
         "--runs",
         type=common.positive_int,
-        default=1,
-        help="excitations in a row (from the second on: TIC against the nominal)",
+        default=None,
+        help="excitations in a row (from the second on: TIC against the nominal); default 2 "
+        "with sizing (the build-up run, then the sized run), 1 without",
+    )
+    parser.add_argument(
+        "--sizing",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="the operator has each plan sized by the aircraft before arming it (default); "
+        "--no-sizing arms the preset at its own amplitudes",
     )
     parser.add_argument("--keep", type=Path, metavar="DIR", help="keep logs and models in DIR")
     parser.add_argument("--json", action="store_true", help="one JSON object")
@@ -53,7 +61,8 @@ def run(args: argparse.Namespace) -> int:
     options = SimOptions(
         plane=common.aircraft_options(args),
         preset=args.preset,
-        runs=args.runs,
+        runs=args.runs or (2 if args.sizing else 1),
+        sizing=args.sizing,
         directory=args.keep,
         progress=progress,
     )

@@ -37,6 +37,11 @@ class Following:
     lag_s: float
     gain: float
     """Measured per commanded deflection at that lag (the servo's and linkage's gain)."""
+    even: float = 0.0
+    """Measured per |commanded| deflection at that lag, fitted with the gain: the linkage's
+    even part. Differential ailerons (more up than down) make the ganged aileron's mean move
+    with the command's amplitude, |δA| acting as a bias that banks the aircraft (the sizing's
+    prediction uses it, agent/sizing.py)."""
 
     @property
     def verdict(self) -> str:
@@ -82,9 +87,19 @@ def following(
         commanded = np.where(inside, values[np.clip(index, 0, timeline.count - 1)], 0.0)
         best = _best_lag(commanded, np.asarray(column, dtype=float), round(MAX_LAG_S / dt))
         if best is not None:
-            lag, r, gain = best
-            result.append(Following(control, r, lag * dt, gain))
+            lag, r, _ = best
+            gain, even = _linkage(commanded, np.asarray(column, dtype=float), lag)
+            result.append(Following(control, r, lag * dt, gain, even))
     return result
+
+
+def _linkage(u: np.ndarray, y: np.ndarray, lag: int) -> tuple[float, float]:
+    """y = trim + gain·u + even·|u| by least squares, u delayed by `lag` samples."""
+    a, b = u[: u.size - lag], y[lag:]
+    ok = np.isfinite(a) & np.isfinite(b)
+    regressors = np.column_stack([np.ones(np.count_nonzero(ok)), a[ok], np.abs(a[ok])])
+    (_, gain, even), *_ = np.linalg.lstsq(regressors, b[ok], rcond=None)
+    return float(gain), float(even)
 
 
 def _best_lag(u: np.ndarray, y: np.ndarray, lags: int) -> tuple[int, float, float] | None:

@@ -210,6 +210,11 @@ class Scheduler:
         """The latest flight state (latest value wins)."""
         self._state = state
 
+    @property
+    def state(self) -> FlightState | None:
+        """The latest flight state (None: none yet)."""
+        return self._state
+
     def update_servos(self, time: float, pwm: Mapping[int, int]) -> None:
         """Servo outputs (SERVO_OUTPUT_RAW) by channel, for trim capture."""
         self._servos.append((time, dict(pwm)))

@@ -69,6 +69,7 @@ class Console(App):
         Binding("3", "tab('identify')", "identify"),
         Binding("4", "tab('results')", "results"),
         Binding("5", "tab('live')", "live"),
+        Binding("f3", "size", "size plan", priority=True),
         Binding("f2", "arm", "arm plan", priority=True),
         Binding("y", "decide(True)", "accept", show=False),
         Binding("n", "decide(False)", "reject", show=False),
@@ -157,6 +158,9 @@ class Console(App):
         r = message.heard.report
         self.results_tab.frf = (r.model_id, r.input, r.output)
 
+    def on_sizing_heard(self, message: posted.SizingHeard) -> None:
+        self.excite_tab.sized(message.heard.sizing)
+
     def on_ack_heard(self, message: posted.AckHeard) -> None:
         command = message.heard.command
         if isinstance(command.message, messages.IdentSettings):
@@ -221,6 +225,9 @@ class Console(App):
 
     def action_arm(self) -> None:
         self.excite_tab.arm()
+
+    def action_size(self) -> None:
+        self.excite_tab.request_sizing()
 
     def action_abort(self) -> None:
         self.send(self.station.abort)

@@ -62,6 +62,13 @@ class FrfHeard:
 
 
 @dataclass(frozen=True)
+class SizingHeard:
+    """How the aircraft would fly a plan (the answer to a size request)."""
+
+    sizing: messages.Sizing
+
+
+@dataclass(frozen=True)
 class AckHeard:
     """The aircraft answered a command (`command.ack`: done, or refused with the reason)."""
 
@@ -75,4 +82,4 @@ class Noted:
     line: Line
 
 
-Event = StatusHeard | LiveFrame | ResultHeard | FrfHeard | AckHeard | Noted
+Event = StatusHeard | LiveFrame | ResultHeard | FrfHeard | SizingHeard | AckHeard | Noted

@@ -42,6 +42,11 @@ class FrfHeard(Message, bubble=False):
 
 
 @dataclass
+class SizingHeard(Message, bubble=False):
+    heard: events.SizingHeard
+
+
+@dataclass
 class AckHeard(Message, bubble=False):
     heard: events.AckHeard
 
@@ -56,6 +61,7 @@ _MESSAGES: dict[type, type[Message]] = {
     events.LiveFrame: LiveFrame,
     events.ResultHeard: ResultHeard,
     events.FrfHeard: FrfHeard,
+    events.SizingHeard: SizingHeard,
     events.AckHeard: AckHeard,
     events.Noted: Noted,
 }

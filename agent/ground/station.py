@@ -55,6 +55,8 @@ class Heard:
     strips: dict[str, deque[tuple[float, float | None]]] = field(default_factory=dict)
     """The run's strip charts: per channel, (time, value in display units), STRIP_S long."""
     excitation: messages.ExcitationEvent | None = None
+    sizing: messages.Sizing | None = None
+    """The aircraft's latest sizing of a plan (agent/sizing.py)."""
 
 
 class GroundStation:
@@ -178,6 +180,16 @@ class GroundStation:
             self._run_over()
             h.failures.append(message)
             self.note("error", f"identification {message.model_id} failed: {message.reason}")
+        elif isinstance(message, messages.Sizing):
+            h.sizing = message
+            amplitudes = ", ".join(
+                f"{c.control} {c.amplitude:.3g}{'°' if c.unit == 'deg' else c.unit}"
+                for c in message.controls
+            )
+            level = "error" if message.refusals else "info"
+            refused = f"; REFUSED: {'; '.join(message.refusals)}" if message.refusals else ""
+            self.note(level, f"sizing {message.plan.id} by {message.source}: {amplitudes}{refused}")
+            self._tell(events.SizingHeard(message))
         elif isinstance(message, messages.Notice):
             self.note("warning", message.text)
 
@@ -235,6 +247,10 @@ class GroundStation:
 
     def arm(self, plan) -> Command:
         return self.send(messages.Arm(plan=plan), f"arm {plan.id}")
+
+    def size(self, plan) -> Command:
+        """Ask the aircraft how it would fly `plan`; its answer is a Sizing (`heard.sizing`)."""
+        return self.send(messages.SizeRequest(plan=plan), f"size {plan.id}")
 
     def abort(self) -> Command:
         return self.send(messages.Abort(reason="operator abort (ground)"), "abort")

@@ -1,10 +1,10 @@
 """What the aircraft and the ground say to each other (pydantic), version 1.
 
-Uplink (ground → air): arm a plan, start, abort, identification settings, a model decision,
-revert to the previous nominal model, ping. Downlink (air → ground): status (≈ 1 Hz, best
-effort), excitation events, identification results, acknowledgements of commands (with the
-reason for a refusal), warnings. Every message carries the protocol version; a receiver
-refuses other versions with a clear error.
+Uplink (ground → air): size a plan, arm a plan, start, abort, identification settings, a
+model decision, revert to the previous nominal model, ping. Downlink (air → ground): status
+(≈ 1 Hz, best effort), excitation events, identification results, a plan's sizing,
+acknowledgements of commands (with the reason for a refusal), warnings. Every message carries
+the protocol version; a receiver refuses other versions with a clear error.
 """
 
 from __future__ import annotations
@@ -36,6 +36,14 @@ class Arm(Message):
     """Arm this plan (the onboard envelope still decides; the pilot's switch starts it)."""
 
     kind: Literal["arm"] = "arm"
+    plan: Plan
+
+
+class SizeRequest(Message):
+    """How would the aircraft fly this plan? Answered with a Sizing (agent/sizing.py); nothing
+    is armed."""
+
+    kind: Literal["size"] = "size"
     plan: Plan
 
 
@@ -232,6 +240,37 @@ class Ack(Message):
     reason: str = ""
 
 
+class SizedControl(BaseModel):
+    """One control of a sized plan: its largest deflection, the factor on the plan's own
+    amplitude, and what set it (a target, a limit, the build-up)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    control: str = Field(max_length=16)
+    amplitude: float
+    unit: Literal["deg", "%"]
+    factor: float
+    limited_by: str = Field(max_length=80)
+
+
+class Sizing(Message):
+    """The answer to a SizeRequest: the plan sized to the aircraft (arm it as it is), how,
+    from which model, the response predicted, and where that leaves the envelope."""
+
+    kind: Literal["sizing"] = "sizing"
+    plan: Plan
+    source: str = Field(max_length=120)
+    controls: list[SizedControl]
+    predicted: dict[str, float] = Field(default_factory=dict)
+    """Each predicted peak by quantity (agent.sizing.QUANTITIES); empty: no model yet."""
+    corrections: dict[str, float] = Field(default_factory=dict)
+    """Quantity → how much more the model's own data moved than it predicts (≥ 1), by which
+    its predictions were scaled."""
+    unexplained: dict[str, float] = Field(default_factory=dict)
+    """Quantity → the largest excursion of the model's data no input explains (turbulence,
+    drift), added to the predicted peaks the envelope is checked against."""
+    refusals: list[Annotated[str, Field(max_length=200)]] = Field(default_factory=list)
+
+
 class Notice(Message):
     """A warning for the operator."""
 
@@ -239,10 +278,13 @@ class Notice(Message):
     text: str = Field(max_length=200)
 
 
-Uplink = Arm | Start | Abort | IdentSettings | Decision | Revert | FrfRequest | Ping
-Downlink = Status | Live | ExcitationEvent | Result | FrfReport | Failure | Ack | Notice | Ping
+Uplink = Arm | SizeRequest | Start | Abort | IdentSettings | Decision | Revert | FrfRequest | Ping
+Downlink = (
+    Status | Live | ExcitationEvent | Result | Sizing | FrfReport | Failure | Ack | Notice | Ping
+)
 Message = Annotated[
     Arm
+    | SizeRequest
     | Start
     | Abort
     | IdentSettings
@@ -254,6 +296,7 @@ Message = Annotated[
     | Live
     | ExcitationEvent
     | Result
+    | Sizing
     | FrfReport
     | Failure
     | Ack
@@ -267,7 +310,7 @@ def to_dict(message: Message) -> dict:
     """Plain values with defaults left out (kind, version and a plan's signal kinds stay)."""
     data = message.model_dump(mode="json", exclude_defaults=True)
     data |= {"kind": message.kind, "v": message.v}
-    if isinstance(message, Arm):
+    if isinstance(message, Arm | SizeRequest | Sizing):
         data["plan"] = message.plan.to_compact()
     return data
 

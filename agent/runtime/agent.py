@@ -33,6 +33,7 @@ from agent.runtime.downlink import Downlink
 from agent.runtime.health import Health
 from agent.runtime.identification import Identifier
 from agent.runtime.live import Live
+from agent.runtime.sizer import Sizer
 from agent.runtime.status import Status
 from agent.runtime.worker import new_worker
 from drivers.airdata.driver import make_driver as airdata
@@ -102,9 +103,13 @@ class Agent:
             counters=self.counters,
             worker=worker,
         )
+        self.sizer = Sizer(
+            config=config, identification=self.identification, flight=lambda: self.scheduler.state
+        )
         self.commands = Commands(
             scheduler=self.scheduler,
             identification=self.identification,
+            sizer=self.sizer,
             downlink=self.downlink,
             counters=self.counters,
         )
@@ -291,6 +296,8 @@ class Agent:
         frames = self.recorder.frames(rows)
         for f in following(played.timeline, played.start, frames.time, frames.values):
             if f.verdict == "follows":
+                # Its linkage sizes the next plans (agent/runtime/sizer.py).
+                self.sizer.linkage[f.control] = (f.gain, f.even)
                 continue
             self.counters[f"surface_{f.verdict.replace(' ', '_')}"] += 1
             log.warning("%s: %s", window.plan_id, f.text())

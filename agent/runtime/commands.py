@@ -9,7 +9,9 @@ command whose replay state could not be saved or that arrived too late. Each mes
 has one handler (`Commands.handlers`): it returns "" when done, or the reason it was not; a
 refusal the handler raises (`PlanRefused`, no such model, no previous nominal) is a reason
 too. A plan whose run cannot be identified on its axes (an input of them it does not move)
-is armed all the same, and the ground told why in a notice.
+is armed all the same, and the ground told why in a notice. A size request is answered with
+the plan's sizing (agent/runtime/sizer.py); an arm whose predicted response leaves the
+envelope is refused with what the prediction says.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from agent.excitation.scheduler import Scheduler
 from agent.link import messages
 from agent.runtime.downlink import Downlink
 from agent.runtime.identification import Identifier
+from agent.runtime.sizer import Sizer, sizing_message
 
 log = logging.getLogger(__name__)
 
@@ -40,16 +43,18 @@ class Commands:
         *,
         scheduler: Scheduler,
         identification: Identifier,
+        sizer: Sizer,
         downlink: Downlink,
         counters: Counter[str],
     ):
-        self.scheduler, self.identification = scheduler, identification
+        self.scheduler, self.identification, self.sizer = scheduler, identification, sizer
         self.downlink, self.counters = downlink, counters
         self._queue: asyncio.Queue[tuple[messages.Message, int | None]] = asyncio.Queue(
             COMMAND_QUEUE
         )
         self.handlers: dict[type[messages.Message], Handler] = {
             messages.Arm: self._arm,
+            messages.SizeRequest: self._size,
             messages.Start: self._start,
             messages.Abort: self._abort,
             messages.IdentSettings: self._settings,
@@ -133,7 +138,24 @@ class Commands:
 
     # -- the handlers: "" when done, else the reason -----------------------------------------
 
+    async def _size(self, message: messages.SizeRequest) -> str:
+        plan = message.plan
+        missing = [c for c in plan.controls() if c not in self.sizer.config.excitation.surfaces]
+        if missing:
+            raise PlanRefused(
+                f"plan {plan.id!r}: {', '.join(missing)} not a configured control "
+                "([excitation.surfaces])"
+            )
+        sized = await self.sizer.size(plan)
+        self.downlink.send(sizing_message(sized, self.sizer.config.excitation.surfaces))
+        return ""
+
     async def _arm(self, message: messages.Arm) -> str:
+        # The agent never flies a plan its own prediction takes out of the envelope.
+        refusals = await self.sizer.refusals(message.plan)
+        if refusals:
+            self.counters["refused_by_prediction"] += 1
+            raise PlanRefused(f"plan {message.plan.id!r} refused: " + "; ".join(refusals))
         await self.scheduler.arm_checked(message.plan)
         unmoved = _unmoved_inputs(message.plan, self.identification.settings.axes)
         if unmoved:  # armed all the same: the excitation is the operator's to fly

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agent import sizing
 from agent.clock import LoopClock
 from agent.config import (
     AirDataPort,
@@ -76,6 +77,9 @@ class SimOptions:
     progress: object = None  # callable(str) for progress lines
     realtime_priority: int | None = None
     """The agent's [runtime] realtime_priority (the benchmarks run it as in the field)."""
+    sizing: bool = False
+    """The scripted operator has each plan sized by the aircraft (a SizeRequest, agent/sizing.py)
+    and arms the sized plan; False: it arms the preset at its own amplitudes."""
 
 
 @dataclass
@@ -422,6 +426,11 @@ async def ground_station(
 async def one_run(options: SimOptions, aircraft: SimAircraft, ground: Ground, run: int, say):
     plan = preset(options.preset, plan_id=f"{options.preset}-{run + 1}")
     ack = await ground.command(messages.IdentSettings(axes=plan.axes))
+    sized = None
+    if options.sizing:
+        plan, sized = await size(ground, plan)
+        for line in sizing.message_lines(sized):
+            say(f"run {run + 1}: {line}")
     ack = await ground.command(messages.Arm(plan=plan))
     if not ack.ok:
         raise SimError(f"the agent refused the plan: {ack.reason}")
@@ -441,7 +450,7 @@ async def one_run(options: SimOptions, aircraft: SimAircraft, ground: Ground, ru
     events = [m.event for m in ground.inbox[seen:] if isinstance(m, messages.ExcitationEvent)]
     if isinstance(answer, messages.Failure):
         say(f"run {run + 1}: identification failed: {answer.reason}")
-        return {"plan": plan.id, "events": events, "failure": answer.reason}
+        return {"plan": plan.id, "events": events, "failure": answer.reason, "sizing": sized}
     accept = _operator_accepts(answer, first=not ground.accepted)
     decision = "accept" if accept else "reject"
     ack = await ground.command(messages.Decision(model_id=answer.model_id, accept=accept))
@@ -450,7 +459,31 @@ async def one_run(options: SimOptions, aircraft: SimAircraft, ground: Ground, ru
         f"run {run + 1}: result {answer.model_id} received; operator: {decision} "
         f"({'ok' if ack.ok else ack.reason})"
     )
-    return {"plan": plan.id, "events": events, "result": answer, "decision": decision}
+    return {
+        "plan": plan.id,
+        "events": events,
+        "result": answer,
+        "decision": decision,
+        "sizing": sized,
+    }
+
+
+async def size(ground: Ground, plan) -> tuple:
+    """The aircraft's sizing of `plan` (a SizeRequest answered by a Sizing message): the sized
+    plan and the message. SimError when the aircraft refuses it or predicts it out of the
+    envelope."""
+    seen = len(ground.inbox)
+    ack = await ground.command(messages.SizeRequest(plan=plan))
+    if not ack.ok:
+        raise SimError(f"the agent would not size the plan: {ack.reason}")
+
+    def answered():
+        return next((m for m in ground.inbox[seen:] if isinstance(m, messages.Sizing)), None)
+
+    sized = await wait(ground.pace, answered, f"no sizing of {plan.id}", ACK_S)
+    if sized.refusals:
+        raise SimError(f"{plan.id}: the aircraft predicts " + "; ".join(sized.refusals))
+    return sized.plan, sized
 
 
 async def pilot_follows_arming(sim: SimFlight, delay_s: float = 2.0) -> None:
@@ -509,11 +542,13 @@ async def console_flight(options: SimOptions):
 
 def _operator_accepts(result: messages.Result, first: bool) -> bool:
     """The scripted operator: follows the suggestion; with no nominal model yet, accepts a
-    stable candidate that fits its own data (TIC_jj < 0.3) as the first nominal, even if the
-    quality step flagged a mode — a human establishing a baseline would."""
+    stable candidate that fits its own data (TIC_jj < 0.3) and has every mode its axes must
+    have as the first nominal, even if the quality step flagged a mode — a human
+    establishing a baseline would."""
     if result.suggest_update:
         return True
-    return first and result.checks.get("stability", False) and result.checks.get("fit", False)
+    checks = result.checks
+    return first and all(checks.get(step, False) for step in ("stability", "fit", "modes"))
 
 
 def _truth(aircraft: SimAircraft, axes: str) -> dict[str, complex | list[complex] | None]:
@@ -597,6 +632,9 @@ def _report(
                 "plan": o["plan"],
                 "decision": o.get("decision"),
                 "model_id": o["result"].model_id if "result" in o else None,
+                "sizing": None
+                if o.get("sizing") is None
+                else o["sizing"].model_dump(mode="json", exclude={"v", "kind", "plan"}),
             }
             for o in outcomes
         ],
@@ -611,6 +649,10 @@ def _report(
 
 def format_report(report: dict) -> str:
     lines = [f"{report['aircraft']} · preset {report['preset']} · {report['runs']} run(s)"]
+    for k, run in enumerate(report["history"]):
+        if run.get("sizing"):
+            sized = messages.Sizing(plan=preset(report["preset"]), **run["sizing"])
+            lines += [f"run {k + 1}: {line}" for line in sizing.message_lines(sized)]
     if report["failure"]:
         lines.append(f"identification failed: {report['failure']}")
         return "\n".join([*lines, *(f"notice: {text}" for text in report["notices"])])

@@ -104,6 +104,18 @@ def frequency_response(request: messages.FrfRequest) -> messages.FrfReport:
     )
 
 
+def sized(plan) -> messages.Sizing:
+    """The agent's own sizing of `plan` with no model yet (the build-up), as it sends it."""
+    from agent import sizing
+    from agent.config import Excitation
+    from agent.excitation.plan import render
+    from agent.runtime.sizer import sizing_message
+
+    ex = Excitation()
+    done = sizing.size(plan, render(plan, ex.rate_hz), None, ex.sizing, ex.surfaces, ex.envelope)
+    return sizing_message(done, ex.surfaces)
+
+
 @dataclass
 class ScriptedAircraft:
     session: LinkSession | None = None
@@ -137,6 +149,8 @@ class ScriptedAircraft:
         self.session.send_reliable(messages.Ack(ref=seq, ok=not reason, reason=reason))
         if isinstance(message, messages.FrfRequest) and not reason:
             self.session.send_reliable(frequency_response(message))
+        if isinstance(message, messages.SizeRequest) and not reason:
+            self.session.send_reliable(sized(message.plan))
 
     def status(self, t: float) -> messages.Status:
         return messages.Status(

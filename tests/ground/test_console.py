@@ -16,6 +16,7 @@ import re
 import pytest
 
 from agent.clock import LoopClock
+from agent.config import Excitation
 from agent.ground.app import Console
 from agent.ground.splane import SPlane
 from agent.ground.station import GroundStation
@@ -99,6 +100,30 @@ async def test_a_preset_is_armed_and_acknowledged_and_a_refusal_shows_its_reason
     await until(
         pilot, lambda: any(isinstance(m, messages.Abort) for m in r.aircraft.inbox), what="abort"
     )
+
+
+async def test_a_plan_is_sized_by_the_aircraft_and_the_sized_plan_armed(console):
+    app, pilot, r, _ = console
+    await pilot.press("2")
+    await pilot.pause(0.1)
+    assert "not sized" in text_of(app, "#sizing")
+    await pilot.press("f3")
+    await until(pilot, lambda: "sized by build-up" in text_of(app, "#sizing"), "sizing")
+    assert "aileron" in text_of(app, "#sizing")
+    assert "Arm sized" in str(app.query_one("#arm").label)
+    await pilot.press("f2")
+    await until(pilot, lambda: "arm lateral: acknowledged" in log_text(app), "ack")
+    armed = next(m for m in r.aircraft.inbox if isinstance(m, messages.Arm))
+    asked = next(m for m in r.aircraft.inbox if isinstance(m, messages.SizeRequest))
+    build_up = Excitation().sizing.build_up
+    for segment, original in zip(armed.plan.segments, asked.plan.segments, strict=True):
+        for control, signal in segment.signals.items():
+            assert signal.amplitude == pytest.approx(build_up * original.signals[control].amplitude)
+    # An edit drops the sizing: F2 then arms the plan as written.
+    app.query_one("#plan").text = app.query_one("#plan").text.replace('"lateral"', '"lat2"', 1)
+    await pilot.pause(0.1)
+    assert "not sized" in text_of(app, "#sizing")
+    assert str(app.query_one("#arm").label) == "Arm F2"
 
 
 async def test_a_result_renders_and_accept_reject_revert_round_trip(console, tmp_path):
@@ -306,6 +331,55 @@ def test_percentages_never_print_as_exponents():
         "<0.01",
         "–",
     ]
+
+
+def test_a_refused_step_of_the_suggestion_reaches_the_results_tab_with_its_reason():
+    """Bad input tried: a lateral candidate without a Dutch roll and with a pole at −2008 1/s
+    on a 100 Hz record. The aircraft's suggestion refuses it at step 2b; the step's line, with
+    the missing mode's reason and the pole, crosses the link's schema and is what the results
+    tab shows under "do not update"."""
+    import numpy as np
+
+    from agent.ground.tabs.results import _summary
+    from agent.ident.document import ModeDocument
+    from agent.models import Candidate, suggest
+    from agent.runtime.identification import result_message
+    from tests.documents import OUTPUTS, lateral_document
+
+    def mode(name, re, emac):
+        return ModeDocument(
+            name=name,
+            eigenvalue=(re, 0.0),
+            frequency_rad_s=abs(re),
+            damping=1.0,
+            time_constant_s=-1 / re,
+            msv=100.0,
+            mci=100.0,
+            moi=100.0,
+            emac=emac,
+            mpc=100.0,
+            cmi=None,
+        )
+
+    reason = "no named mode: no lateral pair damped below ζ = 0.95"
+    result = lateral_document(
+        dt=0.01,
+        tic=dict.fromkeys(OUTPUTS, 0.1),
+        tic_avg=0.1,
+        modes=[mode("spiral", -0.2, 90.0), mode("roll", -9.0, 90.0), mode(None, -2008.0, None)],
+        missing_modes=[{"name": "Dutch roll", "reason": reason}],
+    )
+    data = ((np.zeros((10, 2)), np.zeros((10, 4))),)
+    candidate = Candidate(
+        model_id="lat-9", axes="lateral", record_dt=0.01, result=result, experiments=data
+    )
+    suggestion = suggest(candidate, None, None, None)
+    heard = messages.from_dict(messages.to_dict(result_message(candidate, suggestion)))
+    assert heard.checks["modes"] is False
+    shown = str(_summary(heard))
+    assert "suggestion: do not update" in shown
+    assert f"2b modes: MISSING Dutch roll ({reason})" in shown
+    assert "OUT OF RANGE: pole -2008 1/s faster than 126 rad/s" in shown
 
 
 def live(

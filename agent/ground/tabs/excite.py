@@ -1,5 +1,7 @@
 """Excite (2): pick a preset or edit a plan, see what it would play (and whether the aircraft
-would refuse it) before arming; arm and abort."""
+would refuse it) before arming; have the aircraft size it (F3: the amplitudes it would fly,
+why, and the response it predicts, agent/sizing.py), then arm the sized plan (F2), or the plan
+as written when it was not sized; abort."""
 
 from __future__ import annotations
 
@@ -13,8 +15,10 @@ from textual.app import ComposeResult
 from textual.containers import Horizontal, Vertical
 from textual.widgets import Button, Select, Static, TextArea
 
+from agent import sizing as sz
 from agent.excitation.plan import PRESETS, Plan, preset, refusals, render, summary
 from agent.ground.station import GroundStation
+from agent.link import messages
 
 
 class ExciteTab(Vertical):
@@ -22,6 +26,8 @@ class ExciteTab(Vertical):
         super().__init__(**kwargs)
         self.station, self.send = station, send
         self.plan: Plan | None = None  # the editor's plan, when valid
+        self.sizing: messages.Sizing | None = None  # the aircraft's sizing of that plan
+        self._asked: Plan | None = None  # the plan a size request was sent for
 
     def compose(self) -> ComposeResult:
         with Horizontal(id="preset-row"):
@@ -32,11 +38,14 @@ class ExciteTab(Vertical):
                 id="preset",
                 compact=True,
             )
+            yield Button("Size F3", id="size", compact=True)
             yield Button("Arm F2", id="arm", variant="primary", compact=True)
             yield Button("ABORT F5", id="abort", variant="error", compact=True)
         with Horizontal(id="editor"):
             yield TextArea(id="plan", soft_wrap=False)
-            yield Static(id="preview")
+            with Vertical(id="preview-column"):
+                yield Static(id="preview")
+                yield Static(id="sizing")
 
     def on_mount(self) -> None:
         self.load_preset("lateral")
@@ -53,8 +62,10 @@ class ExciteTab(Vertical):
         self.preview(event.text_area.text)
 
     def preview(self, text: str) -> None:
-        """Validate the editor's plan and show what it would play, or what is wrong."""
+        """Validate the editor's plan and show what it would play, or what is wrong; a sizing
+        of another plan is dropped."""
         panel = self.query_one("#preview", Static)
+        self._show_sizing(None)
         try:
             plan = Plan.model_validate_json(text)
         except ValidationError as exc:
@@ -83,12 +94,47 @@ class ExciteTab(Vertical):
             text.append(f"would be refused: {reason}\n", "bold red")
         panel.update(text)
 
-    def arm(self) -> None:
+    def request_sizing(self) -> None:
+        """Ask the aircraft how it would fly the editor's plan (not `size`: a widget's size
+        is Textual's)."""
         if self.plan is None:
             self.station.note("error", "the plan in the editor is not valid: not sent")
             return
-        plan = self.plan
+        plan = self._asked = self.plan
+        self.send(lambda: self.station.size(plan))
+
+    def sized(self, sizing: messages.Sizing) -> None:
+        """The aircraft's sizing: shown, and armed by F2, while the editor holds the plan it
+        was asked for."""
+        if self._asked is not None and self._asked == self.plan:
+            self._show_sizing(sizing)
+
+    def _show_sizing(self, sizing: messages.Sizing | None) -> None:
+        self.sizing = sizing
+        panel = self.query_one("#sizing", Static)
+        button = self.query_one("#arm", Button)
+        if sizing is None:
+            panel.update(Text("not sized: F3 has the aircraft size it; F2 arms it as written"))
+            button.label = "Arm F2"
+            return
+        text = Text()
+        for line in sz.message_lines(sizing):
+            text.append(line + "\n", "bold red" if line.startswith("REFUSED") else "")
+        panel.update(text)
+        button.label = "Arm sized F2" if not sizing.refusals else "Arm F2"
+
+    def arm(self) -> None:
+        """Arm the sized plan when the aircraft sized the editor's plan, else the plan as
+        written (the aircraft still refuses one its prediction takes out of the envelope)."""
+        if self.plan is None:
+            self.station.note("error", "the plan in the editor is not valid: not sent")
+            return
+        plan = self.sizing.plan if self.sizing is not None else self.plan
         self.send(lambda: self.station.arm(plan))
+
+    @on(Button.Pressed, "#size")
+    def _size_pressed(self) -> None:
+        self.request_sizing()
 
     @on(Button.Pressed, "#arm")
     def _arm_pressed(self) -> None:

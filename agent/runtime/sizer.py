@@ -1,0 +1,114 @@
+"""The plans' sizing onboard (agent/sizing.py): the ground asks how a plan would fly, the agent
+answers with each control's amplitude and why, the predicted response and the envelope's
+refusals; an armed plan whose predicted response leaves the envelope is refused.
+
+The model is the one `Identifier.sizing_model` names (the nominal, else this flight's newest
+good candidate); each surface's linkage (its measured position per commanded degree, and per
+|commanded degree|) is the last finished run's, measured where the agent checks that the
+surfaces followed their commands. Rendering and prediction take seconds for the full preset:
+they run on a thread, never on the event loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from collections.abc import Callable
+
+from agent import sizing
+from agent.config import Config
+from agent.excitation.plan import Plan, render
+from agent.link import messages
+from agent.runtime.identification import Identifier
+from drivers.values import FlightState
+
+
+class Sizer:
+    def __init__(
+        self,
+        *,
+        config: Config,
+        identification: Identifier,
+        flight: Callable[[], FlightState | None],
+    ):
+        self.config, self.identification, self._flight = config, identification, flight
+        self.linkage: dict[str, tuple[float, float]] = {}
+        """Control → (gain, even) of the last finished run (agent.excitation.follow)."""
+
+    def flight(self) -> dict[str, float]:
+        """The flight state now by output role, SI (empty: none yet)."""
+        s = self._flight()
+        if s is None:
+            return {}
+        return {
+            "airspeed": s.airspeed,
+            "alpha": math.radians(s.alpha_deg),
+            "theta": math.radians(s.pitch_deg),
+            "phi": math.radians(s.bank_deg),
+        }
+
+    async def predictor(self, plan: Plan) -> sizing.Predictor | None:
+        found = await self.identification.sizing_model(plan.axes)
+        if found is None:
+            return None
+        candidate, source = found
+        return sizing.predictor_from(
+            candidate,
+            self.config.identification.channels,
+            self.config.excitation.surfaces,
+            source,
+            flight=self.flight(),
+            linkage=self.linkage,
+        )
+
+    async def size(self, plan: Plan) -> sizing.Sizing:
+        """`plan` sized to the aircraft (its controls must be configured: PlanRefused
+        otherwise, as arming would)."""
+        ex = self.config.excitation
+        predictor = await self.predictor(plan)
+        trim = self.flight()
+
+        def work() -> sizing.Sizing:
+            timeline = render(plan, ex.rate_hz)
+            return sizing.size(
+                plan, timeline, predictor, ex.sizing, ex.surfaces, ex.envelope, trim=trim
+            )
+
+        return await asyncio.to_thread(work)
+
+    async def refusals(self, plan: Plan) -> list[str]:
+        """Where the plan's predicted response leaves the envelope (empty: it stays in, or no
+        model predicts it)."""
+        ex = self.config.excitation
+        predictor = await self.predictor(plan)
+        if predictor is None:
+            return []
+        trim = self.flight()
+
+        def work() -> list[str]:
+            peaks = sizing.predict(predictor, render(plan, ex.rate_hz))
+            return sizing.envelope_refusals(peaks, ex.envelope, predictor.airspeed, trim)
+
+        return await asyncio.to_thread(work)
+
+
+def sizing_message(sized: sizing.Sizing, surfaces) -> messages.Sizing:
+    """A sizing as the ground sees it."""
+    return messages.Sizing(
+        plan=sized.plan,
+        source=sized.source[:120],
+        controls=[
+            messages.SizedControl(
+                control=c,
+                amplitude=round(a, 4),
+                unit="%" if surfaces[c].unit == "percent" else "deg",
+                factor=round(sized.factors[c], 4),
+                limited_by=sized.limited_by[c][:80],
+            )
+            for c, a in sized.amplitudes.items()
+        ],
+        predicted={q: round(v, 3) for q, v in sized.predicted.items()},
+        corrections={q: round(v, 3) for q, v in sized.corrections.items()},
+        unexplained={q: round(v, 3) for q, v in sized.unexplained.items()},
+        refusals=[r[:200] for r in sized.refusals],
+    )

@@ -1,0 +1,705 @@
+"""Excitation sized to the aircraft: amplitudes chosen from the response they will cause, not
+from degrees, and a plan refused when its predicted response leaves the envelope.
+
+The same ±4° of aileron banks a J-3 Cub at 60 kt to 11° and a four-seat trainer at 95 kt to
+36°; the same full preset took a turboprop trainer into the ground (JSBSim, docs/excitation.md).
+A flight-test engineer sizes inputs to the response: enough to stand above turbulence and
+sensor noise, small enough to stay linear and inside the envelope. Here:
+
+1. The prediction is a linear model of the aircraft (`Predictor`): the axes' nominal model,
+   or the newest identified candidate that fits its own data, driven by the plan's commands
+   in the record's units (surface degrees as the potentiometers measure them; the throttle's
+   servo output in µs, `us_per_unit` per percent). It predicts each response the run cares
+   about (`QUANTITIES`): bank, airspeed, angle of attack, sideslip, pitch attitude, load
+   factor (V₀(q − α̇)/g) and the height lost (V₀∫(θ − α)dt, wings level), over the plan and
+   `TAIL_S` after it.
+2. Each control is first sized alone: the factor on its plan amplitude that brings its own
+   largest predicted response to its target ([excitation.sizing]). Then the controls play
+   together: while a quantity exceeds its target, every control contributing at least
+   `CONTRIBUTION` of it is scaled down by the excess.
+3. Limits: a control never exceeds its `max_amplitude`, nor `max_growth` times the largest
+   deflection in the data its model was identified from (a model is trusted near what it
+   has seen; amplitude build-up, as in flight test).
+4. With no model, the plan flies at `build_up` of its amplitudes: the first run is the
+   calibration, and its identification sizes the next.
+5. The targets never reach past the envelope ([excitation.envelope], from the flight state
+   now: `within`), and whatever sized it, a plan whose predicted response (trim plus the
+   peaks) leaves the envelope is refused before it is armed (`envelope_refusals`); the
+   envelope monitor still ends a run that leaves it in flight.
+
+No I/O and no event loop: the agent calls it on a thread (a render of the full preset takes
+seconds).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+
+from agent.channels import OUTPUT_ROLES
+from agent.config import Channels, Envelope, Surface
+from agent.config import Sizing as SizingConfig
+from agent.excitation.plan import Plan, Timeline
+from agent.ident.aircraft.kinematics import KINEMATIC_STATES, kinematic_jacobian, kinematics
+from agent.ident.convert import StateSpace
+from agent.ident.document import ResultDocument
+from agent.ident.fit import simulate
+from agent.link import messages
+from agent.models import Candidate
+
+G = 9.80665
+# Predicted after the plan ends (s): the free response still moves the aircraft (a phugoid's
+# airspeed swing peaks a quarter period later), though the run has ended by then.
+TAIL_S = 10.0
+# A control takes part in a quantity's excess when its own response in that quantity is at
+# least this share of the combined one.
+CONTRIBUTION = 0.1
+# Rounds of step 2: each scales the controls behind every quantity still above its target, on
+# the linear responses (ROUNDS) and then with the full kinematics (FULL_ROUNDS, a simulation
+# each); a quantity within SLACK of its target is on it.
+ROUNDS, FULL_ROUNDS = 20, 5
+SLACK = 1.01
+# The quantities whose prediction is checked on the model's own data (`checked`), the
+# smoothing that keeps sensor noise out of their measured peaks (s), and the largest
+# correction trusted (a model predicting a quarter of what its own data did is not used
+# to size anything bigger).
+CORRECTED = ("bank_deg", "airspeed_pct", "alpha_deg", "beta_deg", "pitch_deg")
+SMOOTH_S = 0.5
+MAX_CORRECTION = 4.0
+# The share of the envelope's room (from the trim, less what no input explains) the targets
+# may take: the rest is left to the prediction's error.
+ENVELOPE_SHARE = 0.9
+# The quantities predicted, with their unit for the operator.
+QUANTITIES = {
+    "bank_deg": "°",
+    "airspeed_pct": "%",
+    "alpha_deg": "°",
+    "beta_deg": "°",
+    "pitch_deg": "°",
+    "load_factor": "g",
+    "height_loss_m": "m",
+}
+# The operator's names of the quantities, for the lines shown before arming.
+LABELS = {
+    "bank_deg": "bank",
+    "airspeed_pct": "airspeed",
+    "alpha_deg": "α",
+    "beta_deg": "β",
+    "pitch_deg": "pitch",
+    "load_factor": "load factor",
+    "height_loss_m": "height loss",
+}
+
+
+@dataclass(frozen=True, kw_only=True)
+class Kinematic:
+    """A model whose states are aircraft states, predicted with the rigid body's kinematics
+    and gravity in full: the identified model holds their linear part at the trim, and what
+    it leaves out (the remainder: a bank's lost lift, the pitch attitude's change in a turn)
+    is added as a forcing of each state present. The aerodynamic forces stay linear."""
+
+    A: np.ndarray  # continuous, its first states the model's outputs
+    B: np.ndarray
+    dt: float
+    state: Mapping[int, int]  # KINEMATIC_STATES index → the model's state
+    output: Mapping[int, int]  # the model's output → its state
+    trim: np.ndarray  # the trim in KINEMATIC_STATES order, absolute, SI
+    drag: tuple[int, float] | None = None  # (the airspeed's state, V̇'s gain on β²)
+
+    def simulate(self, u: np.ndarray) -> np.ndarray:
+        """The outputs (deviations from trim) driven by u, each sample held over dt."""
+        n, r = self.B.shape
+        k = len(KINEMATIC_STATES)
+        block = np.zeros((n + r + k, n + r + k))
+        block[:n, :n], block[:n, n : n + r] = self.A, self.B
+        for i, j in self.state.items():
+            block[j, n + r + i] = 1.0  # the remainder's row i forces state j
+        phi = scipy.linalg.expm(block * self.dt)
+        Ad, Bd, Ed = phi[:n, :n], phi[:n, n : n + r], phi[:n, n + r :]
+        jacobian = kinematic_jacobian(self.trim)
+        at_trim = kinematics(self.trim)
+        which = np.array(list(self.state)), np.array(list(self.state.values()))
+        beta = KINEMATIC_STATES.index("beta")
+        x, out = np.zeros(n), np.empty((len(u), len(self.output)))
+        deviation = np.zeros(k)
+        for step, row in enumerate(u):
+            out[step] = x[list(self.output.values())]
+            deviation[which[0]] = x[which[1]]
+            forcing = kinematics(self.trim + deviation) - at_trim - jacobian @ deviation
+            x = Ad @ x + Bd @ row + Ed @ forcing
+            if self.drag is not None:
+                x[self.drag[0]] += self.drag[1] * deviation[beta] ** 2 * self.dt
+        return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class Predictor:
+    """A linear model of the aircraft that predicts a plan's response."""
+
+    model: StateSpace  # discrete, at dt, inputs and outputs deviations from trim
+    dt: float
+    inputs: Mapping[str, int]  # control role → the model's input column
+    outputs: Mapping[str, int]  # output role (agent.channels) → the model's output column
+    per_unit: Mapping[str, float]  # control → the record's units per plan unit
+    airspeed: float | None  # the trim airspeed (m/s); None: unknown (no airspeed, load
+    # factor or height predicted)
+    flown: Mapping[str, float] = field(default_factory=dict)
+    """Control → the largest deflection (plan units) in the data the model came from."""
+    source: str = "model"
+    kinematic: Kinematic | None = None
+    """The model's states as aircraft states, for a prediction with the rigid body's full
+    kinematics (None: the linear model alone)."""
+    correction: Mapping[str, float] = field(default_factory=dict)
+    """Quantity → how much more its data moved with the inputs than the model predicts on
+    them (≥ 1; `checked`)."""
+    unexplained: Mapping[str, float] = field(default_factory=dict)
+    """Quantity → the largest excursion of its data that no input explains (`checked`)."""
+    linkage: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    """Control → (gain, even): its recorded position per commanded deflection and per
+    |commanded| deflection, measured on the last run (agent.excitation.follow); without it
+    the record follows the command at `per_unit`."""
+
+    def commands(self, timeline: Timeline, factors: Mapping[str, float]) -> np.ndarray:
+        """The model's inputs (record units, at dt) for the timeline's controls, each times its
+        factor (a control absent from `factors` is left out), over the plan and TAIL_S."""
+        n = math.ceil((timeline.duration + TAIL_S) / self.dt)
+        index = np.minimum((np.arange(n) * self.dt / timeline.dt).astype(int), timeline.count)
+        u = np.zeros((n, self.model.B.shape[1]))
+        for control, factor in factors.items():
+            if control in self.inputs and control in timeline.values:
+                values = np.append(timeline.values[control], 0.0)[index]
+                gain, even = self.linkage.get(control, (self.per_unit[control], 0.0))
+                u[:, self.inputs[control]] += factor * (gain * values + even * np.abs(values))
+        return u
+
+    def response(self, timeline: Timeline, control: str) -> dict[str, np.ndarray]:
+        """Each quantity's predicted time history for `control`'s part of the timeline alone,
+        by the linear model (an empty dict when the model does not take the control)."""
+        if control not in self.inputs or control not in timeline.values:
+            return {}
+        with np.errstate(all="ignore"):
+            y = simulate(self.model, self.commands(timeline, {control: 1.0}))
+        if not np.all(np.isfinite(y)):
+            return {}
+        return self._quantities(y)
+
+    def nonlinear(self, timeline: Timeline, factors: Mapping[str, float]) -> dict[str, np.ndarray]:
+        """Each quantity's predicted time history with every control playing at its factor, by
+        the model with the rigid body's full kinematics (the linear model's without them)."""
+        u = self.commands(timeline, factors)
+        with np.errstate(all="ignore"):
+            y = simulate(self.model, u) if self.kinematic is None else self.kinematic.simulate(u)
+        if not np.all(np.isfinite(y)):
+            return {}
+        return self._quantities(y)
+
+    def _quantities(self, y: np.ndarray) -> dict[str, np.ndarray]:
+        out = {}
+        col = self.outputs
+
+        def has(*roles: str) -> bool:
+            return all(r in col for r in roles)
+
+        if has("phi"):
+            out["bank_deg"] = np.degrees(y[:, col["phi"]])
+        if has("airspeed") and self.airspeed:
+            out["airspeed_pct"] = 100 * y[:, col["airspeed"]] / self.airspeed
+        if has("alpha"):
+            out["alpha_deg"] = np.degrees(y[:, col["alpha"]])
+        if has("beta"):
+            out["beta_deg"] = np.degrees(y[:, col["beta"]])
+        if has("theta"):
+            out["pitch_deg"] = np.degrees(y[:, col["theta"]])
+        if has("q", "alpha") and self.airspeed:
+            alpha_rate = np.gradient(y[:, col["alpha"]], self.dt)
+            out["load_factor"] = self.airspeed * (y[:, col["q"]] - alpha_rate) / G
+        if has("theta", "alpha") and self.airspeed:
+            climb = self.airspeed * (y[:, col["theta"]] - y[:, col["alpha"]])
+            out["height_loss_m"] = -np.cumsum(climb) * self.dt  # positive: height lost
+        return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class Sizing:
+    """What the agent will fly: the sized plan, why each amplitude, and what it predicts."""
+
+    plan: Plan
+    factors: dict[str, float]  # control → the factor on the plan's amplitudes
+    amplitudes: dict[str, float]  # control → its largest deflection (plan units)
+    limited_by: dict[str, str]  # control → what set its amplitude
+    predicted: dict[str, float]  # quantity → its predicted peak (None: no model)
+    source: str
+    refusals: list[str] = field(default_factory=list)  # the envelope's, from the prediction
+    corrections: dict[str, float] = field(default_factory=dict)  # the predictor's (≥ 1)
+    unexplained: dict[str, float] = field(default_factory=dict)  # the predictor's
+
+    def lines(self, units: Mapping[str, str] | None = None) -> list[str]:
+        """The sizing as lines for the operator."""
+        units = units or {}
+        return describe(
+            source=self.source,
+            controls=[
+                (c, a, units.get(c, ""), self.factors[c], self.limited_by[c])
+                for c, a in self.amplitudes.items()
+            ],
+            predicted=self.predicted,
+            corrections=self.corrections,
+            unexplained=self.unexplained,
+            refusals=self.refusals,
+        )
+
+
+def describe(
+    *,
+    source: str,
+    controls: Sequence[tuple[str, float, str, float, str]],
+    predicted: Mapping[str, float],
+    corrections: Mapping[str, float],
+    unexplained: Mapping[str, float],
+    refusals: Sequence[str],
+) -> list[str]:
+    """A sizing as lines for the operator; `controls`: (control, amplitude, unit, factor,
+    what limited it)."""
+
+    def each(values: Mapping[str, float], form: str) -> str:
+        return ", ".join(
+            form.format(label=LABELS.get(q, q), v=v, unit=QUANTITIES.get(q, ""))
+            for q, v in values.items()
+        )
+
+    out = [f"amplitudes sized by {source}"]
+    out += [f"  {c} {a:.3g} {unit} (×{f:.2f}: {why})" for c, a, unit, f, why in controls]
+    if predicted:
+        out.append("  predicted: " + each(predicted, "{label} {v:.3g}{unit}"))
+    if corrections:
+        out.append(
+            "  its data moved more than it predicts: " + each(corrections, "{label} ×{v:.2f}")
+        )
+    if unexplained:
+        out.append(
+            "  its data moved besides the inputs (turbulence, drift; checked against the "
+            "envelope): " + each(unexplained, "{label} {v:.3g}{unit}")
+        )
+    out += [f"REFUSED: {r}" for r in refusals]
+    return out
+
+
+def message_lines(sized: messages.Sizing) -> list[str]:
+    """A sizing as the ground hears it, as lines for the operator."""
+    return describe(
+        source=sized.source,
+        controls=[(c.control, c.amplitude, c.unit, c.factor, c.limited_by) for c in sized.controls],
+        predicted=sized.predicted,
+        corrections=sized.corrections,
+        unexplained=sized.unexplained,
+        refusals=sized.refusals,
+    )
+
+
+def peaks(responses: Mapping[str, np.ndarray]) -> dict[str, float]:
+    """Each quantity's largest magnitude (the height lost: its largest positive value)."""
+    out = {}
+    for q, v in responses.items():
+        out[q] = float(max(np.max(v), 0.0)) if q == "height_loss_m" else float(np.max(np.abs(v)))
+    return out
+
+
+def targets(config: SizingConfig) -> dict[str, float]:
+    """The configured target of each quantity (the height lost has none: the envelope's)."""
+    return {
+        "bank_deg": config.bank_deg,
+        "airspeed_pct": config.airspeed_pct,
+        "alpha_deg": config.alpha_deg,
+        "beta_deg": config.beta_deg,
+        "pitch_deg": config.pitch_deg,
+        "load_factor": config.load_factor,
+    }
+
+
+def within(
+    goal: Mapping[str, float],
+    envelope: Envelope,
+    airspeed: float | None,
+    trim: Mapping[str, float] | None = None,
+    unexplained: Mapping[str, float] | None = None,
+) -> dict[str, float]:
+    """The targets, each within ENVELOPE_SHARE of the room the envelope leaves from the trim
+    (`trim`: the flight state now by output role, SI) once what no input explains is taken
+    off: a sizing aims inside the limits the run is held to."""
+    trim, unexplained = trim or {}, unexplained or {}
+    out = dict(goal)
+    room = {
+        "bank_deg": envelope.max_bank_deg - abs(math.degrees(trim.get("phi", 0.0))),
+        "pitch_deg": envelope.max_pitch_deg - abs(math.degrees(trim.get("theta", 0.0))),
+        "alpha_deg": envelope.max_alpha_deg - math.degrees(trim.get("alpha", 0.0)),
+    }
+    v0 = trim.get("airspeed", airspeed)
+    if v0:
+        room["airspeed_pct"] = (
+            100 * min(v0 - envelope.min_airspeed, envelope.max_airspeed - v0) / v0
+        )
+    for q, limit in room.items():
+        limit = ENVELOPE_SHARE * (limit - unexplained.get(q, 0.0))
+        if q in out and limit > 0:
+            out[q] = min(out[q], limit)
+    return out
+
+
+def scaled(plan: Plan, factors: Mapping[str, float]) -> Plan:
+    """`plan` with each control's signals' amplitudes times its factor."""
+    segments = tuple(
+        segment.model_copy(
+            update={
+                "signals": {
+                    c: sig.model_copy(update={"amplitude": sig.amplitude * factors.get(c, 1.0)})
+                    for c, sig in segment.signals.items()
+                }
+            }
+        )
+        for segment in plan.segments
+    )
+    return plan.model_copy(update={"segments": segments})
+
+
+def size(
+    plan: Plan,
+    timeline: Timeline,
+    predictor: Predictor | None,
+    config: SizingConfig,
+    surfaces: Mapping[str, Surface],
+    envelope: Envelope,
+    trim: Mapping[str, float] | None = None,
+) -> Sizing:
+    """The plan's amplitudes sized to the aircraft (module docstring); `timeline` is the plan
+    rendered, `trim` the flight state now (output roles, SI) for the envelope check."""
+    controls = list(timeline.values)
+    peak = {c: float(np.max(np.abs(timeline.values[c]))) for c in controls}
+    ceiling = {c: surfaces[c].max_amplitude / peak[c] if peak[c] > 0 else 1.0 for c in controls}
+    if predictor is None:
+        factors = {c: min(config.build_up, ceiling[c]) for c in controls}
+        return Sizing(
+            plan=scaled(plan, factors),
+            factors=factors,
+            amplitudes={c: factors[c] * peak[c] for c in controls},
+            limited_by={c: f"build-up: {config.build_up:g} of the plan" for c in controls},
+            predicted={},
+            source="build-up (no model of the aircraft yet: this run calibrates the next)",
+        )
+    goal = within(targets(config), envelope, predictor.airspeed, trim, predictor.unexplained)
+    alone = {c: predictor.response(timeline, c) for c in controls}
+    factors, limited_by = {}, {}
+    for c in controls:
+        own = peaks(alone[c])
+        limits = {"max_amplitude": ceiling[c]}
+        flown = predictor.flown.get(c, 0.0)
+        if flown > 0 and peak[c] > 0:
+            limits[f"{config.max_growth:g}× the {flown:.3g} its model saw"] = (
+                config.max_growth * flown / peak[c]
+            )
+        for q, target in goal.items():
+            if own.get(q, 0.0) > 0:
+                limits[f"{LABELS[q]} {target:g}{QUANTITIES[q]}"] = target / own[q]
+        if len(limits) == 1 and not alone[c]:
+            limits = {"build-up: its model does not take it": min(config.build_up, ceiling[c])}
+        limited_by[c] = min(limits, key=limits.get)
+        factors[c] = limits[limited_by[c]]
+    own = {c: peaks(alone[c]) for c in controls}
+    # Cheap rounds on the linear responses first, then the kinematics in full (a bank's lost
+    # lift costs height and gains speed, which no superposition of linear responses shows).
+    for full in (False, True):
+        for _ in range(ROUNDS if not full else FULL_ROUNDS):
+            total = _estimate(predictor, timeline, alone, own, factors, full)
+            over = {q: goal[q] / total[q] for q in goal if total.get(q, 0.0) > goal[q] * SLACK}
+            if not over:
+                break
+            for q, ratio in over.items():
+                share = {c: factors[c] * own[c].get(q, 0.0) for c in controls}
+                for c in controls:
+                    if share[c] >= CONTRIBUTION * max(share.values()):
+                        factors[c] *= ratio
+                        limited_by[c] = f"{LABELS[q]} {goal[q]:g}{QUANTITIES[q]} with the others"
+    predicted = _estimate(predictor, timeline, alone, own, factors, True)
+    sized = scaled(plan, factors)
+    return Sizing(
+        plan=sized,
+        factors=factors,
+        amplitudes={c: factors[c] * peak[c] for c in controls},
+        limited_by=limited_by,
+        predicted=predicted,
+        source=predictor.source,
+        refusals=envelope_refusals(
+            with_unexplained(predicted, predictor), envelope, predictor.airspeed, trim
+        ),
+        corrections=dict(predictor.correction),
+        unexplained=dict(predictor.unexplained),
+    )
+
+
+def predict(predictor: Predictor, timeline: Timeline) -> dict[str, float]:
+    """The peaks of the plan's predicted response, every control playing as rendered (times
+    the predictor's corrections), with what no input explains added: the peaks the
+    envelope is checked against."""
+    found = peaks(predictor.nonlinear(timeline, dict.fromkeys(timeline.values, 1.0)))
+    corrected = {q: v * predictor.correction.get(q, 1.0) for q, v in found.items()}
+    return with_unexplained(corrected, predictor)
+
+
+def with_unexplained(predicted: Mapping[str, float], predictor: Predictor) -> dict[str, float]:
+    """The predicted peaks with the model's unexplained excursions added (`checked`)."""
+    return {q: v + predictor.unexplained.get(q, 0.0) for q, v in predicted.items()}
+
+
+def _estimate(
+    predictor: Predictor,
+    timeline: Timeline,
+    alone: Mapping[str, dict],
+    own: Mapping[str, dict[str, float]],
+    factors: Mapping[str, float],
+    full: bool,
+) -> dict[str, float]:
+    """The peaks a run is sized by: each quantity's larger of the controls' responses together
+    (with the kinematics in full when `full` and the model allows) and the root-sum-square of
+    each control's own peak. No credit is taken for one control's response cancelling
+    another's: on the C172R the throttle's roll (the propeller's torque) cancelled half the
+    ailerons' bank in the prediction, and the aircraft flown banked twice as far."""
+    together = predictor.nonlinear(timeline, factors) if full else {}
+    together = peaks(together or _combined(alone, factors))
+    out = {}
+    for q in {*together, *(q for p in own.values() for q in p)}:
+        rss = math.sqrt(sum((factors[c] * p.get(q, 0.0)) ** 2 for c, p in own.items()))
+        out[q] = max(together.get(q, 0.0), rss) * predictor.correction.get(q, 1.0)
+    return out
+
+
+def _combined(alone: Mapping[str, dict], factors: Mapping[str, float]) -> dict[str, np.ndarray]:
+    out: dict[str, np.ndarray] = {}
+    for c, responses in alone.items():
+        for q, v in responses.items():
+            out[q] = out.get(q, 0.0) + factors.get(c, 1.0) * v
+    return out
+
+
+def envelope_refusals(
+    predicted: Mapping[str, float],
+    envelope: Envelope,
+    airspeed: float | None,
+    trim: Mapping[str, float] | None = None,
+) -> list[str]:
+    """Where the predicted response, from the trim, leaves the envelope (empty: it stays in).
+    `trim` holds the flight state now by output role (SI); without it the trim is wings
+    level at `airspeed`, α and θ unknown (their limits checked on the excursion alone)."""
+    trim = trim or {}
+    v0 = trim.get("airspeed", airspeed)
+    reasons = []
+
+    def check(quantity: str, start: float, limit: float, what: str, unit: str) -> None:
+        if quantity in predicted and abs(start) + predicted[quantity] > limit:
+            reasons.append(
+                f"predicted {what} {abs(start) + predicted[quantity]:.3g}{unit} exceeds the "
+                f"envelope's {limit:g}{unit}"
+            )
+
+    check("bank_deg", math.degrees(trim.get("phi", 0.0)), envelope.max_bank_deg, "bank", "°")
+    check("pitch_deg", math.degrees(trim.get("theta", 0.0)), envelope.max_pitch_deg, "pitch", "°")
+    check("alpha_deg", math.degrees(trim.get("alpha", 0.0)), envelope.max_alpha_deg, "α", "°")
+    check("height_loss_m", 0.0, envelope.max_altitude_loss_m, "height loss", " m")
+    if "airspeed_pct" in predicted and v0:
+        swing = v0 * predicted["airspeed_pct"] / 100
+        if v0 - swing < envelope.min_airspeed:
+            reasons.append(
+                f"predicted airspeed {v0 - swing:.3g} m/s is below the envelope's "
+                f"{envelope.min_airspeed:g} m/s"
+            )
+        if v0 + swing > envelope.max_airspeed:
+            reasons.append(
+                f"predicted airspeed {v0 + swing:.3g} m/s is above the envelope's "
+                f"{envelope.max_airspeed:g} m/s"
+            )
+    return reasons
+
+
+def per_unit(surface: Surface) -> float:
+    """The record's units per plan unit of a control: a throttle's plan is in percent and its
+    record the servo output (µs, `us_per_unit` per percent, in the control's direction); a
+    surface's plan and its potentiometer are both degrees of the surface."""
+    return surface.direction * surface.us_per_unit if surface.unit == "percent" else 1.0
+
+
+def predictor_from(
+    candidate: Candidate,
+    channels: Channels,
+    surfaces: Mapping[str, Surface],
+    source: str,
+    flight: Mapping[str, float] | None = None,
+    linkage: Mapping[str, tuple[float, float]] | None = None,
+) -> Predictor | None:
+    """A stored model as a predictor of the plans' response (None: see `predictor`)."""
+    return predictor(
+        candidate.result,
+        trim=(candidate.trim or {}).get("outputs", {}),
+        experiments=candidate.experiments,
+        channels=channels,
+        surfaces=surfaces,
+        source=source,
+        flight=flight,
+        linkage=linkage,
+    )
+
+
+def predictor(
+    result: ResultDocument,
+    *,
+    trim: Mapping[str, float],
+    experiments: Sequence[tuple[np.ndarray, np.ndarray]],
+    channels: Channels,
+    surfaces: Mapping[str, Surface],
+    source: str,
+    flight: Mapping[str, float] | None = None,
+    linkage: Mapping[str, tuple[float, float]] | None = None,
+) -> Predictor | None:
+    """An identified model as a predictor of the plans' response: `trim` is its record's trim
+    outputs by channel, `experiments` its data (u, y), trim removed, `flight` the flight
+    state now by output role (the trim of what the model does not hold). None when it
+    predicts nothing a sizing uses: no configured control among its inputs or no output of a
+    quantity. Without a known airspeed (a lateral model, flown with no flight state yet) the
+    airspeed, load factor and height are not predicted."""
+    inputs = {
+        role: result.inputs.index(name)
+        for role in surfaces
+        if (name := getattr(channels, role, None)) in result.inputs
+    }
+    outputs = {
+        role: result.outputs.index(getattr(channels, role))
+        for role in OUTPUT_ROLES
+        if getattr(channels, role) in result.outputs
+    }
+    known = {
+        role: trim[getattr(channels, role)]
+        for role in OUTPUT_ROLES
+        if getattr(channels, role) in trim
+    }
+    state = {**(flight or {}), **known}  # the model's own trim first, else the flight's now
+    airspeed = state.get("airspeed")
+    airspeed = float(airspeed) if airspeed and airspeed > 0 else None
+    if not inputs or not outputs:
+        return None
+    scale = {c: per_unit(surfaces[c]) for c in inputs}
+    linkage = {c: v for c, v in (linkage or {}).items() if c in inputs}
+    # The deflections its data saw, in plan units: through the measured linkage when known (a
+    # surface that moves a third of its command saw three times its recorded deflection).
+    gain = {c: abs(linkage[c][0]) if c in linkage else abs(scale[c]) for c in inputs}
+    flown = {
+        c: max((float(np.max(np.abs(u[:, j]))) for u, _ in experiments), default=0.0) / gain[c]
+        for c, j in inputs.items()
+        if gain[c] > 0
+    }
+    matrices = (result.A, result.B, result.C, result.D)
+    model = StateSpace(*(np.asarray(m, dtype=float) for m in matrices))
+    unchecked = Predictor(
+        model=model,
+        dt=result.dt,
+        inputs=inputs,
+        outputs=outputs,
+        per_unit=scale,
+        airspeed=airspeed,
+    )
+    correction, unexplained = checked(unchecked, experiments)
+    return Predictor(
+        model=model,
+        dt=result.dt,
+        inputs=inputs,
+        outputs=outputs,
+        per_unit=scale,
+        airspeed=airspeed,
+        flown=flown,
+        source=source,
+        kinematic=_kinematic(result, outputs, state),
+        correction=correction,
+        unexplained=unexplained,
+        linkage=linkage,
+    )
+
+
+def checked(predictor: Predictor, experiments) -> tuple[dict[str, float], dict[str, float]]:
+    """The model checked on its own data, quantity by quantity (CORRECTED; both sides
+    smoothed over SMOOTH_S): the correction, the least-squares gain of the measured excursion
+    on the one the model predicts from the same recorded inputs, when above 1 (at most
+    MAX_CORRECTION); and the unexplained excursion, the largest of what the corrected
+    prediction leaves (turbulence, an untrimmed drift). The correction scales the model's
+    predictions of the response to the inputs: on JSBSim's T-6 the bank moved twice as far
+    with the inputs as the model predicted, and the next run, sized without it, banked to
+    31°. The unexplained excursion does not scale with the inputs; it is added to the peaks
+    the envelope is checked against, not to those the targets size (a plan sized smaller
+    in turbulence would only stand less above it)."""
+    gains: dict[str, float] = {}
+    unexplained: dict[str, float] = {}
+    window = max(1, round(SMOOTH_S / predictor.dt))
+    for u, y in experiments:
+        if len(u) <= window:
+            continue
+        with np.errstate(all="ignore"):
+            model = simulate(predictor.model, np.asarray(u, dtype=float))
+        if not np.all(np.isfinite(model)):
+            continue
+        measured = _smoothed(predictor._quantities(np.asarray(y, dtype=float)), window)
+        predicted = _smoothed(predictor._quantities(model), window)
+        for q in CORRECTED:
+            if q not in measured or q not in predicted:
+                continue
+            m, p = measured[q] - measured[q][0], predicted[q] - predicted[q][0]
+            power = float(p @ p)
+            if power <= 0:
+                continue
+            gain = float(np.clip((m @ p) / power, 1.0, MAX_CORRECTION))
+            gains[q] = max(gains.get(q, 1.0), gain)
+            unexplained[q] = max(unexplained.get(q, 0.0), float(np.max(np.abs(m - gain * p))))
+    return {q: g for q, g in gains.items() if g > 1.0}, unexplained
+
+
+def _smoothed(responses: Mapping[str, np.ndarray], window: int) -> dict[str, np.ndarray]:
+    kernel = np.ones(window) / window
+    return {q: np.convolve(v, kernel, mode="valid") for q, v in responses.items()}
+
+
+def _kinematic(
+    result: ResultDocument, outputs: Mapping[str, int], state: Mapping[str, float]
+) -> Kinematic | None:
+    """The model as a Kinematic one, when its continuous form's states include its outputs
+    and the trim of every aircraft state is known (None otherwise)."""
+    cont = result.continuous
+    if cont is None or result.coordinates != "outputs":
+        return None
+    # A steady trim has no rates and, the aircraft being symmetric, no sideslip: those may be
+    # unknown; the airspeed, α and the attitude must be known.
+    state = {"q": 0.0, "p": 0.0, "r": 0.0, "beta": 0.0, **state}
+    if any(role not in state for role in KINEMATIC_STATES):
+        return None
+    C = np.asarray(cont.C, dtype=float)
+    of_output = {}
+    for i, row in enumerate(C):
+        ones = np.flatnonzero(row)
+        if len(ones) != 1 or row[ones[0]] != 1.0:
+            return None  # an output that is not one state
+        of_output[i] = int(ones[0])
+    states = {
+        KINEMATIC_STATES.index(role): of_output[column]
+        for role, column in outputs.items()
+        if role in KINEMATIC_STATES
+    }
+    drag = None
+    aircraft = result.aircraft
+    if aircraft is not None and aircraft.sideslip_drag is not None and "airspeed" in outputs:
+        drag = (of_output[outputs["airspeed"]], aircraft.sideslip_drag.gain)
+    return Kinematic(
+        A=np.asarray(cont.A, dtype=float),
+        B=np.asarray(cont.B, dtype=float),
+        dt=result.dt,
+        state=states,
+        output=of_output,
+        trim=np.array([state[role] for role in KINEMATIC_STATES], dtype=float),
+        drag=drag,
+    )

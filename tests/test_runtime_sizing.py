@@ -1,0 +1,158 @@
+"""The plans' sizing onboard: the ground's size request answered with the sizing, from the build-up
+with no model to the model the agent identified; an arm whose predicted response leaves the
+envelope refused before anything is armed.
+
+The agent is real (its command handlers, its identification with the worker's jobs on a
+thread, its model store); the record is the thesis's A.2 lateral flight.
+
+Bad input tried: a size request before any model (the build-up, no prediction); a plan on a
+control the aircraft does not have (refused with the reason, no sizing sent); an arm whose
+plan the model predicts past the envelope's bank limit (refused, nothing armed); the same plan
+with no model to predict it (armed: no prediction, no refusal).
+"""
+
+from __future__ import annotations
+
+import csv
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agent.config import Config, Envelope, Excitation, IdentificationConfig, Recorder
+from agent.excitation.plan import preset
+from agent.excitation.scheduler import Window
+from agent.link import messages
+from agent.runtime import Agent
+from drivers.values import FlightState
+
+A2 = Path(__file__).resolve().parents[1] / "examples" / "a2_lateral.csv"
+
+
+def make_agent(tmp_path, envelope: Envelope | None = None) -> Agent:
+    config = Config(
+        recorder=Recorder(log_dir=str(tmp_path / "logs"), rate_hz=50.0),
+        identification=IdentificationConfig(axes="lateral", refine=False),
+        excitation=Excitation(envelope=envelope or Envelope()),
+    )
+    agent = Agent(
+        config, base=tmp_path, worker=lambda: ThreadPoolExecutor(1, thread_name_prefix="worker")
+    )
+    agent.sent = []
+    agent.downlink.subscribe(agent.sent.append)
+    # Level flight at the A.2 record's airspeed, as the autopilot reports it.
+    agent.scheduler.update_state(FlightState(0.0, 0.0, 2.0, 25.0, 4.0, 300.0))
+    return agent
+
+
+def a2_rows(agent) -> np.ndarray:
+    with A2.open() as handle:
+        table = list(csv.DictReader(handle))
+    channels = agent.recorder.channels
+    rows = np.full((len(table), 1 + 2 * len(channels)), np.nan)
+    rows[:, 0] = [float(r["time"]) for r in table]
+    for name in ("aileron", "rudder", "beta", "p", "r", "phi"):
+        rows[:, 1 + channels.index(name)] = [float(r[name]) for r in table]
+    return rows
+
+
+async def command(agent, message, seq: int) -> messages.Ack:
+    await agent.commands.handle(message, seq)
+    return next(m for m in agent.sent if isinstance(m, messages.Ack) and m.ref == seq)
+
+
+def sizings(agent) -> list[messages.Sizing]:
+    return [m for m in agent.sent if isinstance(m, messages.Sizing)]
+
+
+async def identify_a2(agent) -> messages.Result:
+    plan = preset("lateral")
+    rows = a2_rows(agent)
+    window = Window(plan.id, plan.axes, rows[0, 0], rows[-1, 0], "finished")
+    await agent.identification.identify(window, rows)
+    return [m for m in agent.sent if isinstance(m, messages.Result)][-1]
+
+
+@pytest.fixture
+def agent(tmp_path):
+    a = make_agent(tmp_path)
+    yield a
+    a.close()
+
+
+async def test_size_requests_build_up_then_follow_the_identified_model(agent):
+    plan = preset("lateral")
+    ack = await command(agent, messages.SizeRequest(plan=plan), 1)
+    assert ack.ok, ack.reason
+    first = sizings(agent)[-1]
+    assert first.source.startswith("build-up")
+    assert first.predicted == {}
+    build_up = agent.config.excitation.sizing.build_up
+    assert {c.control: c.factor for c in first.controls} == {
+        "aileron": build_up,
+        "rudder": build_up,
+    }
+    # The plan to arm is the sized one, and it crosses the link as it is.
+    wire = messages.from_dict(messages.to_dict(first))
+    assert wire == first
+
+    result = await identify_a2(agent)
+    assert result.checks["stability"]
+    assert result.checks["fit"]
+    ack = await command(agent, messages.SizeRequest(plan=plan), 2)
+    assert ack.ok, ack.reason
+    second = sizings(agent)[-1]
+    assert result.model_id in second.source
+    assert "not yet accepted" in second.source
+    targets = agent.config.excitation.sizing
+    assert 0 < second.predicted["bank_deg"] <= targets.bank_deg * 1.01
+    assert second.predicted["beta_deg"] <= targets.beta_deg * 1.01
+    assert not second.refusals
+
+    ack = await command(agent, messages.Decision(model_id=result.model_id, accept=True), 3)
+    assert ack.ok, ack.reason
+    await command(agent, messages.SizeRequest(plan=plan), 4)
+    assert sizings(agent)[-1].source == f"nominal model {result.model_id}"
+
+
+async def test_a_plan_on_a_control_the_aircraft_lacks_is_not_sized(tmp_path):
+    agent = make_agent(tmp_path)
+    try:
+        surfaces = {k: v for k, v in agent.config.excitation.surfaces.items() if k != "rudder"}
+        agent.config = agent.config.model_copy(
+            update={"excitation": agent.config.excitation.model_copy(update={"surfaces": surfaces})}
+        )
+        agent.sizer.config = agent.config
+        ack = await command(agent, messages.SizeRequest(plan=preset("lateral")), 1)
+        assert not ack.ok
+        assert "rudder" in ack.reason
+        assert sizings(agent) == []
+    finally:
+        agent.close()
+
+
+async def test_an_arm_the_prediction_takes_out_of_the_envelope_is_refused(tmp_path):
+    agent = make_agent(tmp_path, Envelope(max_bank_deg=3.0))
+    try:
+        plan = preset("lateral")
+        # No model yet: nothing predicts the run, so the plan is armed as given.
+        ack = await command(agent, messages.Arm(plan=plan), 1)
+        assert ack.ok, ack.reason
+        agent.scheduler.disarm()
+        await identify_a2(agent)
+        ack = await command(agent, messages.Arm(plan=plan), 2)
+        assert not ack.ok
+        assert "predicted bank" in ack.reason
+        assert "3°" in ack.reason
+        assert agent.scheduler.status != "armed"
+        assert agent.counters["refused_by_prediction"] == 1
+        # Sized, the same plan aims inside the envelope's bank, and arms.
+        await command(agent, messages.SizeRequest(plan=plan), 3)
+        sized = sizings(agent)[-1]
+        assert not sized.refusals
+        assert sized.predicted["bank_deg"] <= 0.9 * 3.0 * 1.01
+        ack = await command(agent, messages.Arm(plan=sized.plan), 4)
+        assert ack.ok, ack.reason
+    finally:
+        agent.close()

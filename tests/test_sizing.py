@@ -1,0 +1,199 @@
+"""Plans sized to the aircraft (agent/sizing.py): each control's amplitude from the response the
+model predicts, the controls together within the targets, the limits (max_amplitude, the
+build-up), the envelope's refusal, and the model checked on its own data.
+
+The model is the thesis's A.2 lateral Super Cub (eq. A.2), whose aileron and rudder move the
+bank and the sideslip; no mock stands in for it.
+
+Bad input tried: no model at all (the build-up flies); a model that predicts nothing for one
+of the plan's controls (that control stays at the build-up); a model whose data moved half as
+far as it predicts (no correction below 1) and twice as far (its predictions doubled); two
+controls whose responses cancel (no credit taken for it); an envelope the predicted bank
+leaves (refused, naming the bank); a linkage with an even part (its bias predicted).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agent import sizing
+from agent.config import Envelope, Excitation, Sizing
+from agent.excitation.plan import preset, render
+from agent.ident.convert import StateSpace, discretize
+from agent.ident.fit import simulate
+from agent.ident.reference import LATERAL
+
+DT = 0.02
+EX = Excitation()
+ROLES = {"beta": 0, "p": 1, "r": 2, "phi": 3}
+
+
+def lateral(**changes) -> sizing.Predictor:
+    """The A.2 lateral model as a predictor: aileron and rudder in degrees, β, p, r, φ."""
+    Ad, Bd = discretize(LATERAL.A, LATERAL.B, DT)
+    model = StateSpace(Ad, Bd, np.eye(4), np.zeros((4, 2)))
+    fields = dict(
+        model=model,
+        dt=DT,
+        inputs={"aileron": 0, "rudder": 1},
+        outputs=ROLES,
+        per_unit={"aileron": 1.0, "rudder": 1.0},
+        airspeed=25.0,
+        source="the A.2 model",
+    )
+    return sizing.Predictor(**{**fields, **changes})
+
+
+@pytest.fixture(scope="module")
+def plan_and_timeline():
+    plan = preset("lateral")
+    return plan, render(plan, EX.rate_hz)
+
+
+def test_no_model_flies_the_build_up(plan_and_timeline):
+    plan, timeline = plan_and_timeline
+    sized = sizing.size(plan, timeline, None, EX.sizing, EX.surfaces, EX.envelope)
+    assert sized.factors == {"aileron": EX.sizing.build_up, "rudder": EX.sizing.build_up}
+    assert all(why.startswith("build-up") for why in sized.limited_by.values())
+    assert sized.predicted == {}
+    played = render(sized.plan, EX.rate_hz)
+    for c in ("aileron", "rudder"):
+        assert np.allclose(played.values[c], EX.sizing.build_up * timeline.values[c])
+
+
+def test_each_control_is_sized_to_its_targets_and_together_they_stay_within(plan_and_timeline):
+    plan, timeline = plan_and_timeline
+    targets = Sizing(bank_deg=10.0, beta_deg=3.0)
+    sized = sizing.size(plan, timeline, lateral(), targets, EX.surfaces, EX.envelope)
+    goal = sizing.targets(targets)
+    for q, peak in sized.predicted.items():
+        if q in goal:
+            assert peak <= goal[q] * sizing.SLACK + 1e-9, (q, peak)
+    # Something binds: the bank or the sideslip is on its target (not a limit of the surface).
+    assert max(sized.predicted["bank_deg"] / 10.0, sized.predicted["beta_deg"] / 3.0) > 0.98
+    # What the plan flies is what was predicted: the sized plan's own prediction agrees.
+    again = sizing.predict(lateral(), render(sized.plan, EX.rate_hz))
+    assert again["bank_deg"] == pytest.approx(sized.predicted["bank_deg"], rel=0.05)
+    # The lines for the operator name each control's amplitude and what limited it.
+    text = "\n".join(sized.lines({"aileron": "deg", "rudder": "deg"}))
+    assert "aileron" in text
+    assert "rudder" in text
+    assert "predicted" in text
+
+
+def test_limits_hold_whatever_the_targets_allow(plan_and_timeline):
+    plan, timeline = plan_and_timeline
+    generous = Sizing(bank_deg=60.0, beta_deg=20.0, max_growth=1.5)
+    flown = {"aileron": 0.5, "rudder": 0.5}
+    sized = sizing.size(plan, timeline, lateral(flown=flown), generous, EX.surfaces, EX.envelope)
+    for c in ("aileron", "rudder"):
+        assert sized.amplitudes[c] <= 1.5 * 0.5 + 1e-9
+        assert sized.limited_by[c].startswith("1.5× the 0.5")
+    unbounded = sizing.size(plan, timeline, lateral(), generous, EX.surfaces, EX.envelope)
+    for c in ("aileron", "rudder"):
+        assert unbounded.amplitudes[c] <= EX.surfaces[c].max_amplitude + 1e-9
+
+
+def test_a_control_the_model_does_not_take_stays_at_the_build_up(plan_and_timeline):
+    plan, timeline = plan_and_timeline
+    aileron_only = lateral(inputs={"aileron": 0}, per_unit={"aileron": 1.0})
+    sized = sizing.size(plan, timeline, aileron_only, EX.sizing, EX.surfaces, EX.envelope)
+    assert sized.factors["rudder"] == EX.sizing.build_up
+    assert "does not take it" in sized.limited_by["rudder"]
+
+
+def test_no_credit_for_responses_that_cancel(plan_and_timeline):
+    """Two inputs with opposite effects on every output: the simulated sum is zero, but each
+    alone moves the aircraft, and no model is trusted to cancel them exactly."""
+    plan, timeline = plan_and_timeline
+    Ad, Bd = discretize(LATERAL.A, LATERAL.B[:, :1], DT)
+    twin = StateSpace(Ad, np.hstack([Bd, -Bd]), np.eye(4), np.zeros((4, 2)))
+    same_signal = plan.model_copy(
+        update={
+            "segments": (
+                plan.segments[0].model_copy(
+                    update={
+                        "signals": {
+                            "aileron": plan.segments[0].signals["aileron"],
+                            "rudder": plan.segments[0].signals["aileron"],
+                        }
+                    }
+                ),
+            )
+        }
+    )
+    timeline = render(same_signal, EX.rate_hz)
+    predictor = lateral(model=twin)
+    both = sizing.size(same_signal, timeline, predictor, EX.sizing, EX.surfaces, EX.envelope)
+    alone = sizing.peaks(predictor.response(timeline, "aileron"))
+    assert both.predicted["bank_deg"] == pytest.approx(
+        np.hypot(both.factors["aileron"], both.factors["rudder"]) * alone["bank_deg"], rel=1e-6
+    )
+    assert both.predicted["bank_deg"] <= EX.sizing.bank_deg * sizing.SLACK
+
+
+def test_the_targets_stay_inside_the_envelope_and_a_plan_beyond_it_is_refused(
+    plan_and_timeline,
+):
+    plan, timeline = plan_and_timeline
+    tight = Envelope(max_bank_deg=2.0)
+    sized = sizing.size(plan, timeline, lateral(), EX.sizing, EX.surfaces, tight)
+    assert sized.refusals == []
+    assert sized.predicted["bank_deg"] <= sizing.ENVELOPE_SHARE * 2.0 * sizing.SLACK
+    # Banked 1.5° already, the room left is 0.5°.
+    banked = {"phi": np.radians(1.5)}
+    sized = sizing.size(plan, timeline, lateral(), EX.sizing, EX.surfaces, tight, trim=banked)
+    assert sized.predicted["bank_deg"] <= sizing.ENVELOPE_SHARE * 0.5 * sizing.SLACK
+    # Banked past the limit already: nothing fits, and the plan is refused.
+    beyond = {"phi": np.radians(2.5)}
+    sized = sizing.size(plan, timeline, lateral(), EX.sizing, EX.surfaces, tight, trim=beyond)
+    assert sized.refusals
+    assert "bank" in sized.refusals[0]
+    assert "2°" in sized.refusals[0]
+    # As given, the plan is predicted past the tight bank limit, not past the default one.
+    peaks = sizing.predict(lateral(), timeline)
+    assert any("bank" in r for r in sizing.envelope_refusals(peaks, tight, 25.0))
+    assert sizing.envelope_refusals(peaks, Envelope(), 25.0) == []
+
+
+def test_the_linkage_even_part_is_a_bias_the_prediction_carries(plan_and_timeline):
+    """Differential ailerons: the ganged aileron moves by 0.1° per |commanded degree| besides
+    its gain, a mean the doublet alone does not have, which banks the aircraft further."""
+    _plan, timeline = plan_and_timeline
+    plain = lateral()
+    biased = lateral(linkage={"aileron": (1.0, 0.1)})
+    u_plain = plain.commands(timeline, {"aileron": 1.0})
+    u_biased = biased.commands(timeline, {"aileron": 1.0})
+    assert np.mean(u_plain[:, 0]) == pytest.approx(0.0, abs=1e-9)
+    assert np.mean(u_biased[:, 0]) > 0.0
+    assert np.allclose(u_biased[:, 0] - u_plain[:, 0], 0.1 * np.abs(u_plain[:, 0]))
+
+
+def test_the_model_is_checked_on_its_own_data(plan_and_timeline):
+    """Data that moved twice as far as the model predicts double its predictions; data that
+    moved half as far change nothing (the model is not trusted to be conservative); a drift
+    that no input explains is kept apart."""
+    _, timeline = plan_and_timeline
+    predictor = lateral()
+    u = predictor.commands(timeline, {"aileron": 1.0, "rudder": 1.0})
+    y = simulate(predictor.model, u)
+    twice, unexplained = sizing.checked(predictor, [(u, 2.0 * y)])
+    assert max(unexplained.values()) < 0.05  # twice the prediction explains it all
+    for q in ("bank_deg", "beta_deg"):
+        assert twice[q] == pytest.approx(2.0, rel=0.01)
+    assert sizing.checked(predictor, [(u, 0.5 * y)])[0] == {}
+    # An excursion no input explains (a slow drift of 3° in bank) is not a correction: it
+    # is added to the peaks the envelope is checked against.
+    drift = np.zeros_like(y)
+    drift[:, ROLES["phi"]] = np.radians(3.0) * np.linspace(0, 1, len(y))
+    gains, unexplained = sizing.checked(predictor, [(u, y + drift)])
+    assert gains.get("bank_deg", 1.0) < 1.2
+    assert unexplained["bank_deg"] == pytest.approx(3.0, rel=0.2)
+    drifting = lateral(unexplained=unexplained)
+    assert sizing.predict(drifting, timeline)["bank_deg"] == pytest.approx(
+        sizing.predict(predictor, timeline)["bank_deg"] + unexplained["bank_deg"]
+    )
+    corrected = lateral(correction=twice)
+    base, more = sizing.predict(predictor, timeline), sizing.predict(corrected, timeline)
+    assert more["bank_deg"] == pytest.approx(2.0 * base["bank_deg"], rel=0.01)
