@@ -306,6 +306,10 @@ class Sizing(Section):
     max_growth: float = Field(2.0, ge=1.0, le=10.0)
     """A control's sized amplitude is at most this many times the largest deflection in the
     data its model was identified from (amplitude build-up)."""
+    max_factor: float = Field(1.0, gt=0.0, le=10.0)
+    """The largest factor on a plan's own amplitudes: 1 never flies more than the plan asks
+    (the response targets only take amplitude away); above 1 a weakly responding aircraft is
+    excited harder, up to the targets and max_amplitude."""
 
 
 class Excitation(Section):

@@ -17,9 +17,10 @@ sensor noise, small enough to stay linear and inside the envelope. Here:
    largest predicted response to its target ([excitation.sizing]). Then the controls play
    together: while a quantity exceeds its target, every control contributing at least
    `CONTRIBUTION` of it is scaled down by the excess.
-3. Limits: a control never exceeds its `max_amplitude`, nor `max_growth` times the largest
-   deflection in the data its model was identified from (a model is trusted near what it
-   has seen; amplitude build-up, as in flight test).
+3. Limits: a control never exceeds its `max_amplitude`, nor `max_factor` times the plan's own
+   amplitude (1 by default: the targets only take amplitude away), nor `max_growth` times the
+   largest deflection in the data its model was identified from (a model is trusted near what
+   it has seen; amplitude build-up, as in flight test).
 4. With no model, the plan flies at `build_up` of its amplitudes: the first run is the
    calibration, and its identification sizes the next.
 5. The targets never reach past the envelope ([excitation.envelope], from the flight state
@@ -395,6 +396,7 @@ def size(
     for c in controls:
         own = peaks(alone[c])
         limits = {"max_amplitude": ceiling[c]}
+        limits[f"the plan's amplitude ×{config.max_factor:g}"] = config.max_factor
         flown = predictor.flown.get(c, 0.0)
         if flown > 0 and peak[c] > 0:
             limits[f"{config.max_growth:g}× the {flown:.3g} its model saw"] = (
@@ -403,7 +405,7 @@ def size(
         for q, target in goal.items():
             if own.get(q, 0.0) > 0:
                 limits[f"{LABELS[q]} {target:g}{QUANTITIES[q]}"] = target / own[q]
-        if len(limits) == 1 and not alone[c]:
+        if not alone[c]:
             limits = {"build-up: its model does not take it": min(config.build_up, ceiling[c])}
         limited_by[c] = min(limits, key=limits.get)
         factors[c] = limits[limited_by[c]]

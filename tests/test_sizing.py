@@ -64,7 +64,7 @@ def test_no_model_flies_the_build_up(plan_and_timeline):
 
 def test_each_control_is_sized_to_its_targets_and_together_they_stay_within(plan_and_timeline):
     plan, timeline = plan_and_timeline
-    targets = Sizing(bank_deg=10.0, beta_deg=3.0)
+    targets = Sizing(bank_deg=10.0, beta_deg=3.0, max_factor=10.0)
     sized = sizing.size(plan, timeline, lateral(), targets, EX.surfaces, EX.envelope)
     goal = sizing.targets(targets)
     for q, peak in sized.predicted.items():
@@ -90,9 +90,19 @@ def test_limits_hold_whatever_the_targets_allow(plan_and_timeline):
     for c in ("aileron", "rudder"):
         assert sized.amplitudes[c] <= 1.5 * 0.5 + 1e-9
         assert sized.limited_by[c].startswith("1.5× the 0.5")
-    unbounded = sizing.size(plan, timeline, lateral(), generous, EX.surfaces, EX.envelope)
+    unbounded = sizing.size(
+        plan,
+        timeline,
+        lateral(),
+        generous.model_copy(update={"max_factor": 10.0}),
+        EX.surfaces,
+        EX.envelope,
+    )
     for c in ("aileron", "rudder"):
         assert unbounded.amplitudes[c] <= EX.surfaces[c].max_amplitude + 1e-9
+    # By default the targets only take amplitude away: never more than the plan asks.
+    default = sizing.size(plan, timeline, lateral(), Sizing(), EX.surfaces, EX.envelope)
+    assert all(f <= 1.0 + 1e-12 for f in default.factors.values())
 
 
 def test_a_control_the_model_does_not_take_stays_at_the_build_up(plan_and_timeline):
