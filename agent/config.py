@@ -11,6 +11,7 @@ import os
 import tomllib
 import types
 import typing
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -108,9 +109,16 @@ class Channels(Section):
             raise ValueError(f"each channel needs its own name; repeated: {', '.join(repeated)}")
         return self
 
-    def axis_set(self, axes: str) -> tuple[tuple[str, ...], tuple[str, ...]]:
-        """(input names, output names) of an axis set: lateral, longitudinal or full."""
+    def axis_set(
+        self, axes: str, controls: Iterable[str] | None = None
+    ) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """(input names, output names) of an axis set: lateral, longitudinal or full; with
+        `controls` (the aircraft's, by role), only the inputs among them: a glider's
+        longitudinal axis has no throttle."""
         inputs, outputs = AXIS_SETS[axes]
+        if controls is not None:
+            have = set(controls)
+            inputs = tuple(r for r in inputs if r in have)
         return tuple(getattr(self, r) for r in inputs), tuple(getattr(self, r) for r in outputs)
 
     def navigation(self) -> tuple[str, ...]:

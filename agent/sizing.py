@@ -236,6 +236,7 @@ class Sizing:
     source: str
     refusals: list[str] = field(default_factory=list)  # the envelope's, from the prediction
     corrections: dict[str, float] = field(default_factory=dict)  # the predictor's (≥ 1)
+    build_up: bool = False  # no model sized it: the build-up share of the plan
     unexplained: dict[str, float] = field(default_factory=dict)  # the predictor's
 
     def lines(self, units: Mapping[str, str] | None = None) -> list[str]:
@@ -389,6 +390,7 @@ def size(
             limited_by={c: f"build-up: {config.build_up:g} of the plan" for c in controls},
             predicted={},
             source="build-up (no model of the aircraft yet: this run calibrates the next)",
+            build_up=True,
         )
     goal = within(targets(config), envelope, predictor.airspeed, trim, predictor.unexplained)
     alone = {c: predictor.response(timeline, c) for c in controls}

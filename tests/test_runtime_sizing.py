@@ -87,6 +87,7 @@ async def test_size_requests_build_up_then_follow_the_identified_model(agent):
     assert ack.ok, ack.reason
     first = sizings(agent)[-1]
     assert first.source.startswith("build-up")
+    assert first.build_up
     assert first.predicted == {}
     build_up = agent.config.excitation.sizing.build_up
     assert {c.control: c.factor for c in first.controls} == {
@@ -105,6 +106,7 @@ async def test_size_requests_build_up_then_follow_the_identified_model(agent):
     second = sizings(agent)[-1]
     assert result.model_id in second.source
     assert "not yet accepted" in second.source
+    assert not second.build_up
     targets = agent.config.excitation.sizing
     assert 0 < second.predicted["bank_deg"] <= targets.bank_deg * 1.01
     assert second.predicted["beta_deg"] <= targets.beta_deg * 1.01

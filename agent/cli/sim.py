@@ -19,6 +19,12 @@ def add_parser(sub) -> None:
     parser.add_argument("--aircraft", default="J3Cub")
     parser.add_argument("--speed-kts", type=float, default=60.0)
     parser.add_argument(
+        "--altitude-ft",
+        type=float,
+        default=1000.0,
+        help="height above the ground to trim at (a glider sinks all flight: start high)",
+    )
+    parser.add_argument(
         "--turbulence",
         type=common.turbulence,
         default=0.0,
@@ -59,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
 
     progress = None if args.json else (lambda text: print(text, flush=True))
     options = SimOptions(
-        plane=common.aircraft_options(args),
+        plane=common.aircraft_options(args, altitude_ft=args.altitude_ft),
         preset=args.preset,
         runs=args.runs or (2 if args.sizing else 1),
         sizing=args.sizing,

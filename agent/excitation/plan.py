@@ -10,7 +10,7 @@ signal, phase optimisation included, is deterministic). Amplitudes are in each c
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Annotated, ClassVar, Literal
 
@@ -489,11 +489,33 @@ PRESET_CONTROLS = {
 }
 
 
-def preset(name: str, amplitude: Mapping[str, float] | None = None, plan_id: str | None = None):
+def only(plan: Plan, controls: Iterable[str]) -> Plan:
+    """`plan` without the signals of controls not in `controls` (an aircraft without them: a
+    glider's throttle); a segment left with no signal is left out."""
+    keep = set(controls)
+    segments = []
+    for segment in plan.segments:
+        signals = {c: sig for c, sig in segment.signals.items() if c in keep}
+        if signals:
+            segments.append(segment.model_copy(update={"signals": signals}))
+    if not segments:
+        raise ValueError(
+            f"plan {plan.id!r} plays none of {', '.join(sorted(keep)) or 'no'} controls"
+        )
+    return plan.model_copy(update={"segments": tuple(segments)})
+
+
+def preset(
+    name: str,
+    amplitude: Mapping[str, float] | None = None,
+    plan_id: str | None = None,
+    controls: Iterable[str] | None = None,
+):
     """The thesis's plans: lateral (aileron then rudder doublet), longitudinal (elevator
     doublet then throttle steps); and full: an 80 s odd-harmonic multisine on all four
     controls at once (see FULL_PERIOD_S; the thesis's figure 6.12 played multisines on the
-    surfaces, then throttle steps)."""
+    surfaces, then throttle steps). `controls`: the aircraft's (default all four); the
+    others' signals are left out (`only`)."""
     amp = {**(FULL_AMPLITUDE if name == "full" else PRESET_AMPLITUDE), **(amplitude or {})}
     plays = PRESET_CONTROLS.get(name, ())
     stray = [c for c in amplitude or {} if c not in plays]
@@ -529,7 +551,8 @@ def preset(name: str, amplitude: Mapping[str, float] | None = None, plan_id: str
         ]
     else:
         raise ValueError(f"unknown preset {name!r}; presets are {', '.join(PRESETS)}")
-    return Plan(id=plan_id or name, axes=name, segments=tuple(segments))
+    plan = Plan(id=plan_id or name, axes=name, segments=tuple(segments))
+    return plan if controls is None else only(plan, controls)
 
 
 def _thesis_multisine(control: str, amplitude: float) -> Multisine:

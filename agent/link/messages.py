@@ -259,6 +259,8 @@ class Sizing(Message):
     kind: Literal["sizing"] = "sizing"
     plan: Plan
     source: str = Field(max_length=120)
+    build_up: bool = False
+    """No model sized it: the plan's amplitudes times the build-up share (a calibration run)."""
     controls: list[SizedControl]
     predicted: dict[str, float] = Field(default_factory=dict)
     """Each predicted peak by quantity (agent.sizing.QUANTITIES); empty: no model yet."""

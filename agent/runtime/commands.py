@@ -157,7 +157,11 @@ class Commands:
             self.counters["refused_by_prediction"] += 1
             raise PlanRefused(f"plan {message.plan.id!r} refused: " + "; ".join(refusals))
         await self.scheduler.arm_checked(message.plan)
-        unmoved = _unmoved_inputs(message.plan, self.identification.settings.axes)
+        unmoved = _unmoved_inputs(
+            message.plan,
+            self.identification.settings.axes,
+            self.sizer.config.excitation.surfaces,
+        )
         if unmoved:  # armed all the same: the excitation is the operator's to fly
             self.downlink.send(messages.Notice(text=unmoved))
         return ""
@@ -184,12 +188,13 @@ class Commands:
         return await self.identification.request_frf(message)
 
 
-def _unmoved_inputs(plan: Plan, chosen: str | None) -> str:
+def _unmoved_inputs(plan: Plan, chosen: str | None, controls) -> str:
     """Why the run of `plan` will not identify ("" when it can): an input of the axes it is
-    identified on (the operator's `chosen`, else the plan's own) that the plan does not move
-    is constant in the record, and the identification fails on it after the flight."""
+    identified on (the operator's `chosen`, else the plan's own) that the aircraft has
+    (`controls`) and the plan does not move is constant in the record, and the
+    identification fails on it after the flight."""
     axes = chosen or plan.axes
-    unmoved = [c for c in AXIS_SETS[axes][0] if c not in plan.controls()]
+    unmoved = [c for c in AXIS_SETS[axes][0] if c in controls and c not in plan.controls()]
     if not unmoved:
         return ""
     whose = "the ground's settings" if chosen else "the plan's axes"

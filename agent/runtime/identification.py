@@ -345,7 +345,8 @@ class Identifier:
         axes, ident = self.axes_for(window), self.settings
         self.last_axes = axes
         channels = self.config.identification.channels
-        inputs, outputs = channels.axis_set(axes)
+        controls = self.config.excitation.surfaces  # the aircraft's: a glider has no throttle
+        inputs, outputs = channels.axis_set(axes, controls)
         # Never given twice on this aircraft (the model store's numbering): an id never names
         # two models.
         model_id = await self._in_store(self.models.reserve_id, axes)
@@ -361,6 +362,7 @@ class Identifier:
             inputs=inputs,
             outputs=outputs,
             roles=AXIS_SETS[axes][1],
+            input_roles=tuple(r for r in AXIS_SETS[axes][0] if r in controls),
             experiments=tuple(batch),
             settings=onboard_settings(self.config, ident),
             window=columns,

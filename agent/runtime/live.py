@@ -130,7 +130,9 @@ class Live:
                     _tenths(playing.commanded(t)[control]) if t >= playing.start else None
                     for t in times
                 ]
-        inputs, outputs = self.config.identification.channels.axis_set(self._axes)
+        inputs, outputs = self.config.identification.channels.axis_set(
+            self._axes, self.config.excitation.surfaces
+        )
         frames = self.recorder.window(times[0] - dt, times[-1])
         trim = self._trim_of(playing)
         for name in (*inputs, *outputs):

@@ -97,6 +97,7 @@ def sizing_message(sized: sizing.Sizing, surfaces) -> messages.Sizing:
     return messages.Sizing(
         plan=sized.plan,
         source=sized.source[:120],
+        build_up=sized.build_up,
         controls=[
             messages.SizedControl(
                 control=c,

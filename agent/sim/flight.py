@@ -155,20 +155,31 @@ def agent_config(
     axes: str,
     realtime_priority: int | None = None,
     speed_kts: float = 60.0,
+    glide_deg: float | None = None,
 ) -> Config:
     """The simulated flight's agent configuration: the defaults but for the sensor ports under
     `ports`, the autopilot at `mavlink`, the link's files under `tmp`, the log directory, the
     identification's axes, the real-time priority, and an envelope fitting the simulated
-    aircraft at `speed_kts`."""
+    aircraft at `speed_kts`. `glide_deg`: an unpowered aircraft's trim glide angle — it has
+    no throttle to excite, and its height limit adds what the glide itself loses over the
+    longest run."""
     trim = speed_kts * KT
+    excitation = Excitation()
+    height = max(40.0, ENVELOPE_HEIGHT_S * trim)
+    surfaces = excitation.surfaces
+    if glide_deg is not None:
+        surfaces = {c: v for c, v in surfaces.items() if c != "throttle"}
+        sink = trim * np.sin(np.radians(-glide_deg))
+        height += sink * excitation.envelope.max_duration_s
     return Config(
         runtime=Runtime(realtime_priority=realtime_priority),
         excitation=Excitation(
+            surfaces=surfaces,
             envelope=Envelope(
                 min_airspeed=ENVELOPE_SPEED[0] * trim,
                 max_airspeed=ENVELOPE_SPEED[1] * trim,
-                max_altitude_loss_m=max(40.0, ENVELOPE_HEIGHT_S * trim),
-            )
+                max_altitude_loss_m=height,
+            ),
         ),
         identification=IdentificationConfig(axes=axes),
         sensors=Sensors(
@@ -341,8 +352,15 @@ async def _parts(
             CONNECT_S,
         )
         axes = preset(options.preset).axes
+        glide = None if aircraft.plant.engines else aircraft.plant.glide_deg
         config = agent_config(
-            tmp, ports, aircraft.mavlink_address, axes, options.realtime_priority, plane.speed_kts
+            tmp,
+            ports,
+            aircraft.mavlink_address,
+            axes,
+            options.realtime_priority,
+            plane.speed_kts,
+            glide_deg=glide,
         )
         if agent_process:
             agent = AgentProcess(tmp, config)
@@ -424,7 +442,10 @@ async def ground_station(
 
 
 async def one_run(options: SimOptions, aircraft: SimAircraft, ground: Ground, run: int, say):
-    plan = preset(options.preset, plan_id=f"{options.preset}-{run + 1}")
+    controls = ("elevator", "aileron", "rudder")
+    if aircraft.plant.engines:
+        controls = ("throttle", *controls)
+    plan = preset(options.preset, plan_id=f"{options.preset}-{run + 1}", controls=controls)
     ack = await ground.command(messages.IdentSettings(axes=plan.axes))
     sized = None
     if options.sizing:
@@ -451,7 +472,10 @@ async def one_run(options: SimOptions, aircraft: SimAircraft, ground: Ground, ru
     if isinstance(answer, messages.Failure):
         say(f"run {run + 1}: identification failed: {answer.reason}")
         return {"plan": plan.id, "events": events, "failure": answer.reason, "sizing": sized}
-    accept = _operator_accepts(answer, first=not ground.accepted)
+    # A build-up run calibrates the next (its small response stands least above the noise):
+    # the operator does not make its model nominal; the sized run's is the first.
+    build_up = sized is not None and sized.build_up
+    accept = not build_up and _operator_accepts(answer, first=not ground.accepted)
     decision = "accept" if accept else "reject"
     ack = await ground.command(messages.Decision(model_id=answer.model_id, accept=accept))
     ground.accepted |= accept and ack.ok

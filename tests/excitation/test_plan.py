@@ -245,3 +245,21 @@ def test_pwm_conversion_direction_and_clamping():
     assert servo.to_pwm(values, 1500, reverse).tolist() == [1500, 1460, 1540, 1700]
     assert servo.to_pwm(np.array([6.0]), 1500, reverse).tolist() == [1400]  # clamped
     assert servo.pwm_clamped(np.array([6.0, 1.0]), 1500, reverse) == 1
+
+
+def test_presets_leave_out_the_controls_an_aircraft_lacks():
+    """A glider has no throttle: its presets play the surfaces alone, a segment left with no
+    signal goes, and a plan left with nothing is refused by name."""
+    from agent.config import Channels
+    from agent.excitation.plan import only
+
+    surfaces = ("elevator", "aileron", "rudder")
+    full = preset("full", controls=surfaces)
+    assert sorted(full.controls()) == ["aileron", "elevator", "rudder"]
+    longitudinal = preset("longitudinal", controls=surfaces)
+    assert longitudinal.controls() == ["elevator"]
+    assert len(longitudinal.segments) == 1  # the throttle's steps went with their segment
+    with pytest.raises(ValueError, match="plays none of"):
+        only(preset("longitudinal"), ("aileron",))
+    assert Channels().axis_set("longitudinal", surfaces)[0] == ("elevator",)
+    assert Channels().axis_set("longitudinal")[0] == ("throttle", "elevator")

@@ -176,3 +176,33 @@ def test_the_pitch_gust_is_the_vertical_gusts_gradient_along_the_path_at_any_hea
     rest = measured[band] - gain * model[band]
     assert 1 - np.sum(np.abs(rest) ** 2) / np.sum(np.abs(measured[band]) ** 2) > 0.9
     assert abs(gain - 1) < 0.1
+
+
+def test_a_glider_trims_in_a_steady_glide_and_has_no_throttle():
+    """JSBSim's SGS 1-26 has no engine: JSBSim's own trim refuses it (u̇ needs a throttle), and
+    its FGLinearization crashes the process on it. Trimmed in a glide, it stays there; a
+    throttle command moves nothing, and no engine speed is reported."""
+    glider = Plant("sgs126", airspeed_kts=50.0, altitude_ft=3000.0)
+    assert glider.kind == "none"
+    assert glider.engines == 0
+    assert glider.linearisation is None
+    assert -5.0 < glider.glide_deg < -1.0  # a glide, about L/D 23
+    start = glider.state()
+    assert "rpm" not in start
+    glider.fly(np.tile([0.5, 0.0, 0.0, 0.0], (500, 1)), DT)  # 10 s, the throttle "open"
+    after = glider.state()
+    assert after["Vt"] == pytest.approx(start["Vt"], rel=0.01)
+    assert after["theta"] == pytest.approx(start["theta"], abs=np.radians(0.2))
+    sink = (start["alt"] - after["alt"]) / 10.0
+    assert sink == pytest.approx(start["Vt"] * np.sin(np.radians(-glider.glide_deg)), rel=0.1)
+
+
+def test_a_turbine_moves_on_every_engine_and_reports_no_engine_speed():
+    """JSBSim's T-6 (direct thrust, N1/N2 spools) has no `engine-rpm`: the plant must not
+    ask for one (sysid sim ended in a KeyError on it)."""
+    t6 = Plant("t6texan2", airspeed_kts=150.0, linearise=False)
+    assert t6.kind == "turbine"
+    assert "rpm" not in t6.state()
+    before = float(t6.fdm["propulsion/engine/thrust-lbs"])
+    t6.fly(np.tile([0.05, 0.0, 0.0, 0.0], (25, 1)), DT)
+    assert float(t6.fdm["propulsion/engine/thrust-lbs"]) > 1.05 * before
