@@ -1,40 +1,56 @@
-"""The whole-aircraft benchmark: JSBSim's three aircraft, calm and in light turbulence, identified
-through the full preset by suas-sysid and by the peers, in one process.
+"""The whole-aircraft benchmark: six JSBSim aircraft of different kinds, calm and in light
+turbulence, the agent's own full preset and a flight-test engineer's card, each sized to the
+aircraft by the agent, identified with and without the INS's navigation channels, by
+suas-sysid and by the peers, in one process.
 
-    make bench-jsbsim                                            # 3 × 2 × 10 seeds (~5 min)
-    .venv/bin/python benchmarks/bench_jsbsim.py --seeds 2 --no-peers          # a quick look
-    .venv/bin/python benchmarks/bench_jsbsim.py --aircraft pa28 --turbulence 1
+    make bench-jsbsim                                    # every row, 10 seeds (~1 h here)
+    .venv/bin/python benchmarks/bench_jsbsim.py --quick --aircraft c172r --turbulence 0 \
+        --excitation card --nav ins                      # one row in about a minute
+    .venv/bin/python benchmarks/bench_jsbsim.py --sizing nominal --aircraft pa28
     .venv/bin/python benchmarks/bench_jsbsim.py --no-peers --without alpha-products
-    .venv/bin/python benchmarks/bench_jsbsim.py --aircraft J3Cub --turbulence 0 --seeds 1 \
-        --no-peers                                               # the smoke test: one flight
+
+The aircraft (`AIRCRAFT`): JSBSim's J-3 Cub at 60 kt, Cessna 182 and PA-28 at 90 kt (the three
+the method was developed on), the Cessna 172R at 95 kt (a four-seat trainer), the T-6 Texan II
+at 150 kt (a turbine's direct thrust, no propeller) and the Schempp-Hirth SGS 1-26 at 50 kt (a
+glider: no throttle, trimmed in a steady glide, from 3000 ft). Light turbulence: Dryden
+(MIL-F-8785C), W20 = 5 ft/s (`--turbulence 1`). Seeds start at 2, because JSBSim's seeds 0 and
+1 give one turbulence sequence.
+
+The excitations (`--excitation`): "full", the agent's full preset (an 80 s odd-harmonic
+multisine on all four controls at once); "card", a classic flight-test card that is not ours:
+a 3-2-1-1 on each surface in turn, a throttle doublet, then a doublet on each surface (`card`).
+
+Sizing (`--sizing auto`, agent/sizing.py): as the agent flies them. For each aircraft and
+condition the full preset is first flown at the build-up share of its amplitudes; each run is
+identified (with the INS), its surfaces' linkage measured, and the next sized from that
+model, until no amplitude is held back by the build-up (at most CALIBRATION_RUNS runs, seeds
+from CALIBRATION_SEED). The ten seeds then fly the full preset as sized last, and the card
+sized by the same model. `--sizing nominal` flies both at their plans' own amplitudes.
 
 Each seed is one offline flight (`agent.sim.offline.fly`: JSBSim trimmed as `sysid sim` trims
-it, the emulated ArduPlane's servos, the sensors' noise, 100 Hz). It holds the full preset
-from 2 s before to 2 s after. The record is identified as the agent does: the trim from the
-first 0.5 s, the INS's heading and velocities for the wind. The aircraft and speeds are the
-J-3 Cub at 60 kt and the Cessna 182 and PA-28 at 90 kt. Light turbulence:
-Dryden (MIL-F-8785C), W20 = 5 ft/s (`--turbulence 1`). Seeds start at 2, because JSBSim's
-seeds 0 and 1 give one turbulence sequence.
+it, the emulated ArduPlane's servos, the sensors' noise, 100 Hz), 2 s before to 2 s after the
+plan, identified as the agent does (the trim from the first 0.5 s), once with the INS's
+heading and velocities for the wind ("ins") and once without ("none").
 
-Truth: `agent.sim.truth.linear_truth`, JSBSim's validated small-amplitude linear model. Printed
-per aircraft, condition and method:
-- each named mode's error |λ − λ_true| / |λ_true| (median / worst over seeds);
+Truth: `agent.sim.truth.linear_truth`, JSBSim's validated small-amplitude linear model
+(`benchmarks/truth_check.py` checks it). Printed per aircraft, condition, excitation,
+navigation and method:
+- each named mode's error |λ − λ_true| / |λ_true| (median / worst over seeds; "miss" when a
+  seed did not find it);
 - the seeds with every named mode within 10 %;
-- for suas-sysid, the seeds whose spiral holds the truth within 3 standard errors, and below
-  the row the spiral's z-scores (identified − truth over its standard error): their mean, sd,
-  rms and worst, which would be 0, 1, 1 and about 2 for an unbiased, calibrated estimate;
+- for suas-sysid, the seeds whose spiral holds the truth within 3 standard errors;
 - the validation TIC: the model simulated on separate records, its own seed each: an elevator
   doublet judged on V, α, q, θ, and an aileron then a rudder doublet judged on β, p, r, φ
-  (the mean of the two means; median / worst over seeds). The doublets are sized to the
-  atmosphere as a flight-test engineer sizes a validation manoeuvre (`validation_scale`);
-
+  (the mean of the two means; median / worst over seeds), the doublets sized to the
+  atmosphere (`validation_scale`); `--quick` leaves it out;
 - the median seconds per identification.
+Below each excitation, what the flights did: the amplitudes flown, the largest bank and
+airspeed change, and the lowest height above the ground over the seeds.
 
 The peers get the same records (inputs and outputs less the trim) and the truth's order
 without engine, altitude and heading (8 aircraft states + 1); python-control and SIPPY are the
 `bench` extra (`pip install -e '.[bench]'`, which `make bench-jsbsim` does). The "validated
-truth" row gives the truth's own validation TIC: the best a linear model can score on those
-records.
+truth" row gives the truth's own validation TIC: the best a linear model can score there.
 """
 
 from __future__ import annotations
@@ -49,17 +65,23 @@ import dataclasses
 import importlib.util
 import time
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 
-from agent.channels import INPUT_ROLES, OUTPUT_ROLES
+from agent import sizing
+from agent.channels import OUTPUT_ROLES
+from agent.config import Channels, Envelope, Excitation
+from agent.excitation.follow import following
 from agent.excitation.plan import (
     DOUBLET_PULSE_S,
     PRESET_AMPLITUDE,
     Doublet,
     Plan,
     Segment,
+    ThreeTwoOneOne,
     Timeline,
+    only,
     preset,
     render,
 )
@@ -67,30 +89,214 @@ from agent.ident import Experiment, Settings, identify
 from agent.ident.convert import StateSpace
 from agent.ident.errors import DataError, IdentificationFailed
 from agent.ident.fit import simulate
-from agent.sim.offline import Record, fly
+from agent.models import DIVERGENCE_LIMIT
+from agent.runtime.identification import SIZING_TIC
+from agent.sim.flight import ENVELOPE_HEIGHT_S, ENVELOPE_SPEED
+from agent.sim.offline import INPUT_CHANNELS, Record, fly
+from agent.sim.plant import KT, Plant
 from agent.sim.truth import Truth, linear_truth, theil
 
-AIRCRAFT = {"J3Cub": 60.0, "c182": 90.0, "pa28": 90.0}
+
+@dataclass(frozen=True)
+class Flight:
+    """Where a benchmark aircraft flies: its trim airspeed and height above the ground."""
+
+    speed_kts: float
+    altitude_ft: float = 1000.0
+    kind: str = ""
+
+
+AIRCRAFT = {
+    "J3Cub": Flight(60.0, kind="light piston, tailwheel"),
+    "c182": Flight(90.0, kind="piston single"),
+    "pa28": Flight(90.0, kind="piston single, low wing"),
+    "c172r": Flight(95.0, kind="four-seat trainer"),
+    "t6texan2": Flight(150.0, kind="turbine trainer, direct thrust"),
+    "sgs126": Flight(50.0, altitude_ft=3000.0, kind="glider, unpowered"),
+}
 MODES = ("short period", "phugoid", "Dutch roll", "roll")
+EXCITATIONS = ("full", "card")
+NAVIGATION = ("ins", "none")
 TRIM_SAMPLES = 50  # 0.5 s at 100 Hz, as the agent's trim
 PEER_ORDER = 9
 TEXTBOOK_P = 4
 FIRST_SEED = 2  # JSBSim's seeds 0 and 1 give one turbulence sequence
+CALIBRATION_SEED = 500
+CALIBRATION_RUNS = 5
 VALIDATION_SEED = 1000
 QUIET_SEED = 1500
 SNR_REQUIRED = 3.0
 MAX_VALIDATION_SCALE = 2.0
 COMMAND_HZ = 50.0  # `fly`'s command rate
+M_PER_FT = 0.3048
 # suas-sysid as the agent runs it on these records: the surfaces' positions are sampled by
 # their potentiometers while they move, so the inputs are not held between samples.
 OURS = Settings(held_inputs=False)
+CONFIG = Excitation()
 
 
-def experiment(rec: Record, wind: bool = True) -> Experiment:
+def card(controls: tuple[str, ...]) -> Plan:
+    """A classic flight-test card at the presets' amplitudes: a 3-2-1-1 on each surface in turn
+    (0.5 s pulses), a throttle doublet (5 s each way), then a doublet on each surface (the
+    presets' pulse widths), each followed by free flight; controls the aircraft lacks are
+    left out."""
+    segments = []
+    for c, free in (("elevator", 4.0), ("aileron", 4.0), ("rudder", 6.0)):
+        signal = ThreeTwoOneOne(pulse_s=0.5, amplitude=PRESET_AMPLITUDE[c])
+        segments.append(Segment(signals={c: signal}, free_s=free))
+    if "throttle" in controls:
+        signal = Doublet(pulse_s=5.0, amplitude=PRESET_AMPLITUDE["throttle"])
+        segments.append(Segment(signals={"throttle": signal}, free_s=15.0))
+    for c, free in (("elevator", 4.0), ("aileron", 4.0), ("rudder", 6.0)):
+        signal = Doublet(pulse_s=DOUBLET_PULSE_S[c], amplitude=PRESET_AMPLITUDE[c])
+        segments.append(Segment(signals={c: signal}, free_s=free))
+    return Plan(id="card", axes="full", segments=tuple(segments))
+
+
+@dataclass(frozen=True)
+class Setup:
+    """One aircraft in one condition: what it has and how it flies."""
+
+    name: str
+    flight: Flight
+    turbulence: float
+    controls: tuple[str, ...]  # the controls it has, in INPUT_CHANNELS order
+
+    @property
+    def surfaces(self) -> dict:
+        return {c: s for c, s in CONFIG.surfaces.items() if c in self.controls}
+
+    @property
+    def envelope(self) -> Envelope:
+        """The envelope `sysid sim` gives the agent for this aircraft (agent.sim.flight)."""
+        trim = self.flight.speed_kts * KT
+        return Envelope(
+            min_airspeed=ENVELOPE_SPEED[0] * trim,
+            max_airspeed=ENVELOPE_SPEED[1] * trim,
+            max_altitude_loss_m=max(40.0, ENVELOPE_HEIGHT_S * trim),
+        )
+
+    def fly(self, plan: Plan | Timeline, seed: int, noise: bool = True) -> Record:
+        return fly(
+            plan,
+            aircraft=self.name,
+            speed_kts=self.flight.speed_kts,
+            altitude_ft=self.flight.altitude_ft,
+            turbulence=self.turbulence,
+            seed=seed,
+            noise=noise,
+        )
+
+    def truth(self) -> Truth:
+        return linear_truth(self.name, self.flight.speed_kts, altitude_ft=self.flight.altitude_ft)
+
+
+def columns(setup: Setup) -> list[int]:
+    return [INPUT_CHANNELS.index(c) for c in setup.controls]
+
+
+def experiment(rec: Record, setup: Setup, wind: bool = True) -> Experiment:
+    keep = columns(setup)
     u0, y0 = rec.u[:TRIM_SAMPLES].mean(0), rec.y[:TRIM_SAMPLES].mean(0)
     return Experiment(
-        rec.u - u0, rec.y - y0, operating_point=y0, navigation=rec.ins if wind else None
+        (rec.u - u0)[:, keep],
+        rec.y - y0,
+        operating_point=y0,
+        navigation=rec.ins if wind else None,
     )
+
+
+def ours(exp: Experiment, dt: float, setup: Setup, settings: Settings = OURS):
+    start = time.perf_counter()
+    result = identify(
+        exp,
+        dt,
+        input_names=setup.controls,
+        output_names=Record.outputs,
+        input_roles=setup.controls,
+        output_roles=OUTPUT_ROLES,
+        settings=settings,
+    )
+    seconds = time.perf_counter() - start
+    found: dict[str, list[complex]] = {}
+    spiral = None
+    for mode in result.modes:
+        if mode.name:
+            found.setdefault(mode.name, []).append(complex(mode.eigenvalue))
+        if mode.name == "spiral":
+            spiral = mode
+    return found, result, seconds, spiral
+
+
+def _linkage(setup: Setup, rec: Record, played: Plan) -> dict:
+    """Each surface's linkage measured against what `played` commanded, as the agent
+    measures it (agent.excitation.follow)."""
+    timeline = render(played, COMMAND_HZ)
+    measured = {c: rec.u[:, INPUT_CHANNELS.index(c)] for c in setup.controls}
+    times = np.arange(len(rec.u)) * rec.dt
+    # `fly` records from its margin (2 s) before the plan's first command.
+    return {f.control: (f.gain, f.even) for f in following(timeline, 2.0, times, measured)}
+
+
+def predictor_of(setup: Setup, result, rec: Record, exp: Experiment, played: Plan):
+    """The identified model as the agent's sizing sees it: its surfaces' linkage measured
+    against what `played` commanded, its trim the record's."""
+    linkage = _linkage(setup, rec, played)
+    trim = dict(zip(Record.outputs, rec.y[:TRIM_SAMPLES].mean(0), strict=True))
+    return sizing.predictor(
+        result.document(),
+        trim=trim,
+        experiments=[(exp.u, exp.y)],
+        channels=Channels(),
+        surfaces=setup.surfaces,
+        source="the previous run's model",
+        linkage=linkage,
+    )
+
+
+def calibrate(setup: Setup, plan: Plan):
+    """The agent's amplitude build-up (module docstring): the sizing the seeds fly, the model
+    that sized it (None: none could), each calibration run's (sizing, excursions), and with
+    no model what the last run flew (the build-up grows from it)."""
+    timeline = render(plan, CONFIG.rate_hz)
+    sized = sizing.size(plan, timeline, None, CONFIG.sizing, setup.surfaces, setup.envelope)
+    predictor, runs, flown = None, [], None
+    for step in range(CALIBRATION_RUNS):
+        rec = setup.fly(sized.plan, CALIBRATION_SEED + step)
+        runs.append((sized, excursions(rec)))
+        exp = experiment(rec, setup)
+        try:
+            _, result, _, _ = ours(exp, rec.dt, setup)
+        except (IdentificationFailed, DataError) as exc:
+            print(f"  calibration run {step + 1} not identified: {exc}")
+            break
+        fastest = max(m.eigenvalue.real for m in result.modes)
+        usable = fastest < DIVERGENCE_LIMIT and result.fit.tic_avg < SIZING_TIC  # the agent's
+        predictor = predictor_of(setup, result, rec, exp, sized.plan) if usable else None
+        flown = None
+        if predictor is None:  # the build-up grows from what this run flew, as the agent's
+            linkage = _linkage(setup, rec, sized.plan)
+            document = result.document()
+            flown = sizing.deflections(
+                document, [(exp.u, exp.y)], Channels(), setup.surfaces, linkage
+            )
+        sized = sizing.size(
+            plan, timeline, predictor, CONFIG.sizing, setup.surfaces, setup.envelope, flown=flown
+        )
+        grown = f"{CONFIG.sizing.max_growth:g}× the"
+        if not any(grown in why for why in sized.limited_by.values()):
+            break
+    return sized, predictor, runs, flown
+
+
+def excursions(rec: Record) -> tuple[float, float, float]:
+    """The largest bank (deg) and airspeed change (% of trim), and the lowest height above the
+    ground (ft) of a flight."""
+    v0 = rec.y[:TRIM_SAMPLES, 0].mean()
+    bank = float(np.degrees(np.max(np.abs(rec.y[:, 7]))))
+    speed = float(100 * np.max(np.abs(rec.y[:, 0] - v0)) / v0)
+    lowest = float(np.min(rec.height) / M_PER_FT) if rec.height is not None else np.nan
+    return bank, speed, lowest
 
 
 # The validation records: each axis's doublets, judged on that axis's outputs. One record
@@ -115,7 +321,7 @@ def doublets(axis: str, scale: float) -> Plan:
 
 
 def validation(
-    name: str, turbulence: float, seed: int, model: StateSpace
+    setup: Setup, seed: int, model: StateSpace
 ) -> tuple[list[tuple[Experiment, tuple]], list[float]]:
     """Each axis's doublet record, flown from trim with its own seed (its own turbulence),
     and the outputs it is judged on, with the scale its doublets were flown at
@@ -125,13 +331,15 @@ def validation(
     0.7 on the airspeed there)."""
     out, scales = [], []
     for k, axis in enumerate(VALIDATION):
-        flight = dict(aircraft=name, speed_kts=AIRCRAFT[name], turbulence=turbulence, noise=False)
         seeded = VALIDATION_SEED + 2 * seed + k
-        exp = experiment(fly(doublets(axis, 1.0), seed=seeded, **flight), wind=False)
-        quiet = fly(_still(doublets(axis, 1.0)), seed=QUIET_SEED + 2 * seed + k, **flight)
-        scale = validation_scale(model, exp, experiment(quiet, wind=False), AXIS_OUTPUTS[axis])
+        rec = setup.fly(doublets(axis, 1.0), seeded, noise=False)
+        exp = experiment(rec, setup, wind=False)
+        quiet = setup.fly(_still(doublets(axis, 1.0)), QUIET_SEED + 2 * seed + k, noise=False)
+        scale = validation_scale(
+            model, exp, experiment(quiet, setup, wind=False), AXIS_OUTPUTS[axis]
+        )
         if scale > 1.0:
-            exp = experiment(fly(doublets(axis, scale), seed=seeded, **flight), wind=False)
+            exp = experiment(setup.fly(doublets(axis, scale), seeded, noise=False), setup, False)
         scales.append(scale)
         out.append((Experiment(exp.u, exp.y), AXIS_OUTPUTS[axis]))
     return out, scales
@@ -196,29 +404,7 @@ def named_by_truth(eigenvalues: np.ndarray, truth: dict[str, list[complex]]) -> 
     return found
 
 
-def ours(exp: Experiment, dt: float, rec: Record, settings: Settings = OURS):
-    start = time.perf_counter()
-    result = identify(
-        exp,
-        dt,
-        input_names=rec.inputs,
-        output_names=rec.outputs,
-        input_roles=INPUT_ROLES,
-        output_roles=OUTPUT_ROLES,
-        settings=settings,
-    )
-    seconds = time.perf_counter() - start
-    found: dict[str, list[complex]] = {}
-    spiral = None
-    for mode in result.modes:
-        if mode.name:
-            found.setdefault(mode.name, []).append(complex(mode.eigenvalue))
-        if mode.name == "spiral":
-            spiral = mode
-    return found, result.discrete, seconds, spiral
-
-
-def textbook(exp: Experiment, dt: float, rec: Record):
+def textbook(exp: Experiment, dt: float):
     start = time.perf_counter()
     result = identify(
         Experiment(exp.u, exp.y),
@@ -230,7 +416,7 @@ def textbook(exp: Experiment, dt: float, rec: Record):
     return result.discrete, time.perf_counter() - start
 
 
-def python_control(exp: Experiment, dt: float, rec: Record):
+def python_control(exp: Experiment, dt: float):
     import control
 
     start = time.perf_counter()
@@ -239,7 +425,7 @@ def python_control(exp: Experiment, dt: float, rec: Record):
     return StateSpace(sys_.A, sys_.B, sys_.C, sys_.D), time.perf_counter() - start
 
 
-def sippy_n4sid(exp: Experiment, dt: float, rec: Record):
+def sippy_n4sid(exp: Experiment, dt: float):
     import sippy_unipi
 
     start = time.perf_counter()
@@ -258,13 +444,14 @@ PEERS = {
 }
 
 
-def truth_tic(truth: Truth, records: list[tuple[Experiment, tuple]], dt: float) -> float:
+def truth_tic(truth: Truth, records: list[tuple[Experiment, tuple]], setup: Setup, dt) -> float:
     """The validated truth's own validation TIC: the best a linear model can do there. Its
     inputs are the throttle's position (0–1; the record's µs / 1000) and the surfaces'; each
     sample acts over the interval it ends."""
     tics = []
     for exp, outputs in records:
-        u = exp.u.copy()
+        u = np.zeros((len(exp.u), len(INPUT_CHANNELS)))
+        u[:, columns(setup)] = exp.u
         u[:, 0] /= 1000.0
         x = truth.simulate(np.vstack([u[1:], u[-1:]]), dt)[:, : exp.y.shape[1]]
         tics.append(np.mean(theil(exp.y, x)[list(outputs)]))
@@ -300,8 +487,22 @@ def main() -> None:
     parser.add_argument(
         "--turbulence", type=float, nargs="*", default=[0.0, 1.0], help="1: W20 = 5 ft/s"
     )
-    parser.add_argument("--seeds", type=int, default=10, help=f"seeds from {FIRST_SEED}")
+    parser.add_argument("--excitation", nargs="*", choices=EXCITATIONS, default=EXCITATIONS)
+    parser.add_argument("--nav", nargs="*", choices=NAVIGATION, default=NAVIGATION)
+    parser.add_argument("--seeds", type=int, default=None, help=f"seeds from {FIRST_SEED}")
     parser.add_argument("--no-peers", action="store_true", help="suas-sysid alone")
+    parser.add_argument("--no-validation", action="store_true", help="no validation records")
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="3 seeds, no peers, no validation records: a row in about a minute",
+    )
+    parser.add_argument(
+        "--sizing",
+        choices=("auto", "nominal"),
+        default="auto",
+        help="auto: the agent's sizing (default); nominal: the plans' own amplitudes",
+    )
     parser.add_argument(
         "--without",
         nargs="*",
@@ -310,10 +511,13 @@ def main() -> None:
         help="leave out a term of the whole-aircraft method, to see what it does",
     )
     args = parser.parse_args()
+    seeds = args.seeds if args.seeds is not None else 3 if args.quick else 10
+    peers = not (args.no_peers or args.quick)
+    validate = not (args.no_validation or args.quick)
     missing = [
         name
         for module, name in (("control", "python-control"), ("sippy_unipi", "SIPPY"))
-        if not args.no_peers and not importlib.util.find_spec(module)
+        if peers and not importlib.util.find_spec(module)
     ]
     if missing:
         parser.error(
@@ -321,52 +525,116 @@ def main() -> None:
             "bench-jsbsim does), or --no-peers"
         )
     settings = dataclasses.replace(OURS, **{ABLATIONS[term]: False for term in args.without})
-    plan = preset("full")
     print(
         "cells: median / worst over seeds; errors in %; ≤10 %: seeds with every named mode "
         "within 10 %; spiral: seeds with the truth within 3σ; TIC: validation record"
     )
     head = "  ".join(f"{m:>13}" for m in MODES)
-    print(f"{'aircraft':8} {'turb':>4} {'method':20} {head}  ≤10 %  spiral  {'TIC':>11}   s/id")
+    print(
+        f"{'aircraft':8} {'turb':>4} {'exc.':4} {'nav':4} {'method':20} {head}  ≤10 %  spiral"
+        f"  {'TIC':>11}   s/id"
+    )
     for name in args.aircraft:
-        reference = linear_truth(name, AIRCRAFT[name])
-        truth = reference.modes()
+        flight = AIRCRAFT[name]
+        kind = Plant(
+            name, airspeed_kts=flight.speed_kts, altitude_ft=flight.altitude_ft, linearise=False
+        ).kind
+        controls = tuple(c for c in INPUT_CHANNELS if c != "throttle" or kind != "none")
         for turbulence in args.turbulence:
-            rows: dict[str, list] = {}
-            sizes: list[float] = []
-            for seed in range(FIRST_SEED, FIRST_SEED + args.seeds):
-                rec = fly(
-                    plan, aircraft=name, speed_kts=AIRCRAFT[name], turbulence=turbulence, seed=seed
-                )
-                exp = experiment(rec)
-                found, model, seconds, spiral = ours(exp, rec.dt, rec, settings)
-                check, scales = validation(name, turbulence, seed, model)
-                sizes.extend(scales)
-                rows.setdefault("validated truth", []).append(
-                    ([0.0] * len(MODES), truth_tic(reference, check, rec.dt), np.nan, None)
-                )
-                z = _spiral_z(spiral, truth)
-                rows.setdefault("suas-sysid", []).append(
-                    (mode_errors(found, truth), validation_tic(model, check), seconds, z)
-                )
-                if args.no_peers:
-                    continue
-                for peer, method in PEERS.items():
-                    try:
-                        model, seconds = method(exp, rec.dt, rec)
-                        eig = np.log(np.linalg.eigvals(model.A).astype(complex)) / rec.dt
-                        errs = mode_errors(named_by_truth(eig, truth), truth)
-                        tic = validation_tic(model, check)
-                    except (IdentificationFailed, DataError, np.linalg.LinAlgError, ValueError):
-                        errs, tic, seconds = [np.inf] * len(MODES), 1.0, np.nan
-                    rows.setdefault(peer, []).append((errs, tic, seconds, None))
-            for method, results in rows.items():
-                _print(name, turbulence, method, results)
+            setup = Setup(name, flight, turbulence, controls)
+            run(setup, args, seeds, settings, peers, validate)
+
+
+def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validate: bool):
+    """Every row of one aircraft in one condition."""
+    reference = setup.truth()
+    truth = reference.modes()
+    full = only(preset("full"), setup.controls)
+    plans = {"full": full, "card": only(card(setup.controls), setup.controls)}
+    if args.sizing == "auto":
+        sized, predictor, runs, flown = calibrate(setup, full)
+        for k, (step, (bank, speed, lowest)) in enumerate(runs):
             print(
-                f"{'':8} {'':4} validation doublets: {np.median(sizes):.2f}× the presets' "
-                f"amplitudes (median), {np.max(sizes):.2f}× at most",
+                f"{setup.name:8} {setup.turbulence:4.1f} calibration run {k + 1}: "
+                f"{_amplitudes(step)}; bank {bank:.0f}°, airspeed ±{speed:.1f} %, "
+                f"lowest {lowest:.0f} ft",
                 flush=True,
             )
+        plans["full"] = sized.plan
+        timeline = render(plans["card"], CONFIG.rate_hz)
+        plans["card"] = sizing.size(
+            plans["card"],
+            timeline,
+            predictor,
+            CONFIG.sizing,
+            setup.surfaces,
+            setup.envelope,
+            flown=flown,
+        ).plan
+    for excitation in args.excitation:
+        plan = plans[excitation]
+        rows: dict[tuple[str, str], list] = {}
+        flown = []
+        for seed in range(FIRST_SEED, FIRST_SEED + seeds):
+            rec = setup.fly(plan, seed)
+            flown.append(excursions(rec))
+            check = None
+            for nav in args.nav:
+                exp = experiment(rec, setup, wind=nav == "ins")
+                try:
+                    found, result, seconds, spiral = ours(exp, rec.dt, setup, settings)
+                    model, errors = result.discrete, mode_errors(found, truth)
+                except (IdentificationFailed, DataError):
+                    model, errors, seconds, spiral = None, [np.inf] * len(MODES), np.nan, None
+                if validate and check is None and model is not None:
+                    check, _ = validation(setup, seed, model)
+                    rows.setdefault(("–", "validated truth"), []).append(
+                        (
+                            [0.0] * len(MODES),
+                            truth_tic(reference, check, setup, rec.dt),
+                            np.nan,
+                            None,
+                        )
+                    )
+                tic = validation_tic(model, check) if check and model is not None else np.nan
+                rows.setdefault((nav, "suas-sysid"), []).append(
+                    (errors, tic, seconds, _spiral_z(spiral, truth))
+                )
+            if not peers:
+                continue
+            exp = experiment(rec, setup, wind=False)
+            for peer, method in PEERS.items():
+                try:
+                    model, seconds = method(exp, rec.dt)
+                    eig = np.log(np.linalg.eigvals(model.A).astype(complex)) / rec.dt
+                    errs = mode_errors(named_by_truth(eig, truth), truth)
+                    tic = validation_tic(model, check) if check else np.nan
+                except (IdentificationFailed, DataError, np.linalg.LinAlgError, ValueError):
+                    errs, tic, seconds = [np.inf] * len(MODES), 1.0, np.nan
+                rows.setdefault(("–", peer), []).append((errs, tic, seconds, None))
+        for (nav, method), results in rows.items():
+            _print(setup, excitation, nav, method, results)
+        bank, speed, lowest = (
+            np.max([f[0] for f in flown]),
+            np.max([f[1] for f in flown]),
+            min(f[2] for f in flown),
+        )
+        print(
+            f"{'':8} {'':4} {excitation:4} flown at {_amplitudes(plan)}: bank ≤ {bank:.0f}°, "
+            f"airspeed within ±{speed:.1f} %, lowest {lowest:.0f} ft above the ground",
+            flush=True,
+        )
+
+
+def _amplitudes(item) -> str:
+    """A plan's (or a sizing's) largest amplitude per control."""
+    plan = item.plan if isinstance(item, sizing.Sizing) else item
+    peak: dict[str, float] = {}
+    for segment in plan.segments:
+        for c, sig in segment.signals.items():
+            peak[c] = max(peak.get(c, 0.0), abs(sig.amplitude))
+    units = {"throttle": "%"}
+    return ", ".join(f"{c} {a:.2g}{units.get(c, '°')}" for c, a in peak.items())
 
 
 def _spiral_z(spiral, truth) -> float | None:
@@ -380,26 +648,21 @@ def _spiral_z(spiral, truth) -> float | None:
     return float((spiral.eigenvalue.real - true) / spiral.uncertainty.real)
 
 
-def _print(name: str, turbulence: float, method: str, results: list) -> None:
+def _print(setup: Setup, excitation: str, nav: str, method: str, results: list) -> None:
     e = 100 * np.array([r[0] for r in results], dtype=float)
     cells = "  ".join(_pair(np.median(c), np.max(c)) for c in e.T)
     ok = int(np.sum(np.all(e <= 10, axis=1)))
-    tics = np.array([r[1] for r in results])
+    tics = np.array([r[1] for r in results], dtype=float)
     z = np.array([r[3] for r in results if r[3] is not None])
     spiral_cell = f"{int(np.sum(np.abs(z) <= 3)):2d}/{len(z):<2d}" if z.size else "  –  "
     times = [r[2] for r in results if np.isfinite(r[2])]
     seconds = f"{np.median(times):5.2f}" if times else "    –"
+    tic = f"{np.median(tics):5.3f}/{np.max(tics):5.3f}" if np.all(np.isfinite(tics)) else "–"
     print(
-        f"{name:8} {turbulence:4.1f} {method:20} {cells}  {ok:2d}/{len(e):<2d}  {spiral_cell}  "
-        f"{np.median(tics):5.3f}/{np.max(tics):5.3f}  {seconds}",
+        f"{setup.name:8} {setup.turbulence:4.1f} {excitation:4} {nav:4} {method:20} {cells}  "
+        f"{ok:2d}/{len(e):<2d}  {spiral_cell}  {tic:>11}  {seconds}",
         flush=True,
     )
-    if z.size and np.all(np.isfinite(z)):  # calibrated and unbiased: mean 0, sd and rms 1
-        print(
-            f"{'':8} {'':4} spiral z (identified − truth, in its σ): mean {np.mean(z):+.2f}, "
-            f"sd {np.std(z):.2f}, rms {np.sqrt(np.mean(z * z)):.2f}, worst {np.max(np.abs(z)):.2f}",
-            flush=True,
-        )
 
 
 def _pair(median: float, worst: float) -> str:

@@ -31,14 +31,23 @@ import argparse
 import dataclasses
 
 import numpy as np
-from bench_jsbsim import AIRCRAFT, FIRST_SEED, MODES, TRIM_SAMPLES, experiment, mode_errors, ours
+from bench_jsbsim import (
+    AIRCRAFT,
+    FIRST_SEED,
+    MODES,
+    TRIM_SAMPLES,
+    Setup,
+    experiment,
+    mode_errors,
+    ours,
+)
 
 from agent.channels import INPUT_ROLES, OUTPUT_ROLES
 from agent.excitation.plan import FULL_AMPLITUDE, preset
 from agent.ident import Settings, identify
 from agent.sim.offline import OUTPUTS, Record, fly
 from agent.sim.plant import INPUTS, Plant
-from agent.sim.truth import STATES, Truth, linear_truth
+from agent.sim.truth import Truth, linear_truth
 
 SIGN_NAMES = {"++": (1, 1), "-+": (-1, 1), "+-": (1, -1), "--": (-1, -1)}
 
@@ -61,7 +70,8 @@ def main() -> None:
     parser.add_argument("--scale-longitudinal", type=float, default=1.0)
     args = parser.parse_args()
     signs = [SIGN_NAMES[name] for name in args.signs]
-    speed = AIRCRAFT[args.aircraft]
+    speed = AIRCRAFT[args.aircraft].speed_kts
+    setup = Setup(args.aircraft, AIRCRAFT[args.aircraft], args.turbulence, INPUTS)
     reference = linear_truth(args.aircraft, speed)
     truth = reference.modes()
     spiral_true = truth["spiral"][0].real if truth.get("spiral") else None
@@ -90,7 +100,7 @@ def main() -> None:
             rec = fly(
                 plan, aircraft=args.aircraft, speed_kts=speed, turbulence=args.turbulence, seed=seed
             )
-            found, _, _, spiral = ours(experiment(rec), rec.dt, rec)
+            found, _, _, spiral = ours(experiment(rec, setup), rec.dt, setup)
             errors = "  ".join(f"{100 * e:>13.1f}" for e in mode_errors(found, truth))
             z = (
                 (spiral.eigenvalue.real - spiral_true) / spiral.uncertainty.real
@@ -105,21 +115,20 @@ def main() -> None:
             )
             if first is None:  # the truth's linear response is to this flight's inputs
                 first = rec
-        print(
-            f"{seed:>4} the truth's linear response: spiral {linear_spiral(reference, first):+.5f}"
-        )
+        spiral = linear_spiral(reference, first, setup)
+        print(f"{seed:>4} the truth's linear response: spiral {spiral:+.5f}")
 
 
-def linear_spiral(truth: Truth, rec: Record) -> float:
+def linear_spiral(truth: Truth, rec: Record, setup: Setup) -> float:
     """The spiral identified from the truth's linear response to `rec`'s inputs."""
     u = rec.u - rec.u[:TRIM_SAMPLES].mean(axis=0)
     u = u[:, [rec.inputs.index(name) for name in INPUTS]]
     u[:, INPUTS.index("throttle")] /= 1000.0  # µs → the truth's 0–1
     x = truth.simulate(u, rec.dt)
-    y = rec.y[:TRIM_SAMPLES].mean(axis=0) + x[:, [STATES.index(o) for o in rec.outputs]]
+    y = rec.y[:TRIM_SAMPLES].mean(axis=0) + x[:, [OUTPUTS.index(o) for o in rec.outputs]]
     linear = dataclasses.replace(rec, y=y)
     result = identify(
-        experiment(linear, wind=False),
+        experiment(linear, setup, wind=False),
         rec.dt,
         input_names=rec.inputs,
         output_names=rec.outputs,

@@ -207,3 +207,17 @@ def test_the_model_is_checked_on_its_own_data(plan_and_timeline):
     corrected = lateral(correction=twice)
     base, more = sizing.predict(predictor, timeline), sizing.predict(corrected, timeline)
     assert more["bank_deg"] == pytest.approx(2.0 * base["bank_deg"], rel=0.01)
+
+
+def test_with_no_usable_model_the_build_up_grows_from_the_last_run(plan_and_timeline):
+    """A run whose model sizes nothing (in turbulence a build-up's small response stood
+    below the gusts: JSBSim's glider fitted at TIC 0.6) must not be flown again at the same
+    amplitude: the next grows by max_growth from what it flew, within the plan's own."""
+    plan, timeline = plan_and_timeline
+    flown = {"aileron": 1.0, "rudder": 3.0}
+    sized = sizing.size(plan, timeline, None, EX.sizing, EX.surfaces, EX.envelope, flown=flown)
+    assert sized.build_up
+    assert sized.amplitudes["aileron"] == pytest.approx(EX.sizing.max_growth * 1.0)
+    assert "the last run flew" in sized.limited_by["aileron"]
+    assert sized.amplitudes["rudder"] == pytest.approx(4.0)  # the plan's own: max_factor 1
+    assert sized.source.startswith("build-up from the last run")
