@@ -375,21 +375,44 @@ def size(
     surfaces: Mapping[str, Surface],
     envelope: Envelope,
     trim: Mapping[str, float] | None = None,
+    flown: Mapping[str, float] | None = None,
 ) -> Sizing:
     """The plan's amplitudes sized to the aircraft (module docstring); `timeline` is the plan
-    rendered, `trim` the flight state now (output roles, SI) for the envelope check."""
+    rendered, `trim` the flight state now (output roles, SI) for the envelope check. With no
+    predictor, `flown` (control → the largest deflection of the last run, plan units:
+    `deflections`) grows the build-up from there: a run whose model sized nothing (its
+    response did not stand above the turbulence) calibrates nothing either."""
     controls = list(timeline.values)
     peak = {c: float(np.max(np.abs(timeline.values[c]))) for c in controls}
     ceiling = {c: surfaces[c].max_amplitude / peak[c] if peak[c] > 0 else 1.0 for c in controls}
     if predictor is None:
-        factors = {c: min(config.build_up, ceiling[c]) for c in controls}
+        factors, limited_by = {}, {}
+        for c in controls:
+            limits = {
+                "max_amplitude": ceiling[c],
+                f"the plan's amplitude ×{config.max_factor:g}": config.max_factor,
+            }
+            last = (flown or {}).get(c, 0.0)
+            if last > 0 and peak[c] > 0:
+                limits[f"build-up: {config.max_growth:g}× the {last:.3g} the last run flew"] = (
+                    config.max_growth * last / peak[c]
+                )
+            else:
+                limits[f"build-up: {config.build_up:g} of the plan"] = config.build_up
+            limited_by[c] = min(limits, key=limits.get)
+            factors[c] = limits[limited_by[c]]
+        source = (
+            "build-up from the last run (its model sizes nothing: this run calibrates the next)"
+            if flown
+            else "build-up (no model of the aircraft yet: this run calibrates the next)"
+        )
         return Sizing(
             plan=scaled(plan, factors),
             factors=factors,
             amplitudes={c: factors[c] * peak[c] for c in controls},
-            limited_by={c: f"build-up: {config.build_up:g} of the plan" for c in controls},
+            limited_by=limited_by,
             predicted={},
-            source="build-up (no model of the aircraft yet: this run calibrates the next)",
+            source=source,
             build_up=True,
         )
     goal = within(targets(config), envelope, predictor.airspeed, trim, predictor.unexplained)
@@ -593,14 +616,7 @@ def predictor(
         return None
     scale = {c: per_unit(surfaces[c]) for c in inputs}
     linkage = {c: v for c, v in (linkage or {}).items() if c in inputs}
-    # The deflections its data saw, in plan units: through the measured linkage when known (a
-    # surface that moves a third of its command saw three times its recorded deflection).
-    gain = {c: abs(linkage[c][0]) if c in linkage else abs(scale[c]) for c in inputs}
-    flown = {
-        c: max((float(np.max(np.abs(u[:, j]))) for u, _ in experiments), default=0.0) / gain[c]
-        for c, j in inputs.items()
-        if gain[c] > 0
-    }
+    flown = deflections(result, experiments, channels, surfaces, linkage)
     matrices = (result.A, result.B, result.C, result.D)
     model = StateSpace(*(np.asarray(m, dtype=float) for m in matrices))
     unchecked = Predictor(
@@ -626,6 +642,30 @@ def predictor(
         unexplained=unexplained,
         linkage=linkage,
     )
+
+
+def deflections(
+    result: ResultDocument,
+    experiments: Sequence[tuple[np.ndarray, np.ndarray]],
+    channels: Channels,
+    surfaces: Mapping[str, Surface],
+    linkage: Mapping[str, tuple[float, float]] | None = None,
+) -> dict[str, float]:
+    """Control → the largest deflection its data saw, in plan units: through the measured
+    linkage when known (a surface that moves a third of its command saw three times its
+    recorded deflection), else the control's record units per plan unit."""
+    linkage = linkage or {}
+    out = {}
+    for role in surfaces:
+        name = getattr(channels, role, None)
+        if name not in result.inputs:
+            continue
+        j = result.inputs.index(name)
+        gain = abs(linkage[role][0]) if role in linkage else abs(per_unit(surfaces[role]))
+        if gain > 0:
+            peak = max((float(np.max(np.abs(u[:, j]))) for u, _ in experiments), default=0.0)
+            out[role] = peak / gain
+    return out
 
 
 def checked(predictor: Predictor, experiments) -> tuple[dict[str, float], dict[str, float]]:

@@ -93,6 +93,8 @@ class Identifier:
         # By axes: the newest candidate that is stable and fits its own data to SIZING_TIC
         # (sizes plans while no model is nominal yet).
         self.newest: dict[str, Candidate] = {}
+        # By axes: the latest candidate, good or not (what its run flew grows the build-up).
+        self.latest: dict[str, Candidate] = {}
 
     # -- windows in ----------------------------------------------------------------------
 
@@ -387,6 +389,7 @@ class Identifier:
         )
         suggestion = await self._compare(candidate, len(rows))
         await self._in_store(self.models.add, candidate)
+        self.latest[axes] = candidate
         if suggestion.checks.get("stability") and candidate.tic_jj < SIZING_TIC:
             self.newest[axes] = candidate
         record = ResultRecord(

@@ -61,17 +61,40 @@ class Sizer:
             linkage=self.linkage,
         )
 
+    def flown(self, plan: Plan) -> dict[str, float] | None:
+        """What the last run of these axes flew, by control (plan units), for a plan no model
+        sizes: the build-up grows from there (None: no run yet)."""
+        ident = self.identification
+        last = ident.latest.get(plan.axes) or ident.latest.get("full")
+        if last is None:
+            return None
+        return sizing.deflections(
+            last.result,
+            last.experiments,
+            self.config.identification.channels,
+            self.config.excitation.surfaces,
+            self.linkage,
+        )
+
     async def size(self, plan: Plan) -> sizing.Sizing:
         """`plan` sized to the aircraft (its controls must be configured: PlanRefused
         otherwise, as arming would)."""
         ex = self.config.excitation
         predictor = await self.predictor(plan)
+        flown = None if predictor is not None else self.flown(plan)
         trim = self.flight()
 
         def work() -> sizing.Sizing:
             timeline = render(plan, ex.rate_hz)
             return sizing.size(
-                plan, timeline, predictor, ex.sizing, ex.surfaces, ex.envelope, trim=trim
+                plan,
+                timeline,
+                predictor,
+                ex.sizing,
+                ex.surfaces,
+                ex.envelope,
+                trim=trim,
+                flown=flown,
             )
 
         return await asyncio.to_thread(work)
