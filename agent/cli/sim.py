@@ -8,6 +8,11 @@ from pathlib import Path
 from agent.cli import common
 from agent.excitation.names import PRESETS
 
+# With sizing and no --runs: runs until the operator accepts a model, at most this many (the
+# build-up, then sized runs that grow at most 2× each, so the fourth reaches any plan's own
+# amplitudes from a quarter).
+SIZED_RUNS = 4
+
 
 def add_parser(sub) -> None:
     parser = sub.add_parser(
@@ -36,8 +41,9 @@ def add_parser(sub) -> None:
         "--runs",
         type=common.positive_int,
         default=None,
-        help="excitations in a row (from the second on: TIC against the nominal); default 2 "
-        "with sizing (the build-up run, then the sized run), 1 without",
+        help="excitations in a row (from the second on: TIC against the nominal); default "
+        "with sizing: until the operator accepts a model, at most 4 (the build-up run, then "
+        "sized runs); 1 without",
     )
     parser.add_argument(
         "--sizing",
@@ -67,8 +73,9 @@ def run(args: argparse.Namespace) -> int:
     options = SimOptions(
         plane=common.aircraft_options(args, altitude_ft=args.altitude_ft),
         preset=args.preset,
-        runs=args.runs or (2 if args.sizing else 1),
+        runs=args.runs or (SIZED_RUNS if args.sizing else 1),
         sizing=args.sizing,
+        until_accepted=args.sizing and args.runs is None,
         directory=args.keep,
         progress=progress,
     )

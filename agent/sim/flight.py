@@ -80,6 +80,8 @@ class SimOptions:
     sizing: bool = False
     """The scripted operator has each plan sized by the aircraft (a SizeRequest, agent/sizing.py)
     and arms the sized plan; False: it arms the preset at its own amplitudes."""
+    until_accepted: bool = False
+    """Stop after the first run whose model the operator accepts (`runs` is then the most)."""
 
 
 @dataclass
@@ -283,6 +285,8 @@ async def fly(options: SimOptions) -> dict:
         outcomes = []
         for run in range(options.runs):
             outcomes.append(await one_run(options, sim.aircraft, sim.ground, run, say))
+            if options.until_accepted and outcomes[-1].get("decision") == "accept":
+                break
     # After the flight is torn down: the truth's linearisation takes seconds (tens on a busy
     # machine) and would hold the event loop the agent and the aircraft still ran on.
     return _report(options, sim.aircraft, sim.agent, outcomes, sim.ground)

@@ -1,8 +1,11 @@
 """`sysid sim` end to end: the simulated aircraft, emulated ArduPlane, sensor ptys and radios,
 the real agent (worker-process identification, model store), and the scripted operator.
 
-Two lateral excitations: the first result becomes the nominal model by the operator's accept,
-the second is compared with it by the thesis's TIC procedure (TIC_jN, TIC_NN, TIC_Nj).
+Three lateral excitations, each sized by the aircraft before it is armed (agent/sizing.py):
+the first is the build-up (a quarter of the preset, its model not made nominal), the second
+is sized by the first's model and its result becomes the nominal by the operator's accept, the
+third is sized by the nominal and compared with it by the thesis's TIC procedure (TIC_jN,
+TIC_NN, TIC_Nj).
 """
 
 from __future__ import annotations
@@ -14,13 +17,13 @@ from agent.sim.flight import SimOptions, fly
 pytestmark = pytest.mark.usefixtures("no_leaked_tasks")
 
 
-@pytest.mark.timeout(240)
-async def test_two_lateral_runs_end_to_end(tmp_path):
-    report = await fly(SimOptions(preset="lateral", runs=2, directory=tmp_path))
+@pytest.mark.timeout(300)
+async def test_three_sized_lateral_runs_end_to_end(tmp_path):
+    report = await fly(SimOptions(preset="lateral", runs=3, sizing=True, directory=tmp_path))
     assert report["events"] == ["started", "finished"]  # the excitation played
     assert report["sensor_gaps"] == {"vn200": 0, "airdata": 0, "surfaces": 0}  # 100 Hz, no loss
     assert report["recorder"]["frames"] > 30 * 100
-    assert report["worker_identifications"] == 2  # both ran in the worker process
+    assert report["worker_identifications"] == 3  # each ran in the worker process
     # Commanded and measured surfaces agree in sign end to end (plan, direction, ArduPlane,
     # servo linkage, pots): the aircraft told the operator of no surface moving against or
     # not following its command.
@@ -29,9 +32,21 @@ async def test_two_lateral_runs_end_to_end(tmp_path):
     modes = {m["name"]: m for m in report["modes"] if m["name"]}
     for name in ("Dutch roll", "roll"):
         assert modes[name]["error"] < 0.15, (name, modes[name])
-    # The operator's accept made the first model nominal; the second got the TIC comparison.
-    first, second = report["history"]
+    # The build-up flew a quarter of the preset and calibrated the second run, whose sizing
+    # came from its model, within the targets; the operator's accept made the second model
+    # nominal, and the third, sized by it, got the TIC comparison.
+    build_up, first, second = report["history"]
+    assert build_up["sizing"]["build_up"]
+    assert build_up["decision"] == "reject"
+    assert all(c["factor"] == 0.25 for c in build_up["sizing"]["controls"])
+    sized = first["sizing"]
+    assert build_up["model_id"] in sized["source"]
+    assert not sized["build_up"]
+    assert sized["predicted"]["bank_deg"] <= 15.0 * 1.01
+    grown = {c["control"]: c["amplitude"] for c in sized["controls"]}
+    assert all(grown[c["control"]] > c["amplitude"] for c in build_up["sizing"]["controls"])
     assert first["decision"] == "accept"
+    assert second["sizing"]["source"] == f"nominal model {first['model_id']}"
     assert second["model_id"] != first["model_id"]
     suggestion = report["suggestion"]
     assert suggestion["tic_nn"] is not None
@@ -80,7 +95,8 @@ def post_flight(directory, report) -> None:
 
     logs = directory / "logs"
     analysed = json.loads(sysid("analyze", logs, "--axes", "lateral", "--cross", "--json"))
-    assert len(analysed["cases"]) == 2  # the two lateral excitation logs
+    runs = len(report["history"])
+    assert len(analysed["cases"]) == runs  # one per lateral excitation log
     truth = complex(*report["truth_modes"]["Dutch roll"])
     for case in analysed["cases"]:
         modes = case["result"]["modes"]
@@ -115,7 +131,7 @@ def post_flight(directory, report) -> None:
             assert any("iteration limit" in w for w in warnings), warnings
     sysid("export", results, "--out", directory / "flight.mat")
     mat = loadmat(directory / "flight.mat", simplify_cells=True)
-    assert len(mat["model_ids"]) == 2
+    assert len(mat["model_ids"]) == runs
     sysid("import", directory / "ardupilot.bin", "--out", directory / "ardupilot.csv")
     header = (directory / "ardupilot.csv").read_text().split("\n")
     columns = next(line for line in header if line.startswith("time,")).split(",")
@@ -131,6 +147,6 @@ def post_flight(directory, report) -> None:
         directory / "models" / "lateral_nominal.json",
     )
     page = (directory / "report" / "index.html").read_text()
-    assert page.count('<svg class="splane"') == 3  # every excitation's, then one each
+    assert page.count('<svg class="splane"') == runs + 1  # every excitation's, then one each
     assert page.count('<g class="mode nominal"') >= 3  # the nominal's modes on each plane
     assert (directory / "report" / "excitation_2_bode.png").stat().st_size > 10_000
