@@ -57,8 +57,9 @@ test-loaded: $(STAMP)
 bench: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/bench_identify.py
 
-# JSBSim's J-3 Cub, Cessna 182 and PA-28, calm and in light turbulence, 10 seeds each, with the
-# peers (about 5 minutes here).
+# Six JSBSim aircraft, calm and in light turbulence, the full preset and a classic card, sized
+# as the agent sizes them, with and without the INS, 10 seeds each, with the peers (about 15
+# minutes here; benchmarks/bench_jsbsim.py --quick reruns one row in about a minute).
 bench-jsbsim: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/bench_jsbsim.py
 
