@@ -13,11 +13,8 @@ an older peer sends them (no `settings`, no `axes`).
 
 from __future__ import annotations
 
-import csv
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 
-import numpy as np
 import pytest
 
 from agent.config import Config, IdentificationConfig, Recorder
@@ -25,8 +22,7 @@ from agent.excitation.plan import preset
 from agent.excitation.scheduler import Window
 from agent.link import messages
 from agent.runtime import Agent
-
-A2 = Path(__file__).resolve().parents[1] / "examples" / "a2_lateral.csv"
+from tests.a2 import a2_rows
 
 
 @pytest.fixture
@@ -43,14 +39,7 @@ def flight(tmp_path):
     )
     agent.sent = []
     agent.downlink.subscribe(agent.sent.append)
-    with A2.open() as handle:
-        table = list(csv.DictReader(handle))
-    channels = agent.recorder.channels
-    rows = np.full((len(table), 1 + 2 * len(channels)), np.nan)
-    rows[:, 0] = [float(r["time"]) for r in table]
-    for name in ("aileron", "rudder", "beta", "p", "r", "phi"):
-        rows[:, 1 + channels.index(name)] = [float(r[name]) for r in table]
-    yield agent, rows
+    yield agent, a2_rows(agent.recorder.channels)
     agent.close()
 
 

@@ -13,11 +13,8 @@ with no model to predict it (armed: no prediction, no refusal).
 
 from __future__ import annotations
 
-import csv
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 
-import numpy as np
 import pytest
 
 from agent.config import Config, Envelope, Excitation, IdentificationConfig, Recorder
@@ -26,8 +23,7 @@ from agent.excitation.scheduler import Window
 from agent.link import messages
 from agent.runtime import Agent
 from drivers.values import FlightState
-
-A2 = Path(__file__).resolve().parents[1] / "examples" / "a2_lateral.csv"
+from tests.a2 import a2_rows
 
 
 def make_agent(tmp_path, envelope: Envelope | None = None) -> Agent:
@@ -46,17 +42,6 @@ def make_agent(tmp_path, envelope: Envelope | None = None) -> Agent:
     return agent
 
 
-def a2_rows(agent) -> np.ndarray:
-    with A2.open() as handle:
-        table = list(csv.DictReader(handle))
-    channels = agent.recorder.channels
-    rows = np.full((len(table), 1 + 2 * len(channels)), np.nan)
-    rows[:, 0] = [float(r["time"]) for r in table]
-    for name in ("aileron", "rudder", "beta", "p", "r", "phi"):
-        rows[:, 1 + channels.index(name)] = [float(r[name]) for r in table]
-    return rows
-
-
 async def command(agent, message, seq: int) -> messages.Ack:
     await agent.commands.handle(message, seq)
     return next(m for m in agent.sent if isinstance(m, messages.Ack) and m.ref == seq)
@@ -68,7 +53,7 @@ def sizings(agent) -> list[messages.Sizing]:
 
 async def identify_a2(agent) -> messages.Result:
     plan = preset("lateral")
-    rows = a2_rows(agent)
+    rows = a2_rows(agent.recorder.channels)
     window = Window(plan.id, plan.axes, rows[0, 0], rows[-1, 0], "finished")
     await agent.identification.identify(window, rows)
     return [m for m in agent.sent if isinstance(m, messages.Result)][-1]
