@@ -66,8 +66,8 @@ ROUNDS, FULL_ROUNDS = 20, 5
 SLACK = 1.01
 # The quantities whose prediction is checked on the model's own data (`checked`), the
 # smoothing that keeps sensor noise out of their measured peaks (s), and the largest
-# correction trusted (a model predicting a quarter of what its own data did is not used
-# to size anything bigger).
+# correction applied (a gain beyond it says more about the record, a drift or a gust, than
+# about the model's scale; what the corrected prediction leaves is the unexplained part).
 CORRECTED = ("bank_deg", "airspeed_pct", "alpha_deg", "beta_deg", "pitch_deg")
 SMOOTH_S = 0.5
 MAX_CORRECTION = 4.0
