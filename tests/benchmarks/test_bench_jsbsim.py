@@ -3,9 +3,10 @@
 What it cannot do briefly: every row is judged against the aircraft's validated linear truth
 (`agent.sim.truth.linear_truth`), whose linearisation of JSBSim alone takes about 15 s here,
 and the smallest run (`--quick --aircraft J3Cub --turbulence 0 --excitation full --nav ins
---seeds 1`: the calibration runs that size the preset, then one flight) 27 s. The suite's smoke tests share a budget
-of about a minute and a half with two real-time simulated flights (test_bench_agent,
-test_bench_abort), so this one stops short of the flights: the script starts with no aircraft,
+--seeds 1`: the calibration runs that size the preset, then one flight) 27 s. The suite's
+smoke tests share a budget of about a minute and a half with two real-time simulated flights
+(test_bench_agent, test_bench_abort), so this one stops short of the flights: the script
+starts with no aircraft,
 after its imports, its arguments and its `--without` terms are applied (the terms reach into
 the aircraft method, whose options have moved before), and prints its table's head. The
 truth is checked in the suite by tests/sim/test_truth.py and an offline flight through the full
