@@ -119,6 +119,28 @@ async def test_a_plan_on_a_control_the_aircraft_lacks_is_not_sized(tmp_path):
         agent.close()
 
 
+async def test_a_plan_arming_would_refuse_is_refused_unsized(agent):
+    """A plan from the radio with a multisine harmonic far above the command rate's Nyquist
+    frequency (a typo): refused from its parameters with the reason, nothing rendered, no
+    sizing sent; the next request is answered."""
+    from agent.excitation.plan import Multisine, Plan, Segment
+
+    typo = Multisine(harmonics=(1, 10**6), period_s=10.0, amplitude=2.0)
+    plan = Plan(id="typo", axes="lateral", segments=(Segment(signals={"aileron": typo}),))
+    ack = await command(agent, messages.SizeRequest(plan=plan), 1)
+    assert not ack.ok
+    assert "Nyquist" in ack.reason
+    assert sizings(agent) == []
+    ack = await command(agent, messages.SizeRequest(plan=preset("lateral")), 2)
+    assert ack.ok, ack.reason
+    # With a model to predict it, the arm of the same typo is refused the same way: checked
+    # before it is predicted, never rendered.
+    await identify_a2(agent)
+    ack = await command(agent, messages.Arm(plan=plan), 3)
+    assert not ack.ok
+    assert "Nyquist" in ack.reason
+
+
 async def test_an_arm_the_prediction_takes_out_of_the_envelope_is_refused(tmp_path):
     agent = make_agent(tmp_path, Envelope(max_bank_deg=3.0))
     try:

@@ -139,14 +139,7 @@ class Commands:
     # -- the handlers: "" when done, else the reason -----------------------------------------
 
     async def _size(self, message: messages.SizeRequest) -> str:
-        plan = message.plan
-        missing = [c for c in plan.controls() if c not in self.sizer.config.excitation.surfaces]
-        if missing:
-            raise PlanRefused(
-                f"plan {plan.id!r}: {', '.join(missing)} not a configured control "
-                "([excitation.surfaces])"
-            )
-        sized = await self.sizer.size(plan)
+        sized = await self.sizer.size(message.plan)
         self.downlink.send(sizing_message(sized, self.sizer.config.excitation.surfaces))
         return ""
 

@@ -17,7 +17,7 @@ from collections.abc import Callable
 
 from agent import sizing
 from agent.config import Config
-from agent.excitation.plan import Plan, render
+from agent.excitation.plan import Plan, check
 from agent.link import messages
 from agent.runtime.identification import Identifier
 from drivers.values import FlightState
@@ -77,15 +77,18 @@ class Sizer:
         )
 
     async def size(self, plan: Plan) -> sizing.Sizing:
-        """`plan` sized to the aircraft (its controls must be configured: PlanRefused
-        otherwise, as arming would)."""
+        """`plan` sized to the aircraft; PlanRefused, with every reason, for a plan that
+        arming would refuse on its own (a control not configured, a frequency above Nyquist,
+        too long)."""
         ex = self.config.excitation
         predictor = await self.predictor(plan)
         flown = None if predictor is not None else self.flown(plan)
         trim = self.flight()
 
         def work() -> sizing.Sizing:
-            timeline = render(plan, ex.rate_hz)
+            # Checked as an arm checks it (PlanRefused with every reason): a plan from the
+            # radio with a harmonic of 1e6 is refused from its parameters, never rendered.
+            timeline = check(plan, ex.rate_hz, ex.surfaces, ex.envelope)
             return sizing.size(
                 plan,
                 timeline,
@@ -109,7 +112,7 @@ class Sizer:
         trim = self.flight()
 
         def work() -> list[str]:
-            peaks = sizing.predict(predictor, render(plan, ex.rate_hz))
+            peaks = sizing.predict(predictor, check(plan, ex.rate_hz, ex.surfaces, ex.envelope))
             return sizing.envelope_refusals(peaks, ex.envelope, predictor.airspeed, trim)
 
         return await asyncio.to_thread(work)
