@@ -12,6 +12,10 @@ from typing import Literal
 AxisSet = Literal["lateral", "longitudinal", "full"]
 
 INPUT_ROLES = ("throttle", "elevator", "aileron", "rudder")
+# A measured engine speed or thrust: where a record has one, the whole-aircraft method takes it
+# as the longitudinal axis's known input, acting at once, instead of the throttle's command
+# through the engine's fitted lags (agent.ident.aircraft). Not flown by the agent.
+POWER_ROLES = ("rpm", "thrust")
 LONGITUDINAL_OUTPUTS = ("airspeed", "alpha", "q", "theta")
 LATERAL_OUTPUTS = ("beta", "p", "r", "phi")
 OUTPUT_ROLES = LONGITUDINAL_OUTPUTS + LATERAL_OUTPUTS
@@ -24,6 +28,8 @@ UNITS = {
     "elevator": "deg",
     "aileron": "deg",
     "rudder": "deg",
+    "rpm": "rpm",
+    "thrust": "N",
     "airspeed": "m/s",
     "alpha": "rad",
     "q": "rad/s",

@@ -24,7 +24,7 @@ from pydantic import (
     model_validator,
 )
 
-from agent.channels import AXIS_SETS, INPUT_ROLES, NAVIGATION_ROLES, OUTPUT_ROLES
+from agent.channels import AXIS_SETS, INPUT_ROLES, NAVIGATION_ROLES, OUTPUT_ROLES, POWER_ROLES
 from drivers.config import (  # the devices' sections are the drivers'
     AirDataPort,
     Autopilot,
@@ -76,6 +76,11 @@ class Channels(Section):
     """Aileron deflection δA, degrees, ganged as ½(δA_R − δA_L) (thesis eq. 3.1)."""
     rudder: Name = "rudder"
     """Rudder deflection δR, degrees."""
+    rpm: Name = "rpm"
+    """Measured engine speed, rpm: given as an input, the engine's known input in place of the
+    throttle's command (offline identification)."""
+    thrust: Name = "thrust"
+    """Measured thrust, N: as rpm."""
     airspeed: Name = "Vt"
     """True airspeed V_T, m/s."""
     alpha: Name = "alpha"
@@ -103,7 +108,8 @@ class Channels(Section):
 
     @model_validator(mode="after")
     def _distinct(self) -> Channels:
-        names = [getattr(self, role) for role in INPUT_ROLES + OUTPUT_ROLES + NAVIGATION_ROLES]
+        roles = INPUT_ROLES + POWER_ROLES + OUTPUT_ROLES + NAVIGATION_ROLES
+        names = [getattr(self, role) for role in roles]
         repeated = sorted({n for n in names if names.count(n) > 1})
         if repeated:
             raise ValueError(f"each channel needs its own name; repeated: {', '.join(repeated)}")
@@ -127,7 +133,7 @@ class Channels(Section):
 
     def role_of(self, name: str) -> str | None:
         """The role a column name carries, or None."""
-        for role in INPUT_ROLES + OUTPUT_ROLES:
+        for role in INPUT_ROLES + POWER_ROLES + OUTPUT_ROLES:
             if getattr(self, role) == name:
                 return role
         return None

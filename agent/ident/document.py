@@ -165,6 +165,19 @@ class AxisDocument(Document):
     converged: bool
 
 
+class Engine(Document):
+    """How an input reaches the thrust: through `lags` equal first-order lags of
+    `time_constant_s` (0: at once), the number chosen from the data (`criterion`: the Akaike
+    criterion of each number tried, less the chosen one's), or a measured rpm or thrust, which
+    acts at once."""
+
+    input: str
+    lags: int
+    time_constant_s: float | None = None
+    criterion: dict[int, float] = {}
+    measured: bool = False
+
+
 class AircraftDocument(Document):
     """The whole-aircraft method's part (agent.ident.aircraft)."""
 
@@ -176,6 +189,7 @@ class AircraftDocument(Document):
     axes: list[AxisDocument]
     coupling: dict[str, Coupling] = {}
     engine_lag_s: dict[str, dict[str, float]] = {}  # axis → input → the lags' time constant
+    engine: list[Engine] = []  # each engine input: its lags as the data chose them
     sideslip_drag: Gain | None = None  # V̇'s gain on β²
     alpha_products: dict[str, dict[str, Gain]] = {}  # "alpha·beta" → output → gain
 

@@ -15,6 +15,7 @@ from agent.ident.aircraft.wind import measured_gust
 from agent.ident.convert import discretize_foh
 from agent.ident.errors import DataError, IdentificationFailed
 from agent.ident.fit import simulate
+from agent.ident.summary import format_text
 from agent.ident.reference import LATERAL, LONGITUDINAL
 
 DT = 0.01
@@ -85,6 +86,76 @@ def test_noise_free_aircraft_is_recovered_with_its_engine_lag_and_no_coupling():
     # Every mode carries its standard error; the named ones are the aircraft's.
     assert all(mode.uncertainty is not None for mode in result.modes)
     assert {"Dutch roll", "roll"} <= {mode.name for mode in result.modes}
+
+
+def aircraft_with_engine_order(order: int):
+    """`aircraft_with_engine_lag` with the throttle through `order` lags of TAU (0: the
+    thrust follows at once)."""
+    A, B, C = aircraft_with_engine_lag()
+    n = 8 + order
+    A2, B2 = A[:n, :n].copy(), B[:n].copy()
+    if order == 0:
+        B2[:4, 0] = A[:4, 9]
+    elif order == 1:
+        A2[:4, 8] = A[:4, 9]
+        B2[8, 0] = 1 / TAU
+    return A2, B2, C[:, :n]
+
+
+@pytest.mark.parametrize("order", [0, 1, 2])
+def test_the_engines_number_of_lags_is_the_datas(order):
+    # A turbine's spool (one lag), a piston's manifold and speed (two), a thrust that follows
+    # at once (none): the record says which, the Akaike criterion picks it, and the result and
+    # its summary report it. 1 % sensor noise: the choice must not hang on the last digits.
+    A, B, C = aircraft_with_engine_order(order)
+    record = full_preset_record(A, B, C)
+    noise = 0.01 * record.y.std(axis=0)
+    y = record.y + noise * np.random.default_rng(order).standard_normal(record.y.shape)
+    result = aircraft_identify(Experiment(record.u, y))
+    (engine,) = result.aircraft.engine
+    assert (engine.input, engine.lags, engine.measured) == ("throttle", order, False)
+    assert engine.criterion[order] == 0.0
+    assert all(v > 0 for k, v in engine.criterion.items() if k != order)
+    assert set(engine.criterion) == {0, 1, 2}
+    assert result.order == 8 + order  # the model carries the lags it chose, no more
+    if order:
+        assert engine.time_constant_s == pytest.approx(TAU, rel=0.05)
+        assert result.aircraft.engine_lag_s["longitudinal"]["throttle"] == engine.time_constant_s
+    else:
+        assert engine.time_constant_s is None
+        assert "longitudinal" not in result.aircraft.engine_lag_s
+    found = np.sort_complex(np.linalg.eigvals(result.continuous.A[:8, :8]))
+    true = np.sort_complex(np.linalg.eigvals(A[:8, :8]))
+    assert np.max(np.abs(found - true) / np.abs(true)) < 0.02
+    text = format_text(result, 1, len(y))
+    assert f"engine: throttle {'at once' if not order else 'through'}" in text
+    assert "lags 0/1/2: AIC" in text
+
+
+def test_a_measured_rpm_is_the_engines_input_at_once_and_the_throttle_is_set_aside():
+    # The record carries the engine's speed (here the last lag state × 2): it is the
+    # longitudinal axis's known input without lags, and the throttle command beside it would
+    # be the same path twice, so it is set aside with a note — not dropped silently.
+    A, B, C = aircraft_with_engine_lag()
+    record = full_preset_record(A, B, C)
+    C2 = np.vstack([C, 2.0 * np.eye(10)[9:]])
+    y = simulate(discretize_foh(A, B, C2, np.zeros((9, 4)), DT), record.u)
+    u = np.column_stack([record.u, y[:, 8]])
+    result = aircraft_identify(Experiment(u, y[:, :8]), inputs=(*INPUTS, "rpm"))
+    assert any("throttle set aside: the measured rpm" in w for w in result.warnings)
+    (engine,) = result.aircraft.engine
+    assert (engine.input, engine.lags, engine.measured) == ("rpm", 0, True)
+    longitudinal = next(a for a in result.aircraft.axes if a.name == "longitudinal")
+    assert longitudinal.inputs == ["elevator", "rpm"]
+    assert result.order == 8  # no lag states: the engine's speed is measured
+    # The rpm's gains within 2 % of the largest (measured: 1.0 %, on V̇'s).
+    gains = result.continuous.B[:4, 4] * 2.0
+    assert np.max(np.abs(gains - A[:4, 9])) < 0.02 * np.max(np.abs(A[:4, 9]))
+    assert np.all(result.continuous.B[:, 0] == 0)  # the throttle's column: not used
+    found = np.sort_complex(np.linalg.eigvals(result.continuous.A[:8, :8]))
+    true = np.sort_complex(np.linalg.eigvals(A[:8, :8]))
+    assert np.max(np.abs(found - true) / np.abs(true)) < 0.01
+    assert "engine: rpm measured, at once" in format_text(result, 1, len(u))
 
 
 def test_the_same_identification_in_one_bin_set_per_record_batches_records():

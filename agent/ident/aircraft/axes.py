@@ -6,7 +6,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-LONGITUDINAL = (("airspeed", "alpha", "q", "theta"), ("elevator", "throttle"))
+# A measured rpm or thrust is the longitudinal axis's engine input where the record has one
+# (agent.channels.POWER_ROLES): it acts at once, and the throttle's command is then set aside.
+LONGITUDINAL = (("airspeed", "alpha", "q", "theta"), ("elevator", "throttle", "rpm", "thrust"))
 LATERAL = (("beta", "p", "r", "phi"), ("aileron", "rudder"))
 AXES = {"longitudinal": LONGITUDINAL, "lateral": LATERAL}
 # The states whose equations are kinematics alone (no aerodynamic parameter): their rows of A

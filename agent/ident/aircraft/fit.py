@@ -11,8 +11,9 @@ error with per-band weights, its covariance, and the coupling tests.
    gradient of bin k): frequency bins are nearly independent for long records, so this holds
    for coloured noise (turbulence) where the white-noise Cramér–Rao bound (JᵀJ)⁻¹σ² does not.
 3. Inputs: surfaces are measured positions; the throttle reaches the thrust through the
-   engine's spin-up, THROTTLE_LAGS first-order lags whose time constant is estimated
-   (u_eff = u / (1 + jωτ)^THROTTLE_LAGS). Held inputs (commands recorded at the sample) carry
+   engine's spin-up, first-order lags whose time constant is estimated (u_eff = u / (1 +
+   jωτ)^k, k lags: THROTTLE_LAGS first, then the number the data choose, `lag_order_cost`
+   and agent.ident.aircraft.model). Held inputs (commands recorded at the sample) carry
    the zero-order hold's half-sample delay and sinc; sampled ones are taken at face value.
 
 Coupling (`coupling`): an axis model is fitted again with the other axis's controls added,
@@ -29,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.ndimage
 
-from agent.ident.aircraft.problem import LAG_START_S, AxisProblem
+from agent.ident.aircraft.problem import LAG_START_S, THROTTLE_LAGS, AxisProblem
 from agent.ident.aircraft.transforms import Transforms
 from agent.ident.errors import DataError, IdentificationFailed
 
@@ -292,6 +293,39 @@ def coupling(
     fraction = max(0.0, 1.0 - after / before) if before > 0 else 0.0
     change = float(np.sqrt(_cost(X1 - X0, fitted.bin_std) / signal)) if signal > 0 else 0.0
     return fraction, change
+
+
+def lag_order_cost(
+    sp: Transforms, fitted: AxisFit, *, column: int, order: int, experiments: int
+) -> tuple[float, float | None]:
+    """`fitted` fitted again with `column` (a lagged input) through `order` lags instead (0:
+    none, the input acting at once), started from its fit (the lags' mean delay kept) and
+    weighted as it was: the weighted cost, comparable with `fitted.cost`, and the new time
+    constant (None with no lag)."""
+    powers = dict(fitted.lag_powers)
+    now = powers.get(column, THROTTLE_LAGS)
+    lagged = [j for j in fitted.lags if j != column or order > 0]
+    if order > 0:
+        powers[column] = order
+    else:
+        powers.pop(column, None)
+    problem = AxisProblem(
+        sp,
+        states=fitted.states,
+        inputs=fitted.inputs,
+        lagged=lagged,
+        experiments=experiments,
+        controls=fitted.controls,
+        powers=powers,
+    )
+    taus = [fitted.lags[j] * (now / order if j == column else 1.0) for j in lagged]
+    theta = problem.pack(fitted.A, fitted.B, np.array(taus), fitted.transients)
+    theta, _, _ = _minimise(problem, theta, fitted.bin_std)
+    X = problem.response(theta)[0]
+    tau = None
+    if order > 0:
+        tau = float(abs(problem.unpack(theta)[2][lagged.index(column)]))
+    return _cost(problem.Y - X, fitted.bin_std), tau
 
 
 def known_gain(fit: AxisFit, column: int, row: int) -> tuple[float, float] | None:

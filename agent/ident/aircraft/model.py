@@ -28,10 +28,18 @@ from dataclasses import replace
 
 import numpy as np
 
+from agent.channels import POWER_ROLES
 from agent.ident.aircraft.axes import AXES
-from agent.ident.aircraft.fit import COUPLED, AxisFit, coupling, fit_axis, known_gain
+from agent.ident.aircraft.fit import (
+    COUPLED,
+    AxisFit,
+    coupling,
+    fit_axis,
+    known_gain,
+    lag_order_cost,
+)
 from agent.ident.aircraft.prepare import Prepared, prepare
-from agent.ident.aircraft.problem import THROTTLE_LAGS
+from agent.ident.aircraft.problem import ENGINE_ORDERS, THROTTLE_LAGS
 from agent.ident.aircraft.transforms import Transforms, input_band, transforms
 from agent.ident.aircraft.wind import GUST_RATE_LAGS
 from agent.ident.convert import StateSpace, discretize, discretize_hold
@@ -39,6 +47,7 @@ from agent.ident.document import (
     AircraftDocument,
     AxisDocument,
     Coupling,
+    Engine,
     Gain,
     Wind,
 )
@@ -96,18 +105,33 @@ def identify(
         rows=ready.rows,
     )
     throttle = [j for j, role in enumerate(input_roles) if role == "throttle"]
-    fits = _fit_axes(sp, ready, present, throttle, len(batch))
+    measured = [j for j, role in enumerate(input_roles) if role in POWER_ROLES]
+    notes = []
+    if measured and throttle and "longitudinal" in present:
+        # The measured rpm or thrust is what the throttle's command does to the engine: both as
+        # inputs would give the same path twice.
+        states, ins = present["longitudinal"]
+        present = {**present, "longitudinal": (states, [j for j in ins if j not in throttle])}
+        notes.append(
+            f"{', '.join(inputs[j] for j in throttle)} set aside: the measured "
+            f"{', '.join(inputs[j] for j in measured)} carries the engine (a known input, at once)"
+        )
+    fits, engine = _fit_axes(sp, ready, present, throttle, len(batch))
+    engine |= {j: (0, {}) for j in measured if any(j in f.inputs for f in fits)}
     couplings: dict[str, Coupling] = {}
     structure = fits[0].name
     if len(fits) == 2:
         fits, couplings, structure = _coupled(
-            sp, fits, ready, throttle, r=len(inputs), experiments=len(batch)
+            sp, fits, ready, engine, r=len(inputs), experiments=len(batch)
         )
     width = sp.U.shape[1]
     model, covariance = assemble(
         fits, r=len(inputs), m=len(outputs), states_of={width + c: c for c in range(len(outputs))}
     )
-    report = _report(sp, fits, ready, couplings, structure, inputs=inputs, outputs=outputs)
+    report = _report(
+        sp, fits, ready, couplings, structure, engine, inputs=inputs, outputs=outputs,
+        measured=measured,
+    )
     hold = "zoh" if settings.held_inputs else "foh"
     discrete = _sampled(model, dt, hold, outputs)
     start = max(1, round(INITIAL_S / dt))
@@ -160,7 +184,7 @@ def identify(
         modes=tuple(modes),
         fit=fitted,
         refinement=refinement,
-        warnings=(*warnings, *judged(modes, fitted)),
+        warnings=(*notes, *warnings, *judged(modes, fitted)),
         method="aircraft",
         aircraft=report,
         missing=tuple(missing),
@@ -180,29 +204,66 @@ def _fit_axes(
     known = {axis: [j for j, a in ready.extra_axes.items() if a == axis] for axis in AXES}
     if "longitudinal" not in present:  # α barely moves: its products only add unknowns
         known["lateral"] = [j for j in known["lateral"] if j not in ready.bilinear]
-    fits = []
+    fits, engine = [], {}
     for axis, (states, ins) in present.items():
         rated = [j for j in known[axis] if j in ready.rates]  # gust rates: one lag each
-        fits.append(
-            fit_axis(
-                sp,
-                name=axis,
-                states=states,
-                inputs=[*ins, *known[axis]],
-                lagged=[j for j in ins if j in throttle] + rated,
-                experiments=experiments,
-                controls=ins,
-                powers=dict.fromkeys(rated, GUST_RATE_LAGS),
-            )
+        engines = [j for j in ins if j in throttle]
+        powers = dict.fromkeys(rated, GUST_RATE_LAGS) | dict.fromkeys(engines, THROTTLE_LAGS)
+        fitted = fit_axis(
+            sp,
+            name=axis,
+            states=states,
+            inputs=[*ins, *known[axis]],
+            lagged=engines + rated,
+            experiments=experiments,
+            controls=ins,
+            powers=powers,
         )
-    return fits
+        for j in engines:
+            order, criterion = _engine_order(sp, fitted, j, experiments)
+            engine[j] = (order, criterion)
+            if order != THROTTLE_LAGS:
+                fitted = fit_axis(
+                    sp,
+                    name=axis,
+                    states=states,
+                    inputs=fitted.inputs,
+                    lagged=[k for k in fitted.lags if k != j or order > 0],
+                    experiments=experiments,
+                    controls=ins,
+                    powers={**fitted.lag_powers, j: order},
+                )
+        fits.append(fitted)
+    return fits, engine
+
+
+def _engine_order(
+    sp: Transforms, fitted: AxisFit, column: int, experiments: int
+) -> tuple[int, dict[int, float]]:
+    """How many lags the data give the engine between `column` (a throttle) and the thrust:
+    each of ENGINE_ORDERS fitted from `fitted` with its weights, the Akaike criterion
+    2 J + 2 k (J: the weighted cost, a complex residual's −log-likelihood; k: 1 for the lags'
+    time constant) picks one, the fewer lags on a tie. Returns the order and each order's
+    criterion less the chosen one's."""
+    now = fitted.lag_powers.get(column, THROTTLE_LAGS)
+    aic = {}
+    for order in ENGINE_ORDERS:
+        if order == now:
+            cost = fitted.cost
+        else:
+            cost, _ = lag_order_cost(
+                sp, fitted, column=column, order=order, experiments=experiments
+            )
+        aic[order] = 2.0 * cost + 2.0 * (order > 0)
+    best = min(aic, key=lambda k: (round(aic[k], 9), k))
+    return best, {k: float(v - aic[best]) for k, v in aic.items()}
 
 
 def _coupled(
     sp: Transforms,
     fits: list[AxisFit],
     ready: Prepared,
-    throttle: list[int],
+    engine: dict[int, tuple[int, dict[int, float]]],
     *,
     r: int,
     experiments: int,
@@ -229,11 +290,14 @@ def _coupled(
             response_by_states=moved_states,
         )
         ins, controls, lags = list(fitted.inputs), list(fitted.controls), list(fitted.lags)
+        powers = dict(fitted.lag_powers)
         if moved_inputs > COUPLED and fitted.name == "lateral":
             # The throttle reaches the lateral axis as it reaches the longitudinal one:
             # through the engine's lags (its torque and slipstream follow the thrust).
-            thrust = [j for j in other if j in throttle]
-            ins, controls, lags = ins + thrust, controls + thrust, lags + thrust
+            thrust = [j for j in other if j in engine]
+            ins, controls = ins + thrust, controls + thrust
+            lags += [j for j in thrust if engine[j][0] > 0]
+            powers |= {j: engine[j][0] for j in thrust if engine[j][0] > 0}
         if moved_states > COUPLED:
             ins += cross
         if ins != list(fitted.inputs):
@@ -245,7 +309,7 @@ def _coupled(
                 lagged=tuple(lags),
                 experiments=experiments,
                 controls=controls,
-                powers=fitted.lag_powers,
+                powers=powers,
             )
     joined = []
     for k, f in enumerate(fits):
@@ -262,11 +326,14 @@ def _report(
     ready: Prepared,
     couplings: dict[str, Coupling],
     structure: str,
+    engine: dict[int, tuple[int, dict[int, float]]],
     *,
     inputs: tuple[str, ...],
     outputs: tuple[str, ...],
+    measured: Sequence[int] = (),
 ) -> AircraftDocument:
     """What the method found: band, axes, coupling, engine lags, wind and known gains."""
+    taus = {j: tau for f in fits for j, tau in f.lags.items()}
     r, width = len(inputs), sp.U.shape[1]
     names = [*inputs, *ready.extra_names]
     drag = None
@@ -302,8 +369,20 @@ def _report(
         ],
         coupling=couplings,
         engine_lag_s={
-            f.name: {inputs[j]: tau for j, tau in f.lags.items() if j < r} for f in fits if f.lags
+            f.name: {inputs[j]: tau for j, tau in f.lags.items() if j < r}
+            for f in fits
+            if any(j < r for j in f.lags)
         },
+        engine=[
+            Engine(
+                input=inputs[j],
+                lags=order,
+                time_constant_s=taus.get(j) if order else None,
+                criterion=criterion,
+                measured=j in measured,
+            )
+            for j, (order, criterion) in engine.items()
+        ],
         sideslip_drag=drag,
         alpha_products=products,
     )
@@ -319,7 +398,7 @@ def _modes(
     r: int,
     output_roles: Sequence[str | None],
 ) -> tuple[list[Mode], list[str]]:
-    """Modes of the aircraft states alone (the lag states are the engine's, two equal poles
+    """Modes of the aircraft states alone (the lag states are the engine's, equal poles
     with no modal decomposition), with each lagged input at its steady gain, their Cramér–Rao
     1-σ and their names; and the poles left out of them (`modal.left_out`)."""
     m, n = model.C.shape[0], model.A.shape[0]
@@ -370,12 +449,13 @@ def _sampled(model: StateSpace, dt: float, hold: str, outputs: Sequence[str]) ->
 def assemble(
     fits: Sequence[AxisFit], *, r: int, m: int, states_of: dict[int, int] | None = None
 ) -> tuple[StateSpace, np.ndarray]:
-    """One continuous model (states: the m outputs, then THROTTLE_LAGS lag states per lagged
-    input of each axis) and the covariance of [vec Ac, vec Bc, vec C, vec D] (zero where
-    fixed). `states_of`: an input column that is another axis's state → that state."""
+    """One continuous model (states: the m outputs, then the lag states of each lagged input
+    of each axis, its number of lags) and the covariance of [vec Ac, vec Bc, vec C, vec D]
+    (zero where fixed). `states_of`: an input column that is another axis's state → that
+    state."""
     states_of = states_of or {}
     lagged = [(f, j) for f in fits for j in f.lags if j < r]  # the gust rates' are no state
-    n = m + THROTTLE_LAGS * len(lagged)
+    n = m + sum(f.lag_powers.get(j, THROTTLE_LAGS) for f, j in lagged)
     A, B = np.zeros((n, n)), np.zeros((n, r))
     index_a = np.arange(n * n).reshape(n, n)
     index_b = n * n + np.arange(n * r).reshape(n, r)
@@ -394,8 +474,8 @@ def assemble(
             if j >= r:  # a measured gust: it drove the fit, it is not an input of the model
                 continue
             if j in f.lags:  # u → lag → lag → the axis: B's column acts on the last lag state
-                tau = f.lags[j]
-                chain = list(range(extra, extra + THROTTLE_LAGS))
+                tau, order = f.lags[j], f.lag_powers.get(j, THROTTLE_LAGS)
+                chain = list(range(extra, extra + order))
                 B[chain[0], j] = 1.0 / tau
                 for a, b in itertools.pairwise(chain):
                     A[b, a] = 1.0 / tau
@@ -403,7 +483,7 @@ def assemble(
                     A[k, k] = -1.0 / tau
                 A[st, chain[-1]] = f.B[:, c]
                 where_b[:, c] = index_a[st, chain[-1]]
-                extra += THROTTLE_LAGS
+                extra += order
             else:
                 B[st, j] = f.B[:, c]
                 where_b[:, c] = index_b[st, j]

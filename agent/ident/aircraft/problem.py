@@ -9,10 +9,14 @@ import numpy as np
 
 from agent.ident.aircraft.transforms import Transforms, excited
 
-# Engine spin-up between throttle and thrust, as this many equal first-order lags of one
-# estimated time constant (2: manifold pressure and engine speed; JSBSim's piston engines show
-# poles at 1–3 and 1–10 1/s). Two separate time constants are not identifiable apart from
-# each other in a minute of data (the fit wanders along τ1 ↔ τ2).
+# Engine spin-up between throttle and thrust, as equal first-order lags of one estimated time
+# constant. How many, the data say (`agent.ident.aircraft.model`): ENGINE_ORDERS are tried and
+# the Akaike criterion picks one — none (a thrust that follows at once), one (a turbine's
+# spool, a propeller's speed), two (a piston's manifold pressure and engine speed; JSBSim's
+# piston engines show poles at 1–3 and 1–10 1/s). Two separate time constants are not
+# identifiable apart from each other in a minute of data (the fit wanders along τ1 ↔ τ2).
+# THROTTLE_LAGS is the order fitted first and the one a lagged input has unless told.
+ENGINE_ORDERS = (0, 1, 2)
 THROTTLE_LAGS = 2
 LAG_START_S = 0.3
 
