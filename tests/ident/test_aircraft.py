@@ -15,8 +15,8 @@ from agent.ident.aircraft.wind import measured_gust
 from agent.ident.convert import discretize_foh
 from agent.ident.errors import DataError, IdentificationFailed
 from agent.ident.fit import simulate
-from agent.ident.summary import format_text
 from agent.ident.reference import LATERAL, LONGITUDINAL
+from agent.ident.summary import format_text
 
 DT = 0.01
 TAU = 0.4  # the throttle's two lags, s

@@ -129,7 +129,14 @@ def identify(
         fits, r=len(inputs), m=len(outputs), states_of={width + c: c for c in range(len(outputs))}
     )
     report = _report(
-        sp, fits, ready, couplings, structure, engine, inputs=inputs, outputs=outputs,
+        sp,
+        fits,
+        ready,
+        couplings,
+        structure,
+        engine,
+        inputs=inputs,
+        outputs=outputs,
         measured=measured,
     )
     hold = "zoh" if settings.held_inputs else "foh"
