@@ -9,7 +9,8 @@ Bad input tried: no model at all (the build-up flies); a model that predicts not
 of the plan's controls (that control stays at the build-up); a model whose data moved half as
 far as it predicts (no correction below 1) and twice as far (its predictions doubled); two
 controls whose responses cancel (no credit taken for it); an envelope the predicted bank
-leaves (refused, naming the bank); a linkage with an even part (its bias predicted).
+leaves (refused, naming the bank); a linkage with an even part (its bias predicted); data
+whose bank the model does not explain (predicted from the data instead).
 """
 
 from __future__ import annotations
@@ -188,7 +189,8 @@ def test_the_model_is_checked_on_its_own_data(plan_and_timeline):
     predictor = lateral()
     u = predictor.commands(timeline, {"aileron": 1.0, "rudder": 1.0})
     y = simulate(predictor.model, u)
-    twice, unexplained = sizing.checked(predictor, [(u, 2.0 * y)])
+    twice, unexplained, unknown = sizing.checked(predictor, [(u, 2.0 * y)])
+    assert unknown == {}  # the model explains its data
     assert max(unexplained.values()) < 0.05  # twice the prediction explains it all
     for q in ("bank_deg", "beta_deg"):
         assert twice[q] == pytest.approx(2.0, rel=0.01)
@@ -197,7 +199,7 @@ def test_the_model_is_checked_on_its_own_data(plan_and_timeline):
     # is added to the peaks the envelope is checked against.
     drift = np.zeros_like(y)
     drift[:, ROLES["phi"]] = np.radians(3.0) * np.linspace(0, 1, len(y))
-    gains, unexplained = sizing.checked(predictor, [(u, y + drift)])
+    gains, unexplained, _ = sizing.checked(predictor, [(u, y + drift)])
     assert gains.get("bank_deg", 1.0) < 1.2
     assert unexplained["bank_deg"] == pytest.approx(3.0, rel=0.2)
     drifting = lateral(unexplained=unexplained)
@@ -207,6 +209,37 @@ def test_the_model_is_checked_on_its_own_data(plan_and_timeline):
     corrected = lateral(correction=twice)
     base, more = sizing.predict(predictor, timeline), sizing.predict(corrected, timeline)
     assert more["bank_deg"] == pytest.approx(2.0 * base["bank_deg"], rel=0.01)
+
+
+def test_a_quantity_the_model_does_not_know_is_grown_from_what_the_data_flew(plan_and_timeline):
+    """Bad input tried: data whose bank the model does not explain at all (a slow 12° swing
+    where the model simulates its own response; JSBSim's T-6 drifted so while its model was
+    right in every mode). The bank is then predicted from the data — its peak times the
+    ailerons' and rudder's growth over what they flew — and the plan sized to keep that within
+    the 15° target: the model alone would have sized it by its own, smaller bank."""
+    plan, timeline = plan_and_timeline
+    plain = lateral()
+    built = 0.25  # a build-up run flew the plan at a quarter
+    u = plain.commands(timeline, {"aileron": built, "rudder": built})
+    y = simulate(plain.model, u)
+    t = np.arange(len(y)) * DT
+    y[:, ROLES["phi"]] = np.radians(12.0) * np.sin(2 * np.pi * t / 40.0)
+    _, unexplained, unknown = sizing.checked(plain, [(u, y)])
+    assert set(unknown) == {"bank_deg"}  # β, p, r are the model's own: known
+    assert unknown["bank_deg"] == pytest.approx(12.0, rel=0.05)
+    flown = {c: built * float(np.max(np.abs(timeline.values[c]))) for c in timeline.values}
+    trusting = lateral(flown=flown, unexplained=unexplained)
+    wary = lateral(flown=flown, unexplained=unexplained, extrapolated=unknown)
+    target = EX.sizing.bank_deg
+    by_model = sizing.size(plan, timeline, trusting, EX.sizing, EX.surfaces, EX.envelope)
+    by_data = sizing.size(plan, timeline, wary, EX.sizing, EX.surfaces, EX.envelope)
+    growth = max(by_data.factors[c] / built for c in ("aileron", "rudder"))
+    assert unknown["bank_deg"] * growth <= target * sizing.SLACK
+    assert by_data.predicted["bank_deg"] == pytest.approx(unknown["bank_deg"] * growth, rel=0.01)
+    assert max(by_model.factors.values()) > 1.2 * max(by_data.factors.values())
+    # The arm's check predicts the same: the sized plan, played as sized, stays within.
+    played = render(by_data.plan, EX.rate_hz)
+    assert sizing.predict(wary, played)["bank_deg"] >= unknown["bank_deg"] * growth * 0.99
 
 
 def test_with_no_usable_model_the_build_up_grows_from_the_last_run(plan_and_timeline):

@@ -15,6 +15,7 @@ bench-jsbsim`."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from tests.benchmarks.bench import SLACK_S, help_text, run
@@ -38,3 +39,37 @@ def test_help_and_arguments():
     done = run("bench_jsbsim.py", "--without", "wings", timeout_s=TIMEOUT_S, ok=False)
     assert done.returncode == 2
     assert "invalid choice: 'wings'" in done.stderr, done.stderr
+
+
+def _bench():
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    path = Path(__file__).parents[2] / "benchmarks" / "bench_jsbsim.py"
+    spec = importlib.util.spec_from_file_location("bench_jsbsim", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["bench_jsbsim"] = module  # its dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_a_mode_of_two_real_poles_is_judged_by_its_wn_and_zeta():
+    """The J-3 Cub's overdamped short period (−9.745 and −6.367 1/s: ωn 7.877, ζ 1.023)
+    against an identified −7.507 ± 1.855j (ωn 7.733, ζ 0.971): 34 % apart pole by pole, 5.1 %
+    in ζ and 1.8 % in ωn. A complex pair on both sides is still judged pole by pole; a
+    missing mode is a miss."""
+    bench = _bench()
+    truth = {"short period": [-9.745 + 0j, -6.367 + 0j], "phugoid": [-0.036 + 0.344j]}
+    found = {"short period": [-7.507 + 1.855j], "phugoid": [-0.040 + 0.344j]}
+    errors = dict(zip(bench.MODES, bench.mode_errors(found, truth), strict=True))
+    assert errors["short period"] == pytest.approx(0.0508, abs=5e-4)
+    assert errors["phugoid"] == pytest.approx(0.004 / abs(-0.036 + 0.344j), rel=1e-6)
+    assert errors["Dutch roll"] == 0.0  # no truth of it given: nothing to miss
+    assert bench.mode_errors({}, truth)[0] == float("inf")
+    # Two real poles found for a complex truth: by ωn and ζ too.
+    two = bench.mode_errors({"short period": [-9.0 + 0j, -7.0 + 0j]}, found)[0]
+    wn, zeta = 7.733, 7.507 / 7.733
+    assert two == pytest.approx(
+        max(abs(np.sqrt(63) - wn) / wn, abs(8 / np.sqrt(63) - zeta) / zeta), rel=1e-3
+    )
