@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
-from agent.channels import OUTPUT_ROLES
+from agent.channels import AXIS_SETS, OUTPUT_ROLES
 from agent.config import Channels, Envelope, Surface
 from agent.config import Sizing as SizingConfig
 from agent.excitation.plan import Plan, Timeline
@@ -75,6 +75,14 @@ MAX_CORRECTION = 4.0
 # is one the model does not know: it is predicted from the data instead, its measured peak
 # grown as its controls grow (`Predictor.extrapolated`).
 UNKNOWN_SHARE = 0.5
+# Each checked quantity's axis: its controls are the ones grown from the data's peak.
+AXIS_OF = {
+    "bank_deg": "lateral",
+    "beta_deg": "lateral",
+    "airspeed_pct": "longitudinal",
+    "alpha_deg": "longitudinal",
+    "pitch_deg": "longitudinal",
+}
 # The share of the envelope's room (from the trim, less what no input explains) the targets
 # may take: the rest is left to the prediction's error.
 ENVELOPE_SHARE = 0.9
@@ -165,10 +173,11 @@ class Predictor:
     """Quantity → the largest excursion of its data that no input explains (`checked`)."""
     extrapolated: Mapping[str, float] = field(default_factory=dict)
     """Quantity → its data's peak excursion, where the model explains less than UNKNOWN_SHARE
-    of it (`checked`): predicted as that peak times the growth of its controls over what the
-    data flew (`flown`), when that is more than the model predicts. On JSBSim's T-6 the
-    bank drifted 10° in a 1° build-up run while its model, right in every mode, simulated
-    5° the other way; the next run, sized by the model alone at 2.6°, banked to 31°."""
+    of it (`checked`): predicted as that peak times the growth of its axis's controls over
+    what the data flew (`flown`), when that is more than the model predicts. On JSBSim's T-6
+    the bank drifted 10° in a 1° build-up run while its model, right in every mode,
+    simulated 5° the other way; the next run, sized by the model alone at 2.6°, banked to
+    31°."""
     linkage: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     """Control → (gain, even): its recorded position per commanded deflection and per
     |commanded| deflection, measured on the last run (agent.excitation.follow); without it
@@ -441,7 +450,7 @@ def size(
             if own.get(q, 0.0) > 0:
                 limits[f"{LABELS[q]} {target:g}{QUANTITIES[q]}"] = target / own[q]
             known = predictor.extrapolated.get(q, 0.0)
-            if known > 0 and flown > 0 and peak[c] > 0:  # no control may grow it past the goal
+            if known > 0 and _axis_controls(q, (c,)) and flown > 0 and peak[c] > 0:
                 why = f"{LABELS[q]} {target:g}{QUANTITIES[q]}: {known:.3g}{QUANTITIES[q]} flown"
                 limits[f"{why}, not in the model"] = target / known * flown / peak[c]
         if not alone[c]:
@@ -525,17 +534,28 @@ def _extrapolated(
     predictor: Predictor, timeline: Timeline, factors: Mapping[str, float]
 ) -> dict[str, float]:
     """The quantities the model does not know (`Predictor.extrapolated`), each its data's
-    peak times the largest growth of any control over what the data flew: the model cannot
-    say which control moved it (on the T-6 its bank drift grew with the throttle, which the
-    model gives no bank at all)."""
-    growth = [
-        factors[c] * float(np.max(np.abs(timeline.values[c]))) / predictor.flown[c]
-        for c in factors
-        if c in timeline.values and predictor.flown.get(c, 0.0) > 0
-    ]
-    if not growth:
-        return {}
-    return {q: peak * max(growth) for q, peak in predictor.extrapolated.items()}
+    peak times the largest growth over what the data flew of its axis's controls
+    (`AXIS_OF`): what the model misses of the other axis's controls' reach, their linear
+    coupling, the model's coupling tests would have found."""
+    out = {}
+    for q, peak in predictor.extrapolated.items():
+        growth = [
+            factors[c] * float(np.max(np.abs(timeline.values[c]))) / predictor.flown[c]
+            for c in _axis_controls(q, factors)
+            if c in timeline.values and predictor.flown.get(c, 0.0) > 0
+        ]
+        if growth:
+            out[q] = peak * max(growth)
+    return out
+
+
+def _axis_controls(quantity: str, controls) -> list[str]:
+    """The controls of the quantity's axis among `controls` (none for a quantity of no one
+    axis: only the checked ones are extrapolated)."""
+    if quantity not in AXIS_OF:
+        return []
+    mine = AXIS_SETS[AXIS_OF[quantity]][0]
+    return [c for c in controls if c in mine]
 
 
 def _combined(alone: Mapping[str, dict], factors: Mapping[str, float]) -> dict[str, np.ndarray]:

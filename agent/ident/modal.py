@@ -48,6 +48,11 @@ from agent.ident.errors import IdentificationFailed
 REAL_TOLERANCE = 1e-10
 # Eigenvector matrices worse conditioned than this mean a defective A (no modal basis).
 MAX_EIGENVECTOR_COND = 1e12
+# The largest log of a pole's growth over the modal analysis's horizon: beyond it its powers
+# overflow (float64 ends near e⁷⁰⁹), so a model with such a pole gets a clear failure, not an
+# SVD that does not converge (JSBSim's glider in turbulence without the INS: a pole of
+# thousands of 1/s, once in sixty flights).
+MAX_LOG_GROWTH = 300.0
 
 
 # Not era.EraResult: its two factors alone, to transform along with a StateSpace.
@@ -126,6 +131,17 @@ def modal_analysis(
     if factors is not None:
         horizon = (factors.observability.shape[0] // m, factors.controllability.shape[1] // r)
     z, Psi = scipy.linalg.eig(A)
+    steps = sum(horizon)
+    with np.errstate(divide="ignore"):
+        growth = np.log(np.maximum(np.abs(z), 1e-300))
+    if np.max(growth) * steps > MAX_LOG_GROWTH:
+        worst = z[int(np.argmax(growth))]
+        raise IdentificationFailed(
+            f"the identified model has a pole of {np.log(abs(worst)) / dt:.3g} 1/s (its "
+            f"response grows {abs(worst):.3g}× per sample, beyond what {steps} samples of "
+            "modal analysis can hold): the fit diverged; a response that does not stand "
+            "above the noise or the turbulence does that — excite harder or in calmer air"
+        )
     if np.linalg.cond(Psi) > MAX_EIGENVECTOR_COND:
         raise IdentificationFailed(
             "the identified A is defective (repeated eigenvalues without a full set of "

@@ -10,7 +10,7 @@ import pytest
 
 from agent.ident import identify, reference
 from agent.ident.convert import StateSpace, continuous_eigenvalues, discretize
-from agent.ident.errors import ContinuousConversionError
+from agent.ident.errors import ContinuousConversionError, IdentificationFailed
 from agent.ident.modal import (
     HankelFactors,
     Mode,
@@ -244,3 +244,17 @@ def test_a_pole_at_z_0_is_left_out_of_the_modes_without_a_warning():
     assert modal_analysis(np.zeros((1, 1)), np.ones((1, 1)), np.eye(1), DT) == []
     with pytest.raises(ContinuousConversionError, match="no continuous-time eigenvalue"):
         continuous_eigenvalues(np.array([0.0]), DT)
+
+
+def test_a_pole_whose_response_overflows_the_analysis_is_a_clear_failure():
+    # Bad input tried: a fitted model with a pole of +4000 1/s (a diverged fit; JSBSim's glider
+    # in turbulence gave one): its powers overflow the Hankel horizon. A clear failure naming
+    # the pole, not numpy's "SVD did not converge".
+    dt = 0.01
+    A = np.diag(np.exp(np.array([-1.0, -3.0, 4000.0]) * dt))
+    B, C = np.ones((3, 1)), np.ones((2, 3))
+    with pytest.raises(IdentificationFailed, match=r"a pole of 4e\+03 1/s .* the fit diverged"):
+        modal_analysis(A, B, C, dt)
+    # A fast but ordinary unstable pole (+5 1/s) is analysed as before.
+    A[2, 2] = np.exp(5.0 * dt)
+    assert len(modal_analysis(A, B, C, dt)) == 3
