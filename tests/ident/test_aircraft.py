@@ -3,6 +3,8 @@ every state measured, fitted in the frequency domain, on known linear aircraft."
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -156,6 +158,25 @@ def test_a_measured_rpm_is_the_engines_input_at_once_and_the_throttle_is_set_asi
     true = np.sort_complex(np.linalg.eigvals(A[:8, :8]))
     assert np.max(np.abs(found - true) / np.abs(true)) < 0.01
     assert "engine: rpm measured, at once" in format_text(result, 1, len(u))
+
+
+def test_a_mode_the_record_resolves_poorly_is_said_so_by_name_with_why():
+    # Bad input tried: sensor noise as large as each output's own motion. The spiral (0.07 rad/s,
+    # below most of the preset's lines) comes out with σ(ωn) above 20 % of ωn, the
+    # suggestion's own limit: the result says so by name, with the share of the lateral
+    # controls' power near it; the modes the record does resolve are not flagged.
+    A, B, C = aircraft_with_engine_lag()
+    record = full_preset_record(A, B, C)
+    noise = record.y.std(axis=0) * np.random.default_rng(0).standard_normal(record.y.shape)
+    result = aircraft_identify(Experiment(record.u, record.y + noise))
+    flagged = [w for w in result.warnings if "poorly resolved" in w]
+    spread = {m.name: m.uncertainty.frequency / m.frequency for m in result.modes if m.name}
+    assert {w.split(" poorly")[0] for w in flagged} == {n for n, v in spread.items() if v > 0.2}
+    assert [w.split(" poorly")[0] for w in flagged] == ["spiral"]
+    assert re.search(
+        r"σ\(ωn\) \d+% of its 0.0\d+ rad/s; the lateral controls put [\d.]+% ", flagged[0]
+    )
+    assert spread.get("short period", 1.0) < 0.2
 
 
 def test_the_same_identification_in_one_bin_set_per_record_batches_records():

@@ -54,7 +54,7 @@ from agent.ident.document import (
 from agent.ident.errors import IdentificationFailed
 from agent.ident.fit import fit
 from agent.ident.modal import Mode, left_out, modal_analysis
-from agent.ident.naming import missing_modes, name_modes
+from agent.ident.naming import LATERAL_MODES, missing_modes, name_modes
 from agent.ident.okid import Experiment, channel_rms
 from agent.ident.preprocess import Preprocessing
 from agent.ident.refine import Refinement, with_uncertainty
@@ -64,6 +64,10 @@ from agent.ident.settings import Settings
 # The kinematic forcing is the kinematics less their expansion about the trim, taken as the
 # record's first TRIM_S (the job removes the same stretch's mean as the operating point).
 TRIM_S = 0.5
+# A named mode whose Cramér–Rao σ(ωn) is above this share of its ωn is said to be poorly
+# resolved by the record (the suggestion's own limit, agent.models.CR_MAX: Tischler & Remple,
+# 2012, ch. 11, take 20 % as the bound of an accurate parameter).
+RESOLVED = 0.2
 # The simulation starts each record at the mean of its first INITIAL_S of outputs, with the
 # engine's lag states at rest: estimated by least squares instead, those nearly unobservable
 # states take absurd values that trade one output's fit for another's.
@@ -171,6 +175,7 @@ def identify(
     warnings = (
         [] if refinement.converged else ["the output-error fit stopped at its iteration limit"]
     )
+    warnings += _poorly_resolved(modes, sp, present)
     prep = Preprocessing(
         record_dt=dt,
         dt=dt,
@@ -430,6 +435,35 @@ def _modes(
     if any(role is not None for role in output_roles):
         modes = name_modes(modes, output_roles, min_msv=0.0)
     return modes, left_out(Am, dt, states_only.A)
+
+
+def _poorly_resolved(
+    modes: Sequence[Mode], sp: Transforms, present: dict[str, tuple[list[int], list[int]]]
+) -> list[str]:
+    """A named mode whose Cramér–Rao σ(ωn) exceeds RESOLVED of its ωn, said by name, with the
+    share of its axis's controls' power the record put within a factor 2 of ωn: why the
+    record resolves it poorly, the manoeuvre's fault or the noise's."""
+    notes = []
+    for mode in modes:
+        u = mode.uncertainty
+        if mode.name is None or u is None or mode.frequency <= 0:
+            continue
+        spread = u.frequency / mode.frequency
+        if not spread > RESOLVED:
+            continue
+        axis = "lateral" if mode.name in LATERAL_MODES else "longitudinal"
+        controls = present.get(axis, ([], []))[1]
+        power = np.sum(np.abs(sp.U[:, controls]) ** 2, axis=1) if controls else np.zeros(0)
+        w = np.abs(sp.s)
+        near = (w >= mode.frequency / 2) & (w <= 2 * mode.frequency)
+        share = float(power[near].sum() / power.sum()) if power.size and power.sum() > 0 else 0
+        notes.append(
+            f"{mode.name} poorly resolved by this record: σ(ωn) {spread:.0%} of its "
+            f"{mode.frequency:.3g} rad/s; the {axis} controls put {share:.1%} of their power "
+            "within a factor 2 of it"
+            + (f" (the analysed band starts at {sp.band_hz[0]:.3g} Hz)" if not near.any() else "")
+        )
+    return notes
 
 
 def _sampled(model: StateSpace, dt: float, hold: str, outputs: Sequence[str]) -> StateSpace:
