@@ -98,6 +98,17 @@ class ModeDocument(Document):
         return self.eigenvalue[1] != 0.0
 
 
+class SecondOrderMode(Document):
+    """A named mode made of two real poles as the one second-order mode it is
+    (agent.ident.modal.second_order): its ωn and ζ."""
+
+    model_config = Document.model_config | ConfigDict(allow_inf_nan=False)
+
+    name: str
+    frequency_rad_s: float
+    damping: float
+
+
 class MissingMode(Document):
     """A mode the run's axes must have (agent.ident.naming.expected_modes) that no identified
     mode was named as, and why."""
@@ -255,6 +266,8 @@ class ResultDocument(Document):
     poles_left_out: list[str] = []
     """The model's poles left out of the modes, each with why (a discrete pole at z ≈ 0, a
     pure sample delay, has no continuous-time eigenvalue)."""
+    second_order: list[SecondOrderMode] = []
+    """Each named mode of two real poles (an overdamped short period) as one mode: ωn, ζ."""
 
     @model_validator(mode="before")
     @classmethod

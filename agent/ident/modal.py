@@ -190,6 +190,24 @@ def modal_analysis(
     return sorted(modes, key=lambda mode: (mode.frequency, mode.eigenvalue.imag))
 
 
+def second_order(modes: Sequence[Mode]) -> list[tuple[str, float, float]]:
+    """Each named mode made of two real poles (an overdamped short period or phugoid) as the
+    one second-order mode it is: (name, ωn, ζ) of its polynomial. Near ζ = 1 those are well
+    determined where the two poles are not (a 1 % change of the polynomial moves them apart or
+    into a complex pair)."""
+    out = []
+    for name in dict.fromkeys(m.name for m in modes if m.name):
+        mine = [m for m in modes if m.name == name]
+        if len(mine) != 2 or any(m.pair for m in mine):
+            continue
+        s1, s2 = (m.eigenvalue.real for m in mine)
+        if s1 * s2 <= 0:
+            continue
+        wn = float(np.sqrt(s1 * s2))
+        out.append((name, wn, float(-(s1 + s2) / (2 * wn))))
+    return out
+
+
 def left_out(A: np.ndarray, dt: float, Ac: np.ndarray | None = None) -> list[str]:
     """Why each pole of the discrete A that `modal_analysis` leaves out (z ≈ 0) is no mode,
     one line each; `Ac`, the continuous model A is the sampling of, names the pole it was."""

@@ -21,13 +21,14 @@ from agent.ident.document import (
     PreprocessingDocument,
     RefinementDocument,
     ResultDocument,
+    SecondOrderMode,
     StateSpaceDocument,
     rows,
 )
 from agent.ident.era import EraResult
 from agent.ident.fit import Fit
 from agent.ident.frequency import FrequencyData
-from agent.ident.modal import Mode
+from agent.ident.modal import Mode, second_order
 from agent.ident.preprocess import Preprocessing
 from agent.ident.refine import Refinement
 
@@ -109,6 +110,10 @@ class Identification:
             warnings=list(self.warnings),
             missing_modes=[MissingMode(name=n, reason=why) for n, why in self.missing],
             poles_left_out=list(self.left_out),
+            second_order=[
+                SecondOrderMode(name=n, frequency_rad_s=wn, damping=zeta)
+                for n, wn, zeta in second_order(self.modes)
+            ],
         )
 
     def _preprocessing(self) -> PreprocessingDocument:

@@ -4,7 +4,7 @@ and the poles left out of the modes."""
 
 from __future__ import annotations
 
-from agent.ident.modal import Mode
+from agent.ident.modal import Mode, second_order
 from agent.ident.result import Identification
 
 
@@ -43,7 +43,10 @@ def format_text(result: Identification, records: int, samples: int) -> str:
             f"{tau:>8}{_pct(mode.msv):>6}{_pct(mode.mci):>5}{_pct(mode.moi):>5}"
             f"{_pct(mode.emac):>6}{_pct(mode.mpc):>5}{_pct(mode.cmi):>5}" + _fmt_std(mode)
         )
-    lines += _second_order(result.modes)
+    lines += [
+        f"{name} as one mode (its two real poles): ωn {wn:.4g} rad/s, ζ {zeta:.3f}"
+        for name, wn, zeta in second_order(result.modes)
+    ]
     tic = "  ".join(
         f"{n} {v:.3f}" for n, v in zip(result.output_names, result.fit.tic, strict=True)
     )
@@ -115,25 +118,3 @@ def _engine(engine) -> str:
     tried = sorted(engine.criterion)
     aic = ", ".join(f"{engine.criterion[k]:+.3g}" if engine.criterion[k] else "0" for k in tried)
     return f"{engine.input} {how} (lags {'/'.join(map(str, tried))}: AIC {aic})"
-
-
-def _second_order(modes) -> list[str]:
-    """A named mode made of two real poles (an overdamped short period or phugoid) as the one
-    second-order mode it is: its ωn and ζ, which near ζ = 1 are well determined where the two
-    poles themselves are not (a 1 % change of the polynomial moves them apart or into a
-    complex pair)."""
-    lines = []
-    for name in dict.fromkeys(m.name for m in modes if m.name):
-        mine = [m for m in modes if m.name == name]
-        if len(mine) != 2 or any(m.pair for m in mine):
-            continue
-        s1, s2 = (m.eigenvalue.real for m in mine)
-        product = s1 * s2
-        if product <= 0:
-            continue
-        wn = product**0.5
-        lines.append(
-            f"{name} as one mode (its two real poles): ωn {wn:.4g} rad/s, "
-            f"ζ {-(s1 + s2) / (2 * wn):.3f}"
-        )
-    return lines

@@ -151,7 +151,8 @@ def test_a_document_of_before_reads_with_empty_lists_and_its_nan_mode_left_out()
 
 def test_a_mode_of_two_real_poles_is_also_given_as_one_by_its_wn_and_zeta():
     """An overdamped short period (the J-3 Cub's −9.745 and −6.367 1/s) is listed as its two
-    real poles and, below the table, as the one mode it is: ωn 7.877 rad/s, ζ 1.023 — the
+    real poles and, below the table and in --json's `second_order`, as the one mode it is:
+    ωn 7.877 rad/s, ζ 1.023 — the
     handling-qualities parameters, well determined near ζ = 1 where the poles are not. A
     complex pair, or a name with one pole, gets no such line."""
     from tests.ident.test_modal import _mode
@@ -167,7 +168,14 @@ def test_a_mode_of_two_real_poles_is_also_given_as_one_by_its_wn_and_zeta():
     )
     short = [_mode(s, [0.1, 1, 0.9, 0.2]) for s in (-9.745 + 0j, -6.367 + 0j)]
     modes = [*(dataclasses.replace(m, name="short period") for m in short), *found.modes]
-    text = format_text(dataclasses.replace(found, modes=tuple(modes)), 1, u.shape[0])
+    result = dataclasses.replace(found, modes=tuple(modes))
+    text = format_text(result, 1, u.shape[0])
     assert "short period as one mode (its two real poles): ωn 7.877 rad/s, ζ 1.023" in text
+    doc = ResultDocument.model_validate_json(result.document().model_dump_json())
+    (one,) = doc.second_order
+    assert one.name == "short period"
+    assert one.frequency_rad_s == pytest.approx(np.sqrt(9.745 * 6.367), rel=1e-9)
+    assert one.damping == pytest.approx((9.745 + 6.367) / (2 * np.sqrt(9.745 * 6.367)), rel=1e-9)
+    assert found.document().second_order == []  # its own modes: pairs and single poles
     assert "Dutch roll as one mode" not in text  # a complex pair: its own line says it
     assert "roll as one mode" not in text
