@@ -36,6 +36,18 @@ def delayed_aileron() -> tuple[np.ndarray, np.ndarray]:
     return u, reference.simulate(LATERAL, late, DT)
 
 
+def delayed_identified(u: np.ndarray, y: np.ndarray, settings: Settings):
+    """`delayed_aileron`'s record identified at order 5 (a pole at z = 0 among its poles)."""
+    return identify(
+        Experiment(u, y),
+        DT,
+        input_names=LATERAL.inputs,
+        output_names=LATERAL.outputs,
+        output_roles=LATERAL.outputs,
+        settings=settings,
+    )
+
+
 @pytest.mark.parametrize(
     "settings", [Settings(order=5, method="time"), Settings(order=5, method="time", refine=False)]
 )
@@ -43,14 +55,7 @@ def test_a_pole_at_z_0_is_left_out_with_a_note_and_never_a_null_eigenvalue(setti
     u, y = delayed_aileron()
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # "divide by zero encountered in log" was one
-        found = identify(
-            Experiment(u, y),
-            DT,
-            input_names=LATERAL.inputs,
-            output_names=LATERAL.outputs,
-            output_roles=LATERAL.outputs,
-            settings=settings,
-        )
+        found = delayed_identified(u, y, settings)
         doc = found.document()
     text = json.dumps(doc.model_dump(mode="json"), allow_nan=False)  # no NaN, no ∞ anywhere
     again = json.loads(text)
@@ -158,14 +163,7 @@ def test_a_mode_of_two_real_poles_is_also_given_as_one_by_its_wn_and_zeta():
     from tests.ident.test_modal import _mode
 
     u, y = delayed_aileron()
-    found = identify(
-        Experiment(u, y),
-        DT,
-        input_names=LATERAL.inputs,
-        output_names=LATERAL.outputs,
-        output_roles=LATERAL.outputs,
-        settings=Settings(order=5, method="time", refine=False),
-    )
+    found = delayed_identified(u, y, Settings(order=5, method="time", refine=False))
     short = [_mode(s, [0.1, 1, 0.9, 0.2]) for s in (-9.745 + 0j, -6.367 + 0j)]
     modes = [*(dataclasses.replace(m, name="short period") for m in short), *found.modes]
     result = dataclasses.replace(found, modes=tuple(modes))
