@@ -158,6 +158,11 @@ def test_a_measured_rpm_is_the_engines_input_at_once_and_the_throttle_is_set_asi
     true = np.sort_complex(np.linalg.eigvals(A[:8, :8]))
     assert np.max(np.abs(found - true) / np.abs(true)) < 0.01
     assert "engine: rpm measured, at once" in format_text(result, 1, len(u))
+    # Bad input tried: a measured rpm column of zeros (a log's empty thrust channel) is refused
+    # by name, not fitted as an input with no effect.
+    u[:, 4] = 0.0
+    with pytest.raises(DataError, match="input 'rpm' is constant"):
+        aircraft_identify(Experiment(u, y[:, :8]), inputs=(*INPUTS, "rpm"))
 
 
 def test_a_mode_the_record_resolves_poorly_is_said_so_by_name_with_why():
