@@ -87,6 +87,8 @@ ENGINE_STATES = {
 # residual accepted (ft/s², and rad/s² for q̇).
 GLIDE_ITERATIONS = 30
 GLIDE_RESIDUAL = 1e-6
+# The throttles a multi-engine aircraft starts its trim from (the plant's constructor).
+TWIN_START_THROTTLE = 0.6
 
 
 @contextlib.contextmanager
@@ -186,6 +188,14 @@ class Plant:
         self.dt = self.fdm.get_delta_t()
         with _stdout_to_stderr():  # JSBSim prints its trim's complaints with printf
             if self.engines:
+                # Every engine's mixture rich, and on a multi-engine aircraft every throttle
+                # open to TWIN_START_THROTTLE (the trim moves it from there): JSBSim leaves
+                # the second engine lean and closed, and the C310 then had it at 0 rpm and
+                # failed to trim ("udot doesn't appear to be trimmable").
+                for k in range(self.engines):
+                    self.fdm[f"fcs/mixture-cmd-norm[{k}]"] = 1.0
+                    if self.engines > 1:
+                        self.fdm[f"fcs/throttle-cmd-norm[{k}]"] = TWIN_START_THROTTLE
                 self.fdm["propulsion/set-running"] = -1
                 self.fdm.run()
                 try:

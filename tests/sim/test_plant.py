@@ -206,3 +206,17 @@ def test_a_turbine_moves_on_every_engine_and_reports_no_engine_speed():
     before = float(t6.fdm["propulsion/engine/thrust-lbs"])
     t6.fly(np.tile([0.05, 0.0, 0.0, 0.0], (25, 1)), DT)
     assert float(t6.fdm["propulsion/engine/thrust-lbs"]) > 1.05 * before
+
+
+def test_a_twin_trims_with_both_engines_running():
+    """JSBSim's C310 (two pistons) leaves its second engine's mixture lean: untouched, its
+    trim at 100 kt failed ("udot doesn't appear to be trimmable", the second engine at 0 rpm).
+    Both engines run, at one throttle, and it stays trimmed."""
+    twin = Plant("c310", airspeed_kts=100.0, linearise=False)
+    assert (twin.kind, twin.engines) == ("piston", 2)
+    rpm = [float(twin.fdm[f"propulsion/engine[{k}]/engine-rpm"]) for k in range(2)]
+    assert min(rpm) > 1000.0
+    assert rpm[1] == pytest.approx(rpm[0], rel=0.01)
+    start = twin.state()
+    twin.fly(np.tile([0.0, 0.0, 0.0, 0.0], (250, 1)), DT)  # 5 s at the trim
+    assert twin.state()["Vt"] == pytest.approx(start["Vt"], rel=0.01)
