@@ -174,10 +174,9 @@ class Predictor:
     extrapolated: Mapping[str, float] = field(default_factory=dict)
     """Quantity → its data's peak excursion, where the model explains less than UNKNOWN_SHARE
     of it (`checked`): predicted as that peak times the growth of its axis's controls over
-    what the data flew (`flown`), when that is more than the model predicts. On JSBSim's T-6
-    the bank drifted 10° in a 1° build-up run while its model, right in every mode,
-    simulated 5° the other way; the next run, sized by the model alone at 2.6°, banked to
-    31°."""
+    what the data flew (`flown`), when that is more than the model predicts: a response the
+    model does not hold (a drift that grows with the inputs) must not be sized by the model
+    alone (docs/excitation.md, *Sizing*)."""
     linkage: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     """Control → (gain, even): its recorded position per commanded deflection and per
     |commanded| deflection, measured on the last run (agent.excitation.follow); without it

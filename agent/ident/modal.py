@@ -49,9 +49,8 @@ REAL_TOLERANCE = 1e-10
 # Eigenvector matrices worse conditioned than this mean a defective A (no modal basis).
 MAX_EIGENVECTOR_COND = 1e12
 # The largest log of a pole's growth over the modal analysis's horizon: beyond it its powers
-# overflow (float64 ends near e⁷⁰⁹), so a model with such a pole gets a clear failure, not an
-# SVD that does not converge (JSBSim's glider in turbulence without the INS: a pole of
-# thousands of 1/s, once in sixty flights).
+# overflow (float64 ends near e⁷⁰⁹), so a model with such a pole (a diverged fit) gets a clear
+# failure, not an SVD that does not converge.
 MAX_LOG_GROWTH = 300.0
 
 

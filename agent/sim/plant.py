@@ -189,9 +189,8 @@ class Plant:
         with _stdout_to_stderr():  # JSBSim prints its trim's complaints with printf
             if self.engines:
                 # Every engine's mixture rich, and on a multi-engine aircraft every throttle
-                # open to TWIN_START_THROTTLE (the trim moves it from there): JSBSim leaves
-                # the second engine lean and closed, and the C310 then had it at 0 rpm and
-                # failed to trim ("udot doesn't appear to be trimmable").
+                # open to TWIN_START_THROTTLE (the trim moves it from there): JSBSim starts
+                # the second engine lean and closed, dead at the trim, which then fails.
                 for k in range(self.engines):
                     self.fdm[f"fcs/mixture-cmd-norm[{k}]"] = 1.0
                     if self.engines > 1:
