@@ -183,9 +183,15 @@ def _in_range(result: ResultDocument) -> tuple[bool, list[str]]:
 
 
 def suggest(
-    candidate: Candidate, nominal: Candidate | None, tic_jn: float | None, tic_nj: float | None
+    candidate: Candidate,
+    nominal: Candidate | None,
+    tic_jn: float | None,
+    tic_nj: float | None,
+    uncompared: str = "",
 ) -> Suggestion:
-    """The figure 5.2 procedure; each step's outcome is a line for the operator."""
+    """The figure 5.2 procedure; each step's outcome is a line for the operator. `uncompared`:
+    why the candidate and the nominal could not be compared (their channels differ: a run
+    that moved one axis only), and the candidate is then not suggested."""
     steps, ok = [], True
     # A mode slower than half the record (the Cub's spiral: τ ≈ 4 min) is not resolved by it:
     # reported, but it fails neither the stability step nor the quality step. Its sign is not
@@ -242,6 +248,10 @@ def suggest(
     if nominal is None:
         steps.append("4–7 no nominal model yet")
         return Suggestion(update=bool(ok), steps=steps, checks=checks, tic_jj=tic_jj)
+    if uncompared:
+        steps.append(f"4–7 not compared with nominal {nominal.model_id}: {uncompared}")
+        checks |= {"no worse": False, "combined": False}
+        return Suggestion(update=False, steps=steps, checks=checks, tic_jj=tic_jj)
     tic_nn = nominal.tic_nn if nominal.tic_nn is not None else nominal.tic_jj
     better = bool(tic_jn is not None and tic_jn <= tic_nn)
     steps.append(

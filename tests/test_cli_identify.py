@@ -325,7 +325,9 @@ BAD = [
     ("text.csv", _set(5, "r", "n/a"), [], "'n/a' in column 'r' is not a number"),
     # float() reads 1_000 as 1000; a CSV reader must not.
     ("underscore.csv", _set(120, "p", "1_000"), [], "line 122: '1_000' in column 'p' is not a"),
-    ("const.csv", _constant_rudder, [], "input 'rudder' is constant"),
+    # OKID/ERA needs every input moved; the aircraft method leaves one out and says so
+    # (test_a_control_the_record_did_not_move_is_left_out_by_name).
+    ("const.csv", _constant_rudder, ["--method", "time"], "input 'rudder' is constant"),
     ("short.csv", lambda h, r: (h, r[:60]), ["--markov", "10"], "need at least"),
     (
         "short_auto.csv",
@@ -361,6 +363,18 @@ def test_bad_data_is_a_clear_error_with_exit_2(tmp_path, capsys, name, edit, ext
     assert code == 2
     assert doc["error"]["exit"] == 2
     assert message in doc["error"]["message"]
+
+
+def test_a_control_the_record_did_not_move_is_left_out_by_name(tmp_path, capsys):
+    """Bad input: a lateral record whose rudder column is constant. The aircraft method
+    identifies what the aileron moved, without the rudder, and says so; it does not refuse the
+    record nor fit the rudder to nothing."""
+    path = _corrupt(tmp_path, "still.csv", _constant_rudder)
+    code, doc = run_json(capsys, str(path), *LAT)
+    assert code == 0
+    assert doc["method"] == "aircraft"
+    assert doc["inputs"] == ["aileron"]
+    assert any(w.startswith("rudder not moved by this record (constant") for w in doc["warnings"])
 
 
 HEADER = "time,aileron,rudder,beta,p,r,phi\n"

@@ -12,9 +12,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from agent.ident import job as jobs
 from agent.ident.document import ModeDocument, OkidDocument, ResultDocument
+from agent.ident.errors import DataError
 from agent.models import CANDIDATES_KEPT, Candidate, ModelStore, suggest
-from tests.documents import OUTPUTS, lateral_document
+from tests.documents import INPUTS, OUTPUTS, lateral_document
 
 
 def mode(name: str, eigenvalue: tuple[float, float], emac: float | None, **more) -> ModeDocument:
@@ -223,6 +225,31 @@ def test_against_a_nominal_the_tic_comparison_decides():
     combined = suggest(new, nominal, tic_jn=0.2, tic_nj=0.05)  # 0.1 + 0.2 vs 0.2 + 0.05
     assert not combined.update
     assert "NOT better" in combined.steps[5]
+
+
+def test_a_model_without_a_channel_the_nominal_has_is_not_compared_and_says_why():
+    # A run that left the rudder at trim: the aircraft method leaves the rudder out of its
+    # model (agent.ident.aircraft.axes.moved_axes), so neither model can be judged on the
+    # other's data; the candidate is not suggested, and the step says why.
+    nominal = candidate("n", tic=0.2)
+    nominal.tic_nn = 0.2
+    new = _with(candidate("c"), inputs=["aileron"], B=[[0.0]] * 4, D=[[0.0]] * 4)
+    why = jobs.uncompared(new.result, nominal.result)
+    assert why == "this run's model has no rudder (a record that did not move them)"
+    assert jobs.uncompared(nominal.result, nominal.result) == ""
+    verdict = suggest(new, nominal, None, None, why)
+    assert not verdict.update
+    assert verdict.steps[-1] == f"4–7 not compared with nominal n: {why}"
+    assert verdict.checks["no worse"] is False
+    # Its columns are taken by name from data that have more, in its own order; data
+    # without one of its channels are refused by name.
+    u, y = nominal.experiments[0]
+    (picked,) = jobs.of_result(new.result, ("rudder", "aileron"), OUTPUTS, [(u[:, ::-1], y)])
+    assert np.array_equal(picked[0], u[:, :1])
+    assert np.array_equal(picked[1], y)
+    assert np.isfinite(jobs.cross_tic(new.result, 0.02, nominal.experiments, (INPUTS, OUTPUTS)))
+    with pytest.raises(DataError, match="the data have no rudder"):
+        jobs.of_result(nominal.result, ("aileron",), OUTPUTS, [(u[:, :1], y)])
 
 
 def test_accept_persist_revert_and_reject(tmp_path):

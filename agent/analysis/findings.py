@@ -17,6 +17,7 @@ import numpy as np
 from agent.analysis.analyze import Case
 from agent.ident import job as jobs
 from agent.ident.document import ResultDocument
+from agent.ident.errors import DataError
 from agent.ident.job import Outcome
 
 # A setting is "within" the best if its mean TIC_avg is at most this much worse (relative).
@@ -125,7 +126,15 @@ def cross_validation(
             if not outcome.ok:
                 row.append(None)
                 continue
-            row.append(jobs.cross_tic(outcome.result, case.job.record_dt, other.job.experiments))
+            channels = (other.job.inputs, other.job.outputs)
+            try:
+                row.append(
+                    jobs.cross_tic(
+                        outcome.result, case.job.record_dt, other.job.experiments, channels
+                    )
+                )
+            except DataError:  # a model of channels that excitation's record did not move
+                row.append(None)
         matrix.append(row)
     return matrix
 

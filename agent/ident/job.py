@@ -8,6 +8,7 @@ agent.runtime.worker's.
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -190,11 +191,48 @@ def cross_tic(
     result: ResultDocument,
     record_dt: float,
     experiments: tuple[tuple[np.ndarray, np.ndarray], ...],
+    channels: tuple[Sequence[str], Sequence[str]] | None = None,
 ) -> float:
     """TIC_avg of an identified model (its discrete A, B, C, D) on other data, preprocessed
-    as the model's own data was (thesis 5.3: TIC_jN, TIC_Nj)."""
+    as the model's own data was (thesis 5.3: TIC_jN, TIC_Nj). `channels`: the data's inputs
+    and outputs, when they may not be the model's (the model's are taken from them by name;
+    DataError when the data lack one)."""
+    if channels is not None:
+        experiments = of_result(result, *channels, experiments)
     batch, _ = prepared(result.preprocessing, record_dt, experiments)
     return fit(result.model(), batch).tic_avg
+
+
+def of_result(
+    result: ResultDocument,
+    inputs: Sequence[str],
+    outputs: Sequence[str],
+    experiments: Sequence[tuple[np.ndarray, np.ndarray]],
+) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+    """The experiments' columns (named `inputs`, `outputs`) the result's model has, in its
+    order: the aircraft method leaves out what a record did not move (DataError when the
+    data lack one of the model's channels)."""
+    lacking = [n for n in result.inputs if n not in inputs]
+    lacking += [n for n in result.outputs if n not in outputs]
+    if lacking:
+        raise DataError(f"the data have no {', '.join(lacking)}")
+    cols_u = [list(inputs).index(n) for n in result.inputs]
+    cols_y = [list(outputs).index(n) for n in result.outputs]
+    return tuple((np.asarray(u)[:, cols_u], np.asarray(y)[:, cols_y]) for u, y in experiments)
+
+
+def uncompared(candidate: ResultDocument, nominal: ResultDocument) -> str:
+    """Why two models of one axis set cannot be judged on each other's data ("" when they
+    can): one has channels the other lacks, because its record did not move them."""
+    ours, theirs = {*candidate.inputs, *candidate.outputs}, {*nominal.inputs, *nominal.outputs}
+    if ours == theirs:
+        return ""
+    parts = []
+    if theirs - ours:
+        parts.append(f"this run's model has no {', '.join(sorted(theirs - ours))}")
+    if ours - theirs:
+        parts.append(f"the nominal has no {', '.join(sorted(ours - theirs))}")
+    return "; ".join(parts) + " (a record that did not move them)"
 
 
 def frequency_response(

@@ -16,6 +16,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from agent.channels import INPUT_ROLES
 from agent.ident import aircraft, frequency, okid
 from agent.ident.candidates import Candidate, choose_markov, run_candidate
 from agent.ident.convert import (
@@ -49,10 +50,14 @@ MAX_MAGNITUDE = 1e100
 
 
 def check_channels(
-    batch: Sequence[okid.Experiment], input_names: Sequence[str], output_names: Sequence[str]
+    batch: Sequence[okid.Experiment],
+    input_names: Sequence[str],
+    output_names: Sequence[str],
+    resting: Sequence[int] = (),
 ) -> None:
     """Reject channels that never move over the whole batch (they cannot be identified), and
-    values so large that their products overflow float64."""
+    values so large that their products overflow float64. `resting`: inputs that may be
+    constant (the aircraft method leaves a control the record did not move out, and says so)."""
     u = np.vstack([e.u for e in batch])
     y = np.vstack([e.y for e in batch])
     for values, names, kind in ((u, input_names, "input"), (y, output_names, "output")):
@@ -65,7 +70,7 @@ def check_channels(
                     "(check its units)"
                 )
     for j, name in enumerate(input_names):
-        if np.ptp(u[:, j]) == 0:
+        if np.ptp(u[:, j]) == 0 and j not in resting:
             raise ConstantChannelError(
                 f"input '{name}' is constant in every record, so its effect cannot be "
                 "identified; excite it or leave it out of the inputs"
@@ -101,7 +106,6 @@ def identify(
     if dt <= 0:
         raise DataError(f"sample time must be positive, got {dt}")
     inputs, outputs = _names(raw, input_names, output_names)
-    check_channels(raw, inputs, outputs)
     in_roles = tuple(input_roles) if input_roles is not None else inputs
     out_roles = tuple(output_roles) if output_roles is not None else ()
     present = aircraft.axes_present(in_roles, out_roles)
@@ -116,6 +120,8 @@ def identify(
             or not settings.refine
         )
         settings = replace(settings, method="aircraft" if present and not okid_asked else "time")
+    controls = [j for j, role in enumerate(in_roles) if role in INPUT_ROLES]
+    check_channels(raw, inputs, outputs, resting=controls if settings.method == "aircraft" else ())
     if settings.method == "aircraft":
         if not present:
             raise DataError(

@@ -383,7 +383,9 @@ class Identifier:
             axes=axes,
             record_dt=dt,
             result=outcome.result,
-            experiments=(*job.experiments, outcome.experiment),
+            experiments=jobs.of_result(
+                outcome.result, job.inputs, job.outputs, (*job.experiments, outcome.experiment)
+            ),
             record_s=len(outcome.experiment[0]) * dt,
             trim=outcome.trim,
         )
@@ -412,6 +414,9 @@ class Identifier:
         nominal = await self._in_store(self.models.nominal, axes)
         if nominal is None:
             return suggest(candidate, None, None, None)
+        uncompared = jobs.uncompared(candidate.result, nominal.result)
+        if uncompared:
+            return suggest(candidate, nominal, None, None, uncompared)
         self._enter("comparing with nominal", axes, samples)
         tic_jn = await self._cross_tic(candidate, nominal)
         tic_nj = await self._cross_tic(nominal, candidate)

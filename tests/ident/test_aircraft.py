@@ -184,6 +184,76 @@ def test_a_mode_the_record_resolves_poorly_is_said_so_by_name_with_why():
     assert spread.get("short period", 1.0) < 0.2
 
 
+def record_at_rest(controls: tuple[str, ...], noise_deg: float = 0.05, seed: int = 0):
+    """The full preset on the thesis's aircraft with `controls` left at trim: their columns
+    are their position sensors' noise alone (`noise_deg` rms), the outputs' noise 1 % of
+    their motion and 10⁻⁴ (SI) where they do not move."""
+    A, B, C = aircraft_with_engine_lag()
+    timeline = render(preset("full"), 1 / DT)
+    u = np.column_stack([timeline.values[c] for c in INPUTS])
+    u[:, 0] *= 10.0
+    u = np.vstack([np.zeros((100, 4)), u, np.zeros((200, 4))])
+    rest = [INPUTS.index(c) for c in controls]
+    u[:, rest] = 0.0
+    y = simulate(discretize_foh(A, B, C, np.zeros((8, 4)), DT), u)
+    rng = np.random.default_rng(seed)
+    u[:, rest] += noise_deg * rng.standard_normal((u.shape[0], len(rest)))
+    y += (0.01 * y.std(axis=0) + 1e-4) * rng.standard_normal(y.shape)
+    return Experiment(u, y), A
+
+
+def test_an_axis_the_record_did_not_move_is_left_out_and_its_modes_named_missing():
+    # Bad input tried: a whole-aircraft record (all four controls' and all eight states'
+    # columns) whose lateral controls stayed at trim, their potentiometers' noise alone, as a
+    # single-axis manoeuvre leaves them. The lateral modes are not identifiable from it: they
+    # are missing by name, with why, and the lateral channels left out; the longitudinal
+    # modes come out as from a longitudinal record.
+    record, A = record_at_rest(("aileron", "rudder"))
+    result = aircraft_identify(record)
+    assert result.input_names == ("throttle", "elevator")
+    assert result.output_names == OUTPUTS[:4]
+    why = dict(result.missing)
+    assert set(why) == {"Dutch roll", "roll", "spiral"}
+    assert all(
+        re.match(
+            r"not identifiable from this record: the lateral controls \(aileron, rudder\) "
+            r"moved no more than their sensors' noise \(at most [\d.]+×",
+            w,
+        )
+        for w in why.values()
+    ), why
+    assert any(w.startswith("lateral axis left out") for w in result.warnings)
+    named = {m.name: m.eigenvalue for m in result.modes if m.name}
+    assert set(named) == {"short period", "phugoid"}
+    true = np.linalg.eigvals(A[:4, :4])
+    for s in named.values():
+        assert np.min(np.abs(true - s) / np.abs(true)) < 0.01
+    assert "not identified: roll: not identifiable from this record" in format_text(
+        result, 1, len(record.u)
+    )
+
+
+def test_a_control_the_record_did_not_move_is_left_out_by_name_and_its_axis_identified():
+    # Bad input tried: the rudder at trim (its sensor's noise) while the aileron played: the
+    # rudder is no input of the model (fitted, it would be gains on noise), said so; the
+    # lateral modes still come out.
+    record, _ = record_at_rest(("rudder",))
+    result = aircraft_identify(record)
+    assert result.input_names == ("throttle", "elevator", "aileron")
+    assert any(
+        re.match(r"rudder not moved by this record \(at most [\d.]+× its noise floor", w)
+        for w in result.warnings
+    ), result.warnings
+    assert {m.name for m in result.modes if m.name} >= {"Dutch roll", "roll", "short period"}
+
+
+def test_a_record_that_moved_no_control_is_refused_clearly():
+    # Bad input tried: every control at trim (a record of straight and level flight).
+    record, _ = record_at_rest(INPUTS)
+    with pytest.raises(DataError, match="no control moved above its sensor's noise"):
+        aircraft_identify(record)
+
+
 def test_the_same_identification_in_one_bin_set_per_record_batches_records():
     A, B, C = aircraft_with_engine_lag()
     one = full_preset_record(A, B, C)

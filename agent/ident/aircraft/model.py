@@ -29,7 +29,7 @@ from dataclasses import replace
 import numpy as np
 
 from agent.channels import POWER_ROLES
-from agent.ident.aircraft.axes import AXES
+from agent.ident.aircraft.axes import AXES, moved_axes
 from agent.ident.aircraft.fit import (
     COUPLED,
     AxisFit,
@@ -51,10 +51,10 @@ from agent.ident.document import (
     Gain,
     Wind,
 )
-from agent.ident.errors import IdentificationFailed
+from agent.ident.errors import DataError, IdentificationFailed
 from agent.ident.fit import fit
 from agent.ident.modal import Mode, left_out, modal_analysis
-from agent.ident.naming import LATERAL_MODES, missing_modes, name_modes
+from agent.ident.naming import LATERAL_MODES, LONGITUDINAL_MODES, missing_modes, name_modes
 from agent.ident.okid import Experiment, channel_rms
 from agent.ident.preprocess import Preprocessing
 from agent.ident.refine import Refinement, with_uncertainty
@@ -86,7 +86,12 @@ def identify(
     settings: Settings,
 ) -> Identification:
     """Decoupled longitudinal and lateral models in the frequency domain, coupled where the
-    data show it, assembled into one model (module docstring)."""
+    data show it, assembled into one model (module docstring), of what the record moved
+    (`axes.moved_axes`): a control it left at trim is left out of the inputs, an axis it did not
+    move out of the inputs and outputs, with its modes as missing, by name, and why."""
+    raw, inputs, outputs, input_roles, output_roles, present, moved_notes, not_moved = _only_moved(
+        raw, inputs, outputs, input_roles, output_roles, present
+    )
     # The transforms leave out DC, so trim errors do not matter to the fit; the time-domain
     # simulation (TIC) starts from the records' own trim, as the other methods'.
     batch = list(raw)
@@ -196,11 +201,59 @@ def identify(
         modes=tuple(modes),
         fit=fitted,
         refinement=refinement,
-        warnings=(*notes, *warnings, *judged(modes, fitted)),
+        warnings=(*moved_notes, *notes, *warnings, *judged(modes, fitted)),
         method="aircraft",
         aircraft=report,
-        missing=tuple(missing),
+        missing=(*missing, *not_moved),
         left_out=tuple(poles_left_out),
+    )
+
+
+def _only_moved(raw, inputs, outputs, input_roles, output_roles, present):
+    """The batch, channels, roles and axes of what the record moved (`axes.moved_axes`), the
+    notes on what was left out and the modes that leaves missing, with why."""
+    chosen = moved_axes(raw, inputs, input_roles, present)
+    if not chosen.present:
+        raise DataError(
+            "no control moved above its sensor's noise: "
+            + "; ".join(f"{axis} {why}" for axis, why in chosen.axes_left_out.items())
+        )
+    drop_in, drop_out = set(chosen.controls_left_out), set()
+    notes = [chosen.controls_left_out[j] for j in sorted(chosen.controls_left_out)]
+    missing = []
+    for axis, why in chosen.axes_left_out.items():
+        drop_in |= set(present[axis][1])
+        drop_out |= set(present[axis][0])
+        notes.append(f"{axis} axis left out: {why}")
+        modes = LATERAL_MODES if axis == "lateral" else LONGITUDINAL_MODES
+        missing += [(name, f"not identifiable from this record: {why}") for name in modes]
+    keep_in = [j for j in range(len(inputs)) if j not in drop_in]
+    keep_out = [i for i in range(len(outputs)) if i not in drop_out]
+    new_in = {j: k for k, j in enumerate(keep_in)}
+    new_out = {i: k for k, i in enumerate(keep_out)}
+    return (
+        [_columns(e, keep_in, keep_out) for e in raw] if notes else list(raw),
+        tuple(inputs[j] for j in keep_in),
+        tuple(outputs[i] for i in keep_out),
+        [input_roles[j] for j in keep_in],
+        [output_roles[i] for i in keep_out],
+        {
+            axis: ([new_out[i] for i in states], [new_in[j] for j in ins])
+            for axis, (states, ins) in chosen.present.items()
+        },
+        notes,
+        missing,
+    )
+
+
+def _columns(exp: Experiment, inputs: list[int], outputs: list[int]) -> Experiment:
+    """`exp` with only the given input and output columns (its navigation whole)."""
+    op = exp.operating_point
+    return Experiment(
+        np.asarray(exp.u)[:, inputs],
+        np.asarray(exp.y)[:, outputs],
+        operating_point=None if op is None else np.asarray(op)[outputs],
+        navigation=exp.navigation,
     )
 
 
