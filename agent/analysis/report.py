@@ -40,7 +40,7 @@ from agent.ident import Experiment, frf
 from agent.ident.document import ResultDocument
 from agent.ident.fit import fit
 from agent.ident.frf import MeasuredResponse
-from agent.ident.job import Outcome, prepared
+from agent.ident.job import Outcome, of_result, prepared
 from agent.models import StoredModel
 from agent.outputs import Outputs
 
@@ -49,14 +49,18 @@ COLOURS = plt.rcParams["axes.prop_cycle"].by_key()["color"]
 
 
 def _prepared(case: Case, outcome: Outcome) -> tuple[list[Experiment], float]:
-    batch, prep = prepared(outcome.result.preprocessing, case.job.record_dt, case.job.experiments)
+    """The case's experiments as its model sees them: its channels (the aircraft method leaves
+    out what the record did not move), preprocessed as its data were."""
+    job, result = case.job, outcome.result
+    experiments = of_result(result, job.inputs, job.outputs, job.experiments)
+    batch, prep = prepared(result.preprocessing, job.record_dt, experiments)
     return batch, prep.dt
 
 
 def time_histories(case: Case, outcome: Outcome, path: BinaryIO) -> None:
     batch, dt = _prepared(case, outcome)
     result = fit(outcome.result.model(), batch)
-    outputs = case.job.outputs
+    outputs = outcome.result.outputs
     fig, axes = plt.subplots(len(outputs), 1, figsize=(9, 1.9 * len(outputs)), sharex=True)
     axes = np.atleast_1d(axes)
     for j, (ax, name) in enumerate(zip(axes, outputs, strict=True)):
@@ -194,7 +198,7 @@ def frequency_responses(
     batch, dt = _prepared(case, outcome)
     measured = frf.measured(batch, dt)
     model = outcome.result.model()
-    inputs, outputs = case.job.inputs, case.job.outputs
+    inputs, outputs = outcome.result.inputs, outcome.result.outputs
     size = (2.4 * len(outputs), 2.9 * len(inputs))
     fig, axes = plt.subplots(
         3 * len(inputs),

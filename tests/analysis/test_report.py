@@ -4,7 +4,8 @@ parts are checked for what a flight-test engineer reads off them: the s-planes' 
 their rows (hover and click), the frequency responses with coherence, the derivative table
 and its CSV.
 
-Bad input tried: a nominal model file that is not one (exit 2).
+Bad input tried: a nominal model file that is not one (exit 2); a record whose rudder never
+moved (its model's figures drawn with the model's own channels).
 """
 
 from __future__ import annotations
@@ -14,11 +15,16 @@ import re
 import shutil
 import subprocess
 import sys
+from io import BytesIO
 from pathlib import Path
 
 import numpy as np
 from matplotlib.image import imread
 
+from agent.analysis.analyze import Case
+from agent.analysis.report import frequency_responses, time_histories
+from agent.ident import Settings, reference
+from agent.ident import job as jobs
 from tests.analysis.test_analyze import excitation_logs
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -185,3 +191,34 @@ def test_a_report_file_that_is_a_log_is_refused_before_the_work(tmp_path, capsys
     assert f"--out {out}/excitation_1_derivatives.csv: that is {log}, a log being" in err, err
     assert log.read_bytes() == before
     assert [p.name for p in out.iterdir()] == ["excitation_1_derivatives.csv"]
+
+
+def test_the_figures_of_a_model_without_a_control_its_record_left_at_trim(tmp_path):
+    """Bad input tried: a lateral record whose rudder never moved (its column the trim
+    alone). The aircraft method leaves the rudder out of the model; the report draws the
+    model's own channels (before, its one-input model met the record's two columns)."""
+    model = reference.LATERAL
+    record = reference.make_record(model, noise=dict.fromkeys(model.outputs, 1e-3))
+    u = record.inputs - record.inputs[0]
+    u[:, model.inputs.index("rudder")] = 0.0
+    job = jobs.Job(
+        model_id="m",
+        axes="lateral",
+        record_dt=0.02,
+        inputs=model.inputs,
+        outputs=model.outputs,
+        roles=("beta", "p", "r", "phi"),
+        experiments=((u, record.outputs - record.outputs[0]),),
+        settings=Settings(held_inputs=False),
+        input_roles=("aileron", "rudder"),
+    )
+    outcome = jobs.run(job)
+    assert outcome.ok, outcome.reason
+    assert outcome.result.inputs == ["aileron"]
+    case = Case(label="1", key=(), job=job)
+    figure = BytesIO()
+    time_histories(case, outcome, figure)
+    assert figure.getvalue().startswith(b"\x89PNG")
+    bode = BytesIO()
+    frequency_responses(case, outcome, bode)
+    assert bode.getvalue().startswith(b"\x89PNG")
