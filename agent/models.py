@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from agent.channels import AXIS_SETS
-from agent.ident.document import ModeDocument, ResultDocument
+from agent.ident.document import ModeDocument, ResultDocument, SecondOrderMode
 from agent.ident.naming import expected_modes
 
 log = logging.getLogger(__name__)
@@ -95,12 +95,16 @@ class Suggestion:
     tic_nj: float | None = None
 
 
-def _weak(mode: ModeDocument) -> bool:
+def _weak(mode: ModeDocument, one: SecondOrderMode | None = None) -> bool:
     """A mode poorly identified: its EMAC below EMAC_MIN, or, without EMAC, its natural
-    frequency's Cramér–Rao standard error above CR_MAX of it (no error either: weak)."""
+    frequency's Cramér–Rao standard error above CR_MAX of it (no error either: weak). A pole
+    of a mode of two real poles is judged by the mode (`one`, its ωn and its standard error):
+    near a double root each pole alone is ill-determined where the mode is not."""
     if mode.emac is not None:
         return mode.emac < EMAC_MIN
     sigma, omega = mode.frequency_std_rad_s, mode.frequency_rad_s
+    if one is not None and one.frequency_std_rad_s is not None:
+        sigma, omega = one.frequency_std_rad_s, one.frequency_rad_s
     return sigma is None or not omega or sigma / omega > CR_MAX
 
 
@@ -218,7 +222,8 @@ def suggest(
     named = [m for m in modes if m.name]
     resolved = [m for m in named if _resolved(m, span)]
     slow = [m.name for m in named if m not in resolved]
-    weak = [m.name for m in resolved if _weak(m)]
+    pairs = {o.name: o for o in candidate.result.second_order}
+    weak = list(dict.fromkeys(m.name for m in resolved if _weak(m, pairs.get(m.name))))
     quality = bool(resolved) and not weak
     if quality:
         text = f"named modes EMAC ≥ {EMAC_MIN:.0f} % or Cramér–Rao σ(ωn) ≤ {CR_MAX:.0%}"

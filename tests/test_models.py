@@ -158,6 +158,26 @@ def test_a_missing_mode_fails_the_modes_step_with_the_reason_the_result_gives():
     assert "spiral missing, not judged" in s.steps[2]
 
 
+def test_a_mode_of_two_real_poles_is_judged_as_one_mode_by_its_wn():
+    """An overdamped short period (−9.7 and −6.4 1/s) whose poles alone have standard errors
+    of 30 % (near a double root each is ill-determined) but whose ωn is known within 3 %: the
+    quality step judges the mode, not its poles, and passes; with the mode's own σ(ωn) at
+    30 % it says weak, once."""
+    poles = [
+        mode("short period", (s, 0.0), None, frequency_std_rad_s=0.3 * abs(s)) for s in (-9.7, -6.4)
+    ]
+    one = {"name": "short period", "frequency_rad_s": 7.88, "damping": 1.02}
+    c = _with(
+        candidate("a", modes=poles),
+        second_order=[one | {"frequency_std_rad_s": 0.03 * 7.88, "damping_std": 0.02}],
+    )
+    assert suggest(c, None, None, None).checks["quality"]
+    c = _with(c, second_order=[one | {"frequency_std_rad_s": 0.3 * 7.88, "damping_std": 0.2}])
+    verdict = suggest(c, None, None, None)
+    assert not verdict.checks["quality"]
+    assert verdict.steps[1].startswith("2 quality: weak: short period (")
+
+
 @pytest.mark.parametrize("record_s", [15.0, 600.0, None])
 def test_a_missing_spiral_is_reported_but_not_judged(record_s):
     """Bad input tried: a lateral model without a spiral from a 15 s record, a 10 min one and

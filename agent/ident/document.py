@@ -100,13 +100,15 @@ class ModeDocument(Document):
 
 class SecondOrderMode(Document):
     """A named mode made of two real poles as the one second-order mode it is
-    (agent.ident.modal.second_order): its ωn and ζ."""
+    (agent.ident.modal.second_order): its ωn and ζ, and their Cramér–Rao 1-σ."""
 
     model_config = Document.model_config | ConfigDict(allow_inf_nan=False)
 
     name: str
     frequency_rad_s: float
     damping: float
+    frequency_std_rad_s: float | None = None  # Cramér–Rao 1-σ (null: no covariance)
+    damping_std: float | None = None
 
 
 class MissingMode(Document):

@@ -189,11 +189,24 @@ def modal_analysis(
     return sorted(modes, key=lambda mode: (mode.frequency, mode.eigenvalue.imag))
 
 
-def second_order(modes: Sequence[Mode]) -> list[tuple[str, float, float]]:
+@dataclass(frozen=True)
+class SecondOrder:
+    """A named mode made of two real poles as the one second-order mode it is: ωn and ζ of its
+    polynomial (s − s1)(s − s2), and their Cramér–Rao 1-σ where the model's covariance is
+    known (agent.ident.refine.second_order_std)."""
+
+    name: str
+    frequency: float
+    damping: float
+    poles: tuple[float, float]
+    frequency_std: float | None = None
+    damping_std: float | None = None
+
+
+def second_order(modes: Sequence[Mode]) -> list[SecondOrder]:
     """Each named mode made of two real poles (an overdamped short period or phugoid) as the
-    one second-order mode it is: (name, ωn, ζ) of its polynomial. Near ζ = 1 those are well
-    determined where the two poles are not (a 1 % change of the polynomial moves them apart or
-    into a complex pair)."""
+    one second-order mode it is. Near ζ = 1 its ωn and ζ are well determined where the two
+    poles are not (a 1 % change of the polynomial moves them apart or into a complex pair)."""
     out = []
     for name in dict.fromkeys(m.name for m in modes if m.name):
         mine = [m for m in modes if m.name == name]
@@ -203,7 +216,7 @@ def second_order(modes: Sequence[Mode]) -> list[tuple[str, float, float]]:
         if s1 * s2 <= 0:
             continue
         wn = float(np.sqrt(s1 * s2))
-        out.append((name, wn, float(-(s1 + s2) / (2 * wn))))
+        out.append(SecondOrder(name, wn, float(-(s1 + s2) / (2 * wn)), (s1, s2)))
     return out
 
 

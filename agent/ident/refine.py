@@ -57,7 +57,7 @@ from agent.ident.fit import (
     simulate_states,
     state_convolution_from,
 )
-from agent.ident.modal import EigenvalueStd, Mode
+from agent.ident.modal import EigenvalueStd, Mode, SecondOrder
 from agent.ident.okid import Experiment
 
 # Noise re-weighting passes, and the relative change of every σ_i that ends them.
@@ -579,3 +579,26 @@ def with_uncertainty(modes: Sequence[Mode], refinement: Refinement) -> list[Mode
         k = int(np.argmin(np.abs(lam - mode.eigenvalue)))
         out.append(replace(mode, uncertainty=stds[k]))
     return out
+
+
+def second_order_std(order: SecondOrder, refinement: Refinement) -> SecondOrder:
+    """`order` with the Cramér–Rao 1-σ of its ωn and ζ: first order in the covariance of
+    vec(Ac), through the sum p1 = s1 + s2 and product p0 = s1 s2 of its poles (∂p1 = ∂s1 + ∂s2,
+    ∂p0 = s2 ∂s1 + s1 ∂s2, each ∂s as in `eigenvalue_std`), ωn = √p0, ζ = −p1 / 2ωn. The sum
+    and product are smooth where the two poles meet, which the poles are not."""
+    A = refinement.continuous.A
+    lam, V = np.linalg.eig(A)
+    W = np.linalg.inv(V).conj().T
+    k1 = int(np.argmin(np.abs(lam - order.poles[0])))
+    k2 = int(np.argmin(np.where(np.arange(lam.size) == k1, np.inf, np.abs(lam - order.poles[1]))))
+    g1, g2 = (np.outer(W[:, k].conj(), V[:, k]).ravel() for k in (k1, k2))
+    s1, s2 = lam[k1], lam[k2]
+    wn, p1 = order.frequency, float((s1 + s2).real)
+    d_wn = ((s2 * g1 + s1 * g2) / (2 * wn)).real
+    d_zeta = (-(g1 + g2) / (2 * wn)).real + p1 / (2 * wn**2) * d_wn
+    covariance = refinement.covariance_of_a()
+
+    def std(g: np.ndarray) -> float:
+        return float(np.sqrt(max(g @ covariance @ g, 0.0)))
+
+    return replace(order, frequency_std=std(d_wn), damping_std=std(d_zeta))

@@ -28,9 +28,9 @@ from agent.ident.document import (
 from agent.ident.era import EraResult
 from agent.ident.fit import Fit
 from agent.ident.frequency import FrequencyData
-from agent.ident.modal import Mode, second_order
+from agent.ident.modal import Mode, SecondOrder, second_order
 from agent.ident.preprocess import Preprocessing
-from agent.ident.refine import Refinement
+from agent.ident.refine import Refinement, second_order_std
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -111,10 +111,25 @@ class Identification:
             missing_modes=[MissingMode(name=n, reason=why) for n, why in self.missing],
             poles_left_out=list(self.left_out),
             second_order=[
-                SecondOrderMode(name=n, frequency_rad_s=wn, damping=zeta)
-                for n, wn, zeta in second_order(self.modes)
+                SecondOrderMode(
+                    name=o.name,
+                    frequency_rad_s=o.frequency,
+                    damping=o.damping,
+                    frequency_std_rad_s=o.frequency_std,
+                    damping_std=o.damping_std,
+                )
+                for o in self.second_order()
             ],
         )
+
+    def second_order(self) -> list[SecondOrder]:
+        """Each named mode of two real poles as one second-order mode (agent.ident.modal), with
+        the Cramér–Rao 1-σ of its ωn and ζ where the refinement gives a covariance."""
+        orders = second_order(self.modes)
+        refinement = self.refinement
+        if refinement is None or refinement.covariance is None:
+            return orders
+        return [second_order_std(o, refinement) for o in orders]
 
     def _preprocessing(self) -> PreprocessingDocument:
         prep = self.preprocessing

@@ -4,7 +4,7 @@ and the poles left out of the modes."""
 
 from __future__ import annotations
 
-from agent.ident.modal import Mode, second_order
+from agent.ident.modal import Mode
 from agent.ident.result import Identification
 
 
@@ -44,8 +44,11 @@ def format_text(result: Identification, records: int, samples: int) -> str:
             f"{_pct(mode.emac):>6}{_pct(mode.mpc):>5}{_pct(mode.cmi):>5}" + _fmt_std(mode)
         )
     lines += [
-        f"{name} as one mode (its two real poles): ωn {wn:.4g} rad/s, ζ {zeta:.3f}"
-        for name, wn, zeta in second_order(result.modes)
+        f"{o.name} as one mode (its two real poles): ωn {o.frequency:.4g} rad/s"
+        + ("" if o.frequency_std is None else f" (1-σ {o.frequency_std:.2g})")
+        + f", ζ {o.damping:.3f}"
+        + ("" if o.damping_std is None else f" (1-σ {o.damping_std:.2g})")
+        for o in result.second_order()
     ]
     tic = "  ".join(
         f"{n} {v:.3f}" for n, v in zip(result.output_names, result.fit.tic, strict=True)

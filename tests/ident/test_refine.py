@@ -12,8 +12,14 @@ import pytest
 from agent.ident import Experiment, Settings, identify, reference
 from agent.ident.convert import StateSpace, discretize_hold
 from agent.ident.fit import free_response_basis, simulate, state_convolution
-from agent.ident.modal import modal_subspace
-from agent.ident.refine import discretization_jacobian, eigenvalue_std, refine
+from agent.ident.modal import SecondOrder, modal_subspace
+from agent.ident.refine import (
+    Refinement,
+    discretization_jacobian,
+    eigenvalue_std,
+    refine,
+    second_order_std,
+)
 from tests.conftest import DT, matched_relative_errors, true_eigenvalues
 
 LAT = reference.LATERAL
@@ -362,3 +368,42 @@ def test_the_jacobian_summed_stretch_by_stretch_is_the_whole_records(monkeypatch
     assert np.allclose(
         np.linalg.svd(R, compute_uv=False), np.linalg.svd(whole, compute_uv=False), rtol=1e-8
     )
+
+
+@pytest.mark.parametrize("gap", [3.0, 0.05])
+def test_a_two_real_pole_modes_wn_and_zeta_standard_errors_are_its_polynomials(gap):
+    """For a 2×2 Ac the pair's polynomial is s² − tr(A) s + det(A): ωn = √det A and
+    ζ = −tr A / 2ωn, whose gradients are closed-form. `second_order_std` matches them — also
+    with the poles 0.05 1/s apart, where each pole's own standard error grows without bound."""
+    s1, s2 = -8.0, -8.0 + gap
+    A = np.array([[s1, 1.0], [0.001, s2]])
+    assert np.all(np.linalg.eigvals(A).imag == 0)  # two real poles
+    sigma = np.array([0.05, 0.02, 0.03, 0.04])  # per entry of vec(A), independent
+    covariance = np.diag(np.concatenate([sigma**2, np.zeros(2 * 2 + 2 * 2 + 2 * 2)]))
+    model = StateSpace(A, np.zeros((2, 2)), np.eye(2), np.zeros((2, 2)))
+    refinement = Refinement(
+        gain=None,
+        continuous=model,
+        discrete=model,
+        dt=0.01,
+        hold="foh",
+        initial_states=(),
+        noise_std=np.ones(2),
+        covariance=covariance,
+        cost_initial=1.0,
+        cost=1.0,
+        iterations=0,
+        passes=1,
+    )
+    poles = np.sort(np.linalg.eigvals(A).real)
+    wn = float(np.sqrt(np.linalg.det(A)))
+    order = SecondOrder("short period", wn, float(-np.trace(A) / (2 * wn)), tuple(poles))
+    found = second_order_std(order, refinement)
+    each = eigenvalue_std(A, covariance[:4, :4])
+    if gap < 0.1:  # each pole alone is far less determined than the pair's ωn
+        assert min(e.real for e in each) > 3 * found.frequency_std
+    det_grad = np.linalg.det(A) * np.linalg.inv(A).T  # ∂det/∂A
+    d_wn = (det_grad / (2 * wn)).ravel()
+    d_zeta = (-np.eye(2) / (2 * wn)).ravel() + np.trace(A) / (2 * wn**2) * d_wn
+    assert found.frequency_std == pytest.approx(np.sqrt(np.sum((d_wn * sigma) ** 2)), rel=1e-6)
+    assert found.damping_std == pytest.approx(np.sqrt(np.sum((d_zeta * sigma) ** 2)), rel=1e-6)

@@ -53,11 +53,11 @@ from agent.ident.document import (
 )
 from agent.ident.errors import DataError, IdentificationFailed
 from agent.ident.fit import fit
-from agent.ident.modal import Mode, left_out, modal_analysis
+from agent.ident.modal import Mode, SecondOrder, left_out, modal_analysis, second_order
 from agent.ident.naming import LATERAL_MODES, LONGITUDINAL_MODES, missing_modes, name_modes
 from agent.ident.okid import Experiment, channel_rms
 from agent.ident.preprocess import Preprocessing
-from agent.ident.refine import Refinement, with_uncertainty
+from agent.ident.refine import Refinement, second_order_std, with_uncertainty
 from agent.ident.result import Identification, judged
 from agent.ident.settings import Settings
 
@@ -180,7 +180,8 @@ def identify(
     warnings = (
         [] if refinement.converged else ["the output-error fit stopped at its iteration limit"]
     )
-    warnings += _poorly_resolved(modes, sp, present)
+    orders = [second_order_std(o, refinement) for o in second_order(modes)]
+    warnings += _poorly_resolved(modes, orders, sp, present)
     prep = Preprocessing(
         record_dt=dt,
         dt=dt,
@@ -491,28 +492,40 @@ def _modes(
 
 
 def _poorly_resolved(
-    modes: Sequence[Mode], sp: Transforms, present: dict[str, tuple[list[int], list[int]]]
+    modes: Sequence[Mode],
+    orders: Sequence[SecondOrder],
+    sp: Transforms,
+    present: dict[str, tuple[list[int], list[int]]],
 ) -> list[str]:
     """A named mode whose Cramér–Rao σ(ωn) exceeds RESOLVED of its ωn, said by name, with the
     share of its axis's controls' power the record put within a factor 2 of ωn: why the
-    record resolves it poorly, the manoeuvre's fault or the noise's."""
+    record resolves it poorly, the manoeuvre's fault or the noise's. A mode of two real poles
+    is judged once, as the one mode it is (`orders`): near a double root its poles alone are
+    ill-determined where its ωn is not."""
+    pairs = {o.name: o for o in orders if o.frequency_std is not None}
+    judged = [
+        (m.name, m.frequency, m.uncertainty.frequency, "")
+        for m in modes
+        if m.name and m.name not in pairs and m.uncertainty is not None and m.frequency > 0
+    ]
+    judged += [
+        (o.name, o.frequency, o.frequency_std, " (as one mode of two real poles)")
+        for o in pairs.values()
+    ]
     notes = []
-    for mode in modes:
-        u = mode.uncertainty
-        if mode.name is None or u is None or mode.frequency <= 0:
-            continue
-        spread = u.frequency / mode.frequency
+    for name, frequency, sigma, how in judged:
+        spread = sigma / frequency
         if not spread > RESOLVED:
             continue
-        axis = "lateral" if mode.name in LATERAL_MODES else "longitudinal"
+        axis = "lateral" if name in LATERAL_MODES else "longitudinal"
         controls = present.get(axis, ([], []))[1]
         power = np.sum(np.abs(sp.U[:, controls]) ** 2, axis=1) if controls else np.zeros(0)
         w = np.abs(sp.s)
-        near = (w >= mode.frequency / 2) & (w <= 2 * mode.frequency)
+        near = (w >= frequency / 2) & (w <= 2 * frequency)
         share = float(power[near].sum() / power.sum()) if power.size and power.sum() > 0 else 0
         notes.append(
-            f"{mode.name} poorly resolved by this record: σ(ωn) {spread:.0%} of its "
-            f"{mode.frequency:.3g} rad/s; the {axis} controls put {share:.1%} of their power "
+            f"{name} poorly resolved by this record: σ(ωn) {spread:.0%} of its "
+            f"{frequency:.3g} rad/s{how}; the {axis} controls put {share:.1%} of their power "
             "within a factor 2 of it"
             + (f" (the analysed band starts at {sp.band_hz[0]:.3g} Hz)" if not near.any() else "")
         )
