@@ -3,7 +3,7 @@ turbulence, the agent's own full preset and a flight-test engineer's card, each 
 aircraft by the agent, identified with and without the INS's navigation channels, by
 suas-sysid and by the peers, in one process.
 
-    make bench-jsbsim                                    # every row, 10 seeds (~1 h here)
+    make bench-jsbsim                                    # every row, 10 seeds (~25 min here)
     .venv/bin/python benchmarks/bench_jsbsim.py --quick --aircraft c172r --turbulence 0 \
         --excitation card --nav ins                      # one row in about a minute
     .venv/bin/python benchmarks/bench_jsbsim.py --sizing nominal --aircraft pa28
@@ -18,14 +18,17 @@ glider: no throttle, trimmed in a steady glide, from 3000 ft). Light turbulence:
 
 The excitations (`--excitation`): "full", the agent's full preset (an 80 s odd-harmonic
 multisine on all four controls at once); "card", a classic flight-test card that is not ours:
-a 3-2-1-1 on each surface in turn, a throttle doublet, then a doublet on each surface (`card`).
+a 3-2-1-1 on each surface in turn, a throttle doublet, then a doublet on each surface (`card`);
+and "sweep", a frequency-sweep card: a logarithmic sweep from 0.1 to 2 Hz on each surface in
+turn, no throttle (`sweeps`): the record's throttle column is then constant, and the method
+leaves it out and says so.
 
 Sizing (`--sizing auto`, agent/sizing.py): as the agent flies them. For each aircraft and
 condition the full preset is first flown at the build-up share of its amplitudes; each run is
 identified (with the INS), its surfaces' linkage measured, and the next sized from that
 model, until no amplitude is held back by the build-up (at most CALIBRATION_RUNS runs, seeds
-from CALIBRATION_SEED). The ten seeds then fly the full preset as sized last, and the card
-sized by the same model. `--sizing nominal` flies both at their plans' own amplitudes.
+from CALIBRATION_SEED). The ten seeds then fly the full preset as sized last, and the cards
+sized by the same model. `--sizing nominal` flies each at its plan's own amplitudes.
 
 Each seed is one offline flight (`agent.sim.offline.fly`: JSBSim trimmed as `sysid sim` trims
 it, the emulated ArduPlane's servos, the sensors' noise, 100 Hz), 2 s before to 2 s after the
@@ -79,6 +82,7 @@ from agent.excitation.plan import (
     Doublet,
     Plan,
     Segment,
+    Sweep,
     ThreeTwoOneOne,
     Timeline,
     only,
@@ -91,9 +95,9 @@ from agent.ident.errors import DataError, IdentificationFailed
 from agent.ident.fit import simulate
 from agent.models import DIVERGENCE_LIMIT
 from agent.runtime.identification import SIZING_TIC
-from agent.sim.flight import ENVELOPE_HEIGHT_S, ENVELOPE_SPEED
+from agent.sim.flight import ENVELOPE_HEIGHT_S
 from agent.sim.offline import INPUT_CHANNELS, Record, fly
-from agent.sim.plant import KT, Plant
+from agent.sim.plant import Plant
 from agent.sim.truth import Truth, linear_truth, theil
 
 
@@ -115,7 +119,7 @@ AIRCRAFT = {
     "sgs126": Flight(50.0, altitude_ft=3000.0, kind="glider, unpowered"),
 }
 MODES = ("short period", "phugoid", "Dutch roll", "roll")
-EXCITATIONS = ("full", "card")
+EXCITATIONS = ("full", "card", "sweep")
 NAVIGATION = ("ins", "none")
 TRIM_SAMPLES = 50  # 0.5 s at 100 Hz, as the agent's trim
 PEER_ORDER = 9
@@ -128,6 +132,9 @@ QUIET_SEED = 1500
 SNR_REQUIRED = 3.0
 MAX_VALIDATION_SCALE = 2.0
 COMMAND_HZ = 50.0  # `fly`'s command rate
+# The envelope the benchmark holds its flights to: bank within 30°, airspeed within 10 %.
+ENVELOPE_BANK_DEG = 30.0
+ENVELOPE_AIRSPEED = 0.10
 M_PER_FT = 0.3048
 # suas-sysid as the agent runs it on these records: the surfaces' positions are sampled by
 # their potentiometers while they move, so the inputs are not held between samples.
@@ -153,6 +160,37 @@ def card(controls: tuple[str, ...]) -> Plan:
     return Plan(id="card", axes="full", segments=tuple(segments))
 
 
+# The sweep card: a logarithmic sine sweep on each surface in turn (ArduPilot SystemID's chirp
+# law), one cycle at its first frequency, then up to its last, faded in and out, each followed
+# by free flight. No throttle: sweeps move the surfaces.
+SWEEP_HZ = (0.1, 2.0)
+SWEEP_S = 40.0
+SWEEP_FADE_S = 2.0
+
+
+def sweeps() -> Plan:
+    """A frequency-sweep card at the presets' amplitudes: a logarithmic sweep from
+    SWEEP_HZ[0] to SWEEP_HZ[1] on the elevator, then the aileron, then the rudder."""
+    segments = tuple(
+        Segment(
+            signals={
+                c: Sweep(
+                    f0_hz=SWEEP_HZ[0],
+                    f1_hz=SWEEP_HZ[1],
+                    duration_s=SWEEP_S,
+                    law="log",
+                    fade_s=SWEEP_FADE_S,
+                    dwell_cycles=1,
+                    amplitude=PRESET_AMPLITUDE[c],
+                )
+            },
+            free_s=free,
+        )
+        for c, free in (("elevator", 5.0), ("aileron", 5.0), ("rudder", 8.0))
+    )
+    return Plan(id="sweep", axes="full", segments=segments)
+
+
 @dataclass(frozen=True)
 class Setup:
     """One aircraft in one condition: what it has and how it flies."""
@@ -161,6 +199,7 @@ class Setup:
     flight: Flight
     turbulence: float
     controls: tuple[str, ...]  # the controls it has, in INPUT_CHANNELS order
+    airspeed: float  # its true airspeed at the trim, m/s (what the air data measure)
 
     @property
     def surfaces(self) -> dict:
@@ -168,12 +207,15 @@ class Setup:
 
     @property
     def envelope(self) -> Envelope:
-        """The envelope `sysid sim` gives the agent for this aircraft (agent.sim.flight)."""
-        trim = self.flight.speed_kts * KT
+        """The envelope the benchmark holds the flights to (ENVELOPE_BANK_DEG,
+        ENVELOPE_AIRSPEED), given to the agent as a flight-test engineer sets the envelope of
+        a test: the sizing aims inside it, less what the air alone moves. The height lost is
+        `sysid sim`'s limit (agent.sim.flight)."""
         return Envelope(
-            min_airspeed=ENVELOPE_SPEED[0] * trim,
-            max_airspeed=ENVELOPE_SPEED[1] * trim,
-            max_altitude_loss_m=max(40.0, ENVELOPE_HEIGHT_S * trim),
+            max_bank_deg=ENVELOPE_BANK_DEG,
+            min_airspeed=(1 - ENVELOPE_AIRSPEED) * self.airspeed,
+            max_airspeed=(1 + ENVELOPE_AIRSPEED) * self.airspeed,
+            max_altitude_loss_m=max(40.0, ENVELOPE_HEIGHT_S * self.airspeed),
         )
 
     def fly(self, plan: Plan | Timeline, seed: int, noise: bool = True) -> Record:
@@ -226,6 +268,23 @@ def ours(exp: Experiment, dt: float, setup: Setup, settings: Settings = OURS):
         if mode.name == "spiral":
             spiral = mode
     return found, result, seconds, spiral
+
+
+def on_controls(result, setup: Setup) -> StateSpace | None:
+    """The identified model's discrete form with an input column per control of the aircraft,
+    zero for one the method left out (a card without throttle: it has no identified effect);
+    None when it left an axis's outputs out (nothing to validate it on)."""
+    if tuple(result.output_names) != Record.outputs:
+        return None
+    columns = [setup.controls.index(c) for c in result.input_names]
+    return _spread(result.discrete, columns, len(setup.controls))
+
+
+def _spread(model: StateSpace, columns: list[int], r: int) -> StateSpace:
+    """`model` with its input k as input columns[k] of r, the others without effect."""
+    B, D = np.zeros((model.B.shape[0], r)), np.zeros((model.D.shape[0], r))
+    B[:, columns], D[:, columns] = model.B, model.D
+    return dataclasses.replace(model, B=B, D=D)
 
 
 def _linkage(setup: Setup, rec: Record, played: Plan) -> dict:
@@ -563,12 +622,12 @@ def main() -> None:
     )
     for name in args.aircraft:
         flight = AIRCRAFT[name]
-        kind = Plant(
+        plant = Plant(
             name, airspeed_kts=flight.speed_kts, altitude_ft=flight.altitude_ft, linearise=False
-        ).kind
-        controls = tuple(c for c in INPUT_CHANNELS if c != "throttle" or kind != "none")
+        )
+        controls = tuple(c for c in INPUT_CHANNELS if c != "throttle" or plant.kind != "none")
         for turbulence in args.turbulence:
-            setup = Setup(name, flight, turbulence, controls)
+            setup = Setup(name, flight, turbulence, controls, plant.true_airspeed)
             run(setup, args, seeds, settings, peers, validate)
 
 
@@ -577,7 +636,11 @@ def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validat
     reference = setup.truth()
     truth = reference.modes()
     full = only(preset("full"), setup.controls)
-    plans = {"full": full, "card": only(card(setup.controls), setup.controls)}
+    plans = {
+        "full": full,
+        "card": only(card(setup.controls), setup.controls),
+        "sweep": only(sweeps(), setup.controls),
+    }
     if args.sizing == "auto":
         sized, predictor, runs, flown = calibrate(setup, full)
         for k, (step, (bank, speed, lowest)) in enumerate(runs):
@@ -588,18 +651,27 @@ def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validat
                 flush=True,
             )
         plans["full"] = sized.plan
-        timeline = render(plans["card"], CONFIG.rate_hz)
-        plans["card"] = sizing.size(
-            plans["card"],
-            timeline,
-            predictor,
-            CONFIG.sizing,
-            setup.surfaces,
-            setup.envelope,
-            flown=flown,
-        ).plan
+        refused = {"full": sized.refusals}
+        for other in ("card", "sweep"):
+            card_sized = sizing.size(
+                plans[other],
+                render(plans[other], CONFIG.rate_hz),
+                predictor,
+                CONFIG.sizing,
+                setup.surfaces,
+                setup.envelope,
+                flown=flown,
+            )
+            plans[other], refused[other] = card_sized.plan, card_sized.refusals
     for excitation in args.excitation:
         plan = plans[excitation]
+        if args.sizing == "auto" and refused[excitation]:  # the agent would not arm it
+            print(
+                f"{setup.name:8} {setup.turbulence:4.1f} {excitation:4} refused by the agent "
+                f"at {_amplitudes(plan)}: {'; '.join(refused[excitation])}",
+                flush=True,
+            )
+            continue
         rows: dict[tuple[str, str], list] = {}
         flown = []
         for seed in range(FIRST_SEED, FIRST_SEED + seeds):
@@ -610,7 +682,7 @@ def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validat
                 exp = experiment(rec, setup, wind=nav == "ins")
                 try:
                     found, result, seconds, spiral = ours(exp, rec.dt, setup, settings)
-                    model, errors = result.discrete, mode_errors(found, truth)
+                    model, errors = on_controls(result, setup), mode_errors(found, truth)
                 except (IdentificationFailed, DataError):
                     model, errors, seconds, spiral = None, [np.inf] * len(MODES), np.nan, None
                 if validate and check is None and model is not None:
@@ -630,9 +702,11 @@ def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validat
             if not peers:
                 continue
             exp = experiment(rec, setup, wind=False)
+            moved = list(np.flatnonzero(np.ptp(exp.u, axis=0) > 0))  # sweeps leave the throttle
             for peer, method in PEERS.items():
                 try:
-                    model, seconds = method(exp, rec.dt)
+                    model, seconds = method(Experiment(exp.u[:, moved], exp.y), rec.dt)
+                    model = _spread(model, moved, exp.u.shape[1])
                     eig = np.log(np.linalg.eigvals(model.A).astype(complex)) / rec.dt
                     errs = mode_errors(named_by_truth(eig, truth), truth)
                     tic = validation_tic(model, check) if check else np.nan

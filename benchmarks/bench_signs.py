@@ -71,11 +71,14 @@ def main() -> None:
     args = parser.parse_args()
     signs = [SIGN_NAMES[name] for name in args.signs]
     speed = AIRCRAFT[args.aircraft].speed_kts
-    setup = Setup(args.aircraft, AIRCRAFT[args.aircraft], args.turbulence, INPUTS)
+    plant = Plant(args.aircraft, airspeed_kts=speed)
+    setup = Setup(
+        args.aircraft, AIRCRAFT[args.aircraft], args.turbulence, INPUTS, plant.true_airspeed
+    )
     reference = linear_truth(args.aircraft, speed)
     truth = reference.modes()
     spiral_true = truth["spiral"][0].real if truth.get("spiral") else None
-    fg = np.linalg.eigvals(Plant(args.aircraft, airspeed_kts=speed).linearisation.A)
+    fg = np.linalg.eigvals(plant.linearisation.A)
     if spiral_true is not None:
         real = fg[np.abs(fg.imag) < 1e-12].real
         nearest = real[np.argmin(np.abs(real - spiral_true))]

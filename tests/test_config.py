@@ -221,6 +221,12 @@ def test_the_simulators_agent_config_file_loads_back_to_the_same_config(tmp_path
         # it, where the default (35 m/s at most) refused every plan.
         envelope = config.excitation.envelope
         assert envelope.min_airspeed < speed * 0.514444 < envelope.max_airspeed
+    # Taken about the trim's true airspeed when the plant gives it (what the air data measure).
+    config = agent_config(
+        tmp_path, tmp_path / "ports", ("127.0.0.1", 14555), "full", None, 50.0, true_airspeed=27.0
+    )
+    envelope = config.excitation.envelope
+    assert (envelope.min_airspeed, envelope.max_airspeed) == pytest.approx((0.6 * 27.0, 1.3 * 27.0))
 
 
 @pytest.mark.parametrize("period", [float("inf"), float("nan"), 1e-9, 1e6])

@@ -254,3 +254,28 @@ def test_with_no_usable_model_the_build_up_grows_from_the_last_run(plan_and_time
     assert "the last run flew" in sized.limited_by["aileron"]
     assert sized.amplitudes["rudder"] == pytest.approx(4.0)  # the plan's own: max_factor 1
     assert sized.source.startswith("build-up from the last run")
+
+
+def test_controls_scaled_down_with_the_others_grow_back_while_every_target_has_room(
+    plan_and_timeline,
+):
+    """The linear rounds can scale the controls down further than the full prediction then
+    shows (JSBSim's Cub: a sweep card's aileron at 0.53° for a predicted bank of 4.7° and β
+    of 2.8°, the targets 15° and 5°). Left at half of where the sizing had them, they grow back
+    together until a quantity is on its target or each is back at its own limit."""
+    plan, timeline = plan_and_timeline
+    targets = Sizing(bank_deg=10.0, beta_deg=3.0, max_factor=10.0)
+    predictor = lateral()
+    sized = sizing.size(plan, timeline, predictor, targets, EX.surfaces, EX.envelope)
+    controls = list(timeline.values)
+    alone = {c: predictor.response(timeline, c) for c in controls}
+    own = {c: sizing.peaks(alone[c]) for c in controls}
+    first = {c: (10.0, "the plan's amplitude ×10") for c in controls}
+    factors = {c: sized.factors[c] / 2 for c in controls}
+    limited = {c: "halved" for c in controls}
+    goal = sizing.within(sizing.targets(targets), EX.envelope, predictor.airspeed)
+    sizing._grown_back(predictor, timeline, alone, own, factors, first, limited, goal)
+    total = sizing._estimate(predictor, timeline, alone, own, factors, True)
+    assert all(total[q] <= goal[q] * sizing.SLACK + 1e-9 for q in goal if q in total)
+    assert max(total[q] / goal[q] for q in goal if q in total) > 1 / sizing.SLACK - 1e-9
+    assert all(factors[c] > sized.factors[c] / 2 for c in controls)

@@ -158,14 +158,16 @@ def agent_config(
     realtime_priority: int | None = None,
     speed_kts: float = 60.0,
     glide_deg: float | None = None,
+    true_airspeed: float | None = None,
 ) -> Config:
     """The simulated flight's agent configuration: the defaults but for the sensor ports under
     `ports`, the autopilot at `mavlink`, the link's files under `tmp`, the log directory, the
     identification's axes, the real-time priority, and an envelope fitting the simulated
     aircraft at `speed_kts`. `glide_deg`: an unpowered aircraft's trim glide angle — it has
     no throttle to excite, and its height limit adds what the glide itself loses over the
-    longest run."""
-    trim = speed_kts * KT
+    longest run. `true_airspeed` (m/s): the trim's, which the air data measure and the
+    envelope's airspeeds are taken about (default: `speed_kts`)."""
+    trim = true_airspeed or speed_kts * KT
     excitation = Excitation()
     height = max(40.0, ENVELOPE_HEIGHT_S * trim)
     surfaces = excitation.surfaces
@@ -365,6 +367,7 @@ async def _parts(
             options.realtime_priority,
             plane.speed_kts,
             glide_deg=glide,
+            true_airspeed=aircraft.plant.true_airspeed,
         )
         if agent_process:
             agent = AgentProcess(tmp, config)

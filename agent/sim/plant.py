@@ -209,6 +209,9 @@ class Plant:
             name: float(self.fdm[self.commands[name][0]]) if name in self.commands else 0.0
             for name in COMMAND_PROPERTY
         }
+        # The true airspeed at the trim (m/s): what the air data measure, above the calibrated
+        # airspeed the trim was asked for by the density's ratio (5 % at 3000 ft).
+        self.true_airspeed = float(self.fdm["velocities/vt-fps"]) * FT
         # Each command's ramp (from, to) over _ramp_steps steps, _ramp_done of them flown
         # (set_normalised); _settled: the surfaces are where the ramps have them now.
         self._ramp = {name: (value, value) for name, value in self.trim.items()}

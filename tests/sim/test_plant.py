@@ -188,6 +188,11 @@ def test_a_glider_trims_in_a_steady_glide_and_has_no_throttle():
     assert glider.linearisation is None
     assert -5.0 < glider.glide_deg < -1.0  # a glide, about L/D 23
     start = glider.state()
+    # Its true airspeed at 3000 ft is what its air data measure, above the 50 kt (25.7 m/s)
+    # calibrated airspeed it was trimmed at by the density's ratio (√(ρ0/ρ) = 1.045):
+    # the envelope is taken about it.
+    assert glider.true_airspeed == pytest.approx(start["Vt"], rel=1e-6)
+    assert glider.true_airspeed == pytest.approx(50.0 * 0.514444 * 1.045, rel=0.01)
     assert "rpm" not in start
     glider.fly(np.tile([0.5, 0.0, 0.0, 0.0], (500, 1)), DT)  # 10 s, the throttle "open"
     after = glider.state()
