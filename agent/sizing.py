@@ -502,9 +502,8 @@ def _grown_back(
 ) -> None:
     """The controls scaled down "with the others" grown back, together, while the full
     prediction leaves every quantity below its target, up to each one's own limit (`first`):
-    the linear rounds can take more than the kinematics in full then show. On JSBSim's J-3
-    Cub in light turbulence a sweep card's aileron came out at 0.53° for a predicted bank
-    of 4.7° and β of 2.8°, the targets 15° and 5°."""
+    the linear rounds can take more than the kinematics in full then show
+    (docs/excitation.md, *Sizing*)."""
     for _ in range(FULL_ROUNDS):
         low = [c for c in factors if factors[c] < first[c][0] / SLACK]
         if not low:

@@ -48,9 +48,9 @@ def axes_present(input_roles, output_roles) -> dict[str, tuple[list[int], list[i
 # smoothed over MOVED_BINS bins a side, stands MOVED times above its noise floor (the
 # periodogram's mean above half the Nyquist frequency, where no flight manoeuvre puts power: the
 # measured gust's floor, agent.ident.aircraft.wind). A measured surface left at trim is its
-# potentiometer's noise, whose smoothed periodogram stays within about twice its floor (1.9×
-# on JSBSim's C172R, whose 3° elevator doublet stood 1300× above it): MOVED asks for a doublet
-# of about a quarter of a degree on that noise.
+# potentiometer's white noise, whose periodogram smoothed over 17 bins stays within about
+# twice its floor at its largest; a manoeuvre's lines stand orders of magnitude above it
+# (docs/identification.md).
 MOVED = 10.0
 MOVED_BINS = 8
 MOVED_FLOOR_FROM = 0.5
@@ -92,8 +92,8 @@ def moved_axes(
     left at trim is left out (its effect cannot be identified; as an input it would be fitted
     to its sensor's noise); an axis none of whose controls moved is left out whole: a
     longitudinal manoeuvre moves the lateral states only through coupling and noise, and
-    lateral modes fitted to that came out as a roll mode 67 % off the truth with a standard
-    error of 6 % (JSBSim's C172R). A measured rpm or thrust is the engine's response, not a
+    modes fitted to those are wrong with standard errors that say otherwise
+    (docs/identification.md). A measured rpm or thrust is the engine's response, not a
     control: it is kept, and its moving counts as the axis's excitation (the throttle moved it)."""
     kept: dict[str, tuple[list[int], list[int]]] = {}
     controls_left_out: dict[int, str] = {}
