@@ -35,7 +35,7 @@ seconds).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -472,7 +472,13 @@ def size(
                     if share[c] >= CONTRIBUTION * max(share.values()):
                         factors[c] *= ratio
                         limited_by[c] = f"{LABELS[q]} {goal[q]:.3g}{QUANTITIES[q]} with the others"
-    _grown_back(predictor, timeline, alone, own, factors, first, limited_by, goal)
+    _grown_back(
+        lambda now: _estimate(predictor, timeline, alone, own, now, True),
+        factors,
+        first,
+        limited_by,
+        goal,
+    )
     predicted = _estimate(predictor, timeline, alone, own, factors, True)
     sized = scaled(plan, factors)
     return Sizing(
@@ -491,24 +497,21 @@ def size(
 
 
 def _grown_back(
-    predictor: Predictor,
-    timeline: Timeline,
-    alone: Mapping[str, dict],
-    own: Mapping[str, dict[str, float]],
+    estimate: Callable[[Mapping[str, float]], dict[str, float]],
     factors: dict[str, float],
     first: Mapping[str, tuple[float, str]],
     limited_by: dict[str, str],
     goal: Mapping[str, float],
 ) -> None:
     """The controls scaled down "with the others" grown back, together, while the full
-    prediction leaves every quantity below its target, up to each one's own limit (`first`):
-    the linear rounds can take more than the kinematics in full then show
-    (docs/excitation.md, *Sizing*)."""
+    prediction (`estimate` of the factors) leaves every quantity below its target, up to each
+    one's own limit (`first`): the linear rounds can take more than the kinematics in full
+    then show (docs/excitation.md, *Sizing*)."""
     for _ in range(FULL_ROUNDS):
         low = [c for c in factors if factors[c] < first[c][0] / SLACK]
         if not low:
             return
-        total = _estimate(predictor, timeline, alone, own, factors, True)
+        total = estimate(factors)
         room = min((goal[q] / total[q] for q in goal if total.get(q, 0.0) > 0), default=1.0)
         if room <= SLACK:
             return

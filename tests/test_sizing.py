@@ -274,7 +274,13 @@ def test_controls_scaled_down_with_the_others_grow_back_while_every_target_has_r
     factors = {c: sized.factors[c] / 2 for c in controls}
     limited = {c: "halved" for c in controls}
     goal = sizing.within(sizing.targets(targets), EX.envelope, predictor.airspeed)
-    sizing._grown_back(predictor, timeline, alone, own, factors, first, limited, goal)
+    sizing._grown_back(
+        lambda now: sizing._estimate(predictor, timeline, alone, own, now, True),
+        factors,
+        first,
+        limited,
+        goal,
+    )
     total = sizing._estimate(predictor, timeline, alone, own, factors, True)
     assert all(total[q] <= goal[q] * sizing.SLACK + 1e-9 for q in goal if q in total)
     assert max(total[q] / goal[q] for q in goal if q in total) > 1 / sizing.SLACK - 1e-9
