@@ -210,7 +210,23 @@ def identify(
     )
 
 
-def _only_moved(raw, inputs, outputs, input_roles, output_roles, present):
+def _only_moved(
+    raw: Sequence[Experiment],
+    inputs: tuple[str, ...],
+    outputs: tuple[str, ...],
+    input_roles: Sequence[str | None],
+    output_roles: Sequence[str | None],
+    present: dict[str, tuple[list[int], list[int]]],
+) -> tuple[
+    list[Experiment],
+    tuple[str, ...],
+    tuple[str, ...],
+    list[str | None],
+    list[str | None],
+    dict[str, tuple[list[int], list[int]]],
+    list[str],
+    list[tuple[str, str]],
+]:
     """The batch, channels, roles and axes of what the record moved (`axes.moved_axes`), the
     notes on what was left out and the modes that leaves missing, with why."""
     chosen = moved_axes(raw, inputs, input_roles, present)
