@@ -13,7 +13,9 @@ sensor noise, small enough to stay linear and inside the envelope. Here:
    about (`QUANTITIES`): bank, airspeed, angle of attack, sideslip, pitch attitude, load
    factor (V₀(q − α̇)/g) and the height lost (V₀∫(θ − α)dt, wings level), over the plan and
    `TAIL_S` after it.
-2. Each control is first sized alone: the factor on its plan amplitude that brings its own
+2. Each sweep and multisine is shaped to its response (`shape`): the frequencies where it
+   moves the aircraft most play less, so its one amplitude is not set by its worst band.
+   Then each control is sized alone: the factor on its plan amplitude that brings its own
    largest predicted response to its target ([excitation.sizing]). Then the controls play
    together: while a quantity exceeds its target, every control contributing at least
    `CONTRIBUTION` of it is scaled down by the excess.
@@ -44,7 +46,7 @@ import scipy.linalg
 from agent.channels import AXIS_SETS, OUTPUT_ROLES
 from agent.config import Channels, Envelope, Surface
 from agent.config import Sizing as SizingConfig
-from agent.excitation.plan import Plan, Timeline
+from agent.excitation.plan import Multisine, Plan, Sweep, Timeline, render
 from agent.ident.aircraft.kinematics import KINEMATIC_STATES, kinematic_jacobian, kinematics
 from agent.ident.convert import StateSpace
 from agent.ident.document import ResultDocument
@@ -86,6 +88,16 @@ AXIS_OF = {
 # The share of the envelope's room (from the trim, less what no input explains) the targets
 # may take: the rest is left to the prediction's error.
 ENVELOPE_SHARE = 0.9
+# Shaping (`shape`): a sweep is split into BANDS_PER_DECADE bands per decade of its
+# frequencies, a multisine into its lines (`_breakpoints`). No part plays less than MIN_GAIN
+# of the signal's amplitude: the record keeps some power in every band it was meant to
+# cover, whatever the model says of it. A shape within FLAT of 1 everywhere is left out: the
+# signal is played as written.
+BANDS_PER_DECADE = 5
+# Shaping and sizing alternate (`size`) at most SHAPE_PASSES times.
+SHAPE_PASSES = 3
+MIN_GAIN = 0.1
+FLAT = 0.95
 # The quantities predicted, with their unit for the operator.
 QUANTITIES = {
     "bank_deg": "°",
@@ -216,6 +228,43 @@ class Predictor:
             return {}
         return self._quantities(y)
 
+    def gains(self, control: str, hz: np.ndarray) -> dict[str, np.ndarray]:
+        """Each quantity's steady amplitude per plan unit of `control` played as a sine at each
+        frequency in `hz`, by the linear model (an empty dict when the model does not take the
+        control or does not settle; the height lost, which no target bounds, is left out)."""
+        if control not in self.inputs:
+            return {}
+        A, B, C, D = self.model.A, self.model.B, self.model.C, self.model.D
+        j = self.inputs[control]
+        gain, even = self.linkage.get(control, (self.per_unit[control], 0.0))
+        hz = np.asarray(hz, dtype=float)
+        eye = np.eye(A.shape[0])
+        with np.errstate(all="ignore"):
+            y = np.array(
+                [
+                    C @ np.linalg.solve(np.exp(2j * np.pi * f * self.dt) * eye - A, B[:, j])
+                    for f in hz
+                ]
+            ).reshape(hz.size, C.shape[0])
+            y = (y + D[:, j]) * (abs(gain) + abs(even))
+        if not np.all(np.isfinite(y)):
+            return {}
+        col, out = self.outputs, {}
+        for role, q in (
+            ("phi", "bank_deg"),
+            ("alpha", "alpha_deg"),
+            ("beta", "beta_deg"),
+            ("theta", "pitch_deg"),
+        ):
+            if role in col:
+                out[q] = np.degrees(np.abs(y[:, col[role]]))
+        if "airspeed" in col and self.airspeed:
+            out["airspeed_pct"] = 100 * np.abs(y[:, col["airspeed"]]) / self.airspeed
+        if "q" in col and "alpha" in col and self.airspeed:
+            normal = y[:, col["q"]] - 2j * np.pi * hz * y[:, col["alpha"]]
+            out["load_factor"] = self.airspeed * np.abs(normal) / G
+        return out
+
     def _quantities(self, y: np.ndarray) -> dict[str, np.ndarray]:
         out = {}
         col = self.outputs
@@ -256,6 +305,8 @@ class Sizing:
     corrections: dict[str, float] = field(default_factory=dict)  # the predictor's (≥ 1)
     build_up: bool = False  # no model sized it: the build-up share of the plan
     unexplained: dict[str, float] = field(default_factory=dict)  # the predictor's
+    held: frozenset[str] = frozenset()
+    """Controls held below their signals' shaping by a limit no shape relieves (`size`)."""
 
     def lines(self, units: Mapping[str, str] | None = None) -> list[str]:
         """The sizing as lines for the operator."""
@@ -270,6 +321,7 @@ class Sizing:
             corrections=self.corrections,
             unexplained=self.unexplained,
             refusals=self.refusals,
+            shaped=shape_lines(self.plan),
         )
 
 
@@ -281,9 +333,10 @@ def describe(
     corrections: Mapping[str, float],
     unexplained: Mapping[str, float],
     refusals: Sequence[str],
+    shaped: Sequence[str] = (),
 ) -> list[str]:
     """A sizing as lines for the operator; `controls`: (control, amplitude, unit, factor,
-    what limited it)."""
+    what limited it); `shaped`: the signals shaped to their response (`shape_lines`)."""
 
     def each(values: Mapping[str, float], form: str) -> str:
         return ", ".join(
@@ -293,6 +346,7 @@ def describe(
 
     out = [f"amplitudes sized by {source}"]
     out += [f"  {c} {a:.3g} {unit} (×{f:.2f}: {why})" for c, a, unit, f, why in controls]
+    out += shaped
     if predicted:
         out.append("  predicted: " + each(predicted, "{label} {v:.3g}{unit}"))
     if corrections:
@@ -317,6 +371,7 @@ def message_lines(sized: messages.Sizing) -> list[str]:
         corrections=sized.corrections,
         unexplained=sized.unexplained,
         refusals=sized.refusals,
+        shaped=shape_lines(sized.plan),
     )
 
 
@@ -399,43 +454,95 @@ def size(
     rendered, `trim` the flight state now (output roles, SI) for the envelope check. With no
     predictor, `flown` (control → the largest deflection of the last run, plan units:
     `deflections`) grows the build-up from there: a run whose model sized nothing (its
-    response did not stand above the turbulence) calibrates nothing either."""
+    response did not stand above the turbulence) calibrates nothing either.
+
+    With a predictor, each sweep and multisine is first shaped to its response (`shape`) at
+    the largest level it may reach, and the plan sized. A control then held lower by what its
+    shape cannot relieve (a quantity the model does not know, grown from what its data flew)
+    would only lose its low end for nothing: its signals are shaped again at the level it
+    got and the plan sized again (SHAPE_PASSES at most)."""
+    if predictor is None:
+        return _build_up(plan, timeline, config, surfaces, flown)
+    goal = within(targets(config), envelope, predictor.airspeed, trim, predictor.unexplained)
+    levels: dict[str, float] = {}
+    sized, last = None, None
+    for _ in range(SHAPE_PASSES):
+        shaped = shape(plan, predictor, goal, config, surfaces, timeline.dt, levels)
+        if shaped == last:
+            break
+        rendered = timeline if shaped == plan else render(shaped, 1 / timeline.dt)
+        sized, last = (
+            _sized(shaped, rendered, predictor, config, surfaces, envelope, trim, goal),
+            shaped,
+        )
+        levels = {c: sized.factors[c] for c in sized.held}
+        if not levels:
+            break
+    assert sized is not None
+    return sized
+
+
+def _build_up(
+    plan: Plan,
+    timeline: Timeline,
+    config: SizingConfig,
+    surfaces: Mapping[str, Surface],
+    flown: Mapping[str, float] | None,
+) -> Sizing:
+    """With no model: the build-up share of the plan, or `max_growth` times what the last run
+    flew (`size`)."""
     controls = list(timeline.values)
     peak = {c: float(np.max(np.abs(timeline.values[c]))) for c in controls}
     ceiling = {c: surfaces[c].max_amplitude / peak[c] if peak[c] > 0 else 1.0 for c in controls}
-    if predictor is None:
-        factors, limited_by = {}, {}
-        for c in controls:
-            limits = {
-                "max_amplitude": ceiling[c],
-                f"the plan's amplitude ×{config.max_factor:g}": config.max_factor,
-            }
-            last = (flown or {}).get(c, 0.0)
-            if last > 0 and peak[c] > 0:
-                limits[f"build-up: {config.max_growth:g}× the {last:.3g} the last run flew"] = (
-                    config.max_growth * last / peak[c]
-                )
-            else:
-                limits[f"build-up: {config.build_up:g} of the plan"] = config.build_up
-            limited_by[c] = min(limits, key=limits.get)
-            factors[c] = limits[limited_by[c]]
-        source = (
-            "build-up from the last run (its model sizes nothing: this run calibrates the next)"
-            if flown
-            else "build-up (no model of the aircraft yet: this run calibrates the next)"
-        )
-        return Sizing(
-            plan=scaled(plan, factors),
-            factors=factors,
-            amplitudes={c: factors[c] * peak[c] for c in controls},
-            limited_by=limited_by,
-            predicted={},
-            source=source,
-            build_up=True,
-        )
-    goal = within(targets(config), envelope, predictor.airspeed, trim, predictor.unexplained)
+    factors, limited_by = {}, {}
+    for c in controls:
+        limits = {
+            "max_amplitude": ceiling[c],
+            f"the plan's amplitude ×{config.max_factor:g}": config.max_factor,
+        }
+        last = (flown or {}).get(c, 0.0)
+        if last > 0 and peak[c] > 0:
+            limits[f"build-up: {config.max_growth:g}× the {last:.3g} the last run flew"] = (
+                config.max_growth * last / peak[c]
+            )
+        else:
+            limits[f"build-up: {config.build_up:g} of the plan"] = config.build_up
+        limited_by[c] = min(limits, key=limits.get)
+        factors[c] = limits[limited_by[c]]
+    source = (
+        "build-up from the last run (its model sizes nothing: this run calibrates the next)"
+        if flown
+        else "build-up (no model of the aircraft yet: this run calibrates the next)"
+    )
+    return Sizing(
+        plan=scaled(plan, factors),
+        factors=factors,
+        amplitudes={c: factors[c] * peak[c] for c in controls},
+        limited_by=limited_by,
+        predicted={},
+        source=source,
+        build_up=True,
+    )
+
+
+def _sized(
+    plan: Plan,
+    timeline: Timeline,
+    predictor: Predictor,
+    config: SizingConfig,
+    surfaces: Mapping[str, Surface],
+    envelope: Envelope,
+    trim: Mapping[str, float] | None,
+    goal: Mapping[str, float],
+) -> Sizing:
+    """The plan (shaped as it is) sized by the predictor to `goal` (`size`, steps 2–4 of the
+    module docstring)."""
+    controls = list(timeline.values)
+    peak = {c: float(np.max(np.abs(timeline.values[c]))) for c in controls}
+    ceiling = {c: surfaces[c].max_amplitude / peak[c] if peak[c] > 0 else 1.0 for c in controls}
     alone = {c: predictor.response(timeline, c) for c in controls}
     factors, limited_by = {}, {}
+    unrelieved = set()  # the limits a shape cannot relieve
     for c in controls:
         own = peaks(alone[c])
         limits = {"max_amplitude": ceiling[c]}
@@ -452,6 +559,7 @@ def size(
             if known > 0 and _axis_controls(q, (c,)) and flown > 0 and peak[c] > 0:
                 why = f"{LABELS[q]} {target:.3g}{QUANTITIES[q]}: {known:.3g}{QUANTITIES[q]} flown"
                 limits[f"{why}, not in the model"] = target / known * flown / peak[c]
+                unrelieved.add(f"{why}, not in the model")
         if not alone[c]:
             limits = {"build-up: its model does not take it": min(config.build_up, ceiling[c])}
         limited_by[c] = min(limits, key=limits.get)
@@ -483,6 +591,7 @@ def size(
     sized = scaled(plan, factors)
     return Sizing(
         plan=sized,
+        held=frozenset(c for c in controls if limited_by[c] in unrelieved),
         factors=factors,
         amplitudes={c: factors[c] * peak[c] for c in controls},
         limited_by=limited_by,
@@ -494,6 +603,160 @@ def size(
         corrections=dict(predictor.correction),
         unexplained=dict(predictor.unexplained),
     )
+
+
+def shape(
+    plan: Plan,
+    predictor: Predictor,
+    goal: Mapping[str, float],
+    config: SizingConfig,
+    surfaces: Mapping[str, Surface],
+    dt: float,
+    levels: Mapping[str, float] | None = None,
+) -> Plan:
+    """`plan` with each sweep's and multisine's amplitude shaped to the response it causes:
+    the parts of its frequencies that move the aircraft most play less (`_breakpoints`), so
+    the low end of a glider's elevator sweep, which swings the airspeed, no longer holds the
+    whole sweep to a fraction of a degree. The level is then sized as every signal's
+    (`size`). Signals of a control the model does not take, and pulses, are left as they
+    are; a shape the sizing computed before is replaced. `levels` (control → a factor on its
+    plan amplitudes) shapes a control's signals at that level rather than at the largest
+    they may reach (`size`).
+    """
+    segments = []
+    for segment in plan.segments:
+        signals = {}
+        for c, sig in segment.signals.items():
+            if isinstance(sig, Sweep | Multisine) and c in predictor.inputs:
+                cap = _cap(c, sig, predictor, config, surfaces)
+                if levels and c in levels:
+                    cap = min(cap, levels[c] * abs(sig.amplitude))
+                breakpoints = _breakpoints(plan, c, sig, predictor, goal, cap, dt)
+                sig = sig.model_copy(update={"shape": breakpoints})
+            signals[c] = sig
+        segments.append(segment.model_copy(update={"signals": signals}))
+    return plan.model_copy(update={"segments": tuple(segments)})
+
+
+def _breakpoints(
+    plan: Plan,
+    control: str,
+    sig: Sweep | Multisine,
+    predictor: Predictor,
+    goal: Mapping[str, float],
+    cap: float,
+    dt: float,
+) -> tuple[tuple[float, float], ...]:
+    """A signal's shape (`shape`): breakpoints (Hz, gain), or () where it is flat.
+
+    A multisine's lines play together and repeat: each is judged by the model's steady
+    response (`Predictor.gains`), its gain the largest share of the cap that keeps every
+    quantity within its target, relative to the largest. Judged alone, N lines of equal
+    response sum to a peak about √N times each line's, and each line's share of the
+    signal's peak is about 1/√N of it: the two cancel, so a line is judged against the
+    signal's whole cap. (Lines alone in the time domain would not do: each starts off trim
+    where together they start at it, and those starts dwarf what each line moves.)
+
+    A sweep plays its frequencies in turn, and a lightly damped mode it passed keeps ringing
+    (a glider's phugoid swings the airspeed after the sweep has left its band), from every
+    band that passes near it. The sweep is split into bands, BANDS_PER_DECADE per decade,
+    that sum to it, each faded in and out along the sweep (`signals.split_by_frequency`), and
+    each band's response predicted by the linear model in the time domain. At the cap, while
+    a quantity's sum over the bands exceeds its target, the bands that make its peak (at
+    least CONTRIBUTION of the largest share, at the peak's time and with its sign) are turned
+    down by the excess, as `size` turns down controls; the shape is the bands' gains relative
+    to the largest, at their centres."""
+    factor = cap / abs(sig.amplitude)  # the cap as a factor on the signal's amplitude
+    if isinstance(sig, Multisine):
+        centres = np.sort(sig.hz)
+        allowance = np.full(centres.size, np.inf)
+        for q, v in predictor.gains(control, centres).items():
+            if q in goal:
+                with np.errstate(divide="ignore"):
+                    v = v * predictor.correction.get(q, 1.0) * abs(sig.amplitude)
+                    allowance = np.minimum(allowance, goal[q] / v)
+        if centres.size < 2 or factor <= 0 or not np.any(np.isfinite(allowance)):
+            return ()
+        gain = np.minimum(allowance, factor) / min(factor, float(np.max(allowance)))
+        return _breakpoints_of(centres, gain)
+    lo, hi = sorted((sig.f0_hz, sig.f1_hz))
+    if hi <= lo or factor <= 0:
+        return ()
+    centres = np.geomspace(lo, hi, max(2, math.ceil(math.log10(hi / lo) * BANDS_PER_DECADE)))
+    responses: dict[str, list[np.ndarray]] = {}
+    for part in sig.bands(dt, centres):
+        values = np.append(part, 0.0)
+        timeline = Timeline(plan, dt, {control: values}, {control: values != 0})
+        alone = predictor.response(timeline, control)
+        if not alone:
+            return ()
+        for q in goal:
+            if q in alone:
+                scale = factor * predictor.correction.get(q, 1.0)
+                responses.setdefault(q, []).append(scale * alone[q])
+    if not responses:
+        return ()
+    stacked = {q: np.array(r) for q, r in responses.items()}
+    gain = np.ones(centres.size)
+    for _ in range(ROUNDS):
+        over = False
+        for q, r in stacked.items():
+            total = gain @ r
+            at = int(np.argmax(np.abs(total)))
+            peak = abs(float(total[at]))
+            if peak <= goal[q] * SLACK:
+                continue
+            over = True
+            share = gain * r[:, at] * np.sign(total[at])
+            gain[share >= CONTRIBUTION * share.max()] *= goal[q] / peak
+        if not over:
+            break
+    return _breakpoints_of(centres, gain / np.max(gain))
+
+
+def _breakpoints_of(hz: np.ndarray, gain: np.ndarray) -> tuple[tuple[float, float], ...]:
+    """Gains at frequencies as a shape: each at least MIN_GAIN, () when all are within FLAT
+    of 1 (rounded: the shape goes over the radio)."""
+    gain = np.clip(gain, MIN_GAIN, 1.0)
+    if np.min(gain) >= FLAT:
+        return ()
+    return tuple((float(f"{f:.5g}"), round(float(g), 3)) for f, g in zip(hz, gain, strict=True))
+
+
+def _cap(
+    control: str,
+    sig: Sweep | Multisine,
+    predictor: Predictor,
+    config: SizingConfig,
+    surfaces: Mapping[str, Surface],
+) -> float:
+    """The largest amplitude a signal may reach whatever its response: the plan's times
+    max_factor, the control's max_amplitude, max_growth times what its model saw."""
+    caps = [abs(sig.amplitude) * config.max_factor, surfaces[control].max_amplitude]
+    if predictor.flown.get(control, 0.0) > 0:
+        caps.append(config.max_growth * predictor.flown[control])
+    return min(caps)
+
+
+def shape_lines(plan: Plan) -> list[str]:
+    """Each shaped signal as a line for the operator: its lowest gain and where, and where it
+    plays its full amplitude."""
+    out = []
+    for segment in plan.segments:
+        for c, sig in segment.signals.items():
+            breakpoints = getattr(sig, "shape", ())
+            if not breakpoints:
+                continue
+            hz = np.array([f for f, _ in breakpoints])
+            gain = np.array([g for _, g in breakpoints])
+            low = int(np.argmin(gain))
+            full = hz[gain >= 0.99]
+            at = f"full from {full.min():.3g} to {full.max():.3g} Hz" if full.size else ""
+            out.append(
+                f"  {c} {sig.kind} shaped to its response: ×{gain[low]:.2f} at {hz[low]:.3g} Hz"
+                + (f", {at}" if at else "")
+            )
+    return out
 
 
 def _grown_back(

@@ -635,7 +635,7 @@ def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validat
     """Every row of one aircraft in one condition."""
     reference = setup.truth()
     truth = reference.modes()
-    full = only(preset("full"), setup.controls)
+    full = preset("full", controls=setup.controls)
     plans = {
         "full": full,
         "card": only(card(setup.controls), setup.controls),

@@ -20,7 +20,15 @@ import pytest
 
 from agent import sizing
 from agent.config import Envelope, Excitation, Sizing
-from agent.excitation.plan import preset, render
+from agent.excitation.plan import (
+    Multisine,
+    Plan,
+    Segment,
+    Sweep,
+    full_harmonics,
+    preset,
+    render,
+)
 from agent.ident.convert import StateSpace, discretize
 from agent.ident.fit import simulate
 from agent.ident.reference import LATERAL
@@ -285,3 +293,84 @@ def test_controls_scaled_down_with_the_others_grow_back_while_every_target_has_r
     assert all(total[q] <= goal[q] * sizing.SLACK + 1e-9 for q in goal if q in total)
     assert max(total[q] / goal[q] for q in goal if q in total) > 1 / sizing.SLACK - 1e-9
     assert all(factors[c] > sized.factors[c] / 2 for c in controls)
+
+
+def glider(**changes) -> sizing.Predictor:
+    """A longitudinal model with a glider's lightly damped phugoid (ζ ≈ 0.02 at 0.066 Hz) and a
+    well damped short period: the elevator swings the airspeed near the phugoid many times
+    more than anywhere else. Elevator in degrees; V (m/s), α, q, θ."""
+    v0, g = 25.0, 9.80665
+    A = np.array(
+        [
+            [-0.06, 0.0, 0.0, -g],
+            [-2 * g / v0**2, -4.0, 1.0, 0.0],
+            [0.0, -15.0, -3.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+        ]
+    )
+    B = np.radians([[0.0], [-0.3], [-12.0], [0.0]])
+    Ad, Bd = discretize(A, B, DT)
+    fields = dict(
+        model=StateSpace(Ad, Bd, np.eye(4), np.zeros((4, 1))),
+        dt=DT,
+        inputs={"elevator": 0},
+        outputs={"airspeed": 0, "alpha": 1, "q": 2, "theta": 3},
+        per_unit={"elevator": 1.0},
+        airspeed=v0,
+        source="a glider's model",
+    )
+    return sizing.Predictor(**{**fields, **changes})
+
+
+def _one(signal) -> Plan:
+    return Plan(id="shaped", axes="longitudinal", segments=(Segment(signals={"elevator": signal}),))
+
+
+@pytest.mark.parametrize(
+    "signal",
+    [
+        Sweep(f0_hz=0.05, f1_hz=2.0, duration_s=60.0, law="log", fade_s=2.0, amplitude=3.0),
+        Multisine(
+            harmonics=full_harmonics(throttle=False)["elevator"],
+            period_s=80.0,
+            periods=1,
+            amplitude=3.0,
+        ),
+    ],
+    ids=["sweep", "multisine"],
+)
+def test_a_sweep_or_multisine_is_shaped_to_the_response_it_causes(signal):
+    """Played flat, the elevator's low frequencies swing the airspeed: the whole signal would
+    be sized to a fraction of its amplitude. Shaped, those play less and the rest at the
+    plan's amplitude, and the sized plan still keeps every quantity within its target."""
+    predictor, plan = glider(), _one(signal)
+    sized = sizing.size(
+        plan, render(plan, EX.rate_hz), predictor, EX.sizing, EX.surfaces, EX.envelope
+    )
+    shape = sized.plan.segments[0].signals["elevator"].shape
+    hz, gain = np.array(shape).T
+    assert gain[hz < 0.1].max() < 0.5  # the phugoid's band turned down ...
+    assert gain[-1] == 1.0  # ... the top of the band at the full amplitude
+    goal = sizing.targets(EX.sizing)
+    for q, peak in sized.predicted.items():
+        if q in goal:
+            assert peak <= goal[q] * sizing.SLACK + 1e-9, (q, peak)
+    again = sizing.predict(predictor, render(sized.plan, EX.rate_hz))
+    assert again["airspeed_pct"] == pytest.approx(sized.predicted["airspeed_pct"], rel=0.05)
+    # Flat at the amplitude the shaped signal plays at its top, it would leave the target.
+    top = sized.factors["elevator"] * signal.amplitude
+    flat = _one(signal.model_copy(update={"amplitude": top}))
+    assert (
+        sizing.predict(predictor, render(flat, EX.rate_hz))["airspeed_pct"]
+        > 2 * goal["airspeed_pct"]
+    )
+    assert "shaped to its response" in "\n".join(sized.lines())
+    # Sized again, the sized plan is shaped afresh, never compounded: a shape times a shape
+    # would square each gain, and turn the phugoid's band down further each time.
+    twice = sizing.size(
+        sized.plan, render(sized.plan, EX.rate_hz), predictor, EX.sizing, EX.surfaces, EX.envelope
+    )
+    again_hz, again_gain = np.array(twice.plan.segments[0].signals["elevator"].shape).T
+    assert again_hz == pytest.approx(hz)
+    assert np.all(again_gain >= 0.8 * gain)
+    assert np.any(gain < 0.5)  # where squaring would tell

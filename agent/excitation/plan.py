@@ -9,8 +9,9 @@ signal, phase optimisation included, is deterministic). Amplitudes are in each c
 
 from __future__ import annotations
 
+import itertools
 import json
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Annotated, ClassVar, Literal
 
@@ -30,6 +31,12 @@ Nonzero = Annotated[float, Field(allow_inf_nan=False)]
 # holds) out of the frequency arithmetic.
 MAX_HARMONIC = 10**9
 Harmonic = Annotated[int, Field(ge=1, le=MAX_HARMONIC)]
+# A spectral shape's breakpoint: (frequency in Hz, gain on the amplitude in (0, 1]); a shape
+# only takes amplitude away, so a signal's amplitude stays its largest.
+Breakpoint = tuple[
+    Annotated[float, Field(gt=0.0, le=1000.0)], Annotated[float, Field(gt=0.0, le=1.0)]
+]
+MAX_BREAKPOINTS = 64
 
 
 class _Model(BaseModel):
@@ -45,6 +52,22 @@ class _Signal(_Model):
     def _nonzero(cls, value: float) -> float:
         if value == 0:
             raise ValueError("amplitude must not be 0")
+        return value
+
+
+class _Shaped(_Signal):
+    """A signal whose amplitude may vary with frequency: `shape` is breakpoints (Hz, gain),
+    ascending, interpolated in log-frequency and held beyond its ends (`signals.shaped`);
+    the sizing shapes a sweep or a multisine to the response it causes (agent/sizing.py)."""
+
+    shape: tuple[Breakpoint, ...] = Field((), max_length=MAX_BREAKPOINTS)
+
+    @field_validator("shape")
+    @classmethod
+    def _ascending(cls, value: tuple[Breakpoint, ...]) -> tuple[Breakpoint, ...]:
+        hz = [f for f, _ in value]
+        if any(b <= a for a, b in itertools.pairwise(hz)):
+            raise ValueError("a shape's breakpoints must be in strictly ascending frequency")
         return value
 
 
@@ -82,7 +105,7 @@ class ThreeTwoOneOne(_Pulses):
     pulse_s: float = Field(gt=0.0, le=10.0)
 
 
-class Sweep(_Signal):
+class Sweep(_Shaped):
     """Sine sweep from f0_hz to f1_hz over duration_s (linear or logarithmic law)."""
 
     kind: Literal["sweep"] = "sweep"
@@ -103,7 +126,18 @@ class Sweep(_Signal):
             self.law,
             self.fade_s,
             self.dwell_cycles,
+            self.shape,
         )
+
+    def bands(self, dt: float, centres: Sequence[float]) -> list[np.ndarray]:
+        """The sweep without its shape, split by its instantaneous frequency into bands about
+        `centres` (Hz, ascending; `signals.split_by_frequency`): one array per band, the
+        sweep's length, summing to the sweep."""
+        flat = self.model_copy(update={"shape": ()}).samples(dt)
+        hz = signals.sweep_instants(
+            dt, self.f0_hz, self.f1_hz, self.duration_s, self.law, self.dwell_cycles
+        )
+        return signals.split_by_frequency(flat, hz, centres)
 
     @property
     def top_hz(self) -> float:
@@ -115,9 +149,10 @@ class Sweep(_Signal):
         return self.dwell_cycles / self.f0_hz + self.duration_s
 
 
-class Multisine(_Signal):
-    """Harmonics k of 1/period_s with equal amplitudes, `periods` periods long (eq. 4.30),
-    started at a zero crossing so whole periods begin and end at trim."""
+class Multisine(_Shaped):
+    """Harmonics k of 1/period_s, `periods` periods long (eq. 4.30), started at a zero
+    crossing so whole periods begin and end at trim; equal amplitudes (their peak is
+    `amplitude`) unless `shape` lowers some."""
 
     kind: Literal["multisine"] = "multisine"
     harmonics: tuple[Harmonic, ...] = Field(min_length=1, max_length=64)
@@ -133,11 +168,20 @@ class Multisine(_Signal):
         return value
 
     def samples(self, dt: float) -> np.ndarray:
+        return self._played(dt, signals.shaped(self.shape, self.hz))
+
+    @property
+    def hz(self) -> np.ndarray:
+        """Each harmonic's frequency, in `harmonics` order."""
+        return np.asarray(self.harmonics, dtype=float) / self.period_s
+
+    def _played(self, dt: float, gains: np.ndarray) -> np.ndarray:
         phases = signals.zero_start(
             self.harmonics,
             signals.low_peak_phases(self.harmonics)
             if self.phases == "optimised"
             else signals.schroeder_phases(len(self.harmonics)),
+            gains,
         )
         return signals.multisine(
             self.harmonics,
@@ -146,6 +190,7 @@ class Multisine(_Signal):
             self.periods * self.period_s,
             self.amplitude,
             phases,
+            gains,
         )
 
     @property
@@ -461,11 +506,19 @@ FULL_THROTTLE_TOP_HZ = 0.12
 FULL_TOP_HZ = 2.0
 
 
-def full_harmonics() -> dict[str, tuple[int, ...]]:
-    """Odd harmonics of 1/FULL_PERIOD_S per control for the full preset (disjoint)."""
+def full_harmonics(throttle: bool = True) -> dict[str, tuple[int, ...]]:
+    """Odd harmonics of 1/FULL_PERIOD_S per control for the full preset (disjoint). Without a
+    throttle (a glider) the elevator plays the throttle's low lines too: they are the
+    phugoid's, and nothing else would put power in its band."""
     odd = range(1, round(FULL_TOP_HZ * FULL_PERIOD_S) + 1, 2)
     low = [k for k in odd if k / FULL_PERIOD_S < FULL_THROTTLE_TOP_HZ]
     rest = [k for k in odd if k / FULL_PERIOD_S >= FULL_THROTTLE_TOP_HZ]
+    if not throttle:
+        return {
+            "elevator": tuple(sorted(low + rest[0::3])),
+            "aileron": tuple(rest[1::3]),
+            "rudder": tuple(rest[2::3]),
+        }
     return {
         "throttle": tuple(low),
         "elevator": tuple(rest[0::3]),
@@ -479,6 +532,13 @@ def full_harmonics() -> dict[str, tuple[int, ...]]:
 # of 1.7 % over seeds (4 of 10 within 10 %; make bench-jsbsim); at ±4.5°, 1.1 % (9 of 10), with
 # no bias from the larger amplitude in calm air.
 FULL_AMPLITUDE = {**PRESET_AMPLITUDE, "elevator": 4.5}
+
+
+# Without a throttle the elevator plays the phugoid's lines, at this share of its amplitude
+# until the sizing shapes them to the response (agent/sizing.py): an unpowered aircraft's
+# phugoid is its least damped mode (ζ ≈ 1/(√2 L/D), about 0.03 for a glider of L/D 23), so
+# a line near it moves the airspeed many times more than the same line elsewhere.
+PHUGOID_LINES_GAIN = 0.25
 
 
 # The controls each preset plays, the only ones it takes an amplitude for.
@@ -516,6 +576,7 @@ def preset(
     controls at once (see FULL_PERIOD_S; the thesis's figure 6.12 played multisines on the
     surfaces, then throttle steps). `controls`: the aircraft's (default all four); the
     others' signals are left out (`only`)."""
+    controls = None if controls is None else tuple(controls)
     amp = {**(FULL_AMPLITUDE if name == "full" else PRESET_AMPLITUDE), **(amplitude or {})}
     plays = PRESET_CONTROLS.get(name, ())
     stray = [c for c in amplitude or {} if c not in plays]
@@ -541,11 +602,20 @@ def preset(
             Segment(signals=throttle, free_s=10.0),
         ]
     elif name == "full":
+        powered = controls is None or "throttle" in controls
+        lines = full_harmonics(throttle=powered)
+        shape = {} if powered else {"elevator": _phugoid_shape(lines["elevator"])}
         segments = [
             Segment(
                 signals={
-                    c: Multisine(harmonics=h, period_s=FULL_PERIOD_S, periods=1, amplitude=amp[c])
-                    for c, h in full_harmonics().items()
+                    c: Multisine(
+                        harmonics=h,
+                        period_s=FULL_PERIOD_S,
+                        periods=1,
+                        amplitude=amp[c],
+                        shape=shape.get(c, ()),
+                    )
+                    for c, h in lines.items()
                 }
             )
         ]
@@ -553,6 +623,15 @@ def preset(
         raise ValueError(f"unknown preset {name!r}; presets are {', '.join(PRESETS)}")
     plan = Plan(id=plan_id or name, axes=name, segments=tuple(segments))
     return plan if controls is None else only(plan, controls)
+
+
+def _phugoid_shape(harmonics: tuple[int, ...]) -> tuple[tuple[float, float], ...]:
+    """The elevator's shape without a throttle: its lines in the throttle's band (the
+    phugoid's) at PHUGOID_LINES_GAIN, the rest at 1."""
+    hz = [k / FULL_PERIOD_S for k in harmonics]
+    low = max(f for f in hz if f < FULL_THROTTLE_TOP_HZ)
+    high = min(f for f in hz if f >= FULL_THROTTLE_TOP_HZ)
+    return ((low, PHUGOID_LINES_GAIN), (high, 1.0))
 
 
 def _thesis_multisine(control: str, amplitude: float) -> Multisine:

@@ -58,12 +58,14 @@ def schroeder_phases(count: int) -> np.ndarray:
     return phases
 
 
-def _one_period(harmonics: np.ndarray, phases: np.ndarray) -> np.ndarray:
-    """Σ cos(2πkτ + φ_k) on _GRID_PER_CYCLE points per cycle of the highest harmonic."""
+def _one_period(
+    harmonics: np.ndarray, phases: np.ndarray, gains: np.ndarray | float = 1.0
+) -> np.ndarray:
+    """Σ g_k cos(2πkτ + φ_k) on _GRID_PER_CYCLE points per cycle of the highest harmonic."""
     k = np.asarray(harmonics).astype(int)
     n = _GRID_PER_CYCLE * int(k.max())
     spectrum = np.zeros(n // 2 + 1, dtype=complex)
-    spectrum[k] = n / 2 * np.exp(1j * np.asarray(phases))
+    spectrum[k] = n / 2 * np.asarray(gains) * np.exp(1j * np.asarray(phases))
     return np.fft.irfft(spectrum, n)
 
 
@@ -141,24 +143,28 @@ def forget_phases() -> None:
     _optimised.cache_clear()
 
 
-def zero_start(harmonics: Sequence[int], phases: Sequence[float]) -> np.ndarray:
+def zero_start(
+    harmonics: Sequence[int], phases: Sequence[float], gains: Sequence[float] | None = None
+) -> np.ndarray:
     """The same multisine delayed so it starts at a zero crossing: phases φ_k + k·θ.
 
     A time shift leaves the amplitude spectrum, the peak factor and the orthogonality to other
     harmonics unchanged, and whole periods then start and end at trim instead of jumping to
-    Σ cos φ_k. Of the zero crossings, the one with the gentlest slope is taken.
+    Σ g_k cos φ_k. Of the zero crossings, the one with the gentlest slope is taken; `gains`
+    (default 1) are the lines' amplitudes (a shaped multisine crosses zero elsewhere).
     """
     k = np.asarray(harmonics, dtype=float)
     phi = np.asarray(phases, dtype=float)
-    u = _one_period(k, phi)
+    g = np.ones(k.size) if gains is None else np.asarray(gains, dtype=float)
+    u = _one_period(k, phi, g)
     n = u.size
     up = np.flatnonzero(np.sign(u) != np.sign(np.roll(u, -1)))
     slope = np.abs(np.roll(u, -1)[up] - u[up])
     i = int(up[np.argmin(slope)])
     theta = 2 * np.pi * (i + u[i] / (u[i] - u[(i + 1) % n])) / n
-    for _ in range(3):  # Newton on the exact waveform: u(θ) = Σ cos(kθ + φ)
-        value = np.cos(k * theta + phi).sum()
-        theta -= value / -(k * np.sin(k * theta + phi)).sum()
+    for _ in range(3):  # Newton on the exact waveform: u(θ) = Σ g cos(kθ + φ)
+        value = (g * np.cos(k * theta + phi)).sum()
+        theta -= value / -(g * k * np.sin(k * theta + phi)).sum()
     return phi + k * theta
 
 
@@ -169,19 +175,38 @@ def multisine(
     duration: float,
     amplitude: float,
     phases: Sequence[float] | None = None,
+    gains: Sequence[float] | None = None,
 ) -> np.ndarray:
-    """Σ cos(2π k t / T + φ_k) over the given harmonics k, scaled to peak `amplitude` (eq. 4.30).
+    """Σ g_k cos(2π k t / T + φ_k) over the given harmonics k (eq. 4.30), scaled so that the
+    equal-amplitude signal (every g_k = 1) peaks at `amplitude`.
 
-    Equal amplitudes per harmonic; Schroeder phases unless given. The signal repeats every
-    `period` seconds, so any whole number of periods is free of spectral leakage.
+    Schroeder phases unless given; `gains` g_k (default 1) shape the spectrum (`shaped`). The
+    signal repeats every `period` seconds, so any whole number of periods is free of spectral
+    leakage.
     """
     k = np.asarray(harmonics, dtype=float)
     phi = schroeder_phases(k.size) if phases is None else np.asarray(phases, dtype=float)
+    g = np.ones(k.size) if gains is None else np.asarray(gains, dtype=float)
     t = np.arange(_samples(duration, dt)) * dt
-    wave = np.cos(2 * np.pi * np.outer(t, k) / period + phi).sum(axis=1)
+    wave = (g * np.cos(2 * np.pi * np.outer(t, k) / period + phi)).sum(axis=1)
     # Scale by the peak over one whole period, so a short record keeps the designed amplitude.
     one = np.cos(2 * np.pi * np.outer(np.arange(round(period / dt)) * dt, k) / period + phi)
     return amplitude * wave / np.max(np.abs(one.sum(axis=1)))
+
+
+def shaped(shape: Sequence[tuple[float, float]], hz: np.ndarray) -> np.ndarray:
+    """The gain of a spectral shape at each frequency: `shape` is breakpoints (Hz, gain) in
+    ascending frequency, interpolated linearly in log-frequency and held beyond its ends; an
+    empty shape is 1 everywhere.
+
+    A flight-test engineer sizes a sweep's or a multisine's amplitude to the response it causes
+    at each frequency: a glider's elevator at 0.1 Hz swings the airspeed where at 2 Hz it only
+    moves α (docs/excitation.md, *Shaped to the response*)."""
+    hz = np.asarray(hz, dtype=float)
+    if not shape:
+        return np.ones_like(hz)
+    at = np.log([f for f, _ in shape])
+    return np.interp(np.log(hz), at, [g for _, g in shape])
 
 
 def allocate_harmonics(
@@ -273,18 +298,20 @@ def sweep(
     law: str = "linear",
     fade: float = 0.0,
     dwell_cycles: float = 0.0,
+    shape: Sequence[tuple[float, float]] = (),
 ) -> np.ndarray:
-    """A sine sweep A·sin(2π∫f dt) from f_start to f_end in `duration` s.
+    """A sine sweep A·g(f)·sin(2π∫f dt) from f_start to f_end in `duration` s.
 
     law "linear": f = f₀ + (f₁ − f₀)t/T; "log": f = f₀(f₁/f₀)^(t/T) (ArduPilot's SystemID
     chirp law). `dwell_cycles` whole cycles at f₀ come first; the whole signal fades in and
     out over `fade` s with a raised cosine, so it starts and ends at trim with zero slope.
+    g(f) is `shape`'s gain at the instantaneous frequency (`shaped`; 1 without a shape).
     """
     if min(f_start, f_end) <= 0 or duration <= 0:
         raise ValueError("sweep needs positive frequencies and duration")
     dwell = dwell_cycles / f_start
     t = np.arange(_samples(dwell + duration, dt)) * dt
-    s = np.clip(t - dwell, 0.0, None)
+    s = np.clip(t - dwell, 0.0, None)  # time into the sweep proper
     if law == "linear":
         cycles = f_start * s + (f_end - f_start) * s**2 / (2 * duration)
     elif law == "log":
@@ -296,7 +323,40 @@ def sweep(
     else:
         raise ValueError(f'sweep law must be "linear" or "log", got {law!r}')
     cycles = np.where(t < dwell, f_start * (t - dwell), cycles)
-    return amplitude * np.sin(2 * np.pi * cycles) * raised_cosine(t.size, dt, fade)
+    gain = shaped(shape, sweep_instants(dt, f_start, f_end, duration, law, dwell_cycles))
+    return amplitude * gain * np.sin(2 * np.pi * cycles) * raised_cosine(t.size, dt, fade)
+
+
+def sweep_instants(
+    dt: float,
+    f_start: float,
+    f_end: float,
+    duration: float,
+    law: str = "linear",
+    dwell_cycles: float = 0.0,
+) -> np.ndarray:
+    """The instantaneous frequency (Hz) at each sample of `sweep` with these parameters."""
+    dwell = dwell_cycles / f_start
+    t = np.arange(_samples(dwell + duration, dt)) * dt
+    return sweep_frequency(np.clip(t - dwell, 0.0, None), f_start, f_end, duration, law)
+
+
+def split_by_frequency(u: np.ndarray, hz: np.ndarray, centres: Sequence[float]) -> list[np.ndarray]:
+    """A signal whose frequency at each sample is `hz` (a sweep) split into bands about
+    `centres` (Hz, ascending): one array per band, u's length, summing to u. Between two
+    centres the signal passes from one band to the next along cos² and sin² in
+    log-frequency (below the first centre or above the last it is all that band's): a band
+    faded in and out over many cycles carries next to nothing outside its frequencies, where
+    a burst cut from the sweep would carry its cut's transient to every frequency."""
+    u = np.asarray(u, dtype=float)
+    hz = np.asarray(hz, dtype=float)
+    at = np.log(np.asarray(centres, dtype=float))
+    x = np.interp(np.log(hz), at, np.arange(at.size))  # fractional band index
+    out = []
+    for b in range(at.size):
+        weight = np.cos(np.pi / 2 * np.clip(np.abs(x - b), 0.0, 1.0)) ** 2
+        out.append(u * weight)
+    return out
 
 
 def raised_cosine(count: int, dt: float, fade: float) -> np.ndarray:

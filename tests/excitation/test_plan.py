@@ -12,6 +12,7 @@ from agent.excitation import servo
 from agent.excitation.plan import (
     FULL_PERIOD_S,
     FULL_THROTTLE_TOP_HZ,
+    PHUGOID_LINES_GAIN,
     PRESET_CONTROLS,
     PRESETS,
     Doublet,
@@ -256,6 +257,14 @@ def test_presets_leave_out_the_controls_an_aircraft_lacks():
     surfaces = ("elevator", "aileron", "rudder")
     full = preset("full", controls=surfaces)
     assert sorted(full.controls()) == ["aileron", "elevator", "rudder"]
+    # Its elevator plays the throttle's low lines (the phugoid's) too, at PHUGOID_LINES_GAIN.
+    elevator = full.segments[0].signals["elevator"]
+    low = full_harmonics()["throttle"]
+    assert set(low) <= set(elevator.harmonics)
+    played = render(full, 50.0)
+    u = played.values["elevator"][played.active["elevator"]]
+    line = np.abs(np.fft.rfft(u))
+    assert line[list(low)] == pytest.approx(PHUGOID_LINES_GAIN * line[max(elevator.harmonics)])
     longitudinal = preset("longitudinal", controls=surfaces)
     assert longitudinal.controls() == ["elevator"]
     assert len(longitudinal.segments) == 1  # the throttle's steps went with their segment
@@ -263,3 +272,40 @@ def test_presets_leave_out_the_controls_an_aircraft_lacks():
         only(preset("longitudinal"), ("aileron",))
     assert Channels().axis_set("longitudinal", surfaces)[0] == ("elevator",)
     assert Channels().axis_set("longitudinal")[0] == ("throttle", "elevator")
+
+
+def test_a_shape_is_checked_and_carried_over_the_radio():
+    """Bad input tried: breakpoints out of order, a gain of 0 or above 1, a frequency of 0,
+    more breakpoints than MAX_BREAKPOINTS."""
+    from agent.excitation.plan import MAX_BREAKPOINTS
+
+    sweep = dict(kind="sweep", f0_hz=0.1, f1_hz=2.0, duration_s=20.0, amplitude=3.0)
+    for bad in (
+        [[1.0, 0.5], [0.5, 1.0]],
+        [[0.5, 0.5], [0.5, 1.0]],
+        [[0.5, 0.0]],
+        [[0.5, 1.5]],
+        [[0.0, 0.5]],
+        [[0.01 * (i + 1), 1.0] for i in range(MAX_BREAKPOINTS + 1)],
+    ):
+        with pytest.raises(ValidationError):
+            Plan.model_validate(
+                {
+                    "id": "s",
+                    "axes": "full",
+                    "segments": [{"signals": {"elevator": {**sweep, "shape": bad}}}],
+                }
+            )
+    shaped = Sweep(
+        **{k: v for k, v in sweep.items() if k != "kind"}, shape=((0.2, 0.3), (1.0, 1.0))
+    )
+    plan = Plan(id="s", axes="full", segments=(Segment(signals={"elevator": shaped}),))
+    assert Plan.from_bytes(plan.to_bytes()) == plan
+    # The shape only takes amplitude away: the rendered peak stays within the amplitude.
+    assert np.max(np.abs(render(plan, 50.0).values["elevator"])) <= 3.0
+    flat = plan.model_copy(
+        update={
+            "segments": (Segment(signals={"elevator": shaped.model_copy(update={"shape": ()})}),)
+        }
+    )
+    assert b"shape" not in flat.to_bytes()  # a flat signal carries no shape

@@ -136,3 +136,58 @@ def test_sweep_dwell_and_fade():
     assert np.allclose(u[dwell], 2.0 * np.sin(2 * np.pi * (t[dwell] - 2.0)), atol=1e-9)
     with pytest.raises(ValueError, match="law"):
         signals.sweep(dt, 1.0, 4.0, 6.0, 2.0, law="cubic")
+
+
+def test_a_shape_interpolates_in_log_frequency_and_holds_beyond_its_ends():
+    shape = ((0.1, 0.2), (1.0, 1.0))
+    gain = signals.shaped(shape, np.array([0.01, 0.1, np.sqrt(0.1), 1.0, 5.0]))
+    assert gain == pytest.approx([0.2, 0.2, 0.6, 1.0, 1.0])
+    assert signals.shaped((), np.array([0.3, 3.0])) == pytest.approx([1.0, 1.0])
+
+
+def test_a_shaped_multisine_plays_each_line_at_its_gain():
+    k = (1, 3, 5, 7)
+    gains = np.array([0.25, 0.5, 1.0, 0.75])
+    phases = signals.low_peak_phases(k)
+    flat = signals.multisine(k, 20.0, DT, 20.0, 3.0, phases)
+    shaped = signals.multisine(k, 20.0, DT, 20.0, 3.0, phases, gains)
+    line = np.abs(np.fft.rfft(shaped))[list(k)] / np.abs(np.fft.rfft(flat))[list(k)]
+    assert line == pytest.approx(gains, rel=1e-9)
+
+
+def test_a_shaped_sweep_plays_the_gain_of_its_instantaneous_frequency():
+    shape = ((0.2, 0.25), (1.0, 1.0))
+    flat = signals.sweep(DT, 0.1, 2.0, 40.0, 3.0, "log")
+    shaped = signals.sweep(DT, 0.1, 2.0, 40.0, 3.0, "log", shape=shape)
+    hz = signals.sweep_instants(DT, 0.1, 2.0, 40.0, "log")
+    moving = np.abs(flat) > 0.5  # away from the zero crossings
+    ratio = shaped[moving] / flat[moving]
+    assert ratio == pytest.approx(signals.shaped(shape, hz[moving]), rel=1e-9)
+    assert ratio.min() == pytest.approx(0.25)
+    assert ratio.max() == pytest.approx(1.0)
+
+
+def test_a_sweep_split_by_frequency_sums_to_itself_and_keeps_each_band_to_its_own():
+    u = signals.sweep(DT, 0.1, 2.0, 40.0, 3.0, "log", fade=2.0, dwell_cycles=1)
+    hz = signals.sweep_instants(DT, 0.1, 2.0, 40.0, "log", dwell_cycles=1)
+    centres = np.geomspace(0.1, 2.0, 5)
+    bands = signals.split_by_frequency(u, hz, centres)
+    assert len(bands) == 5
+    assert np.sum(bands, axis=0) == pytest.approx(u, abs=1e-12)
+    for band, centre in zip(bands, centres, strict=True):
+        playing = hz[np.abs(band) > 1e-9]
+        # A band plays only between its neighbours' centres.
+        assert playing.min() >= centre / (2.0 / 0.1) ** 0.25 * (1 - 1e-9)
+        assert playing.max() <= centre * (2.0 / 0.1) ** 0.25 * (1 + 1e-9)
+
+
+def test_a_shaped_multisine_still_starts_at_trim():
+    """Lines turned down move the waveform's zero crossings: the start is found on the shaped
+    waveform, so a whole period still starts and ends at trim."""
+    k = (1, 3, 5, 7, 9, 11)
+    gains = np.array([0.1, 0.2, 1.0, 1.0, 0.5, 1.0])
+    flat_start = signals.zero_start(k, signals.low_peak_phases(k))
+    assert abs(signals.multisine(k, 20.0, DT, 20.0, 3.0, flat_start, gains)[0]) > 0.01
+    phases = signals.zero_start(k, signals.low_peak_phases(k), gains)
+    u = signals.multisine(k, 20.0, DT, 20.0, 3.0, phases, gains)
+    assert abs(u[0]) < 1e-9
