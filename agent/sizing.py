@@ -47,6 +47,7 @@ from agent.channels import AXIS_SETS, OUTPUT_ROLES
 from agent.config import Channels, Envelope, Surface
 from agent.config import Sizing as SizingConfig
 from agent.excitation.plan import Multisine, Plan, Sweep, Timeline, render
+from agent.excitation.signals import shaped
 from agent.ident.aircraft.kinematics import KINEMATIC_STATES, kinematic_jacobian, kinematics
 from agent.ident.convert import StateSpace
 from agent.ident.document import ResultDocument
@@ -456,28 +457,35 @@ def size(
     `deflections`) grows the build-up from there: a run whose model sized nothing (its
     response did not stand above the turbulence) calibrates nothing either.
 
-    With a predictor, each sweep and multisine is first shaped to its response (`shape`) at
-    the largest level it may reach, and the plan sized. A control then held lower by what its
-    shape cannot relieve (a quantity the model does not know, grown from what its data flew)
-    would only lose its low end for nothing: its signals are shaped again at the level it
-    got and the plan sized again (SHAPE_PASSES at most)."""
+    With a predictor, the plan is sized as written, then each sweep and multisine shaped to
+    its response (`shape`) at the largest level it may reach, and the plan sized again. No
+    frequency plays less than the plan as written would there: the band that limits a
+    signal is the one whose mode it moves most, and a shape must add where there is room,
+    not take the information about that mode away (a phugoid's throttle lines). A control
+    held lower by what its shape cannot relieve (a quantity the model does not know, grown
+    from what its data flew) is shaped again at the level it got; each pass keeps the floor
+    at the level the last one reached (SHAPE_PASSES at most)."""
     if predictor is None:
         return _build_up(plan, timeline, config, surfaces, flown)
     goal = within(targets(config), envelope, predictor.airspeed, trim, predictor.unexplained)
-    levels: dict[str, float] = {}
-    sized, last = None, None
+    written = _sized(plan, timeline, predictor, config, surfaces, envelope, trim, goal)
+    sized, last, levels, expected = written, plan, {}, {}
     for _ in range(SHAPE_PASSES):
-        shaped = shape(plan, predictor, goal, config, surfaces, timeline.dt, levels)
-        if shaped == last:
+        # Each frequency keeps at least what the plan as written would play there: over the
+        # level each control is expected at (first the largest it may reach, then the last
+        # pass's), the level the written plan got.
+        floors = {
+            c: written.factors[c] / expected.get(c, _largest(c, plan, predictor, config, surfaces))
+            for c in written.factors
+        }
+        shaped_plan = shape(plan, predictor, goal, config, surfaces, timeline.dt, levels, floors)
+        if shaped_plan == last:
             break
-        rendered = timeline if shaped == plan else render(shaped, 1 / timeline.dt)
-        sized, last = (
-            _sized(shaped, rendered, predictor, config, surfaces, envelope, trim, goal),
-            shaped,
-        )
+        rendered = render(shaped_plan, 1 / timeline.dt)
+        sized = _sized(shaped_plan, rendered, predictor, config, surfaces, envelope, trim, goal)
+        last = shaped_plan
         levels = {c: sized.factors[c] for c in sized.held}
-        if not levels:
-            break
+        expected = dict(sized.factors)
     assert sized is not None
     return sized
 
@@ -613,6 +621,7 @@ def shape(
     surfaces: Mapping[str, Surface],
     dt: float,
     levels: Mapping[str, float] | None = None,
+    floors: Mapping[str, float] | None = None,
 ) -> Plan:
     """`plan` with each sweep's and multisine's amplitude shaped to the response it causes:
     the parts of its frequencies that move the aircraft most play less (`_breakpoints`), so
@@ -621,7 +630,8 @@ def shape(
     (`size`). Signals of a control the model does not take, and pulses, are left as they
     are; a shape the sizing computed before is replaced. `levels` (control → a factor on its
     plan amplitudes) shapes a control's signals at that level rather than at the largest
-    they may reach (`size`).
+    they may reach; `floors` (control → a share) keeps each frequency at least at that share
+    of what the plan as written plays there (`size`).
     """
     segments = []
     for segment in plan.segments:
@@ -631,7 +641,8 @@ def shape(
                 cap = _cap(c, sig, predictor, config, surfaces)
                 if levels and c in levels:
                     cap = min(cap, levels[c] * abs(sig.amplitude))
-                breakpoints = _breakpoints(plan, c, sig, predictor, goal, cap, dt)
+                floor = min(1.0, (floors or {}).get(c, 0.0))
+                breakpoints = _breakpoints(plan, c, sig, predictor, goal, cap, dt, floor)
                 sig = sig.model_copy(update={"shape": breakpoints})
             signals[c] = sig
         segments.append(segment.model_copy(update={"signals": signals}))
@@ -646,8 +657,10 @@ def _breakpoints(
     goal: Mapping[str, float],
     cap: float,
     dt: float,
+    floor: float = 0.0,
 ) -> tuple[tuple[float, float], ...]:
-    """A signal's shape (`shape`): breakpoints (Hz, gain), or () where it is flat.
+    """A signal's shape (`shape`): breakpoints (Hz, gain), or () where it is flat; no gain
+    below `floor` times the signal's own shape (as written) at its frequency.
 
     A multisine's lines play together and repeat: each is judged by the model's steady
     response (`Predictor.gains`), its gain the largest share of the cap that keeps every
@@ -678,7 +691,7 @@ def _breakpoints(
         if centres.size < 2 or factor <= 0 or not np.any(np.isfinite(allowance)):
             return ()
         gain = np.minimum(allowance, factor) / min(factor, float(np.max(allowance)))
-        return _breakpoints_of(centres, gain)
+        return _breakpoints_of(centres, np.maximum(gain, floor * shaped(sig.shape, centres)))
     lo, hi = sorted((sig.f0_hz, sig.f1_hz))
     if hi <= lo or factor <= 0:
         return ()
@@ -711,7 +724,8 @@ def _breakpoints(
             gain[share >= CONTRIBUTION * share.max()] *= goal[q] / peak
         if not over:
             break
-    return _breakpoints_of(centres, gain / np.max(gain))
+    gain = np.maximum(gain / np.max(gain), floor * shaped(sig.shape, centres))
+    return _breakpoints_of(centres, gain)
 
 
 def _breakpoints_of(hz: np.ndarray, gain: np.ndarray) -> tuple[tuple[float, float], ...]:
@@ -721,6 +735,23 @@ def _breakpoints_of(hz: np.ndarray, gain: np.ndarray) -> tuple[tuple[float, floa
     if np.min(gain) >= FLAT:
         return ()
     return tuple((float(f"{f:.5g}"), round(float(g), 3)) for f, g in zip(hz, gain, strict=True))
+
+
+def _largest(
+    control: str,
+    plan: Plan,
+    predictor: Predictor,
+    config: SizingConfig,
+    surfaces: Mapping[str, Surface],
+) -> float:
+    """The largest factor on its plan amplitudes a control's signals may reach (`_cap`)."""
+    caps = [
+        _cap(control, sig, predictor, config, surfaces) / abs(sig.amplitude)
+        for segment in plan.segments
+        for c, sig in segment.signals.items()
+        if c == control
+    ]
+    return min(caps, default=1.0)
 
 
 def _cap(
