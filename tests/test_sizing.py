@@ -1,16 +1,19 @@
 """Plans sized to the aircraft (agent/sizing.py): each control's amplitude from the response the
 model predicts, the controls together within the targets, the limits (max_amplitude, the
-build-up), the envelope's refusal, and the model checked on its own data.
+build-up), the envelope's refusal, the model checked on its own data, and sweeps and
+multisines shaped to their response.
 
-The model is the thesis's A.2 lateral Super Cub (eq. A.2), whose aileron and rudder move the
-bank and the sideslip; no mock stands in for it.
+The models are the thesis's A.2 lateral Super Cub (eq. A.2), whose aileron and rudder move the
+bank and the sideslip, and a longitudinal model with a glider's lightly damped phugoid; no
+mock stands in for them.
 
 Bad input tried: no model at all (the build-up flies); a model that predicts nothing for one
 of the plan's controls (that control stays at the build-up); a model whose data moved half as
 far as it predicts (no correction below 1) and twice as far (its predictions doubled); two
 controls whose responses cancel (no credit taken for it); an envelope the predicted bank
 leaves (refused, naming the bank); a linkage with an even part (its bias predicted); data
-whose bank the model does not explain (predicted from the data instead).
+whose bank the model does not explain (predicted from the data instead); a sized plan sized
+again (its shape replaced, not compounded).
 """
 
 from __future__ import annotations
@@ -32,6 +35,8 @@ from agent.excitation.plan import (
 from agent.ident.convert import StateSpace, discretize
 from agent.ident.fit import simulate
 from agent.ident.reference import LATERAL
+from agent.link import messages
+from agent.runtime.sizer import sizing_message
 
 DT = 0.02
 EX = Excitation()
@@ -365,6 +370,28 @@ def test_a_sweep_or_multisine_is_shaped_to_the_response_it_causes(signal):
         > 2 * goal["airspeed_pct"]
     )
     assert "shaped to its response" in "\n".join(sized.lines())
+    # The ground hears it as the aircraft sees it: the shape travels in the sized plan.
+    heard = messages.Sizing.model_validate_json(
+        sizing_message(sized, EX.surfaces).model_dump_json()
+    )
+    assert heard.plan == sized.plan
+    assert sizing.shape_lines(sized.plan)[0] in sizing.message_lines(heard)
+    # No frequency plays much below what the plan as written, sized, plays there (the band
+    # that limits the signal is the one whose mode it moves most; the last pass's level may
+    # fall a little below the one its floor was set for).
+    goal_now = sizing.within(goal, EX.envelope, predictor.airspeed)
+    written = sizing._sized(
+        plan,
+        render(plan, EX.rate_hz),
+        predictor,
+        EX.sizing,
+        EX.surfaces,
+        EX.envelope,
+        None,
+        goal_now,
+    )
+    assert written.factors["elevator"] < 0.5 * sized.factors["elevator"]
+    assert np.min(gain) * sized.factors["elevator"] >= 0.8 * written.factors["elevator"]
     # Sized again, the sized plan is shaped afresh, never compounded: a shape times a shape
     # would square each gain, and turn the phugoid's band down further each time.
     twice = sizing.size(
