@@ -8,6 +8,8 @@ suas-sysid and by the peers, in one process.
         --excitation card --nav ins                      # one row in about a minute
     .venv/bin/python benchmarks/bench_jsbsim.py --sizing nominal --aircraft pa28
     .venv/bin/python benchmarks/bench_jsbsim.py --no-peers --without alpha-products
+    .venv/bin/python benchmarks/bench_jsbsim.py --still --aircraft sgs126 --turbulence 1 \
+        --excitation full                                # what the air alone does
 
 The aircraft (`AIRCRAFT`): JSBSim's J-3 Cub at 60 kt, Cessna 182 and PA-28 at 90 kt (the three
 the method was developed on), the Cessna 172R at 95 kt (a four-seat trainer), the T-6 Texan II
@@ -596,6 +598,11 @@ def main() -> None:
         choices=sorted(ABLATIONS),
         help="leave out a term of the whole-aircraft method, to see what it does",
     )
+    parser.add_argument(
+        "--still",
+        action="store_true",
+        help="fly each excitation's length with no input: what the air alone does",
+    )
     args = parser.parse_args()
     seeds = args.seeds if args.seeds is not None else 3 if args.quick else 10
     peers = not (args.no_peers or args.quick)
@@ -633,6 +640,9 @@ def main() -> None:
 
 def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validate: bool):
     """Every row of one aircraft in one condition."""
+    if args.still:
+        still(setup, args.excitation, seeds)
+        return
     reference = setup.truth()
     truth = reference.modes()
     full = preset("full", controls=setup.controls)
@@ -725,6 +735,27 @@ def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validat
             f"airspeed within ±{speed:.1f} %, lowest {lowest:.0f} ft above the ground",
             flush=True,
         )
+
+
+def still(setup: Setup, excitations, seeds: int) -> None:
+    """Each excitation's length flown with no input, seed by seed: how far the air alone
+    takes the aircraft (`--still`), against which the envelope's room is judged."""
+    plans = {
+        "full": preset("full", controls=setup.controls),
+        "card": only(card(setup.controls), setup.controls),
+        "sweep": only(sweeps(), setup.controls),
+    }
+    for excitation in excitations:
+        quiet = _still(plans[excitation])
+        for seed in range(FIRST_SEED, FIRST_SEED + seeds):
+            rec = setup.fly(quiet, seed)
+            bank, speed, lowest = excursions(rec)
+            print(
+                f"{setup.name:8} {setup.turbulence:4.1f} {excitation:4} still, seed {seed}: "
+                f"{len(rec.y) * rec.dt:.0f} s, bank {bank:.1f}°, airspeed ±{speed:.1f} %, "
+                f"lowest {lowest:.0f} ft",
+                flush=True,
+            )
 
 
 def _amplitudes(item) -> str:
