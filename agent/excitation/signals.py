@@ -309,9 +309,7 @@ def sweep(
     """
     if min(f_start, f_end) <= 0 or duration <= 0:
         raise ValueError("sweep needs positive frequencies and duration")
-    dwell = dwell_cycles / f_start
-    t = np.arange(_samples(dwell + duration, dt)) * dt
-    s = np.clip(t - dwell, 0.0, None)  # time into the sweep proper
+    t, s, dwell = _sweep_times(dt, f_start, duration, dwell_cycles)
     if law == "linear":
         cycles = f_start * s + (f_end - f_start) * s**2 / (2 * duration)
     elif law == "log":
@@ -323,7 +321,7 @@ def sweep(
     else:
         raise ValueError(f'sweep law must be "linear" or "log", got {law!r}')
     cycles = np.where(t < dwell, f_start * (t - dwell), cycles)
-    gain = shaped(shape, sweep_instants(dt, f_start, f_end, duration, law, dwell_cycles))
+    gain = shaped(shape, sweep_frequency(s, f_start, f_end, duration, law))
     return amplitude * gain * np.sin(2 * np.pi * cycles) * raised_cosine(t.size, dt, fade)
 
 
@@ -336,9 +334,18 @@ def sweep_instants(
     dwell_cycles: float = 0.0,
 ) -> np.ndarray:
     """The instantaneous frequency (Hz) at each sample of `sweep` with these parameters."""
+    _, s, _ = _sweep_times(dt, f_start, duration, dwell_cycles)
+    return sweep_frequency(s, f_start, f_end, duration, law)
+
+
+def _sweep_times(
+    dt: float, f_start: float, duration: float, dwell_cycles: float
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """A sweep's sample times, the time into the sweep proper at each (0 while it dwells at
+    f_start), and the dwell's length (s)."""
     dwell = dwell_cycles / f_start
     t = np.arange(_samples(dwell + duration, dt)) * dt
-    return sweep_frequency(np.clip(t - dwell, 0.0, None), f_start, f_end, duration, law)
+    return t, np.clip(t - dwell, 0.0, None), dwell
 
 
 def split_by_frequency(u: np.ndarray, hz: np.ndarray, centres: Sequence[float]) -> list[np.ndarray]:
