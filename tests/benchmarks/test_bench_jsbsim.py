@@ -35,7 +35,9 @@ def test_starts_with_every_term_left_out():
 
 
 def test_help_and_arguments():
-    assert "--without" in help_text("bench_jsbsim.py")
+    text = help_text("bench_jsbsim.py")
+    assert "--without" in text
+    assert "--still" in text  # what the air alone does
     done = run("bench_jsbsim.py", "--without", "wings", timeout_s=TIMEOUT_S, ok=False)
     assert done.returncode == 2
     assert "invalid choice: 'wings'" in done.stderr, done.stderr
