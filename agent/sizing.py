@@ -46,7 +46,7 @@ import scipy.linalg
 from agent.channels import AXIS_SETS, OUTPUT_ROLES
 from agent.config import Channels, Envelope, Surface
 from agent.config import Sizing as SizingConfig
-from agent.excitation.plan import Multisine, Plan, Sweep, Timeline, render
+from agent.excitation.plan import MAX_BREAKPOINTS, Multisine, Plan, Sweep, Timeline, render
 from agent.excitation.signals import shaped
 from agent.ident.aircraft.kinematics import KINEMATIC_STATES, kinematic_jacobian, kinematics
 from agent.ident.convert import StateSpace
@@ -486,7 +486,6 @@ def size(
         last = shaped_plan
         levels = {c: sized.factors[c] for c in sized.held}
         expected = dict(sized.factors)
-    assert sized is not None
     return sized
 
 
@@ -695,7 +694,8 @@ def _breakpoints(
     lo, hi = sorted((sig.f0_hz, sig.f1_hz))
     if hi <= lo or factor <= 0:
         return ()
-    centres = np.geomspace(lo, hi, max(2, math.ceil(math.log10(hi / lo) * BANDS_PER_DECADE)))
+    count = math.ceil(math.log10(hi / lo) * BANDS_PER_DECADE)
+    centres = np.geomspace(lo, hi, min(MAX_BREAKPOINTS, max(2, count)))
     responses: dict[str, list[np.ndarray]] = {}
     for part in sig.bands(dt, centres):
         values = np.append(part, 0.0)
@@ -734,7 +734,7 @@ def _breakpoints_of(hz: np.ndarray, gain: np.ndarray) -> tuple[tuple[float, floa
     gain = np.clip(gain, MIN_GAIN, 1.0)
     if np.min(gain) >= FLAT:
         return ()
-    return tuple((float(f"{f:.5g}"), round(float(g), 3)) for f, g in zip(hz, gain, strict=True))
+    return tuple((float(f"{f:.6g}"), round(float(g), 3)) for f, g in zip(hz, gain, strict=True))
 
 
 def _largest(

@@ -401,3 +401,18 @@ def test_a_sweep_or_multisine_is_shaped_to_the_response_it_causes(signal):
     assert again_hz == pytest.approx(hz)
     assert np.all(again_gain >= 0.8 * gain)
     assert np.any(gain < 0.5)  # where squaring would tell
+
+
+def test_a_shape_stays_a_valid_plan_whatever_the_band():
+    """Bad input tried: a sweep from 1e-20 Hz (twenty decades: more bands than a shape may
+    carry). Its shape is capped at MAX_BREAKPOINTS, and the sized plan still goes over the
+    radio as a valid plan."""
+    from agent.excitation.plan import MAX_BREAKPOINTS
+
+    signal = Sweep(f0_hz=1e-20, f1_hz=2.0, duration_s=30.0, law="log", amplitude=3.0)
+    plan = _one(signal)
+    sized = sizing.size(
+        plan, render(plan, EX.rate_hz), glider(), EX.sizing, EX.surfaces, EX.envelope
+    )
+    assert len(sized.plan.segments[0].signals["elevator"].shape) <= MAX_BREAKPOINTS
+    assert Plan.from_bytes(sized.plan.to_bytes()) == sized.plan

@@ -275,8 +275,9 @@ def test_presets_leave_out_the_controls_an_aircraft_lacks():
 
 
 def test_a_shape_is_checked_and_carried_over_the_radio():
-    """Bad input tried: breakpoints out of order, a gain of 0 or above 1, a frequency of 0,
-    more breakpoints than MAX_BREAKPOINTS."""
+    """Bad input tried (a forged plan from the radio or a plan file): breakpoints out of
+    order, a gain of 0, above 1 or NaN, a frequency of 0 or infinite, more breakpoints than
+    MAX_BREAKPOINTS: each refused by the plan's validation, as any malformed plan is."""
     from agent.excitation.plan import MAX_BREAKPOINTS
 
     sweep = dict(kind="sweep", f0_hz=0.1, f1_hz=2.0, duration_s=20.0, amplitude=3.0)
@@ -286,6 +287,8 @@ def test_a_shape_is_checked_and_carried_over_the_radio():
         [[0.5, 0.0]],
         [[0.5, 1.5]],
         [[0.0, 0.5]],
+        [[0.5, float("nan")]],
+        [[float("inf"), 0.5]],
         [[0.01 * (i + 1), 1.0] for i in range(MAX_BREAKPOINTS + 1)],
     ):
         with pytest.raises(ValidationError):
