@@ -201,7 +201,7 @@ def shaped(shape: Sequence[tuple[float, float]], hz: np.ndarray) -> np.ndarray:
 
     A flight-test engineer sizes a sweep's or a multisine's amplitude to the response it causes
     at each frequency: a glider's elevator at 0.1 Hz swings the airspeed where at 2 Hz it only
-    moves α (docs/excitation.md, *Shaped to the response*)."""
+    moves α (docs/excitation.md, *Sizing*, step 4)."""
     hz = np.asarray(hz, dtype=float)
     if not shape:
         return np.ones_like(hz)
