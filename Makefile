@@ -57,9 +57,9 @@ test-loaded: $(STAMP)
 bench: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/bench_identify.py
 
-# Six JSBSim aircraft, calm and in light turbulence, the full preset and a classic card, sized
-# as the agent sizes them, with and without the INS, 10 seeds each, with the peers (about 15
-# minutes here; benchmarks/bench_jsbsim.py --quick reruns one row in about a minute).
+# Six JSBSim aircraft, calm and in light turbulence, the full preset, a classic card and a sweep
+# card, sized as the agent sizes them, with and without the INS, 10 seeds each, with the peers
+# (about 30 minutes here; benchmarks/bench_jsbsim.py --quick reruns one row in about a minute).
 bench-jsbsim: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/bench_jsbsim.py
 

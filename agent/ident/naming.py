@@ -86,9 +86,16 @@ def _plausible(mode: Mode, min_msv: float) -> bool:
 
 
 def name_modes(
-    modes: Sequence[Mode], output_roles: Sequence[str | None], min_msv: float = MIN_MSV
+    modes: Sequence[Mode],
+    output_roles: Sequence[str | None],
+    min_msv: float = MIN_MSV,
+    axes: Sequence[str | None] | None = None,
 ) -> list[Mode]:
     """The modes with `name` set where the rules above identify an aircraft mode.
+    `axes`: each mode's axis ("lat", "lon" or None) as the model's structure tells it, for the
+    modes whose shape does not (rule 1): two modes of the two axes at nearly one eigenvalue
+    (the Cub's roll at −12.1 1/s beside a short-period pole at −11.6) mix their eigenvectors
+    through the weakest coupling, and neither shape lies 70 % in one axis.
     `min_msv` 0 names modes whatever their share of the response: for a model whose every
     state is a measured aircraft state (the aircraft method), where no mode is noise. There
     the MSV misleads too: two real poles nearly coinciding (the Cub's overdamped short
@@ -96,7 +103,7 @@ def name_modes(
     0.4 %."""
     names: dict[int, str] = {}
     candidates = [i for i, mode in enumerate(modes) if _plausible(mode, min_msv)]
-    axis = {i: _axis(modes[i], output_roles) for i in candidates}
+    axis = {i: _axis(modes[i], output_roles) or (axes[i] if axes else None) for i in candidates}
     lat = [i for i in candidates if axis[i] == "lat"]
     lon = [i for i in candidates if axis[i] == "lon"]
     _name_lateral(modes, lat, names)

@@ -258,3 +258,20 @@ def test_a_pole_whose_response_overflows_the_analysis_is_a_clear_failure():
     # A fast but ordinary unstable pole (+5 1/s) is analysed as before.
     A[2, 2] = np.exp(5.0 * dt)
     assert len(modal_analysis(A, B, C, dt)) == 3
+
+
+def test_a_mode_whose_shape_mixes_the_axes_takes_the_axis_the_models_structure_gives():
+    # Two modes of the two axes at nearly one eigenvalue (the Cub's roll at −12.1 1/s beside
+    # a short-period pole at −11.6) mix their eigenvectors through a weak coupling: neither
+    # shape lies 70 % in one axis, and without the model's word the roll went unnamed. The
+    # structure's axis is taken only where the shape says nothing: a clear shape keeps its own.
+    roles = ("airspeed", "alpha", "q", "theta", "beta", "p", "r", "phi")
+    fast_lon = _mode(-5.4 + 0j, [0.1, 1, 0.9, 0.1, 0, 0, 0, 0])
+    near_lon = _mode(-11.6 + 0j, [0.05, 0.8, 1, 0.1, 0.1, 0.9, 0.1, 0.1])
+    roll = _mode(-12.1 + 0j, [0.05, 0.7, 0.8, 0.1, 0.1, 1, 0.1, 0.1])
+    spiral = _mode(-0.01 + 0j, [0, 0, 0, 0, 0.1, 0.01, 0.1, 1])
+    modes = [fast_lon, near_lon, roll, spiral]
+    assert [m.name for m in name_modes(modes, roles, min_msv=0.0)] == [None, None, None, "spiral"]
+    axes = ["lon", "lon", "lat", "lon"]  # the spiral's wrong word is not taken over its shape
+    named = name_modes(modes, roles, min_msv=0.0, axes=axes)
+    assert [m.name for m in named] == ["short period", "short period", "roll", "spiral"]

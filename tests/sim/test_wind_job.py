@@ -70,7 +70,7 @@ def test_the_job_measures_the_wind_from_the_ins_channels_in_its_window(window):
     assert report.wind.measured
     # Light Dryden turbulence at 1000 ft (MIL-F-8785C's low-altitude model, W20 = 5 ft/s):
     # σ_u = 0.1 W20 / (0.177 + 0.000823 h)^0.4 = 0.15 m/s; the measured gust is the gust
-    # without the sensors' noise (agent.ident.aircraft.wind.measured_gust).
+    # without the sensors' noise (agent.ident.aircraft.noise).
     assert 0.1 < report.wind.gust_rms["airspeed"] < 0.3
     lateral = next(axis for axis in report.axes if axis.name == "lateral")
     assert "gust beta" in lateral.inputs

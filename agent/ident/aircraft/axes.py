@@ -11,6 +11,7 @@ import numpy as np
 import scipy.ndimage
 
 from agent.channels import POWER_ROLES
+from agent.ident.aircraft import noise
 
 # A measured rpm or thrust is the longitudinal axis's engine input where the record has one
 # (agent.channels.POWER_ROLES): it acts at once, and the throttle's command is then set aside.
@@ -44,16 +45,14 @@ def axes_present(input_roles, output_roles) -> dict[str, tuple[list[int], list[i
     return present
 
 
-# A control the record moved: somewhere below half the Nyquist frequency its periodogram,
-# smoothed over MOVED_BINS bins a side, stands MOVED times above its noise floor (the
-# periodogram's mean above half the Nyquist frequency, where no flight manoeuvre puts power: the
-# measured gust's floor, agent.ident.aircraft.wind). A measured surface left at trim is its
+# A control the record moved: somewhere below its noise floor's band its periodogram,
+# smoothed over MOVED_BINS bins a side, stands MOVED times above its noise floor
+# (agent.ident.aircraft.noise). A measured surface left at trim is its
 # potentiometer's white noise, whose periodogram smoothed over 17 bins stays within about
 # twice its floor at its largest; a manoeuvre's lines stand orders of magnitude above it
 # (docs/identification.md).
 MOVED = 10.0
 MOVED_BINS = 8
-MOVED_FLOOR_FROM = 0.5
 
 
 def movement(columns: Sequence[np.ndarray]) -> float:
@@ -64,8 +63,8 @@ def movement(columns: Sequence[np.ndarray]) -> float:
         if u.size < 4 or np.ptp(u) == 0:
             continue
         P = np.abs(np.fft.rfft(u - u.mean())) ** 2
-        split = int(MOVED_FLOOR_FROM * P.size)
-        floor = float(np.mean(P[split:]))
+        split = int(noise.FLOOR_FROM * P.size)
+        floor = noise.floor(P)
         smooth = scipy.ndimage.uniform_filter1d(P[1:split], 2 * MOVED_BINS + 1, mode="nearest")
         peak = float(smooth.max()) if smooth.size else 0.0
         best = max(best, peak / floor if floor > 0 else np.inf if peak > 0 else 0.0)

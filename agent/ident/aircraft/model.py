@@ -27,6 +27,7 @@ from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
+import scipy.optimize
 
 from agent.channels import POWER_ROLES
 from agent.ident.aircraft.axes import AXES, moved_axes
@@ -108,6 +109,8 @@ def identify(
         dt,
         settings.band_hz or input_band(batch, dt),
         held_inputs=settings.held_inputs,
+        # Sampled inputs are measured positions, with their sensors' noise; held ones commands.
+        measured=() if settings.held_inputs else range(len(inputs)),
         known=ready.known,
         kinematics=ready.kinematics,
         attitude=ready.attitude,
@@ -354,7 +357,9 @@ def _coupled(
     the model's structure in words. The other axis's measured states are known inputs: their
     gains are A's coupling blocks."""
     width = sp.U.shape[1]
-    augmented = replace(sp, U=np.hstack([sp.U, sp.Y]))
+    # The measured states as inputs: none is ever a control whose excited bins are chosen.
+    floors = None if sp.noise is None else np.hstack([sp.noise, np.zeros(sp.Y.shape)])
+    augmented = replace(sp, U=np.hstack([sp.U, sp.Y]), noise=floors)
     own = [[j for j in f.inputs if j < r] for f in fits]  # each axis's own controls
     found: dict[str, Coupling] = {}
     fits = list(fits)
@@ -503,8 +508,32 @@ def _modes(
     )
     modes = with_uncertainty(modes, for_modes)
     if any(role is not None for role in output_roles):
-        modes = name_modes(modes, output_roles, min_msv=0.0)
+        axes = _mode_axes(modes, states_only.A, fits)
+        modes = name_modes(modes, output_roles, min_msv=0.0, axes=axes)
     return modes, left_out(Am, dt, states_only.A)
+
+
+def _mode_axes(modes: Sequence[Mode], A: np.ndarray, fits: Sequence[AxisFit]) -> list[str | None]:
+    """Each mode's axis by continuity from the axes' own models: the eigenvalues of A with the
+    blocks that couple the axes zeroed are each an axis's, and the model's eigenvalues are
+    matched one to one to them (least total distance), as the coupling grows from nothing to
+    what was fitted. None for every mode with one axis."""
+    if len(fits) != 2:
+        return [None] * len(modes)
+    own = []
+    for f in fits:
+        states = list(f.states)
+        for pole in np.linalg.eigvals(A[np.ix_(states, states)]):
+            if pole.imag >= -1e-9 * max(abs(pole), 1.0):
+                own.append((complex(pole), "lon" if f.name == "longitudinal" else "lat"))
+    if len(own) != len(modes):
+        return [None] * len(modes)
+    cost = np.array([[abs(m.eigenvalue - pole) for pole, _ in own] for m in modes])
+    rows, cols = scipy.optimize.linear_sum_assignment(cost)
+    axes: list[str | None] = [None] * len(modes)
+    for i, j in zip(rows, cols, strict=True):
+        axes[i] = own[j][1]
+    return axes
 
 
 def _poorly_resolved(

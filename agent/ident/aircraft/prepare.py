@@ -16,8 +16,8 @@ but the states move as the inertial ones, ẋ_i = A(x_i − g) + B u, so the mod
 the inertial outputs with the gusts as known inputs of their own (free) gains: the vanes'
 reading of the gust stops being noise that biases the fit and becomes excitation, and A is
 the still-air aircraft's. Each gust is its conditional mean given the noisy measurement
-(`measured_gust`), and the α gust's rate, through GUST_RATE_LAGS fitted lags, is a known
-input of the longitudinal axis: Dryden's pitch-rate gust s α_g/(1 + τs), τ = 4b/πV
+(`agent.ident.aircraft.noise`), and the α gust's rate, through GUST_RATE_LAGS fitted lags, is
+a known input of the longitudinal axis: Dryden's pitch-rate gust s α_g/(1 + τs), τ = 4b/πV
 (MIL-F-8785C), the gust's gradient along the airframe, which otherwise biases the short
 period's damping.
 
@@ -53,7 +53,8 @@ from agent.ident.aircraft.kinematics import (
     kinematic_jacobian,
     kinematic_remainder,
 )
-from agent.ident.aircraft.wind import GUST_RATES, GUSTS, inertial_air_data, measured_gust
+from agent.ident.aircraft.noise import conditional_mean
+from agent.ident.aircraft.wind import GUST_RATES, GUSTS, inertial_air_data
 from agent.ident.okid import Experiment
 
 # The lateral states whose products with α are known inputs (`alpha_products`).
@@ -190,7 +191,7 @@ def _known_inputs(e: Experiment, index: dict[str, int], terms: _Terms, trim_samp
         for role in terms.gusts:
             k = KINEMATIC_STATES.index(role)
             inertial = still[:, ("airspeed", "alpha", "beta").index(role)]
-            gusts.append(measured_gust(inertial - x[:, k]))
+            gusts.append(conditional_mean(inertial - x[:, k]))
             x[:, k] = inertial
             y[:, index[role]] = inertial - e.operating_point[index[role]]
         rates = [np.gradient(gusts[terms.gusts.index(role)], dt) for role in terms.rated]

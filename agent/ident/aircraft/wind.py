@@ -1,11 +1,13 @@
 """The wind, measured: the INS's velocity over the ground against the air data's airspeed, α
 and β. The difference is the gust, taken as its conditional mean given the two sensors'
-noise, and the known input of the model (`agent.ident.aircraft.prepare`)."""
+noise (`agent.ident.aircraft.noise`: where the gust is weak, the short period's band on a
+light aircraft in light turbulence, that noise is as large as the gust; in calm air the
+measured "gust", pure noise, leaves the fit), and the known input of the model
+(`agent.ident.aircraft.prepare`)."""
 
 from __future__ import annotations
 
 import numpy as np
-import scipy.ndimage
 
 # The measured wind's components, the output they correct and the axis they act on.
 GUSTS = (("airspeed", "longitudinal"), ("alpha", "longitudinal"), ("beta", "lateral"))
@@ -15,32 +17,6 @@ GUSTS = (("airspeed", "longitudinal"), ("alpha", "longitudinal"), ("beta", "late
 # benchmark aircraft, so it is left out.
 GUST_RATES = ("alpha",)
 GUST_RATE_LAGS = 1
-# The measured gust's noise floor is its periodogram's mean above this fraction of the Nyquist
-# frequency (no gust reaches there); its periodogram is smoothed over WIENER_BINS bins a side.
-NOISE_FLOOR_FROM = 0.5
-WIENER_BINS = 8
-
-
-def measured_gust(g: np.ndarray) -> np.ndarray:
-    """The gust's conditional mean given its noisy measurement g (samples): each frequency
-    bin scaled by the Wiener gain max(0, 1 − N/P), P the smoothed periodogram and N the white
-    noise floor (NOISE_FLOOR_FROM).
-
-    Why: the measured gust is the INS's still-air α less the vane's, and it inherits both
-    sensors' noise. Where the gust is weak — the short period's band on a light aircraft in
-    light turbulence — that noise is as large as the gust, and a regressor with noise biases
-    its own gain toward zero and the rest of the fit with it (errors in variables). Its
-    conditional mean is a regressor whose error is uncorrelated with it, so linear gains
-    fitted on it are consistent (regression calibration; Carroll, Ruppert, Stefanski &
-    Crainiceanu, *Measurement Error in Nonlinear Models*, 2nd ed., 2006, ch. 4). In calm air
-    the gain is zero almost everywhere and the measured "gust", pure noise, leaves the fit."""
-    mean = float(g.mean())
-    G = np.fft.rfft(g - mean)
-    P = np.abs(G) ** 2
-    smooth = scipy.ndimage.uniform_filter1d(P, 2 * WIENER_BINS + 1, mode="nearest")
-    floor = float(np.mean(P[int(NOISE_FLOOR_FROM * P.size) :]))
-    gain = np.clip(1.0 - floor / np.maximum(smooth, 1e-300), 0.0, 1.0)
-    return np.fft.irfft(gain * G, n=g.size) + mean
 
 
 def inertial_air_data(x: np.ndarray, navigation: np.ndarray) -> np.ndarray:
