@@ -464,6 +464,38 @@ def mode_errors(found: dict[str, list[complex]], truth: dict[str, list[complex]]
     return out
 
 
+def mode_z(result, truth: dict[str, list[complex]]) -> dict[str, float]:
+    """Each named mode's error over its reported standard error (the z-score), as the table
+    judges it (`mode_errors`): "ωn" and "ζ" of a pair or of a mode of two real poles, the
+    real part of a real pole; the spiral has its own column. Over seeds, an rms near 1 says
+    the reported σ are honest, far above 1 that they claim too much."""
+    out: dict[str, float] = {}
+    orders = {o.name: o for o in result.second_order()}
+    for name in MODES:
+        true = truth.get(name, [])
+        mine = [m for m in result.modes if m.name == name]
+        if not true or not mine:
+            continue
+        polynomial = _second_order(true)
+        if name in orders and polynomial is not None:
+            o, (wn, zeta) = orders[name], polynomial
+            if o.frequency_std and o.damping_std:
+                out[f"{name} ωn"] = (o.frequency - wn) / o.frequency_std
+                out[f"{name} ζ"] = (o.damping - zeta) / o.damping_std
+            continue
+        mode = mine[0]
+        if mode.uncertainty is None:
+            continue
+        if mode.pair and polynomial is not None:
+            wn, zeta = polynomial
+            if mode.uncertainty.frequency > 0 and mode.uncertainty.damping > 0:
+                out[f"{name} ωn"] = (mode.frequency - wn) / mode.uncertainty.frequency
+                out[f"{name} ζ"] = (mode.damping - zeta) / mode.uncertainty.damping
+        elif not mode.pair and len(true) == 1 and mode.uncertainty.real > 0:
+            out[name] = (mode.eigenvalue.real - true[0].real) / mode.uncertainty.real
+    return out
+
+
 def _second_order(poles: list[complex]) -> tuple[float, float] | None:
     """ωn and ζ of a mode given as one complex pole (its pair's upper one) or two real ones;
     None for anything else."""
@@ -703,11 +735,13 @@ def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validat
                             truth_tic(reference, check, setup, rec.dt),
                             np.nan,
                             None,
+                            None,
                         )
                     )
                 tic = validation_tic(model, check) if check and model is not None else np.nan
+                scores = mode_z(result, truth) if model is not None else {}
                 rows.setdefault((nav, "suas-sysid"), []).append(
-                    (errors, tic, seconds, _spiral_z(spiral, truth))
+                    (errors, tic, seconds, _spiral_z(spiral, truth), scores)
                 )
             if not peers:
                 continue
@@ -722,7 +756,7 @@ def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validat
                     tic = validation_tic(model, check) if check else np.nan
                 except (IdentificationFailed, DataError, np.linalg.LinAlgError, ValueError):
                     errs, tic, seconds = [np.inf] * len(MODES), 1.0, np.nan
-                rows.setdefault(("–", peer), []).append((errs, tic, seconds, None))
+                rows.setdefault(("–", peer), []).append((errs, tic, seconds, None, None))
         for (nav, method), results in rows.items():
             _print(setup, excitation, nav, method, results)
         bank, speed, lowest = (
@@ -795,6 +829,13 @@ def _print(setup: Setup, excitation: str, nav: str, method: str, results: list) 
         f"{ok:2d}/{len(e):<2d}  {spiral_cell}  {tic:>11}  {seconds}",
         flush=True,
     )
+    scores: dict[str, list[float]] = {}
+    for r in results:
+        for k, v in (r[4] or {}).items():
+            scores.setdefault(k, []).append(v)
+    if scores:
+        rms = ", ".join(f"{k} {np.sqrt(np.mean(np.square(v))):.1f}" for k, v in scores.items())
+        print(f"{'':8} {'':4} {excitation:4} {nav:4} z-scores' rms (error / reported σ): {rms}")
 
 
 def _pair(median: float, worst: float) -> str:

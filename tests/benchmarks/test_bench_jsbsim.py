@@ -15,6 +15,8 @@ bench-jsbsim`."""
 
 from __future__ import annotations
 
+import types
+
 import numpy as np
 import pytest
 
@@ -75,3 +77,42 @@ def test_a_mode_of_two_real_poles_is_judged_by_its_wn_and_zeta():
     assert two == pytest.approx(
         max(abs(np.sqrt(63) - wn) / wn, abs(8 / np.sqrt(63) - zeta) / zeta), rel=1e-3
     )
+
+
+def test_each_modes_error_is_scored_in_its_reported_standard_errors():
+    """mode_z: a pair's ωn and ζ errors over their reported σ, a real pole's real part's, a
+    mode of two real poles by its second-order ωn and ζ; a mode without σ or without a truth
+    is not scored."""
+    bench = _bench()
+    std = types.SimpleNamespace
+    phugoid = std(
+        name="phugoid",
+        pair=True,
+        frequency=0.35,
+        damping=0.12,
+        eigenvalue=-0.042 + 0.347j,
+        uncertainty=std(frequency=0.005, damping=0.01, real=0.003),
+    )
+    roll = std(name="roll", pair=False, eigenvalue=-12.5 + 0j, uncertainty=std(real=0.25))
+    dutch = std(name="Dutch roll", pair=True, eigenvalue=-0.6 + 2.2j, uncertainty=None)
+    short = std(name="short period", pair=False, eigenvalue=-9.0 + 0j, uncertainty=None)
+    order = std(
+        name="short period", frequency=7.7, damping=1.0, frequency_std=0.1, damping_std=0.05
+    )
+    result = std(modes=[phugoid, roll, dutch, short, short], second_order=lambda: [order])
+    truth = {
+        "phugoid": [-0.036 + 0.344j],
+        "roll": [-12.0 + 0j],
+        "Dutch roll": [-0.66 + 2.24j],
+        "short period": [-9.745 + 0j, -6.367 + 0j],
+    }
+    z = bench.mode_z(result, truth)
+    wn, zeta = abs(-0.036 + 0.344j), 0.036 / abs(-0.036 + 0.344j)
+    assert z["phugoid ωn"] == pytest.approx((0.35 - wn) / 0.005)
+    assert z["phugoid ζ"] == pytest.approx((0.12 - zeta) / 0.01)
+    assert z["roll"] == pytest.approx(-2.0)
+    wn_sp = np.sqrt(9.745 * 6.367)
+    assert z["short period ωn"] == pytest.approx((7.7 - wn_sp) / 0.1)
+    assert z["short period ζ"] == pytest.approx((1.0 - 16.112 / (2 * wn_sp)) / 0.05)
+    assert not any(k.startswith("Dutch roll") for k in z)  # no σ reported
+    assert "spiral" not in z
