@@ -94,8 +94,8 @@ def name_modes(
     """The modes with `name` set where the rules above identify an aircraft mode.
     `axes`: each mode's axis ("lat", "lon" or None) as the model's structure tells it, for the
     modes whose shape does not (rule 1): two modes of the two axes at nearly one eigenvalue
-    (the Cub's roll at −12.1 1/s beside a short-period pole at −11.6) mix their eigenvectors
-    through the weakest coupling, and neither shape lies 70 % in one axis.
+    (a roll mode beside a pole of an overdamped short period) mix their eigenvectors through
+    the weakest coupling, and neither shape lies 70 % in one axis.
     `min_msv` 0 names modes whatever their share of the response: for a model whose every
     state is a measured aircraft state (the aircraft method), where no mode is noise. There
     the MSV misleads too: two real poles nearly coinciding (the Cub's overdamped short

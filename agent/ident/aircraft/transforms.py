@@ -19,10 +19,10 @@ away from the elevator's lines.
 Measured surface positions carry their potentiometers' white noise. Where a manoeuvre is short
 against the record (a 3-2-1-1 of a few seconds in a minute) its spectrum's skirts stand no
 higher than that noise, and a bin of pure noise is excited by chance: a regressor with noise
-biases the fit (errors in variables; the T-6's roll mode came out 6 % fast from its card's
-aileron). So a bin counts only where the control stands SIGNAL_MARGIN times above its noise
-floor (`agent.ident.aircraft.noise`), the band ends where the inputs do by the same test, and
-each measured input is its conditional mean given its noise.
+biases the fit (errors in variables; docs/identification.md). So a bin counts only where the
+control stands SIGNAL_MARGIN times above its noise floor (`agent.ident.aircraft.noise`), the
+band ends where the inputs do by the same test, and each measured input is its conditional
+mean given its noise.
 """
 
 from __future__ import annotations
