@@ -111,7 +111,7 @@ def output_error(problem: AxisProblem, theta: np.ndarray):
     cost_start = _cost(problem.Y - X, sigma)
     iterations, converged = 0, False
     for _ in range(PASSES):
-        theta, its, converged = _minimise(problem, theta, sigma)
+        theta, its, converged = minimise(problem, theta, sigma)
         iterations += its
         X, _ = problem.response(theta)
         new = bin_sigma(problem.Y - X, problem.s)
@@ -130,19 +130,25 @@ def bin_sigma(residual: np.ndarray, s: np.ndarray) -> np.ndarray:
     ch. 5): an output's quiet bands then count for what they carry. A single σ per output
     would let its noisiest band set the weight of all of them."""
     power = np.abs(residual) ** 2
-    if SMOOTH_BINS > 0 and power.shape[0] > 2 * SMOOTH_BINS + 1:
-        order = np.argsort(np.abs(s), kind="stable")
-        smooth = np.empty_like(power)
-        smooth[order] = scipy.ndimage.uniform_filter1d(
-            power[order], 2 * SMOOTH_BINS + 1, axis=0, mode="nearest"
-        )
-    else:
-        smooth = np.broadcast_to(power.mean(axis=0), power.shape)
+    smooth, _ = smooth_bins(power, s)
     # No band's weight beyond (1/SMOOTH_FLOOR)² times the output's average: a band the model
     # happens to fit to the last digits (noise-free data) must not take over the fit.
     floor = SMOOTH_FLOOR * np.sqrt(power.mean(axis=0))
     sigma = np.maximum(np.sqrt(np.maximum(smooth, 0.0)), floor)  # the filter rounds to −0
     return np.maximum(sigma, 1e-12 * max(float(sigma.max()), 1e-300))
+
+
+def smooth_bins(values: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, int]:
+    """`values` (F, ...; real) averaged over the SMOOTH_BINS nearest bins in frequency on either
+    side (the mean over all bins when there are too few), and how many bins each average
+    holds."""
+    width = 2 * SMOOTH_BINS + 1
+    if SMOOTH_BINS > 0 and values.shape[0] > width:
+        order = np.argsort(np.abs(s), kind="stable")
+        smooth = np.empty_like(values)
+        smooth[order] = scipy.ndimage.uniform_filter1d(values[order], width, axis=0, mode="nearest")
+        return smooth, width
+    return np.broadcast_to(values.mean(axis=0), values.shape).copy(), values.shape[0]
 
 
 def _cost(residual: np.ndarray, sigma: np.ndarray) -> float:
@@ -154,7 +160,9 @@ def _stack(J: np.ndarray) -> np.ndarray:
     return np.vstack([J.real, J.imag])
 
 
-def _minimise(problem: AxisProblem, theta: np.ndarray, sigma: np.ndarray):
+def minimise(problem: AxisProblem, theta: np.ndarray, sigma: np.ndarray):
+    """Levenberg–Marquardt on `problem.free` at fixed weights (σ per bin and output): the
+    parameters, the iterations taken, and whether it stopped at a minimum."""
     lam = 1e-3
     free = problem.free
     X, J = problem.response(theta, jacobian=True)
@@ -286,7 +294,7 @@ def coupling(
     theta = problem.pack(fitted.A, B, taus, fitted.transients)
     X0 = problem.response(theta)[0]
     before = _cost(problem.Y - X0, fitted.bin_std)
-    theta, _, _ = _minimise(problem, theta, fitted.bin_std)
+    theta, _, _ = minimise(problem, theta, fitted.bin_std)
     X1 = problem.response(theta)[0]
     after = _cost(problem.Y - X1, fitted.bin_std)
     signal = _cost(problem.Y, fitted.bin_std)
@@ -320,7 +328,7 @@ def lag_order_cost(
     )
     taus = [fitted.lags[j] * (now / order if j == column else 1.0) for j in lagged]
     theta = problem.pack(fitted.A, fitted.B, np.array(taus), fitted.transients)
-    theta, _, _ = _minimise(problem, theta, fitted.bin_std)
+    theta, _, _ = minimise(problem, theta, fitted.bin_std)
     X = problem.response(theta)[0]
     tau = None
     if order > 0:

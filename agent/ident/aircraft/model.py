@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.optimize
@@ -75,7 +75,30 @@ RESOLVED = 0.2
 INITIAL_S = 0.05
 
 
-def identify(
+@dataclass(frozen=True, kw_only=True)
+class Fitted:
+    """The axes fitted to a record, before they are assembled: what `identify` builds its model
+    from, and what a bound on that record (`agent.ident.aircraft.bound`) is computed in."""
+
+    sp: Transforms  # the record's transforms (the controls, then the known inputs)
+    augmented: Transforms  # sp with the measured states appended as inputs (the couplings')
+    ready: Prepared
+    fits: list[AxisFit]
+    engine: dict[int, tuple[int, dict[int, float]]]
+    couplings: dict[str, Coupling]
+    structure: str
+    batch: list[Experiment]  # the moved channels' records
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    input_roles: list[str | None]
+    output_roles: list[str | None]
+    present: dict[str, tuple[list[int], list[int]]]
+    measured: list[int]  # input columns of a measured rpm or thrust
+    notes: list[str]  # what was left out or set aside, and why
+    not_moved: list[tuple[str, str]]  # modes missing because their axis did not move
+
+
+def fitted_axes(
     raw: Sequence[Experiment],
     dt: float,
     *,
@@ -85,11 +108,9 @@ def identify(
     output_roles: Sequence[str | None],
     present: dict[str, tuple[list[int], list[int]]],
     settings: Settings,
-) -> Identification:
-    """Decoupled longitudinal and lateral models in the frequency domain, coupled where the
-    data show it, assembled into one model (module docstring), of what the record moved
-    (`axes.moved_axes`): a control it left at trim is left out of the inputs, an axis it did not
-    move out of the inputs and outputs, with its modes as missing, by name, and why."""
+) -> Fitted:
+    """Each axis of what the record moved fitted, and coupled where the data show it
+    (`identify`'s first half)."""
     raw, inputs, outputs, input_roles, output_roles, present, moved_notes, not_moved = _only_moved(
         raw, inputs, outputs, input_roles, output_roles, present
     )
@@ -118,7 +139,7 @@ def identify(
     )
     throttle = [j for j, role in enumerate(input_roles) if role == "throttle"]
     measured = [j for j, role in enumerate(input_roles) if role in POWER_ROLES]
-    notes = []
+    notes = list(moved_notes)
     if measured and throttle and "longitudinal" in present:
         # The measured rpm or thrust is what the throttle's command does to the engine: both as
         # inputs would give the same path twice.
@@ -136,6 +157,55 @@ def identify(
         fits, couplings, structure = _coupled(
             sp, fits, ready, engine, r=len(inputs), experiments=len(batch)
         )
+    return Fitted(
+        sp=sp,
+        augmented=augment(sp),
+        ready=ready,
+        fits=fits,
+        engine=engine,
+        couplings=couplings,
+        structure=structure,
+        batch=batch,
+        inputs=inputs,
+        outputs=outputs,
+        input_roles=list(input_roles),
+        output_roles=list(output_roles),
+        present=present,
+        measured=measured,
+        notes=notes,
+        not_moved=not_moved,
+    )
+
+
+def identify(
+    raw: Sequence[Experiment],
+    dt: float,
+    *,
+    inputs: tuple[str, ...],
+    outputs: tuple[str, ...],
+    input_roles: Sequence[str | None],
+    output_roles: Sequence[str | None],
+    present: dict[str, tuple[list[int], list[int]]],
+    settings: Settings,
+) -> Identification:
+    """Decoupled longitudinal and lateral models in the frequency domain, coupled where the
+    data show it, assembled into one model (module docstring), of what the record moved
+    (`axes.moved_axes`): a control it left at trim is left out of the inputs, an axis it did not
+    move out of the inputs and outputs, with its modes as missing, by name, and why."""
+    fitted = fitted_axes(
+        raw,
+        dt,
+        inputs=inputs,
+        outputs=outputs,
+        input_roles=input_roles,
+        output_roles=output_roles,
+        present=present,
+        settings=settings,
+    )
+    sp, ready, fits, engine = fitted.sp, fitted.ready, fitted.fits, fitted.engine
+    batch, inputs, outputs = fitted.batch, fitted.inputs, fitted.outputs
+    output_roles, present, measured = fitted.output_roles, fitted.present, fitted.measured
+    couplings, structure = fitted.couplings, fitted.structure
     width = sp.U.shape[1]
     model, covariance = assemble(
         fits, r=len(inputs), m=len(outputs), states_of={width + c: c for c in range(len(outputs))}
@@ -158,15 +228,15 @@ def identify(
     initial = [
         np.concatenate([e.y[:start].mean(axis=0), np.zeros(n_model - len(outputs))]) for e in batch
     ]
-    fitted = fit(discrete, batch, initial)
-    residuals = np.vstack([e.y - p for e, p in zip(batch, fitted.predictions, strict=True)])
+    fit_in_time = fit(discrete, batch, initial)
+    residuals = np.vstack([e.y - p for e, p in zip(batch, fit_in_time.predictions, strict=True)])
     refinement = Refinement(
         gain=None,
         continuous=model,
         discrete=discrete,
         dt=dt,
         hold=hold,
-        initial_states=fitted.initial_states,
+        initial_states=fit_in_time.initial_states,
         noise_std=residuals.std(axis=0),
         covariance=covariance,
         cost_initial=sum(f.cost_start for f in fits),
@@ -203,12 +273,12 @@ def identify(
         continuous=model,
         coordinates="outputs",
         modes=tuple(modes),
-        fit=fitted,
+        fit=fit_in_time,
         refinement=refinement,
-        warnings=(*moved_notes, *notes, *warnings, *judged(modes, fitted)),
+        warnings=(*fitted.notes, *warnings, *judged(modes, fit_in_time)),
         method="aircraft",
         aircraft=report,
-        missing=(*missing, *not_moved),
+        missing=(*missing, *fitted.not_moved),
         left_out=tuple(poles_left_out),
     )
 
@@ -357,9 +427,7 @@ def _coupled(
     the model's structure in words. The other axis's measured states are known inputs: their
     gains are A's coupling blocks."""
     width = sp.U.shape[1]
-    # The measured states as inputs: none is ever a control whose excited bins are chosen.
-    floors = None if sp.noise is None else np.hstack([sp.noise, np.zeros(sp.Y.shape)])
-    augmented = replace(sp, U=np.hstack([sp.U, sp.Y]), noise=floors)
+    augmented = augment(sp)
     own = [[j for j in f.inputs if j < r] for f in fits]  # each axis's own controls
     found: dict[str, Coupling] = {}
     fits = list(fits)
@@ -405,6 +473,14 @@ def _coupled(
         if by:
             joined.append(f"{f.name} coupled by {' and '.join(by)}")
     return fits, found, "decoupled" + (f", {' and '.join(joined)}" if joined else "")
+
+
+def augment(sp: Transforms) -> Transforms:
+    """`sp` with the measured states appended to its inputs (after its own columns): the
+    inputs of an axis coupled by the other axis's states."""
+    # The measured states as inputs: none is ever a control whose excited bins are chosen.
+    floors = None if sp.noise is None else np.hstack([sp.noise, np.zeros(sp.Y.shape)])
+    return replace(sp, U=np.hstack([sp.U, sp.Y]), noise=floors)
 
 
 def _report(
