@@ -9,7 +9,8 @@ error with per-band weights, its covariance, and the coupling tests.
    under any noise independent of the inputs, turbulence included, and its covariance is
    estimated from the residuals bin by bin (the sandwich H⁻¹ (Σ_k g_k g_kᵀ) H⁻¹ with g_k the
    gradient of bin k): frequency bins are nearly independent for long records, so this holds
-   for coloured noise (turbulence) where the white-noise Cramér–Rao bound (JᵀJ)⁻¹σ² does not.
+   for coloured noise (turbulence) where the white-noise Cramér–Rao bound (JᵀJ)⁻¹σ² does not;
+   each bin's residual is corrected for its leverage first (`covariance`).
 3. Inputs: surfaces are measured positions; the throttle reaches the thrust through the
    engine's spin-up, first-order lags whose time constant is estimated (u_eff = u / (1 +
    jωτ)^k, k lags: THROTTLE_LAGS first, then the number the data choose, `lag_order_cost`
@@ -49,6 +50,9 @@ NOISE_TOLERANCE = 0.02
 # couplings (the propeller's torque, slipstream and gyroscopic moments) change the outputs by
 # a few per cent (benchmarks/README.md, *The whole-aircraft method's terms*).
 COUPLED = 0.01
+# The covariance's residuals are corrected for each bin's leverage (`covariance`); a bin the fit
+# follows all but exactly (leverage near 1) counts as if its leverage were 1 − LEVERAGE_FLOOR.
+LEVERAGE_FLOOR = 0.05
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -199,15 +203,29 @@ def minimise(problem: AxisProblem, theta: np.ndarray, sigma: np.ndarray):
 
 
 def covariance(problem: AxisProblem, theta: np.ndarray, sigma: np.ndarray) -> np.ndarray:
-    """Sandwich covariance of θ from the bin-wise gradients of the weighted cost."""
+    """Sandwich covariance of θ from the bin-wise gradients of the weighted cost, each bin's
+    residual corrected for its leverage: ẽ_k = (I − h_k)^(−1/2) e_k, h_k = R_k H⁻¹ R_kᵀ the
+    bin's block of the hat matrix (the CR2 correction of Bell & McCaffrey, *Survey
+    Methodology* 28(2), 2002; MacKinnon & White's HC2 for one residual per row). A fit follows
+    the few bins that alone carry a mode (the phugoid's) more closely than it follows the
+    noise there, so their fitted residuals understate it, and the uncorrected sandwich the
+    mode's variance."""
     X, J = problem.response(theta, jacobian=True)
     e = (problem.Y - X) / sigma
     free = problem.free
     Jw = -J[:, :, free] / sigma[:, :, None]
     H = _stack(Jw).T @ _stack(Jw)
-    # Per bin k: g_k = Re(J_kᴴ e_k), the bin's share of the gradient (outputs together).
-    g = np.einsum("fip,fi->fp", Jw.conj(), e).real
     Hinv = np.linalg.pinv(H, rcond=1e-12)
+    # Per bin k: g_k = R_kᵀ ẽ_k, the bin's share of the gradient (outputs together), with R_k
+    # the bin's rows of the stacked Jacobian and ẽ_k its residual corrected for leverage.
+    n = e.shape[1]
+    R = np.concatenate([Jw.real, Jw.imag], axis=1)  # (F, 2n, p)
+    r = np.concatenate([e.real, e.imag], axis=1)  # (F, 2n)
+    hat = np.einsum("fip,pq,fjq->fij", R, Hinv, R)
+    values, vectors = np.linalg.eigh(np.eye(2 * n) - hat)
+    scale = 1.0 / np.sqrt(np.clip(values, LEVERAGE_FLOOR, None))
+    r = np.einsum("fij,fj,fkj,fk->fi", vectors, scale, vectors, r)
+    g = np.einsum("fip,fi->fp", R, r)
     out = np.zeros((theta.size, theta.size))
     out[np.ix_(free, free)] = Hinv @ (g.T @ g) @ Hinv  # the fixed entries are exact
     return out
