@@ -61,7 +61,7 @@ bench: $(BENCH_STAMP)
 # card, sized as the agent sizes them, with and without the INS, 10 seeds each, with the peers
 # (about 30 minutes here; benchmarks/bench_jsbsim.py --quick reruns one row in about a minute).
 bench-jsbsim: $(BENCH_STAMP)
-	$(BIN)/python benchmarks/bench_jsbsim.py
+	$(BIN)/python benchmarks/bench_jsbsim.py --bound
 
 # Bytes on air and delivery time of a full-model result over the emulated radios.
 bench-link: $(STAMP)

@@ -16,10 +16,11 @@ but the states move as the inertial ones, ẋ_i = A(x_i − g) + B u, so the mod
 the inertial outputs with the gusts as known inputs of their own (free) gains: the vanes'
 reading of the gust stops being noise that biases the fit and becomes excitation, and A is
 the still-air aircraft's. Each gust is its conditional mean given the noisy measurement
-(`agent.ident.aircraft.noise`), and the α gust's rate, through GUST_RATE_LAGS fitted lags, is
-a known input of the longitudinal axis: Dryden's pitch-rate gust s α_g/(1 + τs), τ = 4b/πV
-(MIL-F-8785C), the gust's gradient along the airframe, which otherwise biases the short
-period's damping.
+(`agent.ident.aircraft.noise`), and the α and β gusts' rates, through GUST_RATE_LAGS fitted
+lags each, are known inputs of their axes: Dryden's pitch-rate and yaw-rate gusts (MIL-F-8785C;
+`agent.ident.aircraft.wind.GUST_RATES`), the gusts' gradients along the airframe, which
+otherwise bias the short period's damping and, where the span is large against the speed (a
+glider), the Dutch roll's frequency.
 
 Sideslip drag (`sideslip_drag`): where β is measured, β² (the vane's air-relative β, from
 trim) is a known input of V̇'s equation alone, with a fitted gain: drag due to sideslip,
@@ -30,11 +31,16 @@ drag on the throttle's lines. Free on every longitudinal row instead, its gains 
 with the short period's.
 
 The lateral derivatives' change with α (`alpha_products`): where both axes are fitted
-together, α·β, α·p and α·r (the still-air states, from trim) are known inputs of the lateral
+together, α·β, α·p and α·r (about their means: below) are known inputs of the lateral
 axis, with fitted gains. The longitudinal manoeuvre moves α while the lateral one plays, and
 C_lβ, C_nβ, C_lp, C_lr and C_nr vary with α (JSBSim's Cub tabulates C_lβ and C_lr against
 it); the products fall on the sum and difference frequencies of the two axes' lines, some of
 which are the lateral axis's own. A lateral record alone moves α too little: no products.
+The products are of the air-relative α and β (the vanes', what the moments depend on; p and r
+as the gyros read them), each about its mean over the record. About the trim instead, a
+constant part of α times p is p itself, and the roll damping traded against the product's
+gain: in turbulence the trim (the record's first half second) carries that moment's gust,
+which threw the glider's roll mode off on some seeds (benchmarks/README.md).
 
 What each term does on the benchmark aircraft: benchmarks/README.md, *The whole-aircraft
 method's terms* (`make bench-jsbsim`, with `--without` to leave one out).
@@ -185,6 +191,7 @@ def _known_inputs(e: Experiment, index: dict[str, int], terms: _Terms, trim_samp
     # correction below puts the inertial β in its place.
     beta = x[:, KINEMATIC_STATES.index("beta")]
     beta = beta - beta[:trim_samples].mean()
+    air = x.copy()  # the air-relative states: what the forces depend on
     gusts = []
     if terms.gusts:
         still = inertial_air_data(x, e.navigation)
@@ -198,8 +205,8 @@ def _known_inputs(e: Experiment, index: dict[str, int], terms: _Terms, trim_samp
         u = np.hstack([u, np.column_stack([*gusts, *rates])])
     if terms.drag:
         u = np.hstack([u, (beta * beta)[:, None]])
-    if terms.bilinear:  # on the still-air states, as the model's (x − trim)
-        deviation = x - x[:trim_samples].mean(axis=0)
+    if terms.bilinear:  # on the air-relative states, about the record's mean (docstring)
+        deviation = air - air.mean(axis=0)
         alpha = deviation[:, KINEMATIC_STATES.index("alpha")]
         lateral = [KINEMATIC_STATES.index(role) for role in BILINEAR]
         u = np.hstack([u, alpha[:, None] * deviation[:, lateral]])

@@ -11,11 +11,14 @@ import numpy as np
 
 # The measured wind's components, the output they correct and the axis they act on.
 GUSTS = (("airspeed", "longitudinal"), ("alpha", "longitudinal"), ("beta", "lateral"))
-# The gusts whose rate is a known input too, through GUST_RATE_LAGS fitted lags: Dryden's
-# pitch-rate gust q_g = s α_g / (1 + τs), τ = 4b/πV (MIL-F-8785C; JSBSim's), the gust's
-# gradient along the airframe. The yaw-rate gust from β_g changed nothing measurable on the
-# benchmark aircraft, so it is left out.
-GUST_RATES = ("alpha",)
+# The gusts whose rate is a known input too, through GUST_RATE_LAGS fitted lags, each gust's
+# gradient along the airframe (MIL-F-8785C's Dryden model; JSBSim's): the pitch-rate gust
+# q_g = s α_g / (1 + τs), τ = 4b/πV, and the yaw-rate gust r_g = s β_g / (1 + τs), τ = 3b/πV
+# (sign and scale in the fitted gain). The yaw-rate gust matters where the span is large
+# against the speed: left out, it biased the Dutch roll of JSBSim's glider (SGS 1-26 at
+# 50 kt) in light turbulence (benchmarks/README.md). The rolling gust p_g, the vertical
+# gust's gradient across the span, no single-point sensor measures.
+GUST_RATES = ("alpha", "beta")
 GUST_RATE_LAGS = 1
 
 
