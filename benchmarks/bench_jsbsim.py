@@ -10,6 +10,8 @@ suas-sysid and by the peers, in one process.
     .venv/bin/python benchmarks/bench_jsbsim.py --no-peers --without alpha-products
     .venv/bin/python benchmarks/bench_jsbsim.py --still --aircraft sgs126 --turbulence 1 \
         --excitation full                                # what the air alone does
+    .venv/bin/python benchmarks/bench_jsbsim.py --quick --bound --aircraft sgs126 \
+        --turbulence 1 --excitation card --nav ins       # what the record could resolve
 
 The aircraft (`AIRCRAFT`): JSBSim's J-3 Cub at 60 kt, Cessna 182 and PA-28 at 90 kt (the three
 the method was developed on), the Cessna 172R at 95 kt (a four-seat trainer), the T-6 Texan II
@@ -48,7 +50,12 @@ navigation and method:
   doublet judged on V, α, q, θ, and an aileron then a rudder doublet judged on β, p, r, φ
   (the mean of the two means; median / worst over seeds), the doublets sized to the
   atmosphere (`validation_scale`); `--quick` leaves it out;
-- the median seconds per identification.
+- the median seconds per identification;
+- with `--bound` (`make bench-jsbsim` gives it), for suas-sysid's rows, the validated truth's
+  Cramér–Rao bound on the row's records (`truth_bound`): what an efficient estimator of the
+  method's structure would do there, each mode's median error and its expected number of
+  seeds with every mode within 10 %. A row whose bound misses the 10 % target on 9 of 10
+  seeds cannot meet it with any unbiased estimator of that structure.
 Below each excitation, what the flights did: the amplitudes flown, the largest bank and
 airspeed change, and the lowest height above the ground over the seeds.
 

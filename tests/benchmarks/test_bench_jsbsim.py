@@ -29,7 +29,7 @@ TIMEOUT_S = 60
 def test_starts_with_every_term_left_out():
     done = run(
         "bench_jsbsim.py",
-        *("--aircraft", "--no-peers", "--without", "alpha-products", "sideslip-drag"),
+        *("--aircraft", "--no-peers", "--bound", "--without", "alpha-products", "sideslip-drag"),
         timeout_s=TIMEOUT_S,
     )
     assert done.stdout.startswith("cells: median / worst over seeds"), done.stdout
@@ -40,6 +40,7 @@ def test_help_and_arguments():
     text = help_text("bench_jsbsim.py")
     assert "--without" in text
     assert "--still" in text  # what the air alone does
+    assert "--bound" in text  # the truth's Cramér–Rao bound on each row's records
     done = run("bench_jsbsim.py", "--without", "wings", timeout_s=TIMEOUT_S, ok=False)
     assert done.returncode == 2
     assert "invalid choice: 'wings'" in done.stderr, done.stderr

@@ -20,7 +20,7 @@ from agent.ident.aircraft.prepare import prepare
 from agent.ident.aircraft.transforms import Transforms, excited
 from agent.ident.convert import discretize_foh
 from agent.ident.errors import DataError, IdentificationFailed
-from agent.ident.fit import simulate
+from agent.ident.fit import simulate, theil
 from agent.ident.reference import LATERAL, LONGITUDINAL
 from agent.ident.summary import format_text
 
@@ -427,6 +427,22 @@ def test_the_measured_wind_turns_the_gust_from_bias_into_excitation():
     # The model's inputs are the controls; the gusts drove the fit only.
     assert measured.continuous.B.shape[1] == len(INPUTS)
     assert any("gust alpha" in axis.inputs for axis in report.axes)
+
+
+def test_the_time_domain_fit_is_driven_by_the_measured_wind_too():
+    """The gusty aircraft (pitch- and yaw-rate gusts too): the result's simulated outputs
+    are driven by what the record measured and the model was fitted with, the gusts and
+    their rates through their fitted gains and lags, and they are on the recorded channels
+    (the vanes' α and β, the pitot's airspeed). Driven by the controls alone, the gusts'
+    share of the response is left unexplained (measured: TIC 0.013 with the wind, 0.51
+    without)."""
+    u, air, op, navigation, _ = gusty_record(seed=5, tau_q=0.4, tau_r=1.5)
+    result = aircraft_identify(Experiment(u, air, operating_point=op, navigation=navigation))
+    assert result.fit.tic_avg < 0.03
+    predicted = result.fit.predictions[0]
+    assert np.sqrt(np.mean((predicted - air) ** 2)) < 0.02 * np.sqrt(np.mean(air**2))
+    controls_only = simulate(result.discrete, u, result.fit.initial_states[0])
+    assert np.mean(theil(controls_only, air)) > 10 * result.fit.tic_avg
 
 
 def test_the_pitch_rate_gust_is_modelled_from_the_alpha_gusts_rate():

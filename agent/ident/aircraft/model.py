@@ -28,6 +28,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.optimize
+import scipy.signal
 
 from agent.channels import POWER_ROLES
 from agent.ident.aircraft.axes import AXES, moved_axes
@@ -53,7 +54,8 @@ from agent.ident.document import (
     Wind,
 )
 from agent.ident.errors import DataError, IdentificationFailed
-from agent.ident.fit import fit
+from agent.ident.fit import Fit as FitInTime
+from agent.ident.fit import fit, theil
 from agent.ident.modal import Mode, SecondOrder, left_out, modal_analysis, second_order
 from agent.ident.naming import LATERAL_MODES, LONGITUDINAL_MODES, missing_modes, name_modes
 from agent.ident.okid import Experiment, channel_rms
@@ -229,6 +231,8 @@ def identify(
         np.concatenate([e.y[:start].mean(axis=0), np.zeros(n_model - len(outputs))]) for e in batch
     ]
     fit_in_time = fit(discrete, batch, initial)
+    if ready.known is not None:
+        fit_in_time = _fit_with_known(model, fits, ready, batch, r=len(inputs), dt=dt, hold=hold)
     residuals = np.vstack([e.y - p for e, p in zip(batch, fit_in_time.predictions, strict=True)])
     refinement = Refinement(
         gain=None,
@@ -587,6 +591,63 @@ def _modes(
         axes = _mode_axes(modes, states_only.A, fits)
         modes = name_modes(modes, output_roles, min_msv=0.0, axes=axes)
     return modes, left_out(Am, dt, states_only.A)
+
+
+def _fit_with_known(
+    model: StateSpace,
+    fits: Sequence[AxisFit],
+    ready: Prepared,
+    batch: Sequence[Experiment],
+    *,
+    r: int,
+    dt: float,
+    hold: str,
+) -> FitInTime:
+    """The model's time-domain fit driven by everything the record measured that it was
+    fitted with: its controls, and the known inputs (the measured gusts, their rates through
+    their fitted lags, sideslip drag, the α products) and the kinematics' nonlinear rest, with
+    their fitted gains. The model's outputs are the inertial states where the wind is
+    measured; each prediction goes back to the recorded channel (less the same gust the
+    record's inertial output adds), so residuals and TIC are on what was recorded."""
+    n, m = model.A.shape[0], model.C.shape[0]
+    width = ready.batch[0].u.shape[1]
+    known = width - r
+    Bk = np.zeros((n, known))
+    lags: dict[int, tuple[float, int]] = {}
+    for f in fits:
+        for c, j in enumerate(f.inputs):
+            if r <= j < width:
+                Bk[list(f.states), j - r] = f.B[:, c]
+                if j in f.lags:
+                    lags[j - r] = (f.lags[j], f.lag_powers.get(j, THROTTLE_LAGS))
+    forcing = np.vstack([np.eye(m), np.zeros((n - m, m))])
+    B = np.hstack([model.B, Bk, forcing])
+    extended = discretize_hold(model.A, B, model.C, np.zeros((m, B.shape[1])), dt, hold)
+    start = max(1, round(INITIAL_S / dt))
+    runs, initial = [], []
+    for raw, prepared, kinematic in zip(batch, ready.batch, ready.known, strict=True):
+        extra = np.array(prepared.u[:, r:], dtype=float)
+        for k, (tau, order) in lags.items():
+            for _ in range(order):
+                extra[:, k] = _lagged(extra[:, k], tau, dt)
+        u = np.hstack([raw.u, extra, kinematic])
+        runs.append(Experiment(u, prepared.y))
+        initial.append(np.concatenate([prepared.y[:start].mean(axis=0), np.zeros(n - m)]))
+    inertial = fit(extended, runs, initial)
+    predictions = tuple(
+        p - (run.y - raw.y) for p, run, raw in zip(inertial.predictions, runs, batch, strict=True)
+    )
+    return FitInTime(
+        predictions=predictions,
+        initial_states=inertial.initial_states,
+        tic=theil(np.vstack(predictions), np.vstack([e.y for e in batch])),
+    )
+
+
+def _lagged(signal: np.ndarray, tau: float, dt: float) -> np.ndarray:
+    """`signal` through one first-order lag of time constant `tau` (s), from rest (Tustin)."""
+    a = dt / (2 * tau)
+    return scipy.signal.lfilter([a / (1 + a), a / (1 + a)], [1.0, (a - 1) / (1 + a)], signal)
 
 
 def _mode_axes(modes: Sequence[Mode], A: np.ndarray, fits: Sequence[AxisFit]) -> list[str | None]:
