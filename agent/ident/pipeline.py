@@ -134,7 +134,7 @@ def identify(
                 f"decimation (given {settings.decimation}): leave --decimation (and "
                 "[identification] decimation) out, or give --method time or frequency"
             )
-        return aircraft.identify(
+        fitted = aircraft.fitted_axes(
             raw,
             dt,
             inputs=inputs,
@@ -144,6 +144,7 @@ def identify(
             present=present,
             settings=settings,
         )
+        return aircraft.identify(fitted, settings)
     batch, prep = preprocess(
         raw,
         dt,

@@ -336,22 +336,16 @@ def gusty_record(
     g *= [0.03, 0.0005, 0.0005]
     E = np.zeros((A.shape[0], 4))
     E[:, :3] = -A[:, GUSTS]
-    if tau_q > 0:  # q_g = (α_g − lowpass(α_g)) / τ
-        lowpass = np.zeros(len(g))
-        for k in range(1, len(g)):
-            lowpass[k] = lowpass[k - 1] + DT / tau_q * (g[k - 1, 1] - lowpass[k - 1])
-        q_gust = (g[:, 1] - lowpass) / tau_q
+    if tau_q > 0:
+        q_gust = _rate_gust(g[:, 1], tau_q)
         E[:, 3] = -A[:, 2]
         E[1, 3] += 1.0  # α̇ = q + …: the kinematic part sees the inertial q
         E[3, 3] = 0.0  # θ̇ = q
     else:
         q_gust = np.zeros(len(g))
     E = np.hstack([E, np.zeros((A.shape[0], 1))])
-    if tau_r > 0:  # r_g = (β_g − lowpass(β_g)) / τ
-        lowpass = np.zeros(len(g))
-        for k in range(1, len(g)):
-            lowpass[k] = lowpass[k - 1] + DT / tau_r * (g[k - 1, 2] - lowpass[k - 1])
-        r_gust = (g[:, 2] - lowpass) / tau_r
+    if tau_r > 0:
+        r_gust = _rate_gust(g[:, 2], tau_r)
         E[:, 4] = -A[:, 6]
         E[4, 4] -= 1.0  # β̇ = … − r: the kinematic part sees the inertial r
         E[7, 4] = 0.0  # φ̇ = p + …
@@ -383,6 +377,14 @@ def gusty_record(
     for k in range(len(V)):
         ned[k] = _body_to_ned(phi[k], theta[k], psi[k]) @ body[k]
     return u, air, op, np.column_stack([psi, ned]), A
+
+
+def _rate_gust(gust: np.ndarray, tau: float) -> np.ndarray:
+    """Dryden's rate gust of a gust angle: s g / (1 + τ s) = (g − lowpass(g)) / τ."""
+    lowpass = np.zeros(len(gust))
+    for k in range(1, len(gust)):
+        lowpass[k] = lowpass[k - 1] + DT / tau * (gust[k - 1] - lowpass[k - 1])
+    return (gust - lowpass) / tau
 
 
 def _body_to_ned(phi: float, theta: float, psi: float) -> np.ndarray:

@@ -22,6 +22,6 @@ One job per module, in the order the data flow through them:
 """
 
 from agent.ident.aircraft.axes import AXES, LATERAL, LONGITUDINAL, axes_present
-from agent.ident.aircraft.model import identify
+from agent.ident.aircraft.model import fitted_axes, identify
 
-__all__ = ["AXES", "LATERAL", "LONGITUDINAL", "axes_present", "identify"]
+__all__ = ["AXES", "LATERAL", "LONGITUDINAL", "axes_present", "fitted_axes", "identify"]

@@ -82,6 +82,7 @@ class Fitted:
     """The axes fitted to a record, before they are assembled: what `identify` builds its model
     from, and what a bound on that record (`agent.ident.aircraft.bound`) is computed in."""
 
+    dt: float  # the records' sample time, s
     sp: Transforms  # the record's transforms (the controls, then the known inputs)
     augmented: Transforms  # sp with the measured states appended as inputs (the couplings')
     ready: Prepared
@@ -160,6 +161,7 @@ def fitted_axes(
             sp, fits, ready, engine, r=len(inputs), experiments=len(batch)
         )
     return Fitted(
+        dt=dt,
         sp=sp,
         augmented=augment(sp),
         ready=ready,
@@ -179,31 +181,13 @@ def fitted_axes(
     )
 
 
-def identify(
-    raw: Sequence[Experiment],
-    dt: float,
-    *,
-    inputs: tuple[str, ...],
-    outputs: tuple[str, ...],
-    input_roles: Sequence[str | None],
-    output_roles: Sequence[str | None],
-    present: dict[str, tuple[list[int], list[int]]],
-    settings: Settings,
-) -> Identification:
+def identify(fitted: Fitted, settings: Settings) -> Identification:
     """Decoupled longitudinal and lateral models in the frequency domain, coupled where the
-    data show it, assembled into one model (module docstring), of what the record moved
-    (`axes.moved_axes`): a control it left at trim is left out of the inputs, an axis it did not
-    move out of the inputs and outputs, with its modes as missing, by name, and why."""
-    fitted = fitted_axes(
-        raw,
-        dt,
-        inputs=inputs,
-        outputs=outputs,
-        input_roles=input_roles,
-        output_roles=output_roles,
-        present=present,
-        settings=settings,
-    )
+    data show it (`fitted_axes`), assembled into one model (module docstring), of what the
+    record moved (`axes.moved_axes`): a control it left at trim is left out of the inputs, an
+    axis it did not move out of the inputs and outputs, with its modes as missing, by name,
+    and why."""
+    dt = fitted.dt
     sp, ready, fits, engine = fitted.sp, fitted.ready, fitted.fits, fitted.engine
     batch, inputs, outputs = fitted.batch, fitted.inputs, fitted.outputs
     output_roles, present, measured = fitted.output_roles, fitted.present, fitted.measured
