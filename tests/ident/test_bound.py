@@ -5,6 +5,8 @@ fit's own reported standard errors against the same scatter."""
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from agent.ident import Experiment, Settings
@@ -38,6 +40,21 @@ def _fitted(record: Experiment):
     )
 
 
+@functools.cache
+def _records() -> tuple[tuple[Experiment, object], ...]:
+    """The SEEDS noisy records of the thesis's aircraft through the full preset, each with its
+    fitted axes (shared by the tests: fitting them is most of their time)."""
+    A, B, C = aircraft_with_engine_lag()
+    clean = full_preset_record(A, B, C)
+    scale = NOISE * np.sqrt(np.mean(clean.y**2, axis=0))
+    out = []
+    for seed in range(SEEDS):
+        rng = np.random.default_rng(seed)
+        record = Experiment(clean.u, clean.y + scale * rng.normal(size=clean.y.shape))
+        out.append((record, _fitted(record)))
+    return tuple(out)
+
+
 def _assembled(fitted) -> np.ndarray:
     A = np.zeros((len(OUTPUTS), len(OUTPUTS)))
     for fit in fitted.fits:
@@ -52,13 +69,8 @@ def test_the_bound_is_the_scatter_of_an_efficient_fit_over_seeds():
     A bound a factor √2 off either way (the complex likelihood's factor 2) puts some
     eigenvalue's scatter outside the test's limits (the short period's below, the phugoid's
     above)."""
-    A, B, C = aircraft_with_engine_lag()
-    clean = full_preset_record(A, B, C)
-    scale = NOISE * np.sqrt(np.mean(clean.y**2, axis=0))
-    records = []
-    for seed in range(SEEDS):
-        rng = np.random.default_rng(seed)
-        records.append(Experiment(clean.u, clean.y + scale * rng.normal(size=clean.y.shape)))
+    A, B, _ = aircraft_with_engine_lag()
+    records = _records()
     true_A = A[:8, :8]
     true_B = B[:8].copy()
     true_B[:, 0] = np.nan  # the throttle reaches the states through the lags: a nuisance
@@ -67,20 +79,13 @@ def test_the_bound_is_the_scatter_of_an_efficient_fit_over_seeds():
     # BOUND_RECORDS records.
     variance = np.mean(
         [
-            [e.real**2 for e in eigenvalue_std(true_A, bound(_fitted(r), true_A, true_B))]
-            for r in records[:BOUND_RECORDS]
+            [e.real**2 for e in eigenvalue_std(true_A, bound(fitted, true_A, true_B))]
+            for _, fitted in records[:BOUND_RECORDS]
         ],
         axis=0,
     )
-    found = np.array(
-        [
-            [
-                min(np.linalg.eigvals(_assembled(_fitted(r))), key=lambda e: abs(e - t))
-                for t in truth
-            ]
-            for r in records
-        ]
-    )
+    eigenvalues = [np.linalg.eigvals(_assembled(fitted)) for _, fitted in records]
+    found = np.array([[e[np.argmin(np.abs(e - t))] for t in truth] for e in eigenvalues])
     for k, t in enumerate(truth):
         if t.imag < 0:
             continue  # a pair's lower pole repeats the upper one's
@@ -96,13 +101,9 @@ def test_the_fits_reported_standard_errors_are_its_scatter_over_seeds():
     for it (its real part), rms over the seeds, is 1 within the sampling error of 24 seeds
     (±0.3). The covariance's leverage correction is what keeps the phugoid's there: without
     it the fitted residuals of the few bins that carry the phugoid understate the noise."""
-    A, B, C = aircraft_with_engine_lag()
-    clean = full_preset_record(A, B, C)
-    scale = NOISE * np.sqrt(np.mean(clean.y**2, axis=0))
+    A, _, _ = aircraft_with_engine_lag()
     scores: dict[complex, list[float]] = {}
-    for seed in range(SEEDS):
-        rng = np.random.default_rng(seed)
-        fitted = _fitted(Experiment(clean.u, clean.y + scale * rng.normal(size=clean.y.shape)))
+    for _, fitted in _records():
         for fit in fitted.fits:
             n = len(fit.states)
             found = np.linalg.eigvals(fit.A)

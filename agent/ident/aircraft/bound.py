@@ -134,7 +134,8 @@ def whittle(problem: AxisProblem, theta: np.ndarray) -> np.ndarray:
     inverse = np.linalg.inv(smooth) * max(averaged - n, 1) / averaged
     free = problem.free
     Jf = J[:, :, free]
-    M = 2 * np.einsum("fip,fij,fjq->pq", Jf.conj(), inverse, Jf).real
+    weighted = inverse @ Jf  # (F, n, p)
+    M = 2 * (Jf.conj().reshape(-1, Jf.shape[2]).T @ weighted.reshape(-1, Jf.shape[2])).real
     out = np.zeros((theta.size, theta.size))
     out[np.ix_(free, free)] = np.linalg.pinv(M, rcond=1e-12)
     return out

@@ -221,10 +221,11 @@ def covariance(problem: AxisProblem, theta: np.ndarray, sigma: np.ndarray) -> np
     n = e.shape[1]
     R = np.concatenate([Jw.real, Jw.imag], axis=1)  # (F, 2n, p)
     r = np.concatenate([e.real, e.imag], axis=1)  # (F, 2n)
-    hat = np.einsum("fip,pq,fjq->fij", R, Hinv, R)
+    hat = (R @ Hinv) @ R.transpose(0, 2, 1)
     values, vectors = np.linalg.eigh(np.eye(2 * n) - hat)
     scale = 1.0 / np.sqrt(np.clip(values, LEVERAGE_FLOOR, None))
-    r = np.einsum("fij,fj,fkj,fk->fi", vectors, scale, vectors, r)
+    r = vectors @ (scale * (vectors.transpose(0, 2, 1) @ r[:, :, None])[:, :, 0])[:, :, None]
+    r = r[:, :, 0]
     g = np.einsum("fip,fi->fp", R, r)
     out = np.zeros((theta.size, theta.size))
     out[np.ix_(free, free)] = Hinv @ (g.T @ g) @ Hinv  # the fixed entries are exact
