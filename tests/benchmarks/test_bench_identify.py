@@ -5,6 +5,7 @@ leaves them out (`--no-peers`), and without that flag the benchmark must say how
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import math
 
@@ -38,8 +39,10 @@ def test_every_method_identifies_the_lateral_record():
 
 def test_help_and_missing_peers():
     assert "--no-peers" in help_text("bench_identify.py")
-    done = run("bench_identify.py", "--seeds", "1", timeout_s=60, ok=False)
-    if done.returncode == 0:
+    if all(importlib.util.find_spec(module) for module in ("control", "sippy_unipi")):
+        # With the peers the script runs the benchmark itself (tens of seconds) instead of
+        # refusing: what this test checks needs them missing.
         pytest.skip("the peers are installed here")
+    done = run("bench_identify.py", "--seeds", "1", timeout_s=60, ok=False)
     assert done.returncode == 2
     assert "pip install -e '.[bench]'" in done.stderr, done.stderr

@@ -10,6 +10,7 @@ simulated flights (a minute more) for the same code."""
 
 from __future__ import annotations
 
+import importlib.util
 import re
 
 import pytest
@@ -47,8 +48,10 @@ def test_identification_section():
 
 def test_help_and_missing_peers():
     assert "--sections" in help_text("table.py")
-    done = run("table.py", "--sections", "identification", timeout_s=60, ok=False)
-    if done.returncode == 0:
+    if all(importlib.util.find_spec(module) for module in ("control", "sippy_unipi")):
+        # With the peers the script runs the benchmark itself (tens of seconds) instead of
+        # refusing: what this test checks needs them missing.
         pytest.skip("the peers are installed here")
+    done = run("table.py", "--sections", "identification", timeout_s=60, ok=False)
     assert done.returncode == 2
     assert "--no-peers" in done.stderr, done.stderr
