@@ -59,7 +59,8 @@ bench: $(BENCH_STAMP)
 
 # Six JSBSim aircraft, calm and in light turbulence, the full preset, a classic card and a sweep
 # card, sized as the agent sizes them, with and without the INS, 10 seeds each, with the peers
-# (about 30 minutes here; benchmarks/bench_jsbsim.py --quick reruns one row in about a minute).
+# and the validated truth's Cramér–Rao bound on each row (about 35 minutes here;
+# benchmarks/bench_jsbsim.py --quick reruns one row in about a minute).
 bench-jsbsim: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/bench_jsbsim.py --bound
 

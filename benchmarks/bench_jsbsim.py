@@ -3,7 +3,7 @@ turbulence, the agent's own full preset and a flight-test engineer's card, each 
 aircraft by the agent, identified with and without the INS's navigation channels, by
 suas-sysid and by the peers, in one process.
 
-    make bench-jsbsim                                    # every row, 10 seeds (~30 min here)
+    make bench-jsbsim                                    # every row, 10 seeds (~35 min here)
     .venv/bin/python benchmarks/bench_jsbsim.py --quick --aircraft c172r --turbulence 0 \
         --excitation card --nav ins                      # one row in about a minute
     .venv/bin/python benchmarks/bench_jsbsim.py --sizing nominal --aircraft pa28
