@@ -214,8 +214,9 @@ def identify(fitted: Fitted, settings: Settings) -> Identification:
     initial = [
         np.concatenate([e.y[:start].mean(axis=0), np.zeros(n_model - len(outputs))]) for e in batch
     ]
-    fit_in_time = fit(discrete, batch, initial)
-    if ready.known is not None:
+    if ready.known is None:
+        fit_in_time = fit(discrete, batch, initial)
+    else:
         fit_in_time = _fit_with_known(model, fits, ready, batch, r=len(inputs), dt=dt, hold=hold)
     residuals = np.vstack([e.y - p for e, p in zip(batch, fit_in_time.predictions, strict=True)])
     refinement = Refinement(
@@ -618,6 +619,8 @@ def _fit_with_known(
         runs.append(Experiment(u, prepared.y))
         initial.append(np.concatenate([prepared.y[:start].mean(axis=0), np.zeros(n - m)]))
     inertial = fit(extended, runs, initial)
+    if not all(np.all(np.isfinite(p)) for p in inertial.predictions):
+        return inertial  # diverged: TIC 1 on every output, as bad a fit as TIC can say
     predictions = tuple(
         p - (run.y - raw.y) for p, run, raw in zip(inertial.predictions, runs, batch, strict=True)
     )
