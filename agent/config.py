@@ -161,6 +161,11 @@ class IdentificationConfig(Section):
     trim_seconds: float = Field(0.5, ge=0.0)
     """Trim is the mean of the first trim_seconds of each record (trimmed flight before the
     excitation), subtracted from inputs and outputs; 0 disables trim removal."""
+    air_angles: Literal["auto", "vanes", "synthesised"] = "auto"
+    """Where α and β come from: "vanes" (as recorded), "synthesised" (from the INS's velocity,
+    the attitude and an estimated wind, for an aircraft whose air data measures the airspeed
+    only: agent.ident.aircraft.airangles), or "auto": the vanes' where a record has them,
+    else synthesised (docs/identification.md, *Without vanes*)."""
     estimate_d: bool = False
     """Estimate the feed-through D; false forces D = 0, a strictly proper model (thesis §4.1.3)."""
     regularization: float = Field(0.0, ge=0.0, lt=1.0)

@@ -36,8 +36,10 @@ sized by the same model. `--sizing nominal` flies each at its plan's own amplitu
 
 Each seed is one offline flight (`agent.sim.offline.fly`: JSBSim trimmed as `sysid sim` trims
 it, the emulated ArduPlane's servos, the sensors' noise, 100 Hz), 2 s before to 2 s after the
-plan, identified as the agent does (the trim from the first 0.5 s), once with the INS's
-heading and velocities for the wind ("ins") and once without ("none").
+plan, identified as the agent does (the trim from the first 0.5 s): with the INS's heading and
+velocities for the wind ("ins"), without them ("none"), and as an aircraft without vanes would
+be ("novanes": α and β synthesised from the INS and an estimated steady wind, the gust's α
+and β unmeasured; agent.ident.aircraft.airangles).
 
 Truth: `agent.sim.truth.linear_truth`, JSBSim's validated small-amplitude linear model
 (`benchmarks/truth_check.py` checks it). Printed per aircraft, condition, excitation,
@@ -100,6 +102,7 @@ from agent.excitation.plan import (
 )
 from agent.ident import Experiment, Settings, identify
 from agent.ident.aircraft import axes_present
+from agent.ident.aircraft.airangles import synthesise
 from agent.ident.aircraft.bound import bound
 from agent.ident.aircraft.model import fitted_axes
 from agent.ident.convert import StateSpace
@@ -132,7 +135,9 @@ AIRCRAFT = {
 }
 MODES = ("short period", "phugoid", "Dutch roll", "roll")
 EXCITATIONS = ("full", "card", "sweep")
-NAVIGATION = ("ins", "none")
+# With the INS's navigation and the vanes; the vanes alone; the INS with α and β synthesised
+# from it (no vanes).
+NAVIGATION = ("ins", "none", "novanes")
 TRIM_SAMPLES = 50  # 0.5 s at 100 Hz, as the agent's trim
 PEER_ORDER = 9
 TEXTBOOK_P = 4
@@ -250,14 +255,29 @@ def columns(setup: Setup) -> list[int]:
     return [INPUT_CHANNELS.index(c) for c in setup.controls]
 
 
-def experiment(rec: Record, setup: Setup, wind: bool = True) -> Experiment:
+def experiment(rec: Record, setup: Setup, wind: bool = True, vanes: bool = True) -> Experiment:
+    """The record as the agent identifies it: with the INS's navigation (`wind`) or not, and
+    with the vanes' α and β or (`vanes` False) those synthesised from the INS and an
+    estimated wind (agent.ident.aircraft.airangles), as an aircraft without vanes has them."""
     keep = columns(setup)
-    u0, y0 = rec.u[:TRIM_SAMPLES].mean(0), rec.y[:TRIM_SAMPLES].mean(0)
+    y, made = rec.y, None
+    if not vanes:
+        outputs = list(Record.outputs)
+        made = synthesise(
+            y[:, outputs.index("Vt")],
+            y[:, outputs.index("theta")],
+            y[:, outputs.index("phi")],
+            rec.ins,
+        )
+        y = y.copy()
+        y[:, outputs.index("alpha")], y[:, outputs.index("beta")] = made.alpha, made.beta
+    u0, y0 = rec.u[:TRIM_SAMPLES].mean(0), y[:TRIM_SAMPLES].mean(0)
     return Experiment(
         (rec.u - u0)[:, keep],
-        rec.y - y0,
+        y - y0,
         operating_point=y0,
-        navigation=rec.ins if wind else None,
+        navigation=rec.ins if wind or not vanes else None,
+        air_angles=made,
     )
 
 
@@ -723,7 +743,7 @@ def main() -> None:
     )
     head = "  ".join(f"{m:>13}" for m in MODES)
     print(
-        f"{'aircraft':8} {'turb':>4} {'exc.':4} {'nav':4} {'method':20} {head}  ≤10 %  spiral"
+        f"{'aircraft':8} {'turb':>4} {'exc.':4} {'nav':7} {'method':20} {head}  ≤10 %  spiral"
         f"  {'TIC':>11}   s/id"
     )
     for name in args.aircraft:
@@ -789,7 +809,7 @@ def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validat
             flown.append(excursions(rec))
             check = None
             for nav in args.nav:
-                exp = experiment(rec, setup, wind=nav == "ins")
+                exp = experiment(rec, setup, wind=nav == "ins", vanes=nav != "novanes")
                 try:
                     found, result, seconds, spiral = ours(exp, rec.dt, setup, settings)
                     model, errors = on_controls(result, setup), mode_errors(found, truth)
@@ -899,7 +919,7 @@ def _print(setup: Setup, excitation: str, nav: str, method: str, results: list) 
     seconds = f"{np.median(times):5.2f}" if times else "    –"
     tic = f"{np.median(tics):5.3f}/{np.max(tics):5.3f}" if np.all(np.isfinite(tics)) else "–"
     print(
-        f"{setup.name:8} {setup.turbulence:4.1f} {excitation:4} {nav:4} {method:20} {cells}  "
+        f"{setup.name:8} {setup.turbulence:4.1f} {excitation:4} {nav:7} {method:20} {cells}  "
         f"{ok:2d}/{len(e):<2d}  {spiral_cell}  {tic:>11}  {seconds}",
         flush=True,
     )
@@ -909,7 +929,7 @@ def _print(setup: Setup, excitation: str, nav: str, method: str, results: list) 
             scores.setdefault(k, []).append(v)
     if scores:
         rms = ", ".join(f"{k} {np.sqrt(np.mean(np.square(v))):.1f}" for k, v in scores.items())
-        print(f"{'':8} {'':4} {excitation:4} {nav:4} z-scores' rms (error / reported σ): {rms}")
+        print(f"{'':8} {'':4} {excitation:4} {nav:7} z-scores' rms (error / reported σ): {rms}")
 
 
 def _print_bound(excitation: str, nav: str, bounds: list[tuple[float, list[float]]]) -> None:
@@ -919,7 +939,7 @@ def _print_bound(excitation: str, nav: str, bounds: list[tuple[float, list[float
     cells = ", ".join(f"{m} {100 * e:.1f}" for m, e in zip(MODES, median, strict=True))
     expected = sum(b[0] for b in bounds)
     print(
-        f"{'':8} {'':4} {excitation:4} {nav:4} the truth's Cramér–Rao bound: median error (%) "
+        f"{'':8} {'':4} {excitation:4} {nav:7} the truth's Cramér–Rao bound: median error (%) "
         f"{cells}; ≤10 % on {expected:.1f} of {len(bounds)} seeds at best",
         flush=True,
     )

@@ -81,6 +81,10 @@ class AirDataPort(SerialPort):
     """Device path of the µADC's serial port."""
     probe_limit_deg: float = Field(20.0, gt=0.0, le=90.0)
     """Vane/probe range: α or β within 0.05° of it is flagged as clipped."""
+    vanes: bool = True
+    """The probe measures α and β. false: an airspeed-only probe, whose α and β fields carry
+    nothing: they are recorded as missing, and the identification synthesises α and β from
+    the INS and an estimated wind (`[identification] air_angles`, docs/identification.md)."""
 
 
 class Calibration(Section):

@@ -22,6 +22,7 @@ from agent.analysis.identify import Request, load_experiments
 from agent.analysis.records import MAX_LINE, RecordError, time_steps
 from agent.ident import Experiment, Settings
 from agent.ident import job as jobs
+from agent.ident.aircraft.airangles import fill
 from agent.ident.errors import DataError
 from agent.ident.job import Outcome
 from agent.logs import LogError, read_log
@@ -155,7 +156,7 @@ def build_cases(
     for path in request.paths:
         exp, dt = _experiment(Path(path), request)
         data.append((exp.u, exp.y))
-        contexts.append((exp.operating_point, exp.navigation))
+        contexts.append((exp.operating_point, exp.navigation, exp.air_angles))
         rates.append(dt)
     dt = rates[0]
     if any(abs(r - dt) > 0.01 * dt for r in rates):
@@ -203,13 +204,25 @@ def _experiment(path: Path, request: Request) -> tuple[Experiment, float]:
         return experiments[0], dt
     try:
         # Only the columns used are kept: memory goes with them, not with the log.
-        used = ("time", *request.inputs, *request.outputs, *request.navigation)
+        air = request.air_angles
+        synthesisable = (air.alpha, air.beta) if air is not None and air.mode != "vanes" else ()
+        used = (
+            "time",
+            *request.inputs,
+            *request.outputs,
+            *request.navigation,
+            *(air.needed if air is not None else ()),
+        )
         columns, rows = read_log(path, used)
     except LogError as exc:  # names the line and column
         raise AnalyzeError(f"{path}: {exc}") from exc
     except (OSError, ValueError) as exc:
         raise AnalyzeError(f"{path}: not a readable log ({exc})") from exc
-    missing = [n for n in ("time", *request.inputs, *request.outputs) if n not in columns]
+    missing = [
+        n
+        for n in ("time", *request.inputs, *request.outputs)
+        if n not in columns and n not in synthesisable
+    ]
     if missing:
         raise AnalyzeError(f"{path}: no column {', '.join(missing)}")
     if rows.shape[0] < 3:
@@ -231,15 +244,16 @@ def _experiment(path: Path, request: Request) -> tuple[Experiment, float]:
     # the µs-rounded times); logs written before the header named it: the median step.
     rate = _header(path, r"recorded at (\S+) Hz")
     dt = 1.0 / float(rate) if rate else float(np.median(np.diff(time)))
-    navigation = [n for n in request.navigation if n in columns]
-    values = {
-        n: rows[keep, columns.index(n)] for n in (*request.inputs, *request.outputs, *navigation)
-    }
+    present = [n for n in dict.fromkeys(used[1:]) if n in columns]
+    values = {n: rows[keep, columns.index(n)] for n in present}
+    made = None
     try:
+        if air is not None:
+            values, made = fill(values, request.outputs, air)
         (u, y), trim = jobs.window_and_trim(
             values, request.inputs, request.outputs, dt, max(request.trim_seconds, dt)
         )
-    except (DataError, KeyError) as exc:
+    except (DataError, KeyError, ValueError) as exc:
         raise AnalyzeError(f"{path}: {exc}") from exc
     operating_point = np.array(list(trim["outputs"].values()))
     if request.trim_seconds <= 0:  # --trim none: the data as recorded
@@ -247,7 +261,7 @@ def _experiment(path: Path, request: Request) -> tuple[Experiment, float]:
         y = y + operating_point
         operating_point = np.zeros_like(operating_point)
     nav = jobs.window_navigation(values, request.inputs, request.outputs, request.navigation)
-    return Experiment(u, y, operating_point=operating_point, navigation=nav), dt
+    return Experiment(u, y, operating_point=operating_point, navigation=nav, air_angles=made), dt
 
 
 def _check_time(path: Path, time: np.ndarray) -> None:

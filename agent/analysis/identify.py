@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +11,7 @@ import numpy as np
 from agent.analysis.records import Record, RecordError, read_record, select, trim_values
 from agent.config import IdentificationConfig as IdentConfig
 from agent.ident import Experiment, Identification, Settings, identify
+from agent.ident.aircraft.airangles import Sources, fill
 
 # Two records are one batch only if their sample times agree this closely.
 DT_TOLERANCE = 0.01
@@ -29,6 +30,9 @@ class Request:
     # The INS heading and velocity columns (NAVIGATION_ROLES order), used where a record has
     # them all: the aircraft method measures the wind with them, as onboard.
     navigation: tuple[str, ...] = ()
+    # Where α and β come from (vanes, or synthesised from the INS and an estimated wind where
+    # a record has no vanes'); None: as recorded, never synthesised.
+    air_angles: Sources | None = None
 
 
 @dataclass(frozen=True)
@@ -39,6 +43,7 @@ class Outcome:
     trim: list[dict[str, float]]  # per record, in order
     records: int
     samples: int
+    notes: tuple[str, ...] = ()  # per record, how its α and β were synthesised (if they were)
 
 
 def parse_trim(text: str) -> float:
@@ -64,10 +69,24 @@ def load_experiments(
     if overlap:
         raise RecordError(f"column(s) {', '.join(sorted(overlap))} are both input and output")
     names = list(request.inputs) + list(request.outputs)
+    sources = request.air_angles
+    synthesisable = sources is not None and sources.mode != "vanes"
+    angles = {sources.alpha, sources.beta} & set(request.outputs) if synthesisable else set()
+    optional = (*request.navigation, *(sources.needed if angles else ()))
     records: list[Record] = []
+    air: list = []
     for path in request.paths:
-        record = read_record(path, names, optional=request.navigation)
-        records.append(select(record, request.start, request.end))
+        record = read_record(path, names, optional=optional, absent=tuple(angles))
+        record = select(record, request.start, request.end)
+        made = None
+        if angles:
+            try:
+                columns, made = fill(record.columns, request.outputs, sources)
+            except ValueError as exc:
+                raise RecordError(f"{path}: {exc}") from None
+            record = replace(record, columns=columns)
+        records.append(record)
+        air.append(made)
     dt = records[0].dt
     for rec in records[1:]:
         if abs(rec.dt - dt) > DT_TOLERANCE * dt:
@@ -76,7 +95,7 @@ def load_experiments(
                 f"{dt:.6g} s; a batch needs one sample rate"
             )
     experiments, trim = [], []
-    for rec in records:
+    for rec, made in zip(records, air, strict=True):
         offsets = (
             trim_values(rec, names, request.trim_seconds)
             if request.trim_seconds > 0
@@ -90,7 +109,9 @@ def load_experiments(
         if request.navigation and all(n in rec.columns for n in request.navigation):
             navigation = rec.matrix(request.navigation)
         experiments.append(
-            Experiment(u=u, y=y, operating_point=operating_point, navigation=navigation)
+            Experiment(
+                u=u, y=y, operating_point=operating_point, navigation=navigation, air_angles=made
+            )
         )
     return experiments, dt, trim, sum(r.time.size for r in records)
 
@@ -98,6 +119,11 @@ def load_experiments(
 def run(request: Request, config: IdentConfig, settings: Settings) -> Outcome:
     """Identify the request's records as one batch."""
     experiments, dt, trim, samples = load_experiments(request)
+    notes = tuple(
+        f"{path.name}: {e.air_angles.note()}"
+        for path, e in zip(request.paths, experiments, strict=True)
+        if e.air_angles is not None
+    )
     roles: Sequence[str | None] = [config.channels.role_of(n) for n in request.outputs]
     result = identify(
         experiments,
@@ -108,4 +134,5 @@ def run(request: Request, config: IdentConfig, settings: Settings) -> Outcome:
         input_roles=[config.channels.role_of(n) for n in request.inputs],
         settings=settings,
     )
-    return Outcome(result=result, trim=trim, records=len(experiments), samples=samples)
+    result = replace(result, warnings=(*notes, *result.warnings))
+    return Outcome(result=result, trim=trim, records=len(experiments), samples=samples, notes=notes)

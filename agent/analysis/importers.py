@@ -4,7 +4,15 @@ ArduPilot DataFlash (.bin, read with pymavlink's DFReader). The mapping:
 
 - ATT.Roll, Pitch, Yaw → phi, theta, psi (rad; logged in degrees);
 - IMU.GyrX, GyrY, GyrZ → p, q, r (rad/s) and AccX, AccY, AccZ → ax, ay, az (m/s²), instance 0;
-- ARSP.Airspeed → Vt (m/s), instance 0; AOA.AOA, SSA → alpha, beta (rad; logged in degrees);
+- ARSP.Airspeed → Vt (m/s), instance 0;
+- XKF1.VN, VE, VD (EKF3's velocity over the ground, core 0, the primary unless EK3_PRIMARY
+  says otherwise) → vn, ve, vd (m/s); EKF2's NKF1 where the log has no XKF1: with ψ, the
+  navigation the whole-aircraft method measures the wind with;
+- AOA.AOA, SSA → aoa_ahrs, ssa_ahrs (rad; logged in degrees). Not vanes: ArduPilot computes
+  them from the airspeed, its EKF's wind estimate and the velocity over the ground
+  (AP_AHRS), so they are named apart and `sysid identify` synthesises α and β itself from
+  the INS channels (agent.ident.aircraft.airangles), saying so; name them as the alpha and
+  beta channels in `[identification.channels]` to use ArduPilot's instead;
 - RCOU.C<n> of each [excitation.surfaces] control (its `channel`) → <control>_pwm (µs, as
   logged) and <control>: surfaces in degrees from 1500 µs by the control's `us_per_unit` and
   `direction` (the RC input's sense: in MANUAL an output follows its input while
@@ -16,10 +24,14 @@ PX4 ULog (.ulg, read with pyulog), instance 0 of each topic:
 
 - vehicle_attitude.q (w, x, y, z) → phi, theta, psi (rad, ZYX Euler angles);
 - vehicle_angular_velocity.xyz → p, q, r; vehicle_acceleration.xyz → ax, ay, az;
+- vehicle_local_position.vx, vy, vz (the EKF's velocity, north, east, down) → vn, ve, vd, the
+  samples its v_xy_valid / v_z_valid flags mark invalid dropped;
 - airspeed_validated.true_airspeed_m_s → Vt; airflow_aoa.aoa_rad → alpha and
   airflow_slip.slip_rad → beta where the vehicle logs them;
 - actuator_outputs.output[channel − 1] → <control>_pwm and <control>, as for ArduPilot.
 
+Angles that wrap (ψ logged from 0 to 360°, φ past ±180°) are unwrapped before they are
+interpolated: a heading crossing north would otherwise pass through 180° between two samples.
 Every channel is interpolated linearly onto one uniform time grid (`rate_hz`, default 50 Hz,
 ArduPilot's usual ATT/IMU rate) over the span all mapped channels cover; `time` is seconds
 since the log's first sample. A channel the log does not have is left out and listed in
@@ -58,6 +70,10 @@ SID_AXES = {
     12: "mixer yaw",
     13: "mixer thrust",
 }
+# EKF2's velocities are kept under this suffix and used only where the log has no EKF3's.
+EKF2 = "@NKF1"
+# The columns whose angle wraps (rad), unwrapped before the interpolation.
+WRAPPING = ("phi", "psi")
 # (message, field, column, scale, instance field or None)
 DATAFLASH = [
     ("ATT", "Roll", "phi", DEG, None),
@@ -70,12 +86,22 @@ DATAFLASH = [
     ("IMU", "AccY", "ay", 1.0, "I"),
     ("IMU", "AccZ", "az", 1.0, "I"),
     ("ARSP", "Airspeed", "Vt", 1.0, "I"),
-    ("AOA", "AOA", "alpha", DEG, None),
-    ("AOA", "SSA", "beta", DEG, None),
+    ("AOA", "AOA", "aoa_ahrs", DEG, None),
+    ("AOA", "SSA", "ssa_ahrs", DEG, None),
+    ("XKF1", "VN", "vn", 1.0, "C"),
+    ("XKF1", "VE", "ve", 1.0, "C"),
+    ("XKF1", "VD", "vd", 1.0, "C"),
+    ("NKF1", "VN", "vn" + EKF2, 1.0, "C"),
+    ("NKF1", "VE", "ve" + EKF2, 1.0, "C"),
+    ("NKF1", "VD", "vd" + EKF2, 1.0, "C"),
     ("SIDD", "Targ", "sid_target", 1.0, None),
     ("SIDD", "F", "sid_frequency_hz", 1.0, None),
     ("SIDD", "Time", "sid_time", 1.0, None),
 ]
+# What a PX4 log gives where it has every topic mapped (module docstring).
+PX4_COLUMNS = [
+    "phi", "theta", "psi", "p", "q", "r", "ax", "ay", "az", "Vt", "alpha", "beta", "vn", "ve", "vd"
+]  # fmt: skip
 DEFAULT_RATE_HZ = 50.0
 
 
@@ -175,7 +201,10 @@ def _dataflash(path: Path, surfaces: Mapping[str, Surface], rate_hz: float) -> I
         if pwm is not None:
             values = np.asarray(pwm[1])
             series[control] = (pwm[0], list(_deflection(control, values, surface)))
-    return _resample(path, "ArduPilot DataFlash", series, rate_hz, notes)
+    expected = [
+        c for _, _, c, _, _ in DATAFLASH if not c.startswith("sid_") and not c.endswith(EKF2)
+    ]
+    return _resample(path, "ArduPilot DataFlash", series, rate_hz, notes, expected)
 
 
 def _read_dataflash(
@@ -226,6 +255,12 @@ def _read_dataflash(
                 _append(series, column, t, float(getattr(m, name)) * scale)
     if damaged:
         notes.append(f"{damaged} damaged message(s) skipped; reading went on past each")
+    ekf2 = [c for c in series if c.endswith(EKF2)]
+    if ekf2 and "vn" not in series:
+        notes.append("velocities from EKF2 (NKF1): the log has no EKF3 (XKF1)")
+    for column in ekf2:
+        values = series.pop(column)
+        series.setdefault(column.removesuffix(EKF2), values)
     return series, notes
 
 
@@ -234,6 +269,7 @@ def _ulog(path: Path, surfaces: Mapping[str, Surface], rate_hz: float) -> Import
 
     topics = [
         "vehicle_attitude",
+        "vehicle_local_position",
         "vehicle_angular_velocity",
         "vehicle_acceleration",
         "airspeed_validated",
@@ -266,6 +302,16 @@ def _ulog(path: Path, surfaces: Mapping[str, Surface], rate_hz: float) -> Import
             d = data[topic]
             for k, column in enumerate(columns):
                 put(column, d["timestamp"] * 1e-6, d[f"xyz[{k}]"])
+    if "vehicle_local_position" in data:
+        d = data["vehicle_local_position"]
+        t = d["timestamp"] * 1e-6
+        for name, column, flag in (
+            ("vx", "vn", "v_xy_valid"),
+            ("vy", "ve", "v_xy_valid"),
+            ("vz", "vd", "v_z_valid"),
+        ):
+            valid = d[flag].astype(bool) if flag in d else np.ones(t.size, bool)
+            put(column, t, np.where(valid, d[name], np.nan))  # invalid: dropped, counted
     for topic, name, column in (
         ("airspeed_validated", "true_airspeed_m_s", "Vt"),
         ("airflow_aoa", "aoa_rad", "alpha"),
@@ -283,7 +329,7 @@ def _ulog(path: Path, surfaces: Mapping[str, Surface], rate_hz: float) -> Import
     if not series:
         raise LogImportError(f"{path}: none of the mapped topics are in this log")
     notes = [f"PX4 ({log.msg_info_dict.get('sys_name', '?')}), dropouts: {len(log.dropouts)}"]
-    return _resample(path, "PX4 ULog", series, rate_hz, notes)
+    return _resample(path, "PX4 ULog", series, rate_hz, notes, PX4_COLUMNS)
 
 
 def _deflection(control: str, pwm: np.ndarray, surface: Surface) -> np.ndarray:
@@ -337,7 +383,9 @@ def _stretch(core: dict, start: float, end: float) -> tuple[float, float, list[t
     return best[0], best[1], gaps
 
 
-def _resample(path: Path, kind: str, series, rate_hz: float, notes: list[str]) -> Imported:
+def _resample(
+    path: Path, kind: str, series, rate_hz: float, notes: list[str], expected: list[str]
+) -> Imported:
     skipped: dict[str, int] = {}
     series = {
         c: _clean(c, np.asarray(t, float), np.asarray(v, float), skipped)
@@ -377,6 +425,9 @@ def _resample(path: Path, kind: str, series, rate_hz: float, notes: list[str]) -
     for column, (t, v) in series.items():
         t, v = np.asarray(t), np.asarray(v)
         order = np.argsort(t, kind="stable")
+        if column in WRAPPING:
+            v = v.copy()
+            v[order] = np.unwrap(v[order])
         if column.startswith("sid_"):
             inside = (time >= t.min()) & (time <= t.max())
             columns[column] = np.where(inside, np.interp(time, t[order], v[order]), 0.0)
@@ -385,7 +436,6 @@ def _resample(path: Path, kind: str, series, rate_hz: float, notes: list[str]) -
     if "sid_time" in series:
         t = np.asarray(series["sid_time"][0])
         columns["sid_active"] = ((time >= t.min()) & (time <= t.max())).astype(float)
-    expected = [c for _, _, c, _, _ in DATAFLASH if not c.startswith("sid_")]
     expected = list(dict.fromkeys(expected))
     missing = [c for c in expected if c not in columns]
     return Imported(path, kind, time - time[0], columns, missing, notes)

@@ -43,10 +43,14 @@ class Record:
         return np.column_stack([self.columns[n] for n in names])
 
 
-def read_record(path: str | Path, names: Sequence[str], optional: Sequence[str] = ()) -> Record:
+def read_record(
+    path: str | Path, names: Sequence[str], optional: Sequence[str] = (), absent: Sequence[str] = ()
+) -> Record:
     """Read `time` and the named columns; check they are finite and uniformly sampled. The
     `optional` columns are read too where the header has them and every cell is a finite
-    number; otherwise they are left out of the record.
+    number; otherwise they are left out of the record. The named columns also in `absent`
+    may be missing from the header (α and β, which can be synthesised); where the header has
+    them they are read as strictly as the others.
 
     A UTF-8 byte-order mark (Excel's "CSV UTF-8") is skipped. The data rows go through numpy's
     C reader (`np.loadtxt`) into one float array, about 8 bytes a cell; a file it refuses is
@@ -62,6 +66,7 @@ def read_record(path: str | Path, names: Sequence[str], optional: Sequence[str] 
                 raise RecordError(f"{path}: the file is empty; expected a header row")
             header = [h.strip() for h in next(csv.reader([line]))]
             _check_header(path, header)
+            names = [n for n in names if n in header or n not in absent]
             index = _column_index(path, header, ["time", *names])
             extra = [
                 n

@@ -206,6 +206,12 @@ def identification_options(parser: argparse.ArgumentParser) -> None:
         "longitudinal and lateral models fitted in the frequency domain",
     )
     parser.add_argument(
+        "--air-angles",
+        choices=("auto", "vanes", "synthesised"),
+        help="alpha and beta from the vanes, or synthesised from the INS velocity, attitude "
+        "and an estimated wind (default from config: auto, the vanes' where a record has them)",
+    )
+    parser.add_argument(
         "--period",
         type=positive_seconds,
         metavar="SECONDS",
@@ -256,7 +262,8 @@ def service_options(parser: argparse.ArgumentParser, config: Path, base_holds: s
 
 def aircraft_options(args: argparse.Namespace, **more):
     """The simulated aircraft's options (agent.sim.aircraft) from the --aircraft, --speed-kts,
-    --turbulence and --seed that `sysid sim` and `sim-aircraft` each define, and `more`."""
+    --turbulence, --seed and --no-vanes that `sysid sim` and `sim-aircraft` each define, and
+    `more`."""
     from agent.sim.aircraft import AircraftOptions
 
     return AircraftOptions(
@@ -264,6 +271,7 @@ def aircraft_options(args: argparse.Namespace, **more):
         speed_kts=args.speed_kts,
         turbulence=args.turbulence,
         seed=args.seed,
+        vanes=not args.no_vanes,
         **more,
     )
 
@@ -320,6 +328,7 @@ def identification_request(args: argparse.Namespace, paths, *, sampled_inputs: b
     the records are the agent's own (`Settings.from_config`), not CSV records."""
     from agent.analysis import identify as identify_cmd
     from agent.config import MAX_DECIMATION
+    from agent.ident.aircraft.airangles import Sources
     from agent.ident.settings import Settings
 
     if args.decimation is not None and args.decimation > MAX_DECIMATION:
@@ -340,6 +349,7 @@ def identification_request(args: argparse.Namespace, paths, *, sampled_inputs: b
         end=args.end,
         trim_seconds=trim_s,
         navigation=config.channels.navigation(),
+        air_angles=Sources.of(config.channels, args.air_angles or config.air_angles),
     )
     settings = Settings.from_config(
         config,

@@ -36,6 +36,12 @@ def add_parser(sub) -> None:
         help="Dryden intensity: 0 none, 1 light (W20 = 5 ft/s), at most 15 (severe)",
     )
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--no-vanes",
+        action="store_true",
+        help="air data with the airspeed only (no α, β vanes): the agent synthesises α and β "
+        "from the INS",
+    )
     parser.add_argument("--preset", choices=PRESETS, default="full")
     parser.add_argument(
         "--runs",

@@ -27,6 +27,12 @@ def add_parser(sub) -> None:
     )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
+        "--no-vanes",
+        action="store_true",
+        help="air data with the airspeed only (no α, β vanes): the agent synthesises α and β "
+        "from the INS",
+    )
+    parser.add_argument(
         "--mavlink-port",
         type=common.port,
         default=14555,

@@ -155,9 +155,24 @@ class Gain(Document):
     std: float
 
 
+class AirAngles(Document):
+    """How one record's α and β were synthesised without vanes (agent.ident.aircraft.airangles):
+    the wind estimated from the INS and the airspeed."""
+
+    wind_mps: tuple[float, float]  # mean wind, north and east (where the air goes)
+    drift_mps: tuple[float, float]  # its change over the record
+    sideslip_rad: float  # the mean sideslip estimated with it
+    airspeed_rms_mps: float  # how well the wind triangle closes
+    heading_span_deg: float  # the headings the record covered
+
+
 class Wind(Document):
     measured: bool  # the gusts were measured (INS velocities) and were known inputs
     gust_rms: dict[str, float]  # by the output each gust corrects
+    # "vanes": α and β as recorded; "synthesised": from the INS and an estimated wind (no
+    # vanes), one entry per record in `synthesised`, and then only the airspeed's gust measured.
+    air_angles: Literal["vanes", "synthesised"] = "vanes"
+    synthesised: list[AirAngles] = []
 
 
 class Coupling(Document):

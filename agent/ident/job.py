@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from agent.channels import AXIS_SETS
 from agent.ident import Experiment, Settings, frf, identify
+from agent.ident.aircraft.airangles import Sources, fill
 from agent.ident.document import PreprocessingDocument, ResultDocument
 from agent.ident.errors import DataError, IdentificationFailed
 from agent.ident.fit import fit
@@ -42,11 +43,15 @@ class Job:
     navigation: tuple[str, ...] = ()
     """The INS heading and velocity channels in the window (NAVIGATION_ROLES order): the
     aircraft method measures the wind with them. A window without them is identified without."""
-    contexts: tuple[tuple[np.ndarray | None, np.ndarray | None], ...] = ()
+    contexts: tuple[tuple, ...] = ()
     """Per experiment, its operating point and navigation (`Experiment`) where they are known
-    (a replayed log), for the aircraft method's kinematics and wind; empty: none."""
+    (a replayed log), for the aircraft method's kinematics and wind, and optionally third how
+    its α and β were synthesised (`Experiment.air_angles`); empty: none."""
     input_roles: tuple[str, ...] = ()
     """The inputs' roles ("" for none); empty: those of `axes`' axis set."""
+    air_angles: Sources | None = None
+    """Where the window's α and β come from (`agent.ident.aircraft.airangles.fill`): the
+    vanes', or synthesised from the INS and an estimated wind; None: as recorded."""
 
 
 def window_and_trim(values: dict[str, np.ndarray], inputs, outputs, dt: float, trim_s: float):
@@ -133,23 +138,28 @@ def run(job: Job) -> Outcome:
     contexts = job.contexts or ((None, None),) * len(job.experiments)
     pairs = zip(job.experiments, contexts, strict=True)
     experiments = [
-        Experiment(u, y, operating_point=op, navigation=nav) for (u, y), (op, nav) in pairs
+        Experiment(u, y, operating_point=c[0], navigation=c[1], air_angles=(*c, None)[2])
+        for (u, y), c in pairs
     ]
     extra: dict = {}
+    made = None
     if job.window is not None:
+        window = job.window
         try:
+            if job.air_angles is not None:
+                window, made = fill(window, job.outputs, job.air_angles)
             (u, y), trim = window_and_trim(
-                job.window, job.inputs, job.outputs, job.record_dt, job.trim_s
+                window, job.inputs, job.outputs, job.record_dt, job.trim_s
             )
-        except (DataError, KeyError) as exc:
+        except (DataError, KeyError, ValueError) as exc:
             return Outcome(
                 model_id=job.model_id, ok=False, reason=f"window unusable: {exc}", axes=job.axes
             )
         extra = {"experiment": (u, y), "trim": trim}
         # Its absolute trim and navigation, for the aircraft method's kinematics and wind.
         op = np.array([trim["outputs"][n] for n in job.outputs])
-        nav = window_navigation(job.window, job.inputs, job.outputs, job.navigation)
-        experiments.append(Experiment(u, y, operating_point=op, navigation=nav))
+        nav = window_navigation(window, job.inputs, job.outputs, job.navigation)
+        experiments.append(Experiment(u, y, operating_point=op, navigation=nav, air_angles=made))
     try:
         result = identify(
             experiments,
@@ -162,6 +172,9 @@ def run(job: Job) -> Outcome:
         )
     except (DataError, IdentificationFailed, np.linalg.LinAlgError, ValueError) as exc:
         return Outcome(model_id=job.model_id, ok=False, reason=str(exc), axes=job.axes, **extra)
+    notes = tuple(e.air_angles.note() for e in experiments if e.air_angles is not None)
+    if notes:
+        result = replace(result, warnings=(*dict.fromkeys(notes), *result.warnings))
     return Outcome(model_id=job.model_id, ok=True, axes=job.axes, result=result.document(), **extra)
 
 

@@ -21,11 +21,15 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.linalg
 
 from agent.ident.errors import DataError, IdentificationFailed, InsufficientDataError
+
+if TYPE_CHECKING:
+    from agent.ident.aircraft.airangles import Synthesised
 
 # Rows per unknown in each output's regression: below two the fit is barely determined and
 # the Markov parameters are mostly noise.
@@ -47,12 +51,14 @@ class Experiment:
     Optional, for the whole-aircraft method (agent.ident.aircraft): `operating_point`, the
     outputs' trim values that were removed (m,), and `navigation`, the INS's heading and
     north, east and down velocities (l × 4, absolute, rad and m/s) that the wind is measured
-    from."""
+    from; `air_angles`, where α and β were synthesised from the INS and an estimated wind (no
+    vanes: agent.ident.aircraft.airangles), how: the gust's α and β are then not measured."""
 
     u: np.ndarray
     y: np.ndarray
     operating_point: np.ndarray | None = None
     navigation: np.ndarray | None = None
+    air_angles: Synthesised | None = None
 
     @property
     def length(self) -> int:
@@ -99,7 +105,8 @@ def as_experiments(experiments: Sequence[Experiment] | Experiment) -> list[Exper
         if not (np.isfinite(u).all() and np.isfinite(y).all()):
             raise DataError(f"experiment {index}: inputs or outputs contain NaN or infinity")
         op, nav = _optional(exp, index, u.shape[0], y.shape[1])
-        clean.append(Experiment(u=u, y=y, operating_point=op, navigation=nav))
+        air = getattr(exp, "air_angles", None)
+        clean.append(Experiment(u=u, y=y, operating_point=op, navigation=nav, air_angles=air))
     r, m = clean[0].u.shape[1], clean[0].y.shape[1]
     for index, exp in enumerate(clean):
         if exp.u.shape[1] != r or exp.y.shape[1] != m:

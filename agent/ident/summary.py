@@ -4,6 +4,8 @@ and the poles left out of the modes."""
 
 from __future__ import annotations
 
+import numpy as np
+
 from agent.ident.modal import Mode
 from agent.ident.result import Identification
 
@@ -102,8 +104,24 @@ def _method_lines(result: Identification) -> list[str]:
         + (f"; engine lags {lags}" if lags and not engines else ""),
         *([f"engine: {engines}"] if engines else []),
         ("kinematics known; " if aircraft.kinematics else "kinematics not known (no trim); ")
-        + (f"wind measured (gust rms {gusts})" if wind.measured else "wind not measured"),
+        + (f"wind measured (gust rms {gusts})" if wind.measured else "wind not measured")
+        + _air_angles(wind),
     ]
+
+
+def _air_angles(wind) -> str:
+    """How α and β were had: "" for the vanes, else the synthesis's wind per record."""
+    if wind.air_angles != "synthesised":
+        return ""
+    winds = ", ".join(
+        f"{np.hypot(*a.wind_mps):.1f} m/s from "
+        f"{(np.degrees(np.arctan2(a.wind_mps[1], a.wind_mps[0])) + 180.0) % 360.0:.0f}°"
+        for a in wind.synthesised
+    )
+    return (
+        f"; alpha, beta synthesised without vanes (INS less an estimated wind: {winds}), "
+        "their gusts not measured"
+    )
 
 
 def _engine(engine) -> str:

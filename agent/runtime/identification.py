@@ -26,6 +26,7 @@ from agent.config import Config
 from agent.excitation.scheduler import Window
 from agent.ident import Settings
 from agent.ident import job as jobs
+from agent.ident.aircraft.airangles import Sources
 from agent.ident.document import ResultDocument
 from agent.ident.errors import DataError
 from agent.link import messages
@@ -353,7 +354,8 @@ class Identifier:
         # two models.
         model_id = await self._in_store(self.models.reserve_id, axes)
         navigation = channels.navigation()
-        needed = {*inputs, *outputs, *navigation}
+        air = Sources.of(channels, self.config.identification.air_angles)
+        needed = {*inputs, *outputs, *navigation, *air.needed}
         columns = {c: v for c, v in self.recorder.frames(rows).values.items() if c in needed}
         dt = 1.0 / self.config.recorder.rate_hz
         batch = self._batch.setdefault(axes, []) if ident.batch else []
@@ -370,6 +372,7 @@ class Identifier:
             window=columns,
             trim_s=self.config.identification.trim_seconds,
             navigation=navigation,
+            air_angles=air,
         )
         self._enter("identifying", axes, len(rows))
         outcome = await loop.run_in_executor(self._pool, jobs.run, job)

@@ -66,6 +66,7 @@ class AircraftOptions:
     turbulence: float = 0.0
     seed: int = 0
     noise: bool = True
+    vanes: bool = True  # the air data measure α and β (false: airspeed only)
     mavlink_host: str = "127.0.0.1"
     mavlink_port: int = 0
     """UDP port the emulated autopilot listens on (0: any free port)."""
@@ -155,7 +156,7 @@ class SimAircraft:
         calibration = SurfacePort(port="sim").calibration
         encoders = {
             "vn200": devices.vn200_binary(noisy(self._state, seed + 1, noise), boot),
-            "airdata": devices.airdata(noisy(self._state, seed + 2, noise)),
+            "airdata": devices.airdata(noisy(self._state, seed + 2, noise), self.options.vanes),
             "surfaces": devices.surfaces(noisy(self._state, seed + 3, noise), calibration, boot),
         }
         try:

@@ -285,7 +285,8 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
         return commands
 
     def _log(self, now: float, s: dict[str, float], rc: list[int]) -> None:
-        """ATT, IMU, ARSP, AOA, RCIN and RCOU, as ArduPlane logs them (degrees, SI units)."""
+        """ATT, IMU, ARSP, AOA, XKF1, RCIN and RCOU, as ArduPlane logs them (degrees, SI
+        units)."""
         log, us = self.dataflash, int((now - self._boot) * 1e6)
         if self._ticks == 0:
             log.write("MODE", TimeUS=us, Mode=MANUAL, ModeNum=MANUAL)
@@ -312,6 +313,17 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
         )
         log.write("ARSP", TimeUS=us, Airspeed=s["Vt"], U=1, H=1, Pri=1)
         log.write("AOA", TimeUS=us, AOA=s["alpha"] * deg, SSA=s["beta"] * deg)
+        log.write(
+            "XKF1",
+            TimeUS=us,
+            C=0,
+            Roll=s["phi"] * deg,
+            Pitch=s["theta"] * deg,
+            Yaw=(s["psi"] * deg) % 360.0,
+            VN=s["vn"],
+            VE=s["ve"],
+            VD=s["vd"],
+        )
         log.write("RCIN", TimeUS=us, **{f"C{ch}": rc[ch - 1] for ch in range(1, 15)})
         log.write("RCOU", TimeUS=us, **{f"C{ch}": self.outputs.get(ch, 0) for ch in range(1, 15)})
 

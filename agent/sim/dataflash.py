@@ -25,6 +25,15 @@ MESSAGES: dict[str, tuple[str, str]] = {
     "IMU": ("QBffffffIIfBBHH", "TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,EG,EA,T,GH,AH,GHz,AHz"),
     "ARSP": ("QBffcffBBfB", "TimeUS,I,Airspeed,DiffPress,Temp,RawPress,Offset,U,H,Hp,Pri"),
     "AOA": ("Qff", "TimeUS,AOA,SSA"),
+    # The EKF's state: EKF3's XKF1, EKF2's NKF1 (same layout); C is the EKF core.
+    "XKF1": (
+        "QBccCfffffffccce",
+        "TimeUS,C,Roll,Pitch,Yaw,VN,VE,VD,dPD,PN,PE,PD,GX,GY,GZ,OH",
+    ),
+    "NKF1": (
+        "QBccCfffffffccce",
+        "TimeUS,C,Roll,Pitch,Yaw,VN,VE,VD,dPD,PN,PE,PD,GX,GY,GZ,OH",
+    ),
     "RCIN": ("QHHHHHHHHHHHHHH", "TimeUS,C1,C2,C3,C4,C5,C6,C7,C8,C9,C10,C11,C12,C13,C14"),
     "RCOU": ("QHHHHHHHHHHHHHH", "TimeUS,C1,C2,C3,C4,C5,C6,C7,C8,C9,C10,C11,C12,C13,C14"),
     "SIDS": ("QBfffffff", "TimeUS,Ax,Mag,FSt,FSp,TFin,TC,TR,TFout"),

@@ -207,8 +207,9 @@ def vn200_ascii(state: Callable[[float], State]) -> Callable[[float, int], bytes
     return encode
 
 
-def airdata(state: Callable[[float], State]) -> Callable[[float, int], bytes]:
-    """µADC lines: IAS from the true airspeed at the ISA density of the altitude."""
+def airdata(state: Callable[[float], State], vanes: bool = True) -> Callable[[float, int], bytes]:
+    """µADC lines: IAS from the true airspeed at the ISA density of the altitude; without
+    `vanes` (an airspeed-only probe) α and β read zero."""
     codec = AirDataCodec()
 
     def encode(t: float, k: int) -> bytes:
@@ -222,8 +223,8 @@ def airdata(state: Callable[[float], State]) -> Callable[[float, int], bytes]:
             AirData(
                 k,
                 ias,
-                float(np.clip(s["alpha"] * deg, -20, 20)),
-                float(np.clip(s["beta"] * deg, -20, 20)),
+                float(np.clip(s["alpha"] * deg, -20, 20)) if vanes else 0.0,
+                float(np.clip(s["beta"] * deg, -20, 20)) if vanes else 0.0,
                 h,
                 static + 0.5 * rho * s["Vt"] ** 2,
                 static,

@@ -159,6 +159,7 @@ def agent_config(
     speed_kts: float = 60.0,
     glide_deg: float | None = None,
     true_airspeed: float | None = None,
+    vanes: bool = True,
 ) -> Config:
     """The simulated flight's agent configuration: the defaults but for the sensor ports under
     `ports`, the autopilot at `mavlink`, the link's files under `tmp`, the log directory, the
@@ -166,7 +167,8 @@ def agent_config(
     aircraft at `speed_kts`. `glide_deg`: an unpowered aircraft's trim glide angle — it has
     no throttle to excite, and its height limit adds what the glide itself loses over the
     longest run. `true_airspeed` (m/s): the trim's, which the air data measure and the
-    envelope's airspeeds are taken about (default: `speed_kts`)."""
+    envelope's airspeeds are taken about (default: `speed_kts`). `vanes` False: the air data
+    measure the airspeed only (`sysid sim --no-vanes`)."""
     trim = true_airspeed or speed_kts * KT
     excitation = Excitation()
     height = max(40.0, ENVELOPE_HEIGHT_S * trim)
@@ -188,7 +190,7 @@ def agent_config(
         identification=IdentificationConfig(axes=axes),
         sensors=Sensors(
             vn200=VectorNav(port=str(ports / "vn200")),
-            airdata=AirDataPort(port=str(ports / "airdata")),
+            airdata=AirDataPort(port=str(ports / "airdata"), vanes=vanes),
             surfaces=SurfacePort(port=str(ports / "surfaces")),
         ),
         autopilot=Autopilot(url=f"udpout://{mavlink[0]}:{mavlink[1]}"),
@@ -368,6 +370,7 @@ async def _parts(
             plane.speed_kts,
             glide_deg=glide,
             true_airspeed=aircraft.plant.true_airspeed,
+            vanes=plane.vanes,
         )
         if agent_process:
             agent = AgentProcess(tmp, config)
@@ -669,6 +672,8 @@ def _report(
             }
             for o in outcomes
         ],
+        # Which α and β the last identification used: the vanes', or synthesised (--no-vanes).
+        "air_angles": _air_angles(agent),
         "recorder": dict(agent.recorder.counters),
         "sensor_gaps": {d.name: d.health().gaps for d in agent.drivers},
         "worker_identifications": len(agent.identification.results),
@@ -676,6 +681,15 @@ def _report(
         # its command, a full queue, a withheld live view…).
         "notices": [m.text for m in ground.inbox if isinstance(m, messages.Notice)],
     }
+
+
+def _air_angles(agent) -> str | None:
+    """ "vanes" or "synthesised" as the last onboard identification had α and β (None: none
+    identified by the aircraft method)."""
+    for record in reversed(agent.identification.results):
+        if record.result is not None and record.result.aircraft is not None:
+            return record.result.aircraft.wind.air_angles
+    return None
 
 
 def format_report(report: dict) -> str:
@@ -695,6 +709,8 @@ def format_report(report: dict) -> str:
         emac = "" if row["emac"] is None else f"{row['emac']:.0f}"
         lines.append(f"{row['name'] or '-':<14}{lam:>22.3f}{ref:>22}{err:>8}{emac:>8}")
     s = report["suggestion"]
+    if report.get("air_angles") == "synthesised":
+        lines.append("alpha, beta: synthesised from the INS and an estimated wind (no vanes)")
     lines.append(f"TIC_avg {report['tic_avg']:.3f}; update suggested: {s['update']}")
     lines += [f"  {step}" for step in s["steps"]]
     lines.append(f"operator: {report['decision']}")

@@ -34,6 +34,9 @@ TOPICS = {
     "vehicle_acceleration": "uint64_t timestamp;uint64_t timestamp_sample;float[3] xyz",
     "airspeed_validated": "uint64_t timestamp;float indicated_airspeed_m_s;"
     "float calibrated_airspeed_m_s;float true_airspeed_m_s",
+    "vehicle_local_position": "uint64_t timestamp;uint64_t timestamp_sample;bool xy_valid;"
+    "bool z_valid;bool v_xy_valid;bool v_z_valid;float x;float y;float z;float vx;float vy;"
+    "float vz;float heading",
     "airflow_aoa": "uint64_t timestamp;float aoa_rad;bool valid",
     "airflow_slip": "uint64_t timestamp;float slip_rad;bool valid",
     "actuator_outputs": "uint64_t timestamp;uint32_t noutputs;float[16] output",

@@ -41,13 +41,14 @@ class AirDataConverter:
         limit = self._cfg.probe_limit_deg - CLIP_MARGIN_DEG
         if m.p_static <= 0 or not math.isfinite(m.ias):
             return None
+        vanes = self._cfg.vanes  # without them the fields carry nothing: recorded missing
         values = {
             "ias": m.ias,
             "Vt": true_airspeed(m.ias, m.p_static, m.altitude),
-            "alpha": m.alpha_deg * DEG,
-            "beta": m.beta_deg * DEG,
-            "alpha_clipped": float(abs(m.alpha_deg) >= limit),
-            "beta_clipped": float(abs(m.beta_deg) >= limit),
+            "alpha": m.alpha_deg * DEG if vanes else math.nan,
+            "beta": m.beta_deg * DEG if vanes else math.nan,
+            "alpha_clipped": float(vanes and abs(m.alpha_deg) >= limit),
+            "beta_clipped": float(vanes and abs(m.beta_deg) >= limit),
             "alt_pressure": m.altitude,
             "p_total": m.p_total,
             "p_static": m.p_static,

@@ -6,6 +6,9 @@ RCOU, 20 µs per degree), logged the way ArduPlane logs (ATT in degrees, IMU, AR
 each message at its own time stamp). The import must map units and names, resample uniformly,
 recognise the SystemID run, and give a record `sysid identify` turns back into the known pole.
 
+A flight's navigation: the EKF's velocities (EKF3's XKF1, EKF2's NKF1 where there is no
+XKF1) and a heading that crosses north, unwrapped rather than interpolated through 180°.
+
 Bad input tried: a file that is not a DataFlash log, a log cut off mid-message (what was read
 before the cut is imported), a log with none of the mapped messages, a damaged FMT record
 (pymavlink's thousands of lines about it kept off stdout), a missing file, an unknown
@@ -75,6 +78,8 @@ def systemid_log(path: Path, seconds: float = 30.0, seed: int = 0) -> dict:
             log.write("IMU", TimeUS=us + 700, I=1, GyrX=99.0)  # a second IMU: not mapped
             log.write("ARSP", TimeUS=us + 900, I=0, Airspeed=22.0)
             log.write("AOA", TimeUS=us + 1000, AOA=3.0, SSA=-1.0)
+            log.write("XKF1", TimeUS=us + 1100, C=0, Yaw=90.0, VN=0.5, VE=22.0, VD=-0.3)
+            log.write("XKF1", TimeUS=us + 1150, C=1, VN=99.0)  # a second core: not mapped
             pwm = {f"C{ch}": 1500 for ch in range(1, 15)}
             pwm["C1"] = round(1500 + 20.0 * aileron[k])
             pwm["C3"] = 1300
@@ -91,8 +96,14 @@ def test_units_names_and_the_systemid_run(tmp_path):
     assert np.allclose(np.diff(imported.time), 1 / RATE)
     assert np.allclose(c["theta"], np.radians(2.0), atol=1e-4)
     assert np.allclose(c["psi"], np.radians(90.0), atol=1e-4)
-    assert np.allclose(c["alpha"], np.radians(3.0), atol=1e-6)
-    assert np.allclose(c["beta"], np.radians(-1.0), atol=1e-6)
+    # ArduPilot's AOA and SSA are its AHRS's estimates, not vanes: named apart.
+    assert np.allclose(c["aoa_ahrs"], np.radians(3.0), atol=1e-6)
+    assert np.allclose(c["ssa_ahrs"], np.radians(-1.0), atol=1e-6)
+    assert "alpha" not in c
+    assert "beta" not in c
+    assert np.allclose(c["vn"], 0.5, atol=1e-6)  # EKF core 0 (core 1 reads 99)
+    assert np.allclose(c["ve"], 22.0, atol=1e-6)
+    assert np.allclose(c["vd"], -0.3, atol=1e-6)
     assert np.allclose(c["Vt"], 22.0)
     assert np.allclose(c["az"], -9.81, atol=1e-5)
     assert c["p"].max() < 50  # instance 1 (GyrX = 99) is not mixed in
@@ -114,6 +125,32 @@ def test_units_names_and_the_systemid_run(tmp_path):
     )
     assert imported.missing == []
     assert len(truth["t"]) == 1500
+
+
+@pytest.mark.parametrize("ekf", ["XKF1", "NKF1"])
+def test_the_ekfs_velocities_and_a_heading_across_north(tmp_path, ekf):
+    rate, n = 50.0, 500
+    t = np.arange(n) / rate
+    heading = (350.0 + 2.0 * t) % 360.0  # 350° to 10° and on, as ArduPilot logs it
+    with DataFlashWriter(tmp_path / "nav.bin") as log:
+        for k in range(n):
+            us = int(t[k] * 1e6)
+            log.write("ATT", TimeUS=us + 300, Roll=0.0, Pitch=2.0, Yaw=heading[k])
+            log.write("IMU", TimeUS=us + 600, I=0, AccZ=-9.81)
+            log.write("ARSP", TimeUS=us + 900, I=0, Airspeed=22.0)
+            log.write(ekf, TimeUS=us + 1000, C=0, VN=20.0 + t[k], VE=-3.0, VD=0.5)
+            log.write("RCOU", TimeUS=us + 1200, **{f"C{ch}": 1500 for ch in range(1, 15)})
+    imported = import_log(tmp_path / "nav.bin", SURFACES, rate)
+    c = imported.columns
+    psi = np.degrees(c["psi"])
+    assert np.all(np.abs(np.diff(psi)) < 0.1)  # never through 180° between samples
+    assert psi - psi[0] == pytest.approx(2.0 * imported.time, abs=0.1)  # 2°/s throughout
+    assert psi[-1] > 360.0  # crossed north, and kept going
+    assert c["vn"] - c["vn"][0] == pytest.approx(imported.time, abs=0.05)
+    assert np.allclose(c["ve"], -3.0)
+    assert np.allclose(c["vd"], 0.5)
+    assert not any("vn" in m for m in imported.missing)
+    assert ("EKF2" in "\n".join(imported.notes)) == (ekf == "NKF1")
 
 
 def test_the_imported_record_identifies_the_known_pole(tmp_path):

@@ -1,7 +1,8 @@
 """`sysid import` on PX4 ULog files written here from the format specification.
 
 The same known roll-rate model as the ArduPilot test, logged as PX4 logs it: attitude as a
-quaternion, body rates, accelerations, true airspeed, AoA/sideslip topics, PWM outputs.
+quaternion, body rates, accelerations, true airspeed, the EKF's local velocity (briefly
+flagged invalid), AoA/sideslip topics, PWM outputs.
 
 Bad input tried: a file that is not a ULog, a ULog with none of the mapped topics.
 """
@@ -46,6 +47,15 @@ def px4_log(path, seconds=20.0, rate=100.0, pause=None):
             log.write("vehicle_angular_velocity", timestamp=us + 100, xyz=[p[k], 0.0, 0.0])
             log.write("vehicle_acceleration", timestamp=us + 100, xyz=[0.0, 0.0, -9.81])
             log.write("airspeed_validated", timestamp=us + 200, true_airspeed_m_s=21.5)
+            log.write(
+                "vehicle_local_position",
+                timestamp=us + 250,
+                vx=20.0 + 0.1 * t[k],
+                vy=1.0,
+                vz=0.2,
+                v_xy_valid=not 5.0 <= t[k] < 5.05,  # the EKF's velocity briefly invalid
+                v_z_valid=True,
+            )
             log.write("airflow_aoa", timestamp=us + 300, aoa_rad=0.06, valid=True)
             outputs = [1500.0] * 16
             outputs[0], outputs[2] = 1500.0 + 20.0 * aileron[k], 1350.0
@@ -72,6 +82,11 @@ def test_px4_topics_map_to_the_channels(tmp_path):
     moved = np.abs(c["aileron_pwm"] - 1500.0) > 1.0
     assert moved.any()
     assert np.all(np.sign(c["aileron"][moved]) == -np.sign(c["aileron_pwm"][moved] - 1500.0))
+    # The EKF's velocity; the samples it flags invalid dropped (and said so), not imported.
+    assert c["vn"] == pytest.approx(20.0 + 0.1 * (imported.time + 0.00125), abs=1e-3)
+    assert np.allclose(c["ve"], 1.0)
+    assert np.allclose(c["vd"], 0.2)
+    assert any("vn 5" in note and "ve 5" in note for note in imported.notes)
     assert imported.missing == ["beta"]  # no airflow_slip topic in this log
     assert imported.kind == "PX4 ULog"
 

@@ -122,6 +122,17 @@ def test_airdata_flags_the_probe_limit_and_converts_angles():
     assert convert(AirData(1, 20, 0, 0, 0, 101_325, 0.0)) is None
 
 
+def test_an_airspeed_only_probe_records_no_angles():
+    # `vanes = false`: the probe's α and β fields (here a clipped 19.98°) carry nothing; they
+    # are recorded as missing, never as a reading or a clip, and the airspeed is kept.
+    convert = AirDataConverter(AirDataPort(vanes=False))
+    r = convert(AirData(5, 20.0, 19.98, -3.0, 100.0, 101_500.0, 100_000.0))
+    assert math.isnan(r.values["alpha"])
+    assert math.isnan(r.values["beta"])
+    assert r.values["alpha_clipped"] == 0.0
+    assert r.values["Vt"] == pytest.approx(true_airspeed(20.0, 100_000.0, 100.0))
+
+
 def test_surface_calibration_table_poly_and_ganging():
     table = Calibration(table=((100, -20.0), (512, 0.0), (900, 25.0)))
     assert counts_to_degrees(306, table) == pytest.approx(-10.0)

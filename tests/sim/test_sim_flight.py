@@ -135,7 +135,11 @@ def post_flight(directory, report) -> None:
     sysid("import", directory / "ardupilot.bin", "--out", directory / "ardupilot.csv")
     header = (directory / "ardupilot.csv").read_text().split("\n")
     columns = next(line for line in header if line.startswith("time,")).split(",")
-    assert {"phi", "p", "r", "beta", "Vt", "aileron", "rudder"} <= set(columns)
+    # The EKF's velocities with the heading: the navigation the wind is measured with; the
+    # AHRS's sideslip estimate named apart from a vane's.
+    assert {"phi", "p", "r", "Vt", "aileron", "rudder", "psi", "vn", "ve", "vd"} <= set(columns)
+    assert "ssa_ahrs" in columns
+    assert "beta" not in columns
     sysid(
         "report",
         logs,

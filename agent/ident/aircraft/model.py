@@ -31,6 +31,7 @@ import scipy.optimize
 import scipy.signal
 
 from agent.channels import POWER_ROLES
+from agent.ident.aircraft.airangles import Synthesised
 from agent.ident.aircraft.axes import AXES, moved_axes
 from agent.ident.aircraft.fit import (
     COUPLED,
@@ -46,6 +47,7 @@ from agent.ident.aircraft.transforms import Transforms, input_band, transforms
 from agent.ident.aircraft.wind import GUST_RATE_LAGS
 from agent.ident.convert import StateSpace, discretize, discretize_hold
 from agent.ident.document import (
+    AirAngles,
     AircraftDocument,
     AxisDocument,
     Coupling,
@@ -333,6 +335,7 @@ def _columns(exp: Experiment, inputs: list[int], outputs: list[int]) -> Experime
         np.asarray(exp.y)[:, outputs],
         operating_point=None if op is None else np.asarray(op)[outputs],
         navigation=exp.navigation,
+        air_angles=exp.air_angles,
     )
 
 
@@ -507,7 +510,12 @@ def _report(
         band_hz=(float(sp.band_hz[0]), float(sp.band_hz[1])),
         bins=int(sp.s.size),
         kinematics=ready.known is not None,
-        wind=Wind(measured=bool(ready.gusts), gust_rms=ready.gust_rms),
+        wind=Wind(
+            measured=bool(ready.gusts),
+            gust_rms=ready.gust_rms,
+            air_angles="synthesised" if ready.air_angles else "vanes",
+            synthesised=[_air_angles(a) for a in ready.air_angles],
+        ),
         model=structure,
         axes=[
             AxisDocument(
@@ -537,6 +545,17 @@ def _report(
         ],
         sideslip_drag=drag,
         alpha_products=products,
+    )
+
+
+def _air_angles(synthesised: Synthesised) -> AirAngles:
+    """One record's synthesised α and β, as the document reports them."""
+    return AirAngles(
+        wind_mps=synthesised.wind,
+        drift_mps=synthesised.drift,
+        sideslip_rad=synthesised.sideslip,
+        airspeed_rms_mps=synthesised.airspeed_rms,
+        heading_span_deg=float(np.degrees(synthesised.heading_span)),
     )
 
 

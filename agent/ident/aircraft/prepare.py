@@ -11,13 +11,15 @@ kinematic nonlinearities share factors such as 1/(V cos β) with the unknown aer
 force, so half of a nonlinear equation is not nearer the truth than none.
 
 Wind: with the INS's heading and velocities too, the gust g is the still-air V, α, β
-(`inertial_air_data`) less the air data's. The forces depend on the air-relative states x − g
-but the states move as the inertial ones, ẋ_i = A(x_i − g) + B u, so the model is fitted on
-the inertial outputs with the gusts as known inputs of their own (free) gains: the vanes'
-reading of the gust stops being noise that biases the fit and becomes excitation, and A is
-the still-air aircraft's. Each gust is its conditional mean given the noisy measurement
-(`agent.ident.aircraft.noise`), and the α and β gusts' rates, through GUST_RATE_LAGS fitted
-lags each, are known inputs of their axes: Dryden's pitch-rate and yaw-rate gusts (MIL-F-8785C;
+(`inertial_air_data`) less the air data's, the still air being the record's mean air mass:
+the steady wind and its drift (`steady_wind`) come off the INS's velocity first. The forces
+depend on the air-relative states x − g but the states move as the inertial ones, ẋ_i =
+A(x_i − g) + B u, so the model is fitted on the inertial outputs with the gusts as known
+inputs of their own (free) gains: the vanes' reading of the gust stops being noise that
+biases the fit and becomes excitation, and A is the still-air aircraft's. Each gust is its
+conditional mean given the noisy measurement (`agent.ident.aircraft.noise`), and the α and β
+gusts' rates, through GUST_RATE_LAGS fitted lags each, are known inputs of their axes:
+Dryden's pitch-rate and yaw-rate gusts (MIL-F-8785C;
 `agent.ident.aircraft.wind.GUST_RATES`), the gusts' gradients along the airframe, which
 otherwise bias the short period's damping and, where the span is large against the speed (a
 glider), the Dutch roll's frequency.
@@ -42,6 +44,13 @@ constant part of α times p is p itself, and the roll damping traded against the
 gain: in turbulence the trim (the record's first half second) carries that moment's gust,
 which threw the glider's roll mode off on some seeds (benchmarks/README.md).
 
+Without vanes (`Experiment.air_angles`: α and β synthesised from the INS and an estimated
+steady wind, agent.ident.aircraft.airangles) the α and β gusts are not measured: they are
+the INS's less the wind estimate, so their "gust" would be that estimate's projection, a
+function of the attitude collinear with the states (on JSBSim's C172R in light turbulence it
+took the short period up to 17 % off). Only the airspeed's gust (pitot against INS) is a
+known input then; the vertical and lateral gusts are unmeasured process noise.
+
 What each term does on the benchmark aircraft: benchmarks/README.md, *The whole-aircraft
 method's terms* (`make bench-jsbsim`, with `--without` to leave one out).
 """
@@ -53,6 +62,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from agent.ident.aircraft.airangles import Synthesised
 from agent.ident.aircraft.axes import ATTITUDE
 from agent.ident.aircraft.kinematics import (
     KINEMATIC_STATES,
@@ -60,7 +70,7 @@ from agent.ident.aircraft.kinematics import (
     kinematic_remainder,
 )
 from agent.ident.aircraft.noise import conditional_mean
-from agent.ident.aircraft.wind import GUST_RATES, GUSTS, inertial_air_data
+from agent.ident.aircraft.wind import GUST_RATES, GUSTS, inertial_air_data, steady_wind
 from agent.ident.okid import Experiment
 
 # The lateral states whose products with α are known inputs (`alpha_products`).
@@ -83,6 +93,8 @@ class Prepared:
     rates: tuple[int, ...] = ()  # known input columns of gust rates (GUST_RATE_LAGS lags each)
     rows: dict[int, int] = field(default_factory=dict)  # see Transforms.rows
     bilinear: tuple[int, ...] = ()  # known input columns of α·β, α·p, α·r (BILINEAR)
+    # Per experiment whose α and β were synthesised (no vanes), how (else empty).
+    air_angles: tuple[Synthesised, ...] = ()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -110,9 +122,19 @@ def prepare(
     sample time, for the gust rates."""
     index = {role: k for k, role in enumerate(output_roles) if role is not None}
     if "airspeed" not in index or any(e.operating_point is None for e in batch):
-        return Prepared(batch=[Experiment(e.u, e.y) for e in batch])
+        return Prepared(
+            batch=[Experiment(e.u, e.y) for e in batch],
+            air_angles=tuple(e.air_angles for e in batch if e.air_angles is not None),
+        )
     measured = "theta" in index and all(e.navigation is not None for e in batch)
-    gusts = tuple(role for role, _ in GUSTS if role in index) if measured else ()
+    # Synthesised α and β (no vanes) are the INS's less an estimated steady wind: the gust's
+    # α and β parts are not in them, so only the airspeed's gust (the pitot's) is measured.
+    vaneless = any(e.air_angles is not None for e in batch)
+    gusts = tuple(
+        role
+        for role, _ in GUSTS
+        if role in index and measured and not (vaneless and role in ("alpha", "beta"))
+    )
     terms = _Terms(
         gusts=gusts,
         rated=tuple(role for role in GUST_RATES if role in gusts),
@@ -144,6 +166,7 @@ def prepare(
         rates=rates,
         rows=rows,
         bilinear=products,
+        air_angles=tuple(e.air_angles for e in batch if e.air_angles is not None),
     )
 
 
@@ -194,7 +217,9 @@ def _known_inputs(e: Experiment, index: dict[str, int], terms: _Terms, trim_samp
     air = x.copy()  # the air-relative states: what the forces depend on
     gusts = []
     if terms.gusts:
-        still = inertial_air_data(x, e.navigation)
+        navigation = e.navigation.copy()
+        navigation[:, 1:] -= steady_wind(x, navigation)  # relative to the mean air mass
+        still = inertial_air_data(x, navigation)
         for role in terms.gusts:
             k = KINEMATIC_STATES.index(role)
             inertial = still[:, ("airspeed", "alpha", "beta").index(role)]
