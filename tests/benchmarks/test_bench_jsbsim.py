@@ -117,3 +117,28 @@ def test_each_modes_error_is_scored_in_its_reported_standard_errors():
     assert z["short period ζ"] == pytest.approx((1.0 - 16.112 / (2 * wn_sp)) / 0.05)
     assert not any(k.startswith("Dutch roll") for k in z)  # no σ reported
     assert "spiral" not in z
+
+
+def test_the_novanes_rows_identify_the_record_as_an_aircraft_without_vanes_would():
+    """experiment(vanes=False): α and β replaced by those synthesised from the record's INS
+    (the vanes' never read), the navigation kept, and the experiment marked as such, so the
+    method takes only the airspeed's gust as measured."""
+    from agent.sim.offline import Record
+    from tests.ident.test_airangles import flight
+
+    bench = _bench()
+    (alpha, _), speed, theta, phi, navigation = flight(heading_span=2.0, seed=4)
+    n = speed.size
+    y = np.zeros((n, len(Record.outputs)))
+    for name, values in (("Vt", speed), ("theta", theta), ("phi", phi)):
+        y[:, Record.outputs.index(name)] = values
+    y[:, Record.outputs.index("alpha")] = 1.0  # a vane reading the synthesis must not use
+    record = Record(u=np.zeros((n, 4)), y=y, dt=0.02, ins=navigation)
+    setup = types.SimpleNamespace(controls=bench.INPUT_CHANNELS)
+    exp = bench.experiment(record, setup, wind=False, vanes=False)
+    column = Record.outputs.index("alpha")
+    synthesised = exp.y[:, column] + exp.operating_point[column]
+    assert np.degrees(np.std(synthesised - alpha)) < 0.25
+    assert exp.air_angles is not None
+    assert exp.navigation is navigation
+    assert bench.experiment(record, setup).air_angles is None
