@@ -1,9 +1,10 @@
-"""The whole-aircraft benchmark: six JSBSim aircraft of different kinds, calm and in light
-turbulence, the agent's own full preset and a flight-test engineer's card, each sized to the
-aircraft by the agent, identified with and without the INS's navigation channels, by
-suas-sysid and by the peers, in one process.
+"""The whole-aircraft benchmark: six JSBSim aircraft of different kinds, calm and in light and
+moderate turbulence, the agent's own full preset and a flight-test engineer's card, each
+sized to the aircraft by the agent, identified with the vanes and the INS's navigation
+channels, with the vanes alone, and with the INS alone (no vanes), by suas-sysid and by the
+peers, in one process.
 
-    make bench-jsbsim                                    # every row, 10 seeds (~35 min here)
+    make bench-jsbsim                                    # every row, 10 seeds (~75 min here)
     .venv/bin/python benchmarks/bench_jsbsim.py --quick --aircraft c172r --turbulence 0 \
         --excitation card --nav ins                      # one row in about a minute
     .venv/bin/python benchmarks/bench_jsbsim.py --sizing nominal --aircraft pa28
@@ -16,9 +17,9 @@ suas-sysid and by the peers, in one process.
 The aircraft (`AIRCRAFT`): JSBSim's J-3 Cub at 60 kt, Cessna 182 and PA-28 at 90 kt (the three
 the method was developed on), the Cessna 172R at 95 kt (a four-seat trainer), the T-6 Texan II
 at 150 kt (a turbine's direct thrust, no propeller) and the Schempp-Hirth SGS 1-26 at 50 kt (a
-glider: no throttle, trimmed in a steady glide, from 3000 ft). Light turbulence: Dryden
-(MIL-F-8785C), W20 = 5 ft/s (`--turbulence 1`). Seeds start at 2, because JSBSim's seeds 0 and
-1 give one turbulence sequence.
+glider: no throttle, trimmed in a steady glide, from 3000 ft). Turbulence: Dryden
+(MIL-F-8785C), light W20 = 5 ft/s (`--turbulence 1`), moderate W20 = 15 ft/s (`3`). Seeds
+start at 2, because JSBSim's seeds 0 and 1 give one turbulence sequence.
 
 The excitations (`--excitation`): "full", the agent's full preset (an 80 s odd-harmonic
 multisine on all four controls at once); "card", a classic flight-test card that is not ours:
@@ -687,7 +688,11 @@ def main() -> None:
     )
     parser.add_argument("--aircraft", nargs="*", choices=list(AIRCRAFT), default=list(AIRCRAFT))
     parser.add_argument(
-        "--turbulence", type=float, nargs="*", default=[0.0, 1.0], help="1: W20 = 5 ft/s"
+        "--turbulence",
+        type=float,
+        nargs="*",
+        default=[0.0, 1.0, 3.0],
+        help="Dryden intensity: 1 light (W20 = 5 ft/s), 3 moderate (W20 = 15 ft/s)",
     )
     parser.add_argument("--excitation", nargs="*", choices=EXCITATIONS, default=EXCITATIONS)
     parser.add_argument("--nav", nargs="*", choices=NAVIGATION, default=NAVIGATION)
