@@ -12,7 +12,7 @@ force, so half of a nonlinear equation is not nearer the truth than none.
 
 Wind: with the INS's heading and velocities too, the gust g is the still-air V, α, β
 (`inertial_air_data`) less the air data's, the still air being the record's mean air mass:
-the steady wind and its drift (`steady_wind`) come off the INS's velocity first. The forces
+the steady wind (`steady_wind`, the record's mean) comes off the INS's velocity first. The forces
 depend on the air-relative states x − g but the states move as the inertial ones, ẋ_i =
 A(x_i − g) + B u, so the model is fitted on the inertial outputs with the gusts as known
 inputs of their own (free) gains: the vanes' reading of the gust stops being noise that

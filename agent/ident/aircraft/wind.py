@@ -53,23 +53,22 @@ def inertial_air_data(x: np.ndarray, navigation: np.ndarray) -> np.ndarray:
 
 
 def steady_wind(x: np.ndarray, navigation: np.ndarray) -> np.ndarray:
-    """The record's steady wind, north, east and down, with a linear drift over the record:
-    the least-squares line through v_g − Rᵀ v_air, the INS's velocity less the air data's
-    (V, α, β) turned into north, east, down. (N, 3), m/s. `x` and `navigation` as for
-    `inertial_air_data`.
+    """The record's steady wind, north, east and down (m/s, (3,)): the mean over the record
+    of v_g − Rᵀ v_air, the INS's velocity less the air data's (V, α, β) turned into north,
+    east, down. `x` and `navigation` as for `inertial_air_data`.
 
     The gust the method measures is the wind's unsteady part: a steady wind W moves the
     aircraft with the air but its body-axis projection R W changes as the attitude does, so
     the still-air states computed from v_g would carry a "gust" of R W that follows the
-    manoeuvre (an input collinear with the states, and its rate unmodelled). Subtracted, the
-    still-air states are those relative to the mean air mass."""
+    manoeuvre (an input collinear with the states, its rate unmodelled). Subtracted, the
+    still-air states are those relative to the mean air mass. Only the mean: a wind that
+    changes is a gust, which accelerates the aircraft and which the vanes measure; a trend
+    over the record taken off too, the turbulence's slowest part with it, the glider's bank in
+    light turbulence lost its explanation and the sizing held its inputs to a tenth of a
+    degree (benchmarks/README.md)."""
     V, alpha, beta = x[:, 0], x[:, 1], x[:, 4]
     body = np.column_stack(
         [V * np.cos(alpha) * np.cos(beta), V * np.sin(beta), V * np.sin(alpha) * np.cos(beta)]
     )
     rotation = body_from_ned(navigation[:, 0], x[:, 3], x[:, 7])
-    wind = navigation[:, 1:] - np.einsum("nji,nj->ni", rotation, body)
-    s = np.linspace(-0.5, 0.5, len(V))
-    basis = np.column_stack([np.ones_like(s), s])
-    coefficients, *_ = np.linalg.lstsq(basis, wind, rcond=None)
-    return basis @ coefficients
+    return np.mean(navigation[:, 1:] - np.einsum("nji,nj->ni", rotation, body), axis=0)
