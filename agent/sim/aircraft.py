@@ -237,7 +237,8 @@ async def serve(
             f"{options.altitude_ft:g} ft (normalised trim: {trim})\n"
             f'MAVLink (emulated ArduPlane, system 1): [autopilot] url = "udpout://{host}:{port}"\n'
             f'VN-200 (binary, {hz:g} Hz): [sensors.vn200] port = "{ports["vn200"].path}"\n'
-            f'µADC ({hz:g} Hz): [sensors.airdata] port = "{ports["airdata"].path}"\n'
+            f"µADC ({hz:g} Hz{'' if options.vanes else ', airspeed only'}): [sensors.airdata] "
+            f'port = "{ports["airdata"].path}"{"" if options.vanes else ", vanes = false"}\n'
             f'surface box ({hz:g} Hz): [sensors.surfaces] port = "{ports["surfaces"].path}"\n'
             f"excitation switch: RC channel {options.params.switch_channel}, low; "
             f"kill -USR1 {os.getpid()} toggles it"

@@ -38,6 +38,18 @@ def test_announces_the_mavlink_url_and_sensor_ports_then_stops(tmp_path):
     assert not any(tmp_path.iterdir())  # the ports are unplugged on exit
 
 
+def test_an_airspeed_only_probe_is_announced_with_the_config_it_needs(tmp_path):
+    # --no-vanes: the µADC's α and β fields read zero, so the agent must be told they carry
+    # nothing ([sensors.airdata] vanes = false), or it would record them as measured.
+    result = _run(
+        "--duration", "1", "--pty-dir", str(tmp_path), "--mavlink-port", "0", "--no-vanes"
+    )
+    assert result.returncode == 0, result.stderr
+    port = tmp_path / "airdata"
+    line = f'µADC (100 Hz, airspeed only): [sensors.airdata] port = "{port}", vanes = false'
+    assert line in result.stdout
+
+
 def test_unknown_aircraft_is_a_clear_error(tmp_path):
     result = _run("--aircraft", "NoSuchPlane", "--duration", "1", "--pty-dir", str(tmp_path))
     assert result.returncode == 2
