@@ -57,9 +57,10 @@ test-loaded: $(STAMP)
 bench: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/bench_identify.py
 
-# Six JSBSim aircraft, calm and in light turbulence, the full preset, a classic card and a sweep
-# card, sized as the agent sizes them, with and without the INS, 10 seeds each, with the peers
-# and the validated truth's Cramér–Rao bound on each row (about 35 minutes here;
+# Six JSBSim aircraft, calm, in light and in moderate turbulence, the full preset, a classic card
+# and a sweep card, sized as the agent sizes them, with the vanes and the INS, the vanes alone
+# and the INS alone, 10 seeds each, with the peers and the validated truth's Cramér–Rao bound
+# on each row (about 46 minutes here;
 # benchmarks/bench_jsbsim.py --quick reruns one row in about a minute).
 bench-jsbsim: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/bench_jsbsim.py --bound

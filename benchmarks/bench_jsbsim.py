@@ -4,7 +4,7 @@ sized to the aircraft by the agent, identified with the vanes and the INS's navi
 channels, with the vanes alone, and with the INS alone (no vanes), by suas-sysid and by the
 peers, in one process.
 
-    make bench-jsbsim                                    # every row, 10 seeds (~75 min here)
+    make bench-jsbsim                                    # every row, 10 seeds (~46 min here)
     .venv/bin/python benchmarks/bench_jsbsim.py --quick --aircraft c172r --turbulence 0 \
         --excitation card --nav ins                      # one row in about a minute
     .venv/bin/python benchmarks/bench_jsbsim.py --sizing nominal --aircraft pa28
