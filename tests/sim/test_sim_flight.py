@@ -24,6 +24,7 @@ async def test_three_sized_lateral_runs_end_to_end(tmp_path):
     assert report["sensor_gaps"] == {"vn200": 0, "airdata": 0, "surfaces": 0}  # 100 Hz, no loss
     assert report["recorder"]["frames"] > 30 * 100
     assert report["worker_identifications"] == 3  # each ran in the worker process
+    assert report["air_angles"] == "vanes"  # the µADC's; `--no-vanes`: "synthesised"
     # Commanded and measured surfaces agree in sign end to end (plan, direction, ArduPlane,
     # servo linkage, pots): the aircraft told the operator of no surface moving against or
     # not following its command.
