@@ -43,7 +43,6 @@ class Outcome:
     trim: list[dict[str, float]]  # per record, in order
     records: int
     samples: int
-    notes: tuple[str, ...] = ()  # per record, how its α and β were synthesised (if they were)
 
 
 def parse_trim(text: str) -> float:
@@ -135,4 +134,4 @@ def run(request: Request, config: IdentConfig, settings: Settings) -> Outcome:
         settings=settings,
     )
     result = replace(result, warnings=(*notes, *result.warnings))
-    return Outcome(result=result, trim=trim, records=len(experiments), samples=samples, notes=notes)
+    return Outcome(result=result, trim=trim, records=len(experiments), samples=samples)
