@@ -17,6 +17,7 @@ import json
 import logging
 import sys
 import threading
+import time
 
 import pytest
 from digi.xbee.models.address import XBee16BitAddress, XBee64BitAddress
@@ -31,11 +32,16 @@ from agent.runtime.health import GcWatch
 from drivers.autopilot.driver import MessageSeam
 from drivers.xbee.driver import PacketSeam
 
-# How long a thread that logs a few lines may take before it is called deadlocked: each line
-# here runs dozens of full collections (about 15 ms each on this machine, longer when it is
-# busy), so a few seconds per line; a deadlocked thread never ends. Below the suite's 120 s
-# per-test timeout, so the test fails with its own message.
+# A thread that logs while collecting is deadlocked when no full collection has ended for this
+# long: each line here runs dozens of full collections, about 15 ms each on a quiet machine,
+# several times that with the suite's other worker on the second core, and a deadlocked thread
+# never ends one again. Judged by progress, not by the whole run's time, which grows with the
+# process's objects and the machine's load. Below the suite's 120 s per-test timeout, so a
+# stuck thread fails with this test's own message.
 DEADLOCK_S = 60.0
+# The whole logging run may take longer than a per-test timeout allows on a loaded machine,
+# while every collection still ends: the test's own bound (pytest-timeout's marker).
+LOGGING_RUN_S = 600
 LINES = 3
 
 
@@ -57,6 +63,23 @@ def execution_log(tmp_path):
     logger.removeHandler(handler)
     logger.propagate = True
     writer.close()
+
+
+def _full_collections() -> int:
+    return gc.get_stats()[2]["collections"]
+
+
+def _wait_while_collecting(finished: threading.Event) -> None:
+    """Until `finished`; fails when no full collection has ended for DEADLOCK_S meanwhile (the
+    collecting thread is stuck, not slow)."""
+    seen, since = _full_collections(), time.monotonic()
+    while not finished.wait(1.0):
+        now = _full_collections()
+        if now != seen:
+            seen, since = now, time.monotonic()
+        assert time.monotonic() - since < DEADLOCK_S, (
+            "the logging thread deadlocked in a gc callback"
+        )
 
 
 def _log_while_collecting(execution_log, callback, lines, beside=()) -> list[str]:
@@ -81,7 +104,7 @@ def _log_while_collecting(execution_log, callback, lines, beside=()) -> list[str
         thread.start()
         for line in beside:
             logger.warning(line)
-        assert finished.wait(DEADLOCK_S), "the logging thread deadlocked in a gc callback"
+        _wait_while_collecting(finished)
         thread.join()
     finally:
         gc.callbacks.remove(callback)
@@ -90,6 +113,7 @@ def _log_while_collecting(execution_log, callback, lines, beside=()) -> list[str
     return [json.loads(line)["message"] for line in text.splitlines()]
 
 
+@pytest.mark.timeout(LOGGING_RUN_S)
 def test_a_slow_full_collection_inside_the_log_path_neither_deadlocks_nor_logs(execution_log):
     watch = GcWatch(slow_s=0.0)  # every full pass counts as slow: the callback's worst path
     library = [f"library line {k}" for k in range(LINES)]
@@ -246,6 +270,7 @@ async def test_slow_collections_are_reported_from_the_loop(tmp_path, caplog):
     assert agent.health.record(1.0, 0.0)["gc"]["slow"] >= 1
 
 
+@pytest.mark.timeout(LOGGING_RUN_S)
 def test_a_gc_callback_that_logs_cannot_deadlock_the_execution_log(execution_log):
     # A library's gc callback may log; the execution log's handler and queue take no lock, so
     # even a line logged from inside another line's put goes through.
@@ -304,9 +329,9 @@ def test_fails_then_hangs_in_its_teardown(held):
 """
 
 
-def _run_pytest_on(tmp_path, text: str) -> tuple[int, str]:
+def _run_pytest_on(tmp_path, text: str, *options: str) -> tuple[int, str]:
     """pytest with the suite's own settings (pyproject.toml, and the watchdog plugin) on one
-    test file; its exit code and its output."""
+    test file, with `options`; its exit code and its output."""
     import subprocess
     from pathlib import Path
 
@@ -327,6 +352,7 @@ def _run_pytest_on(tmp_path, text: str) -> tuple[int, str]:
             "tests.watchdog",
             "--timeout",
             "3",
+            *options,
             str(tmp_path / "test_hung.py"),
         ],
         capture_output=True,
@@ -358,3 +384,14 @@ def test_a_failed_test_that_hangs_in_its_teardown_ends_the_run(tmp_path):
     assert "Timeout (0:00:" in out  # faulthandler's dump: every thread, most recent call first
     assert "(most recent call first)" in out
     assert "line 12 in held" in out  # stuck in the fixture's teardown
+
+
+def test_a_hung_test_in_a_worker_process_ends_it_with_every_threads_stack(tmp_path):
+    # `make test` runs two pytest-xdist workers, which do not show pytest-timeout's report: a
+    # hung test left only "worker 'gw0' crashed". The watchdog's timer writes it to stderr.
+    code, out = _run_pytest_on(tmp_path, HUNG, "-n", "2")
+    assert code != 0
+    assert "Timeout: test_hung.py::test_waits_on_a_held_lock after 3 s" in out
+    assert "Stack of lock-holder" in out
+    assert "held.acquire()  # never returns" in out  # the test's thread, where it is stuck
+    assert "crashed while running 'test_hung.py::test_waits_on_a_held_lock'" in out

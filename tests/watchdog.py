@@ -8,12 +8,22 @@ shutdown joining one, say) would hang the run forever. This watchdog is Python's
 It is re-armed at the start of each phase (setup, call, teardown) for the test's timeout plus a
 margin. When it fires, it writes every thread's traceback to the terminal's stderr, past
 pytest's capture, and ends the process with exit code 1.
+
+In a pytest-xdist worker (`make test` runs two), pytest-timeout's own report would be lost: it
+writes to the worker's terminal writer, which xdist never shows, so a hung test left only
+"worker 'gw0' crashed while running …". There its timer is this plugin's
+(`pytest_timeout_set_timer`): the same thread timer, writing the test's name and every thread's
+stack to the real stderr before it ends the worker; xdist then fails the test and goes on with
+a new worker.
 """
 
 from __future__ import annotations
 
 import faulthandler
 import os
+import sys
+import threading
+import traceback
 
 import pytest
 
@@ -79,3 +89,37 @@ def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None):
 def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
     yield
     faulthandler.cancel_dump_traceback_later()
+
+
+def _stacks() -> str:
+    """Every thread's stack, named, most recent call last (as pytest-timeout prints them)."""
+    names = {t.ident: t.name for t in threading.enumerate()}
+    out = []
+    for ident, frame in sys._current_frames().items():
+        if ident == threading.get_ident():
+            continue  # the timer's own
+        out.append(f"~~~ Stack of {names.get(ident, '?')} ({ident}) ~~~\n")
+        out.append("".join(traceback.format_stack(frame)))
+    return "".join(out)
+
+
+@pytest.hookimpl(tryfirst=True, optionalhook=True)
+def pytest_timeout_set_timer(item: pytest.Item, settings) -> bool | None:
+    """In an xdist worker: pytest-timeout's thread method, its report on the real stderr."""
+    # xdist gives its workers' configs `workerinput` (the environment's PYTEST_XDIST_WORKER is
+    # inherited by a pytest the test starts, which is no worker).
+    worker = getattr(item.config, "workerinput", {}).get("workerid")
+    if worker is None or _stderr is None or not settings.timeout or settings.timeout <= 0:
+        return None  # pytest-timeout's own
+    err = _stderr
+
+    def expire() -> None:
+        head = f"\n+++ Timeout: {item.nodeid} after {settings.timeout:g} s (worker {worker}) +++\n"
+        os.write(err, (head + _stacks() + "+++ Timeout +++\n").encode(errors="replace"))
+        os._exit(1)
+
+    timer = threading.Timer(settings.timeout, expire)
+    timer.name, timer.daemon = "pytest-timeout", True
+    timer.start()
+    item.cancel_timeout = timer.cancel  # pytest-timeout's cancel hook calls it
+    return True
