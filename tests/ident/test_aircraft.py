@@ -302,6 +302,7 @@ def gusty_record(
     scale: float = 0.0015,
     roll_ab: float = 0.0,
     tau_r: float = 0.0,
+    gust: float = 1.0,
 ):
     """The aircraft flown through a gust g (V, α, β; low-passed white noise, 0.03 m/s and
     0.03° rms), the controls at 0.15 % of the full preset (A.2's responses are large): the
@@ -313,8 +314,9 @@ def gusty_record(
     rad²), V̇ also loses drag · β² (sideslip drag, β the air-relative sideslip from trim);
     with `tau_r` (s), they see Dryden's yaw-rate gust r_g = s β_g / (1 + τ s), as they see
     q_g (β̇'s kinematic −r and φ̇ keep the inertial r);
-    `scale`: the controls' share of the full preset. With `roll_ab` (1/s² per rad²), ṗ also
-    gains roll_ab · α β (the rolling moment's change with α, α and β air-relative from trim).
+    `scale`: the controls' share of the full preset; `gust`: the gust's (0: calm air). With
+    `roll_ab` (1/s² per rad²), ṗ also gains roll_ab · α β (the rolling moment's change with
+    α, α and β air-relative from trim).
 
     A.2's models came from flight data and do not keep θ̇ = q: their θ and φ rows and
     columns are replaced by the kinematics at the operating point, as a real aircraft has
@@ -334,7 +336,7 @@ def gusty_record(
     pole = np.exp(-0.5 * DT)  # Dryden-like: a corner at 0.5 rad/s
     for k in range(1, len(g)):
         g[k] = pole * g[k - 1] + np.sqrt(1 - pole**2) * white[k]
-    g *= [0.03, 0.0005, 0.0005]
+    g *= gust * np.array([0.03, 0.0005, 0.0005])
     E = np.zeros((A.shape[0], 4))
     E[:, :3] = -A[:, GUSTS]
     if tau_q > 0:
@@ -846,6 +848,23 @@ def test_a_steady_wind_is_not_a_gust():
     worst = max(np.min(np.abs(found - t)) / max(abs(t), 1.0) for t in true)
     assert result.aircraft.wind.measured
     assert worst < 0.01
+
+
+def test_calm_air_measured_without_noise_has_no_gust_to_fit():
+    # Bad input tried: the INS and the air data agreeing to rounding (calm air, no sensor
+    # noise: a simulation). The gusts are then zero but for rounding; given free gains, those
+    # grew without bound and the time-domain prediction overflowed (TIC 1.000 on every output
+    # of JSBSim's Cessna 182). A gust that small is left out, and the fit is the calm one.
+    u, air, op, navigation, A = gusty_record(seed=5, gust=0.0)
+    true = np.linalg.eigvals(A[:8, :8])
+    result = aircraft_identify(Experiment(u, air, operating_point=op, navigation=navigation))
+    found = np.linalg.eigvals(result.continuous.A[:8, :8])
+    worst = max(np.min(np.abs(found - t)) / max(abs(t), 1.0) for t in true)
+    assert worst < 0.01
+    assert result.aircraft.wind.gust_rms == {}
+    assert not any("gust" in name for axis in result.aircraft.axes for name in axis.inputs)
+    assert np.all(np.isfinite(result.fit.tic))
+    assert result.fit.tic_avg < 0.1
 
 
 def test_without_vanes_alpha_and_beta_are_synthesised_and_only_the_airspeeds_gust_measured():

@@ -58,7 +58,7 @@ method's terms* (`make bench-jsbsim`, with `--without` to leave one out).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -75,6 +75,9 @@ from agent.ident.okid import Experiment
 
 # The lateral states whose products with α are known inputs (`alpha_products`).
 BILINEAR = ("beta", "p", "r")
+# A measured gust whose rms is at most this share of its air-data channel's motion is no gust
+# (the two sensors agree to rounding): it is left out (`prepare`).
+NO_GUST = 1e-6
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -141,17 +144,17 @@ def prepare(
         drag=sideslip_drag and "beta" in index,
         bilinear=alpha_products and all(role in index for role in ("alpha", *BILINEAR)),
     )
-    out, known, jacobians = [], [], []
-    squares, count = dict.fromkeys(gusts, 0.0), 0
-    for e in batch:
-        u, y, x, gust_columns = _known_inputs(e, index, terms, trim_samples, dt)
-        for role, gust in zip(gusts, gust_columns, strict=False):
-            squares[role] += float(np.sum((gust - gust.mean()) ** 2))
-        count += y.shape[0]
-        trim = x[:trim_samples].mean(axis=0)
-        jacobians.append(kinematic_jacobian(trim))
-        out.append(Experiment(u, y))
-        known.append(_attitude_forcing(x, trim, index, y.shape))
+    out, known, jacobians, squares, motion, count = _assemble(batch, index, terms, trim_samples, dt)
+    # A gust the air data and the INS agree on to the last digits (calm air without sensor
+    # noise: a simulation) holds nothing to fit a gain to; left in, its free gains grew
+    # without bound and the time-domain prediction overflowed (TIC 1 on every output).
+    calm = {role for role in gusts if squares[role] <= NO_GUST**2 * motion[role]}
+    if calm:
+        gusts = tuple(role for role in gusts if role not in calm)
+        terms = replace(terms, gusts=gusts, rated=tuple(g for g in terms.rated if g in gusts))
+        out, known, jacobians, squares, motion, count = _assemble(
+            batch, index, terms, trim_samples, dt
+        )
     r, m = batch[0].u.shape[1], batch[0].y.shape[1]
     names, axes, rates, rows, products = _columns(terms, index, r)
     return Prepared(
@@ -168,6 +171,26 @@ def prepare(
         bilinear=products,
         air_angles=tuple(e.air_angles for e in batch if e.air_angles is not None),
     )
+
+
+def _assemble(batch, index: dict[str, int], terms: _Terms, trim_samples: int, dt: float):
+    """Each experiment's inputs with the known ones, outputs and kinematic forcing; the
+    kinematics' Jacobians; and per gust its sum of squares about its mean and its air-data
+    channel's, over the batch, and the samples counted."""
+    out, known, jacobians = [], [], []
+    squares, motion, count = dict.fromkeys(terms.gusts, 0.0), dict.fromkeys(terms.gusts, 0.0), 0
+    for e in batch:
+        u, y, x, air, gust_columns = _known_inputs(e, index, terms, trim_samples, dt)
+        for role, gust in zip(terms.gusts, gust_columns, strict=False):
+            channel = air[:, KINEMATIC_STATES.index(role)]
+            squares[role] += float(np.sum((gust - gust.mean()) ** 2))
+            motion[role] += float(np.sum((channel - channel.mean()) ** 2))
+        count += y.shape[0]
+        trim = x[:trim_samples].mean(axis=0)
+        jacobians.append(kinematic_jacobian(trim))
+        out.append(Experiment(u, y))
+        known.append(_attitude_forcing(x, trim, index, y.shape))
+    return out, known, jacobians, squares, motion, count
 
 
 def _columns(terms: _Terms, index: dict[str, int], r: int):
@@ -204,7 +227,7 @@ def _output_jacobian(mean: np.ndarray, index: dict[str, int], m: int) -> np.ndar
 
 def _known_inputs(e: Experiment, index: dict[str, int], terms: _Terms, trim_samples: int, dt):
     """One experiment's inputs with the known ones appended, its outputs (the inertial ones
-    where the wind is measured), its absolute states, and its gusts."""
+    where the wind is measured), its absolute states, its air-relative ones, and its gusts."""
     x = np.zeros((e.y.shape[0], len(KINEMATIC_STATES)))
     for k, role in enumerate(KINEMATIC_STATES):
         if role in index:
@@ -235,7 +258,7 @@ def _known_inputs(e: Experiment, index: dict[str, int], terms: _Terms, trim_samp
         alpha = deviation[:, KINEMATIC_STATES.index("alpha")]
         lateral = [KINEMATIC_STATES.index(role) for role in BILINEAR]
         u = np.hstack([u, alpha[:, None] * deviation[:, lateral]])
-    return u, y, x, gusts
+    return u, y, x, air, gusts
 
 
 def _attitude_forcing(x: np.ndarray, trim: np.ndarray, index: dict[str, int], shape):
