@@ -25,6 +25,24 @@ pytestmark = [pytest.mark.usefixtures("no_leaked_tasks"), pytest.mark.timeout(60
 SNAPSHOTS = Path(__file__).parent / "snapshots"
 
 
+# A screen is settled when this many screenshots in a row, each after the app has had a turn,
+# are alike: one after a fixed pause was taken mid-render on a loaded machine.
+SETTLED_FRAMES = 3
+
+
+async def settled(pilot, app, ready=lambda: True, what: str = "the screen settled") -> str:
+    """The screenshot once `ready()` holds and SETTLED_FRAMES frames in a row are alike."""
+    shots: list[str] = []
+
+    def still() -> bool:
+        shots.append(app.export_screenshot())
+        alike = len(shots) >= SETTLED_FRAMES and len(set(shots[-SETTLED_FRAMES:])) == 1
+        return bool(ready()) and alike
+
+    await until(pilot, still, what)
+    return shots[-1]
+
+
 def matches(name: str, svg: str) -> None:
     path = SNAPSHOTS / f"{name}.svg"
     if os.environ.get("UPDATE_SNAPSHOTS"):
@@ -62,11 +80,8 @@ async def test_screen(tmp_path, tab, size):
             await until(pilot, lambda: len(station.heard.results) == 2, "results")
             await until(pilot, lambda: station.rssi_dbm is not None, "RSSI")
             await pilot.press(tab)
-            await pilot.pause(0.3)
-            matches(
-                f"console-{app.query_one('#tabs').active}-{size[0]}x{size[1]}",
-                app.export_screenshot(),
-            )
+            shot = await settled(pilot, app)
+            matches(f"console-{app.query_one('#tabs').active}-{size[0]}x{size[1]}", shot)
 
 
 async def test_frequency_response_view(tmp_path):
@@ -85,16 +100,15 @@ async def test_frequency_response_view(tmp_path):
             bode = app.query_one("#bode")
             bode.scroll_visible(animate=False)
             # Waited for as an event, not a pause: the view scrolled to the whole Bode plot
-            # and two frames in a row alike (a fixed 0.3 s was too short on a loaded machine).
-            shots: list[str] = []
-
-            def settled() -> bool:
-                shots.append(app.export_screenshot())
-                in_view = app.screen.region.contains_region(bode.region)
-                return in_view and len(shots) > 1 and shots[-1] == shots[-2]
-
-            await until(pilot, settled, "the frequency response in view")
-            matches("console-results-frf-120x44", shots[-1])
+            # and the screen settled (a fixed 0.3 s was too short on a loaded machine, and two
+            # frames alike were once taken before the last render).
+            shot = await settled(
+                pilot,
+                app,
+                lambda: app.screen.region.contains_region(bode.region),
+                "the frequency response in view",
+            )
+            matches("console-results-frf-120x44", shot)
 
 
 async def test_live_view(tmp_path):
@@ -114,9 +128,8 @@ async def test_live_view(tmp_path):
                     lambda k=k: len(station.heard.strips.get("p", ())) == 10 * (k + 1),
                     "live",
                 )
-            await until(pilot, lambda: drawn(app, 30), "the strips drawn")
-            await pilot.pause(0.1)
-            matches("console-live-100x30", app.export_screenshot())
+            shot = await settled(pilot, app, lambda: drawn(app, 30), "the strips drawn")
+            matches("console-live-100x30", shot)
 
 
 def drawn(app, samples: int) -> bool:
