@@ -34,7 +34,7 @@ from drivers.xbee.driver import PacketSeam
 
 # A thread that logs while collecting is deadlocked when no full collection has ended for this
 # long: each line here runs dozens of full collections, about 15 ms each on a quiet machine,
-# several times that with the suite's other worker on the second core, and a deadlocked thread
+# several times that on a loaded machine or beside a second test worker, and a deadlocked thread
 # never ends one again. Judged by progress, not by the whole run's time, which grows with the
 # process's objects and the machine's load. Below the suite's 120 s per-test timeout, so a
 # stuck thread fails with this test's own message.
@@ -387,8 +387,9 @@ def test_a_failed_test_that_hangs_in_its_teardown_ends_the_run(tmp_path):
 
 
 def test_a_hung_test_in_a_worker_process_ends_it_with_every_threads_stack(tmp_path):
-    # `make test` runs two pytest-xdist workers, which do not show pytest-timeout's report: a
-    # hung test left only "worker 'gw0' crashed". The watchdog's timer writes it to stderr.
+    # `make test TEST_WORKERS=2` runs two pytest-xdist workers, which do not show
+    # pytest-timeout's report: a hung test left only "worker 'gw0' crashed". The watchdog's
+    # timer writes it to stderr.
     code, out = _run_pytest_on(tmp_path, HUNG, "-n", "2")
     assert code != 0
     assert "Timeout: test_hung.py::test_waits_on_a_held_lock after 3 s" in out

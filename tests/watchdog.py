@@ -9,9 +9,9 @@ It is re-armed at the start of each phase (setup, call, teardown) for the test's
 margin. When it fires, it writes every thread's traceback to the terminal's stderr, past
 pytest's capture, and ends the process with exit code 1.
 
-In a pytest-xdist worker (`make test` runs two), pytest-timeout's own report would be lost: it
-writes to the worker's terminal writer, which xdist never shows, so a hung test left only
-"worker 'gw0' crashed while running …". There its timer is this plugin's
+In a pytest-xdist worker (`make test TEST_WORKERS=2` runs two), pytest-timeout's own report
+would be lost: it writes to the worker's terminal writer, which xdist never shows, so a hung
+test left only "worker 'gw0' crashed while running …". There its timer is this plugin's
 (`pytest_timeout_set_timer`): the same thread timer, writing the test's name and every thread's
 stack to the real stderr before it ends the worker; xdist then fails the test and goes on with
 a new worker.
