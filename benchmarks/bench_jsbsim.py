@@ -679,7 +679,11 @@ def validation_tic(model: StateSpace, records: list[tuple[Experiment, tuple]]) -
 
 # Terms of the whole-aircraft method that `--without` leaves out (docs/identification.md):
 # the Settings field that holds each.
-ABLATIONS = {"alpha-products": "alpha_products", "sideslip-drag": "sideslip_drag"}
+ABLATIONS = {
+    "alpha-products": "alpha_products",
+    "sideslip-drag": "sideslip_drag",
+    "process-noise": "process_noise",
+}
 
 
 def main() -> None:

@@ -191,6 +191,10 @@ class AxisDocument(Document):
     inputs: list[str]  # its controls, known inputs and coupling states
     iterations: int
     converged: bool
+    # "filter error" where the record showed process noise (agent.ident.aircraft.process),
+    # with each output's share of its residual power that the process noise explains.
+    estimator: Literal["output error", "filter error"] = "output error"
+    process_share: dict[str, float] = {}
 
 
 class Engine(Document):

@@ -94,11 +94,19 @@ def _method_lines(result: Identification) -> list[str]:
     engines = "; ".join(_engine(e) for e in aircraft.engine)
     wind = aircraft.wind
     gusts = ", ".join(f"{name} {rms:.3g}" for name, rms in wind.gust_rms.items())
+    filtered = [a for a in aircraft.axes if a.estimator == "filter error"]
+    estimators = "; ".join(
+        f"{a.name} by filter error (process noise's share of the residual: "
+        + ", ".join(f"{k} {v:.2f}" for k, v in a.process_share.items())
+        + ")"
+        for a in filtered
+    )
     return [
         f"whole-aircraft method: {aircraft.model}; order n = {result.order} (the outputs"
         + (" and the engine's lag states" if result.order > len(result.output_names) else "")
         + f"); frequency-domain output error on {aircraft.bins} bins, "
         f"{aircraft.band_hz[0]:.3g}–{aircraft.band_hz[1]:.3g} Hz",
+        *([estimators] if estimators else []),
         "axes: "
         + "; ".join(f"{a.name} ← {', '.join(a.inputs)}" for a in aircraft.axes)
         + (f"; engine lags {lags}" if lags and not engines else ""),

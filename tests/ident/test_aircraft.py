@@ -155,9 +155,11 @@ def test_a_measured_rpm_is_the_engines_input_at_once_and_the_throttle_is_set_asi
     longitudinal = next(a for a in result.aircraft.axes if a.name == "longitudinal")
     assert longitudinal.inputs == ["elevator", "rpm"]
     assert result.order == 8  # no lag states: the engine's speed is measured
-    # The rpm's gains within 2 % of the largest (measured: 1.0 %, on V̇'s).
+    # The rpm's gains within 3 % of the largest (measured: 2.1 %, on V̇'s; 1.0 % by output
+    # error: the noise-free record's residual, the transforms' own errors, is coloured, so the
+    # longitudinal axis takes the filter-error method, agent.ident.aircraft.process).
     gains = result.continuous.B[:4, 4] * 2.0
-    assert np.max(np.abs(gains - A[:4, 9])) < 0.02 * np.max(np.abs(A[:4, 9]))
+    assert np.max(np.abs(gains - A[:4, 9])) < 0.03 * np.max(np.abs(A[:4, 9]))
     assert np.all(result.continuous.B[:, 0] == 0)  # the throttle's column: not used
     found = np.sort_complex(np.linalg.eigvals(result.continuous.A[:8, :8]))
     true = np.sort_complex(np.linalg.eigvals(A[:8, :8]))
@@ -411,8 +413,9 @@ def _body_to_ned(phi: float, theta: float, psi: float) -> np.ndarray:
 def test_the_measured_wind_turns_the_gust_from_bias_into_excitation():
     # The vanes and the pitot read the gust: without the INS's velocities it is an input the
     # fit does not know, and it biases the modes; with them the wind is measured and the
-    # same record gives the aircraft back (measured: worst eigenvalue 0.99 off blind, 0.0002
-    # with the wind).
+    # same record gives the aircraft back (measured: worst eigenvalue 0.25 off blind, 0.99 by
+    # output error before the filter-error method modelled the unmeasured gust as process
+    # noise; 0.0002 with the wind).
     u, air, op, navigation, A = gusty_record(seed=5)
     true = np.linalg.eigvals(A[:8, :8])
 
@@ -427,7 +430,7 @@ def test_the_measured_wind_turns_the_gust_from_bias_into_excitation():
     assert report.kinematics
     assert report.wind.gust_rms["airspeed"] == pytest.approx(0.03, rel=0.3)
     assert not blind.aircraft.wind.measured
-    assert worst(blind) > 0.3
+    assert worst(blind) > 0.1
     assert worst(measured) < 0.01
     # The model's inputs are the controls; the gusts drove the fit only.
     assert measured.continuous.B.shape[1] == len(INPUTS)
@@ -895,3 +898,43 @@ def test_without_vanes_alpha_and_beta_are_synthesised_and_only_the_airspeeds_gus
     assert wind.synthesised[0].wind_mps == pytest.approx((5.0, -3.0), abs=0.3)
     assert not any("gust alpha" in axis.inputs for axis in result.aircraft.axes)
     assert "alpha, beta synthesised without vanes" in format_text(result, 1, len(u))
+
+
+def _longitudinal_error(result, A) -> float:
+    """The worst longitudinal eigenvalue's error: relative, absolute below 1 1/s."""
+    found = np.linalg.eigvals(result.continuous.A[:4, :4])
+    return max(np.min(np.abs(found - t)) / max(abs(t), 1.0) for t in np.linalg.eigvals(A[:4, :4]))
+
+
+def test_an_unmeasured_gust_is_process_noise_and_the_filter_error_method_fits_it():
+    # The vanes and the pitot read the gust and nothing measures it (no INS): its rate drives
+    # the air-relative V and α as process noise. The residual shows it (the likelihood ratio
+    # against white noise alone), so the longitudinal axis takes the filter-error method and
+    # says so; against output error on the same records its longitudinal modes are nearer
+    # (measured worst eigenvalue 0.23 / 0.24 / 0.33 off against 0.42 / 1.90 / 0.33 on seeds
+    # 5–7; the gust, at 0.15 % of the full preset's controls, is most of the motion).
+    filtered, output = [], []
+    for seed in (5, 6, 7):
+        u, air, _, _, A = gusty_record(seed=seed)
+        result = aircraft_identify(Experiment(u, air))
+        (longitudinal,) = [a for a in result.aircraft.axes if a.name == "longitudinal"]
+        assert longitudinal.estimator == "filter error"
+        assert min(longitudinal.process_share[c] for c in ("airspeed", "alpha")) > 0.5
+        assert "longitudinal by filter error" in format_text(result, 1, len(u))
+        filtered.append(_longitudinal_error(result, A))
+        plain = aircraft_identify(Experiment(u, air), process_noise=False)
+        assert {a.estimator for a in plain.aircraft.axes} == {"output error"}
+        output.append(_longitudinal_error(plain, A))
+    assert np.mean(filtered) < 0.5 * np.mean(output)
+
+
+def test_white_sensor_noise_alone_keeps_output_error():
+    # Calm air, 2 % white noise on every output: nothing for a process-noise model to explain,
+    # and estimating one would cost the fit efficiency (the thesis's aircraft's phugoid
+    # scattered 1.6 times its Cramér–Rao bound): the likelihood ratio keeps output error.
+    u, air, _, _, A = gusty_record(seed=5, gust=0.0, scale=0.015)
+    noisy = air + 0.02 * air.std(axis=0) * np.random.default_rng(5).standard_normal(air.shape)
+    result = aircraft_identify(Experiment(u, noisy))
+    assert {a.estimator for a in result.aircraft.axes} == {"output error"}
+    assert all(a.process_share == {} for a in result.aircraft.axes)
+    assert _longitudinal_error(result, A) < 0.05

@@ -11,6 +11,10 @@ error with per-band weights, its covariance, and the coupling tests.
    gradient of bin k): frequency bins are nearly independent for long records, so this holds
    for coloured noise (turbulence) where the white-noise Cramér–Rao bound (JᵀJ)⁻¹σ² does not;
    each bin's residual is corrected for its leverage first (`covariance`).
+   Where the record shows process noise (turbulence it does not measure, the residual
+   coherent across the outputs), the longitudinal axis continues by the filter-error method:
+   the residual's spectral matrix modelled and the Whittle likelihood minimised
+   (agent.ident.aircraft.process); its covariance is the same sandwich, whitened by it.
 3. Inputs: surfaces are measured positions; the throttle reaches the thrust through the
    engine's spin-up, first-order lags whose time constant is estimated (u_eff = u / (1 +
    jωτ)^k, k lags: THROTTLE_LAGS first, then the number the data choose, `lag_order_cost`
@@ -31,7 +35,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.ndimage
 
+from agent.ident.aircraft import process
 from agent.ident.aircraft.problem import LAG_START_S, THROTTLE_LAGS, AxisProblem
+from agent.ident.aircraft.process import ProcessNoise
 from agent.ident.aircraft.transforms import Transforms
 from agent.ident.errors import DataError, IdentificationFailed
 
@@ -76,6 +82,14 @@ class AxisFit:
     controls: tuple[int, ...] = ()  # the inputs whose excited bins the fit used (`excited`)
     # Lagged input → its number of lags where it is not THROTTLE_LAGS (a gust rate's one).
     lag_powers: dict[int, int] = field(default_factory=dict)
+    # The filter-error method's noise model (agent.ident.aircraft.process), or None (output
+    # error: the weights are bin_std).
+    noise: ProcessNoise | None = None
+
+    @property
+    def weights(self) -> np.ndarray | ProcessNoise:
+        """What the fit weighted its residuals by: `noise`, else `bin_std`."""
+        return self.bin_std if self.noise is None else self.noise
 
 
 def equation_error(problem: AxisProblem) -> np.ndarray:
@@ -108,8 +122,12 @@ def equation_error(problem: AxisProblem) -> np.ndarray:
     return problem.pack(A, B, taus, d)
 
 
-def output_error(problem: AxisProblem, theta: np.ndarray):
-    """Levenberg–Marquardt on the weighted residuals, re-weighting between passes."""
+def output_error(problem: AxisProblem, theta: np.ndarray, rows: Sequence[int] = ()):
+    """Levenberg–Marquardt on the weighted residuals, re-weighting between passes; then, with
+    process-noise `rows` (positions among the states), the filter-error method's passes from
+    there (agent.ident.aircraft.process), its noise model re-estimated between them. Returns
+    the parameters, the output-error weights at the end (σ per bin), the noise model (or
+    None), the starting cost, the iterations and whether the last pass converged."""
     X, _ = problem.response(theta)
     sigma = bin_sigma(problem.Y - X, problem.s)
     cost_start = _cost(problem.Y - X, sigma)
@@ -123,16 +141,29 @@ def output_error(problem: AxisProblem, theta: np.ndarray):
         sigma = new
         if settled:
             break
-    return theta, sigma, cost_start, iterations, converged
+    noise = None
+    if rows:
+        noise = process.estimate(problem, theta, tuple(rows), smooth_bins)
+        _, width = smooth_bins(sigma, problem.s)
+        if not process.significant(problem, theta, noise, width):
+            return theta, sigma, None, cost_start, iterations, converged
+        for _ in range(PASSES):
+            theta, its, converged = minimise(problem, theta, noise)
+            iterations += its
+            noise = process.estimate(problem, theta, tuple(rows), smooth_bins)
+        X, _ = problem.response(theta)
+        sigma = bin_sigma(problem.Y - X, problem.s)
+    return theta, sigma, noise, cost_start, iterations, converged
 
 
 def bin_sigma(residual: np.ndarray, s: np.ndarray) -> np.ndarray:
     """σ per bin and output (F, n): the residual's rms over the SMOOTH_BINS nearest bins in
     frequency on either side. Turbulence's response is coloured, strong at the phugoid's
     frequencies and weak at the short period's. Weighting each bin by its own neighbourhood's
-    level is the frequency-domain form of the filter-error method's noise model (Jategaonkar,
-    ch. 5): an output's quiet bands then count for what they carry. A single σ per output
-    would let its noisiest band set the weight of all of them."""
+    level is a diagonal form of the filter-error method's noise model (Jategaonkar, ch. 5;
+    its full form, the outputs' coherence included, is agent.ident.aircraft.process): an
+    output's quiet bands then count for what they carry. A single σ per output would let its
+    noisiest band set the weight of all of them."""
     power = np.abs(residual) ** 2
     smooth, _ = smooth_bins(power, s)
     # No band's weight beyond (1/SMOOTH_FLOOR)² times the output's average: a band the model
@@ -164,18 +195,40 @@ def _stack(J: np.ndarray) -> np.ndarray:
     return np.vstack([J.real, J.imag])
 
 
-def minimise(problem: AxisProblem, theta: np.ndarray, sigma: np.ndarray):
-    """Levenberg–Marquardt on `problem.free` at fixed weights (σ per bin and output): the
-    parameters, the iterations taken, and whether it stopped at a minimum."""
+def weighted_cost(problem: AxisProblem, theta: np.ndarray, weights) -> float:
+    """The fit's cost at `theta`: the weighted residuals' sum of squares at σ per bin and
+    output (`weights` an array), or the filter-error method's (a ProcessNoise); inf where the
+    model has no response."""
+    if isinstance(weights, ProcessNoise):
+        return process.cost(problem, theta, weights)
+    X, _ = problem.response(theta)
+    return _cost(problem.Y - X, weights) if np.all(np.isfinite(X)) else np.inf
+
+
+def _linearised(problem: AxisProblem, theta: np.ndarray, weights):
+    """The whitened residual (F, n), the whitened Jacobian of the residual (F, n, P) and the
+    cost's gradient beyond the residual's sum of squares (P,), at fixed weights."""
+    if isinstance(weights, ProcessNoise):
+        e, J, gradient = process.linearised(problem, theta, weights)
+        return e, -J, gradient
+    X, J = problem.response(theta, jacobian=True)
+    return (problem.Y - X) / weights, -J / weights[:, :, None], None
+
+
+def minimise(problem: AxisProblem, theta: np.ndarray, weights):
+    """Levenberg–Marquardt on `problem.free` at fixed weights (σ per bin and output, or the
+    filter-error method's noise model): the parameters, the iterations taken, and whether it
+    stopped at a minimum."""
     lam = 1e-3
     free = problem.free
-    X, J = problem.response(theta, jacobian=True)
-    cost = _cost(problem.Y - X, sigma)
+    cost = weighted_cost(problem, theta, weights)
+    e, J, extra = _linearised(problem, theta, weights)
     for iteration in range(1, ITERATIONS + 1):
-        e = (problem.Y - X) / sigma
-        Jw = _stack(-J[:, :, free] / sigma[:, :, None])
+        Jw = _stack(J[:, :, free])
         er = np.concatenate([e.ravel().real, e.ravel().imag])
         g, H = Jw.T @ er, Jw.T @ Jw
+        if extra is not None:  # half the gradient, as g is
+            g = g + 0.5 * extra[free]
         scale = np.sqrt(np.maximum(np.diag(H), 1e-300))
         Hs = H / np.outer(scale, scale)
         gs = g / scale
@@ -187,33 +240,34 @@ def minimise(problem: AxisProblem, theta: np.ndarray, sigma: np.ndarray):
             if step is not None and np.all(np.isfinite(step)):
                 trial = theta.copy()
                 trial[free] += step
-                Xt, _ = problem.response(trial)
-                new = _cost(problem.Y - Xt, sigma) if np.all(np.isfinite(Xt)) else np.inf
+                new = weighted_cost(problem, trial, weights)
                 if new < cost:
                     break
             lam *= 10
             if lam > 1e10:
                 return theta, iteration, True  # no step lowers the cost: a minimum
-        decrease = (cost - new) / cost
+        # The filter-error cost's log-determinant can be negative: relative to its size.
+        decrease = (cost - new) / max(abs(cost), 1e-300)
         theta, cost, lam = trial, new, max(lam / 10, 1e-12)
-        X, J = problem.response(theta, jacobian=True)
+        e, J, extra = _linearised(problem, theta, weights)
         if decrease < RELATIVE_DECREASE:
             return theta, iteration, True
     return theta, ITERATIONS, False
 
 
-def covariance(problem: AxisProblem, theta: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+def covariance(problem: AxisProblem, theta: np.ndarray, weights) -> np.ndarray:
     """Sandwich covariance of θ from the bin-wise gradients of the weighted cost, each bin's
     residual corrected for its leverage: ẽ_k = (I − h_k)^(−1/2) e_k, h_k = R_k H⁻¹ R_kᵀ the
     bin's block of the hat matrix (the CR2 correction of Bell & McCaffrey, *Survey
     Methodology* 28(2), 2002; MacKinnon & White's HC2 for one residual per row). A fit follows
     the few bins that alone carry a mode (the phugoid's) more closely than it follows the
     noise there, so their fitted residuals understate it, and the uncorrected sandwich the
-    mode's variance."""
-    X, J = problem.response(theta, jacobian=True)
-    e = (problem.Y - X) / sigma
+    mode's variance. `weights` as `minimise`'s: with the filter-error method's noise model the
+    residuals and the Jacobian are whitened by its spectra (the log-determinant's part of the
+    score left out)."""
+    e, J, _ = _linearised(problem, theta, weights)
     free = problem.free
-    Jw = -J[:, :, free] / sigma[:, :, None]
+    Jw = J[:, :, free]
     H = _stack(Jw).T @ _stack(Jw)
     Hinv = np.linalg.pinv(H, rcond=1e-12)
     # Per bin k: g_k = R_kᵀ ẽ_k, the bin's share of the gradient (outputs together), with R_k
@@ -242,9 +296,12 @@ def fit_axis(
     experiments: int,
     controls: Sequence[int] = (),
     powers: Mapping[int, int] | None = None,
+    process_noise: bool = False,
 ) -> AxisFit:
     """One axis's model: `lagged` inputs reach it through fitted lags, THROTTLE_LAGS of them
-    unless `powers` (input column → number) says otherwise."""
+    unless `powers` (input column → number) says otherwise; with `process_noise`, by the
+    filter-error method, process noise on every state's equation but the kinematics'
+    (agent.ident.aircraft.process)."""
     powers = {j: p for j, p in (powers or {}).items() if j in lagged}
     problem = AxisProblem(
         sp,
@@ -260,15 +317,16 @@ def fit_axis(
             f"{name}: {problem.s.size} frequency bins cannot determine {problem.size} "
             "parameters; record longer or widen the band"
         )
+    rows = [i for i in range(problem.n) if not problem.fixed_A[i].all()] if process_noise else []
     theta = equation_error(problem)
-    theta, sigma, start, iterations, converged = output_error(problem, theta)
+    theta, sigma, noise_model, start, iterations, converged = output_error(problem, theta, rows)
     A, B, taus, d = problem.unpack(theta)
     if not np.all(np.isfinite(A)):
         raise IdentificationFailed(f"{name}: the output-error fit diverged")
-    cov = covariance(problem, theta, sigma)
+    weights = sigma if noise_model is None else noise_model
+    cov = covariance(problem, theta, weights)
     k = problem.n * problem.n + problem.n * problem.r
     lags = {list(inputs)[j]: float(abs(taus[i])) for i, j in enumerate(problem.lagged)}
-    X, _ = problem.response(theta)
     noise = np.sqrt(np.mean(sigma**2, axis=0))
     return AxisFit(
         name=name,
@@ -282,11 +340,12 @@ def fit_axis(
         noise_std=noise,
         bin_std=sigma,
         cost_start=start,
-        cost=_cost(problem.Y - X, sigma),
+        cost=weighted_cost(problem, theta, weights),
         iterations=iterations,
         converged=converged,
         controls=tuple(controls),
         lag_powers=powers,
+        noise=noise_model,
     )
 
 
@@ -313,7 +372,7 @@ def coupling(
     theta = problem.pack(fitted.A, B, taus, fitted.transients)
     X0 = problem.response(theta)[0]
     before = _cost(problem.Y - X0, fitted.bin_std)
-    theta, _, _ = minimise(problem, theta, fitted.bin_std)
+    theta, _, _ = minimise(problem, theta, fitted.weights)
     X1 = problem.response(theta)[0]
     after = _cost(problem.Y - X1, fitted.bin_std)
     signal = _cost(problem.Y, fitted.bin_std)
@@ -347,12 +406,11 @@ def lag_order_cost(
     )
     taus = [fitted.lags[j] * (now / order if j == column else 1.0) for j in lagged]
     theta = problem.pack(fitted.A, fitted.B, np.array(taus), fitted.transients)
-    theta, _, _ = minimise(problem, theta, fitted.bin_std)
-    X = problem.response(theta)[0]
+    theta, _, _ = minimise(problem, theta, fitted.weights)
     tau = None
     if order > 0:
         tau = float(abs(problem.unpack(theta)[2][lagged.index(column)]))
-    return _cost(problem.Y - X, fitted.bin_std), tau
+    return weighted_cost(problem, theta, fitted.weights), tau
 
 
 def known_gain(fit: AxisFit, column: int, row: int) -> tuple[float, float] | None:

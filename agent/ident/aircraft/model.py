@@ -154,7 +154,9 @@ def fitted_axes(
             f"{', '.join(inputs[j] for j in throttle)} set aside: the measured "
             f"{', '.join(inputs[j] for j in measured)} carries the engine (a known input, at once)"
         )
-    fits, engine = _fit_axes(sp, ready, present, throttle, len(batch))
+    fits, engine = _fit_axes(
+        sp, ready, present, throttle, len(batch), process_noise=settings.process_noise
+    )
     engine |= {j: (0, {}) for j in measured if any(j in f.inputs for f in fits)}
     couplings: dict[str, Coupling] = {}
     structure = fits[0].name
@@ -345,9 +347,11 @@ def _fit_axes(
     present: dict[str, tuple[list[int], list[int]]],
     throttle: list[int],
     experiments: int,
+    process_noise: bool = True,
 ) -> list[AxisFit]:
     """Each present axis fitted alone, with its controls and the known inputs that act on it;
-    the throttle and the gust rates through fitted lags."""
+    the throttle and the gust rates through fitted lags; the longitudinal axis by the
+    filter-error method with `process_noise` (agent.ident.aircraft.process)."""
     known = {axis: [j for j, a in ready.extra_axes.items() if a == axis] for axis in AXES}
     if "longitudinal" not in present:  # α barely moves: its products only add unknowns
         known["lateral"] = [j for j in known["lateral"] if j not in ready.bilinear]
@@ -356,6 +360,10 @@ def _fit_axes(
         rated = [j for j in known[axis] if j in ready.rates]  # gust rates: one lag each
         engines = [j for j in ins if j in throttle]
         powers = dict.fromkeys(rated, GUST_RATE_LAGS) | dict.fromkeys(engines, THROTTLE_LAGS)
+        filtered = process_noise and axis == "longitudinal"
+        # The engine's order is chosen by output error: a process-noise model fitted with
+        # the wrong number of lags takes their misfit for turbulence, and no order then
+        # explains more than another.
         fitted = fit_axis(
             sp,
             name=axis,
@@ -365,6 +373,7 @@ def _fit_axes(
             experiments=experiments,
             controls=ins,
             powers=powers,
+            process_noise=filtered and not engines,
         )
         for j in engines:
             order, criterion = _engine_order(sp, fitted, j, experiments)
@@ -380,6 +389,18 @@ def _fit_axes(
                     controls=ins,
                     powers={**fitted.lag_powers, j: order},
                 )
+        if filtered and engines:
+            fitted = fit_axis(
+                sp,
+                name=axis,
+                states=states,
+                inputs=fitted.inputs,
+                lagged=tuple(fitted.lags),
+                experiments=experiments,
+                controls=ins,
+                powers=fitted.lag_powers,
+                process_noise=True,
+            )
         fits.append(fitted)
     return fits, engine
 
@@ -404,6 +425,15 @@ def _engine_order(
         aic[order] = 2.0 * cost + 2.0 * (order > 0)
     best = min(aic, key=lambda k: (round(aic[k], 9), k))
     return best, {k: float(v - aic[best]) for k, v in aic.items()}
+
+
+def _process_share(fit: AxisFit, outputs: tuple[str, ...]) -> dict[str, float]:
+    """Each output's share of its residual power the fit's process noise explains (none
+    without it), over the fit's bins."""
+    if fit.noise is None:
+        return {}
+    share = fit.noise.share(fit.A)
+    return {outputs[c]: float(v) for c, v in zip(fit.states, share, strict=True)}
 
 
 def _coupled(
@@ -457,6 +487,7 @@ def _coupled(
                 experiments=experiments,
                 controls=controls,
                 powers=powers,
+                process_noise=fitted.noise is not None,
             )
     joined = []
     for k, f in enumerate(fits):
@@ -524,6 +555,8 @@ def _report(
                 inputs=[names[j] if j < width else outputs[j - width] for j in f.inputs],
                 iterations=f.iterations,
                 converged=f.converged,
+                estimator="output error" if f.noise is None else "filter error",
+                process_share=_process_share(f, outputs),
             )
             for f in fits
         ],
