@@ -46,6 +46,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.linalg
+import scipy.ndimage
 
 from agent.ident.convert import StateSpace, discretize_hold, hold_block
 from agent.ident.errors import IdentificationFailed
@@ -68,6 +69,12 @@ MAX_ITERATIONS = 30
 RELATIVE_DECREASE = 1e-8
 # σ_i never drops below this fraction of the output's RMS (noise-free data would divide by 0).
 NOISE_FLOOR = 1e-9
+# The correction for coloured residuals (`coloured_covariance`): the residuals' cross-spectra
+# averaged over this many periodogram bins on either side (Daniell's window), and the largest
+# Jacobian (entries, samples × outputs × parameters) it is computed on at once; a longer
+# record is taken in segments of that size, their cross terms left out.
+COLOURED_BINS = 8
+COLOURED_ENTRIES = 20_000_000
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -81,7 +88,9 @@ class Refinement:
     hold: str  # "zoh" or "foh": how the fitted discretisation treats the inputs
     initial_states: tuple[np.ndarray, ...]
     noise_std: np.ndarray  # σ_i per output: of the final residuals (innovations for PEM)
-    covariance: np.ndarray  # of [vec Ac, vec Bc, vec C, vec D] (row-major), fixed entries 0
+    # Of [vec Ac, vec Bc, vec C, vec D] (row-major), fixed entries 0: corrected for the
+    # residuals' colour (`coloured_covariance`).
+    covariance: np.ndarray
     cost_initial: float  # weighted cost of the starting model (final σ)
     cost: float
     iterations: int
@@ -483,6 +492,7 @@ def refine(
     final_res, triangle = problem.evaluate(beta, "triangle")
     start_res, _ = problem.evaluate(np.zeros_like(beta))
     refined, x0s = problem.unpack(beta)
+    basis = problem.basis[: problem.matrix_size]
     return Refinement(
         gain=problem.gain(beta) if problem.innovation else None,
         continuous=refined,
@@ -491,7 +501,7 @@ def refine(
         dt=dt,
         initial_states=tuple(x0s),
         noise_std=sigma,
-        covariance=_covariance(triangle[:, :-1], problem.basis[: problem.matrix_size]),
+        covariance=basis @ coloured_covariance(problem, beta, triangle[:, :-1]) @ basis.T,
         cost_initial=float(start_res @ start_res),
         cost=float(final_res @ final_res),
         iterations=iterations,
@@ -524,6 +534,60 @@ def cramer_rao(
     problem.weights = 1.0 / np.asarray(noise_std, dtype=float)
     _, triangle = problem.evaluate(np.zeros(problem.basis.shape[1]), "triangle")
     return _covariance(triangle[:, :-1], problem.basis[: problem.matrix_size])
+
+
+def coloured_covariance(
+    problem: OutputErrorProblem, beta: np.ndarray, triangle: np.ndarray
+) -> np.ndarray:
+    """The covariance of β corrected for coloured residuals (Morelli & Klein, "Accuracy of
+    aerodynamic model parameters estimated from flight test data", *J. Guidance, Control, and
+    Dynamics* 20(1), 1997; Klein & Morelli 2006, §6.5): M⁻¹ (Σ_t Σ_s J(t)ᵀ R(t − s) J(s)) M⁻¹,
+    M = JᵀJ of the weighted Jacobian (`triangle`: its triangular factor) and R(k) the weighted
+    residuals' autocorrelation. Unmodelled dynamics and turbulence leave residuals correlated
+    in time, and the white-noise bound M⁻¹ then claims several times too little (a tenth of a
+    second's correlation at 100 Hz counts each sample ten times). Computed in the frequency
+    domain, J(ω)ᴴ Φ(ω) J(ω) summed over the bins with Φ the residuals' cross-spectral matrix
+    (the periodogram averaged over COLOURED_BINS on either side): the time-domain sum with a
+    lag window, positive semi-definite as it. White residuals give M back."""
+    _, s, vt = np.linalg.svd(triangle, full_matrices=False)
+    keep = s > s[0] * 1e-12 if s.size else s.astype(bool)
+    inverse = (vt[keep].T / s[keep] ** 2) @ vt[keep]
+    middle = np.zeros_like(inverse)
+    m, q = problem.m, triangle.shape[1]
+    residual, jacobian = problem.evaluate(beta, "full")
+    start = 0
+    for exp in problem.batch:
+        length = exp.u.shape[0]
+        step = max(4 * COLOURED_BINS, COLOURED_ENTRIES // (m * q))
+        for first in range(0, length, step):
+            last = min(length, first + step)
+            rows = slice((start + first) * m, (start + last) * m)
+            middle += _spectral_middle(
+                residual[rows].reshape(-1, m), jacobian[rows].reshape(-1, m, q)
+            )
+        start += length
+    return inverse @ middle @ inverse
+
+
+def _spectral_middle(residual: np.ndarray, jacobian: np.ndarray) -> np.ndarray:
+    """Σ_t Σ_s J(t)ᵀ R(t − s) J(s) of one stretch, residual (N, m), jacobian (N, m, q)."""
+    N = residual.shape[0]
+    rf = np.fft.rfft(residual, axis=0)  # (K, m)
+    jf = np.fft.rfft(jacobian, axis=0)  # (K, m, q)
+    outer = rf[:, :, None] * rf[:, None, :].conj() / N
+    width = min(2 * COLOURED_BINS + 1, outer.shape[0])
+    smooth = scipy.ndimage.uniform_filter1d(outer.real, width, axis=0, mode="nearest")
+    smooth = smooth + 1j * scipy.ndimage.uniform_filter1d(outer.imag, width, axis=0, mode="nearest")
+    # Each interior bin of the one-sided transform stands for two (Parseval).
+    weight = np.full(outer.shape[0], 2.0)
+    weight[0] = 1.0
+    if N % 2 == 0:
+        weight[-1] = 1.0
+    values, vectors = np.linalg.eigh(smooth)
+    root = vectors * np.sqrt(np.clip(values, 0.0, None))[:, None, :]  # Φ = root rootᴴ
+    g = root.conj().transpose(0, 2, 1) @ jf * np.sqrt(weight / N)[:, None, None]
+    g = g.reshape(-1, jf.shape[2])
+    return (g.conj().T @ g).real
 
 
 def _covariance(jac: np.ndarray, basis: np.ndarray) -> np.ndarray:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.signal
 
 from agent.ident import Experiment, Settings, identify, reference
 from agent.ident.convert import StateSpace, discretize_hold
@@ -15,6 +16,7 @@ from agent.ident.fit import free_response_basis, simulate, state_convolution
 from agent.ident.modal import SecondOrder, modal_subspace
 from agent.ident.refine import (
     Refinement,
+    cramer_rao,
     discretization_jacobian,
     eigenvalue_std,
     refine,
@@ -407,3 +409,36 @@ def test_a_two_real_pole_modes_wn_and_zeta_standard_errors_are_its_polynomials(g
     d_zeta = (-np.eye(2) / (2 * wn)).ravel() + np.trace(A) / (2 * wn**2) * d_wn
     assert found.frequency_std == pytest.approx(np.sqrt(np.sum((d_wn * sigma) ** 2)), rel=1e-6)
     assert found.damping_std == pytest.approx(np.sqrt(np.sum((d_zeta * sigma) ** 2)), rel=1e-6)
+
+
+def test_standard_errors_are_corrected_for_coloured_residuals():
+    """Bad input tried: sensor noise correlated in time (white noise through a 0.5 s low-pass,
+    5 % of each output's rms), as turbulence and unmodelled dynamics leave it. The white-noise
+    Cramér–Rao bound claims several times too little (measured: rms of the eigenvalues'
+    error over σ 5.6 over 12 seeds); corrected for the residuals' colour (Morelli & Klein)
+    it is 1.2, an honest σ (1.1 on white noise, where the bound is 0.95)."""
+    u = reference.thesis_multisine(LAT, DT)
+    clean = reference.simulate(LAT, u, DT)
+    truth = true_eigenvalues(LAT)
+    decay = np.exp(-DT / 0.5)
+    corrected, white = [], []
+    for seed in range(12):
+        coloured = scipy.signal.lfilter(
+            [1 - decay], [1, -decay], np.random.default_rng(seed).normal(size=clean.shape), axis=0
+        )
+        coloured *= 0.05 * np.sqrt(np.mean(clean**2, axis=0)) / coloured.std(axis=0)
+        exp = Experiment(u, clean + coloured)
+        start = StateSpace(LAT.A * 1.05, LAT.B * 0.95, np.eye(4), np.zeros((4, 2)))
+        result = refine(start, DT, [exp], output_coordinates=True, estimate_d=False, hold="zoh")
+        bound = cramer_rao(
+            result.continuous, DT, [exp], result.noise_std, initial_states=result.initial_states
+        )
+        lam = np.linalg.eigvals(result.continuous.A)
+        ours = eigenvalue_std(result.continuous.A, result.covariance_of_a())
+        theirs = eigenvalue_std(result.continuous.A, bound[:16, :16])
+        for k, value in enumerate(lam):
+            error = value.real - truth[np.argmin(np.abs(truth - value))].real
+            corrected.append(error / ours[k].real)
+            white.append(error / theirs[k].real)
+    assert 0.6 < np.sqrt(np.mean(np.square(corrected))) < 1.5
+    assert np.sqrt(np.mean(np.square(white))) > 3.0
