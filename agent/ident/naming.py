@@ -30,6 +30,7 @@ The modes an aircraft must have (`expected_modes`) are those of the axes its out
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 from collections.abc import Sequence
 
@@ -39,6 +40,9 @@ from agent.channels import LATERAL_OUTPUTS, LONGITUDINAL_OUTPUTS
 from agent.ident.modal import Mode
 
 AXIS_SHARE = 0.7
+# Two modes this close (a share of the larger eigenvalue's magnitude) are twins, whose
+# eigenvectors the weakest coupling mixes (`name_modes`).
+TWINS = 0.1
 MIN_MSV = 1.0  # percent
 MIN_EMAC = 50.0  # percent
 MAX_FREQUENCY = 30.0  # rad/s
@@ -81,6 +85,11 @@ def _axis(mode: Mode, roles: Sequence[str | None]) -> str | None:
     return "lon" if share <= 1 - AXIS_SHARE else None
 
 
+def _twins(a: Mode, b: Mode) -> bool:
+    """Two eigenvalues within TWINS of the larger's magnitude of each other."""
+    return abs(a.eigenvalue - b.eigenvalue) <= TWINS * max(abs(a.eigenvalue), abs(b.eigenvalue))
+
+
 def _plausible(mode: Mode, min_msv: float) -> bool:
     return not _implausible(mode, min_msv)
 
@@ -104,6 +113,18 @@ def name_modes(
     names: dict[int, str] = {}
     candidates = [i for i, mode in enumerate(modes) if _plausible(mode, min_msv)]
     axis = {i: _axis(modes[i], output_roles) or (axes[i] if axes else None) for i in candidates}
+    if axes and all(a is not None for a in axes):
+        # Two modes of the two axes at nearly one eigenvalue can both look like one axis (each
+        # eigenvector a mixture of the two): the shapes then give that axis more modes than
+        # its states have. Where the counts differ, the structure's axis stands for a mode
+        # with a near twin (JSBSim's Cub: the short period's −12.1 1/s pole beside the roll's
+        # −12.2, both shapes 70 % longitudinal, the roll mode lost); a mode with none keeps
+        # the word of its shape.
+        shapes = collections.Counter(axis.values())
+        if shapes != collections.Counter(axes[i] for i in candidates):
+            for i in candidates:
+                if any(_twins(modes[i], modes[j]) for j in candidates if j != i):
+                    axis[i] = axes[i]
     lat = [i for i in candidates if axis[i] == "lat"]
     lon = [i for i in candidates if axis[i] == "lon"]
     _name_lateral(modes, lat, names)

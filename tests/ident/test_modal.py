@@ -275,3 +275,28 @@ def test_a_mode_whose_shape_mixes_the_axes_takes_the_axis_the_models_structure_g
     axes = ["lon", "lon", "lat", "lon"]  # the spiral's wrong word is not taken over its shape
     named = name_modes(modes, roles, min_msv=0.0, axes=axes)
     assert [m.name for m in named] == ["short period", "short period", "roll", "spiral"]
+
+
+def test_two_modes_of_two_axes_at_one_eigenvalue_take_the_structures_axes():
+    # Bad input tried: an overdamped short period's fast pole beside the roll mode (JSBSim's
+    # J-3 Cub, −12.1 and −12.2 1/s), whose eigenvectors mix through the weak coupling so that
+    # both look 80 % longitudinal: by the shapes alone the longitudinal axis has one mode more
+    # than its states give and the roll mode is lost. The structure (each eigenvalue matched
+    # to an axis's own) gives each axis its count, and its axes stand.
+    roles = ("airspeed", "alpha", "q", "theta", "beta", "p", "r", "phi")
+    modes = [
+        _mode(-0.04 + 0.35j, [1, 0.05, 0.05, 0.8, 0, 0, 0, 0]),
+        _mode(-5.2 + 0j, [0.05, 1, 0.9, 0.2, 0.02, 0.02, 0, 0]),
+        _mode(-12.08 + 0j, [0.05, 1, 0.9, 0.2, 0.2, 0.45, 0.1, 0.1]),
+        _mode(-12.17 + 0j, [0.05, 1, 0.9, 0.2, 0.2, 0.45, 0.1, 0.1]),
+        _mode(-0.67 + 2.25j, [0, 0, 0, 0, 1, 0.8, 0.8, 0.4]),
+        _mode(-0.01 + 0j, [0, 0, 0, 0, 0.1, 0.05, 0.2, 1]),
+    ]
+    structure = ["lon", "lon", "lat", "lon", "lat", "lat"]
+    by_shape = [m.name for m in name_modes(modes, roles, min_msv=0.0)]
+    assert "roll" not in by_shape
+    named = [m.name for m in name_modes(modes, roles, min_msv=0.0, axes=structure)]
+    assert named == ["phugoid", "short period", "roll", "short period", "Dutch roll", "spiral"]
+    # Where the shapes' count is the structure's they keep deciding.
+    agreeing = ["lon", "lon", "lat", "lon", "lon", "lat"]
+    assert [m.name for m in name_modes(modes, roles, min_msv=0.0, axes=agreeing)] == by_shape
