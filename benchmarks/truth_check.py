@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/truth_check.py                  # about two minutes
     .venv/bin/python benchmarks/truth_check.py --aircraft J3Cub   # one aircraft
+    .venv/bin/python benchmarks/truth_check.py --amplitudes 2 4    # the truth at 2× and 4×
 
 For a doublet on each surface and a throttle step, each flown as a ± pair (the odd part of
 JSBSim's response), it prints the worst TIC over the outputs the test moves (agent.sim.truth
@@ -10,6 +11,13 @@ ours by the surface and throttle positions. Both are held to TIC ≤ 0.05; a tes
 is over that bound is marked, and the command then exits with code 1. The aircraft are
 `make bench-jsbsim`'s (bench_jsbsim.AIRCRAFT); FGLinearization has nothing for a glider
 (JSBSim's crashes on an aircraft without engines: "–").
+
+With `--amplitudes`, it prints instead how each named mode of the truth moves when its
+multisine is flown at those multiples of its amplitude: the best linear approximation of a
+nonlinear aircraft is one per amplitude, so an identification at the flown amplitude can be
+right and still differ from the truth by that much. Where that exceeds a standard error the
+method reports, the benchmark's z-scores against the truth measure the aircraft's
+nonlinearity, not the standard error.
 """
 
 from __future__ import annotations
@@ -58,6 +66,41 @@ def fg_worst(aircraft: str, speed: float, altitude: float, ours: list[T.Check]) 
     return worst
 
 
+def amplitude_sensitivity(
+    aircraft: str, speed: float, altitude: float, factors: list[float]
+) -> None:
+    """Each named mode's ωn and ζ at each factor × the truth's amplitude, as changes in % of
+    the truth's own."""
+    base = T.linear_truth(aircraft, speed, altitude_ft=altitude).modes()
+    for factor in factors:
+        try:
+            truth = T.linear_truth(
+                aircraft, speed, amplitude=factor * T.AMPLITUDE, altitude_ft=altitude
+            )
+        except np.linalg.LinAlgError as error:  # the aircraft left its trim in the run
+            print(f"{aircraft:<8} ×{factor:g}: no truth ({error})", flush=True)
+            continue
+        cells = []
+        for name, poles in truth.modes().items():
+            if not poles or not base.get(name):
+                continue
+            (wn, zeta), (wn0, zeta0) = (_wn_zeta(poles), _wn_zeta(base[name]))
+            cells.append(
+                f"{name} ωn {100 * (wn / wn0 - 1):+.2f} %, ζ {100 * (zeta / zeta0 - 1):+.2f} %"
+            )
+        print(f"{aircraft:<8} ×{factor:g}: " + "; ".join(cells), flush=True)
+
+
+def _wn_zeta(poles: list[complex]) -> tuple[float, float]:
+    """ωn and ζ of a mode: of its pair, of its two real poles' polynomial, or of one real pole
+    (ζ 1)."""
+    if len(poles) == 2:
+        wn = float(np.sqrt(abs(poles[0] * poles[1])))
+        return wn, float(-(poles[0] + poles[1]).real / (2 * wn))
+    pole = complex(poles[0])
+    return abs(pole), (-pole.real / abs(pole) if pole.imag else 1.0)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
@@ -66,7 +109,19 @@ def main() -> None:
     parser.add_argument(
         "--aircraft", nargs="+", choices=names, default=names, help="which aircraft to check"
     )
+    parser.add_argument(
+        "--amplitudes",
+        nargs="+",
+        type=float,
+        metavar="K",
+        help="the truth's modes at K times its multisine's amplitude, against its own",
+    )
     args = parser.parse_args()
+    if args.amplitudes:
+        for aircraft, speed, altitude in BENCHMARK:
+            if aircraft in args.aircraft:
+                amplitude_sensitivity(aircraft, speed, altitude, args.amplitudes)
+        return
     print(f"worst TIC over the outputs each test moves (bound {T.CHECK_TIC})")
     print(f"{'aircraft':<8}{'test':<10}{'FGLinearization':>17}{'agent.sim.truth':>17}")
     over = []

@@ -190,16 +190,21 @@ def excitation(
 
 
 @functools.lru_cache(maxsize=8)
-def linear_truth(aircraft: str, airspeed_kts: float, **plant) -> Truth:
+def linear_truth(
+    aircraft: str, airspeed_kts: float, amplitude: float = AMPLITUDE, **plant
+) -> Truth:
     """JSBSim's best linear approximation at the trim (module docstring); about 10 s, so kept
-    for the process (JSBSim is deterministic: the same trim gives the same truth)."""
+    for the process (JSBSim is deterministic: the same trim gives the same truth).
+    `amplitude`: of the multisine's commands (AMPLITUDE unless asked: the best linear
+    approximation of a nonlinear aircraft moves with the amplitude it is taken at,
+    `benchmarks/truth_check.py --amplitudes`)."""
     rate = float(plant.get("integration_hz", 200.0))
     kind = Plant(aircraft, airspeed_kts=airspeed_kts, linearise=False, **plant).kind
     names = states(kind)
     derivatives, rows = [], []
     for m in range(REALISATIONS):
         x, u, (x0, u0) = odd_response(
-            aircraft, airspeed_kts, excitation(rate, m, amplitude=AMPLITUDE), **plant
+            aircraft, airspeed_kts, excitation(rate, m, amplitude=amplitude), **plant
         )
         # x[k] is the state after step k, u[k] the positions held during it: the central
         # difference at k spans steps k and k + 1, so its inputs are their mean.

@@ -13,7 +13,15 @@ from tests.benchmarks.bench import help_text, run
 
 
 def test_help():
-    assert "--aircraft" in help_text("truth_check.py")
+    text = help_text("truth_check.py")
+    assert "--aircraft" in text
+    assert "--amplitudes" in text
+
+
+def test_amplitudes_are_checked_before_flying():
+    done = run("truth_check.py", "--amplitudes", "two", timeout_s=60, ok=False)
+    assert done.returncode == 2
+    assert "invalid float value: 'two'" in done.stderr, done.stderr
 
 
 def test_arguments_are_checked_before_flying():
