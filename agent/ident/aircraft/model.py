@@ -154,9 +154,14 @@ def fitted_axes(
             f"{', '.join(inputs[j] for j in throttle)} set aside: the measured "
             f"{', '.join(inputs[j] for j in measured)} carries the engine (a known input, at once)"
         )
-    fits, engine = _fit_axes(
-        sp, ready, present, throttle, len(batch), process_noise=settings.process_noise
-    )
+    # The filter-error method where its noise model is the physics: the vanes measure the
+    # air-relative V and α and nothing measures the gust, whose rate then enters their
+    # equations row by row (agent.ident.aircraft.process). With the wind measured the residual
+    # is the sensors' and output error holds; with α and β synthesised from the INS (no
+    # vanes) the gust enters every row through the aerodynamic derivatives, a structure the
+    # row-by-row model does not have, and on JSBSim's aircraft it made those fits worse.
+    filtered = settings.process_noise and not ready.gusts and not ready.air_angles
+    fits, engine = _fit_axes(sp, ready, present, throttle, len(batch), process_noise=filtered)
     engine |= {j: (0, {}) for j in measured if any(j in f.inputs for f in fits)}
     couplings: dict[str, Coupling] = {}
     structure = fits[0].name
