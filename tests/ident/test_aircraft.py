@@ -915,7 +915,10 @@ def test_an_unmeasured_gust_is_process_noise_and_the_filter_error_method_fits_it
     # 5–7; the gust, at 0.15 % of the full preset's controls, is most of the motion).
     filtered, output = [], []
     for seed in (5, 6, 7):
-        u, air, _, _, A = gusty_record(seed=seed)
+        u, air, op, navigation, A = gusty_record(seed=seed)
+        # With the INS the gust is measured, a known input: nothing left for process noise.
+        measured = aircraft_identify(Experiment(u, air, operating_point=op, navigation=navigation))
+        assert {a.estimator for a in measured.aircraft.axes} == {"output error"}
         result = aircraft_identify(Experiment(u, air))
         (longitudinal,) = [a for a in result.aircraft.axes if a.name == "longitudinal"]
         assert longitudinal.estimator == "filter error"

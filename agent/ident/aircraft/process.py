@@ -34,7 +34,8 @@ Q and R (`estimate`): Fisher scoring of the same likelihood at fixed θ, the sco
 summed over each bin's neighbourhood (the fit's SMOOTH_BINS a side) and those of R over all bins;
 both held non-negative.
 
-Only the longitudinal axis (`fit.fit_axis`): on JSBSim's aircraft the lateral axis's
+Used (agent.ident.aircraft.model) where this model is the physics: vanes, and no measured
+wind. Only the longitudinal axis (`fit.fit_axis`): on JSBSim's aircraft the lateral axis's
 process-noise model moved the roll mode away from the truth on every variant tried
 (benchmarks/README.md, *The whole-aircraft method's terms*), where its output error holds it.
 """
