@@ -941,3 +941,22 @@ def test_white_sensor_noise_alone_keeps_output_error():
     assert {a.estimator for a in result.aircraft.axes} == {"output error"}
     assert all(a.process_share == {} for a in result.aircraft.axes)
     assert _longitudinal_error(result, A) < 0.05
+
+
+def test_process_noise_spectra_that_do_not_converge_leave_output_error(monkeypatch):
+    # Bad input tried: a record whose process-noise spectra do not converge (on JSBSim's T-6
+    # through the classic card, vanes alone, the Fisher scoring's spectra went non-finite and
+    # the eigen-decomposition of the residual's spectral matrix failed, ending the run). The
+    # filter error is then given up for that axis and output error's estimate stands, with
+    # the result saying which.
+    from agent.ident.aircraft import process
+
+    def diverging(*args, **kwargs):
+        raise np.linalg.LinAlgError("the process-noise spectra did not converge")
+
+    u, air, *_ = gusty_record(seed=5)
+    plain = aircraft_identify(Experiment(u, air), process_noise=False)
+    monkeypatch.setattr(process, "estimate", diverging)
+    result = aircraft_identify(Experiment(u, air))
+    assert {a.estimator for a in result.aircraft.axes} == {"output error"}
+    assert np.allclose(result.continuous.A, plain.continuous.A)

@@ -142,21 +142,24 @@ def output_error(problem: AxisProblem, theta: np.ndarray, rows: Sequence[int] = 
         sigma = new
         if settled:
             break
-    noise = None
-    if rows:
+    if not rows:
+        return theta, sigma, None, cost_start, iterations, converged
+    start, at_start = theta, (sigma, None, cost_start, iterations, converged)
+    try:
         noise = process.estimate(problem, theta, tuple(rows), smooth_bins)
         _, width = smooth_bins(sigma, problem.s)
         if not process.significant(problem, theta, noise, width):
-            return theta, sigma, None, cost_start, iterations, converged
-        start = theta
+            return start, *at_start
         for _ in range(PASSES):
             theta, its, converged = minimise(problem, theta, noise)
             iterations += its
             noise = process.estimate(problem, theta, tuple(rows), smooth_bins)
-        if not _consistent(problem, start, theta):
-            return start, sigma, None, cost_start, iterations, converged
-        X, _ = problem.response(theta)
-        sigma = bin_sigma(problem.Y - X, problem.s)
+    except np.linalg.LinAlgError:  # spectra that do not converge: output error stands
+        return start, *at_start
+    if not _consistent(problem, start, theta):
+        return start, *at_start
+    X, _ = problem.response(theta)
+    sigma = bin_sigma(problem.Y - X, problem.s)
     return theta, sigma, noise, cost_start, iterations, converged
 
 

@@ -102,6 +102,8 @@ def estimate(problem, theta: np.ndarray, rows: tuple[int, ...], smooth) -> Proce
     T = np.linalg.inv(s[:, None, None] * np.eye(n) - A)[:, :, list(rows)]
     Z = np.concatenate([T, np.broadcast_to(np.eye(n), (F, n, n))], axis=2)  # (F, n, m + n)
     Q, R = np.zeros((F, m)), level.copy()
+    if not np.all(np.isfinite(T)):
+        raise np.linalg.LinAlgError("the model has a pole on the frequency axis")
     for _ in range(STEPS):
         S = np.einsum("fia,fa,fja->fij", T, Q, T.conj()) + np.diag(R)
         _, P, _ = whiten(0.5 * (S + S.conj().transpose(0, 2, 1)))
@@ -117,6 +119,8 @@ def estimate(problem, theta: np.ndarray, rows: tuple[int, ...], smooth) -> Proce
         vr = (v[:, m:] - np.einsum("fab,fb->fa", M[:, m:, :m], Q)).sum(axis=0)
         R = _solve(M[:, m:, m:].sum(axis=0)[None], vr[None])[0]
         R = np.maximum(R, R_FLOOR * level)
+        if not (np.all(np.isfinite(Q)) and np.all(np.isfinite(R))):
+            raise np.linalg.LinAlgError("the process-noise spectra did not converge")
     return ProcessNoise(tuple(rows), Q, R, s)
 
 
