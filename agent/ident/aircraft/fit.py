@@ -42,6 +42,9 @@ from agent.ident.aircraft.process import ProcessNoise
 from agent.ident.aircraft.transforms import Transforms
 from agent.ident.errors import DataError, IdentificationFailed
 
+# The filter-error estimate may put no pole more than this many times faster than output
+# error's fastest (`consistent`).
+FASTEST = 10.0
 # Output error's weights: σ per bin from the residuals of this many bins on either side.
 SMOOTH_BINS = 8
 SMOOTH_FLOOR = 0.3
@@ -156,26 +159,29 @@ def output_error(problem: AxisProblem, theta: np.ndarray, rows: Sequence[int] = 
             noise = process.estimate(problem, theta, tuple(rows), smooth_bins)
     except np.linalg.LinAlgError:  # spectra that do not converge: output error stands
         return start, *at_start
-    if not _consistent(problem, start, theta):
+    if not consistent(problem.unpack(start)[0], problem.unpack(theta)[0]):
         return start, *at_start
     X, _ = problem.response(theta)
     sigma = bin_sigma(problem.Y - X, problem.s)
     return theta, sigma, noise, cost_start, iterations, converged
 
 
-def _consistent(problem: AxisProblem, output: np.ndarray, filtered: np.ndarray) -> bool:
-    """Whether the filter-error estimate keeps output error's stability: each eigenvalue of A
-    matched one to one to output error's (least total distance) is stable where that one is.
-    A process-noise model that does not fit the record (the gust entering an aircraft
-    without vanes through its synthesised α, not row by row) can explain the slow motion as
-    noise and leave a mode unstable that output error, which needs no noise model, holds
-    (JSBSim's glider in light turbulence: its phugoid at +0.017 ± 0.278j 1/s, output
-    error's −0.007 ± 0.336j). Then output error is kept. A test of their difference against
-    output error's standard errors (Hausman's) rejected the better estimate where output
-    error's own σ is too small (a gust larger than the manoeuvre)."""
-    ours = np.linalg.eigvals(problem.unpack(output)[0])
-    theirs = np.linalg.eigvals(problem.unpack(filtered)[0])
+def consistent(output: np.ndarray, filtered: np.ndarray) -> bool:
+    """Whether the filter-error estimate's A (`filtered`) keeps to output error's (`output`):
+    each eigenvalue, matched one to one to output error's (least total distance), stable
+    where that one is, and none more than FASTEST times faster than output error's fastest.
+    A process-noise model that does not fit the record can explain the slow motion as noise,
+    or put a pole far beyond the band, where output error, which needs no noise model, holds
+    (JSBSim's glider in light turbulence, the vanes alone: a phugoid at +0.017 ± 0.278j 1/s
+    where output error has −0.007 ± 0.336j; through the card, a pole at +1.9·10⁴ 1/s beside
+    output error's +0.6, and the identification failed). Then output error is kept. A test
+    of their difference against output error's standard errors (Hausman's) rejected the
+    better estimate where output error's own σ is too small (a gust larger than the
+    manoeuvre)."""
+    ours, theirs = np.linalg.eigvals(output), np.linalg.eigvals(filtered)
     if not np.all(np.isfinite(theirs)):
+        return False
+    if np.abs(theirs).max() > FASTEST * np.abs(ours).max():
         return False
     rows, cols = scipy.optimize.linear_sum_assignment(np.abs(ours[:, None] - theirs[None, :]))
     return not any(ours[i].real < 0 <= theirs[j].real for i, j in zip(rows, cols, strict=True))
