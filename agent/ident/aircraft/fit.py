@@ -230,17 +230,23 @@ def weighted_cost(problem: AxisProblem, theta: np.ndarray, weights) -> float:
     """The fit's cost at `theta`: the weighted residuals' sum of squares at σ per bin and
     output (`weights` an array), or the filter-error method's (a ProcessNoise); inf where the
     model has no response."""
+    return _evaluate(problem, theta, weights)[0]
+
+
+def _evaluate(problem: AxisProblem, theta: np.ndarray, weights):
+    """`weighted_cost` and, for the filter-error method, what its linearisation reuses."""
     if isinstance(weights, ProcessNoise):
-        return process.cost(problem, theta, weights)
+        return process.evaluate(problem, theta, weights)
     X, _ = problem.response(theta)
-    return _cost(problem.Y - X, weights) if np.all(np.isfinite(X)) else np.inf
+    return (_cost(problem.Y - X, weights) if np.all(np.isfinite(X)) else np.inf), None
 
 
-def _linearised(problem: AxisProblem, theta: np.ndarray, weights):
+def _linearised(problem: AxisProblem, theta: np.ndarray, weights, state=None):
     """The whitened residual (F, n), the whitened Jacobian of the residual (F, n, P) and the
-    cost's gradient beyond the residual's sum of squares (P,), at fixed weights."""
+    cost's gradient beyond the residual's sum of squares (P,), at fixed weights (`state`:
+    `_evaluate`'s at θ, or None)."""
     if isinstance(weights, ProcessNoise):
-        e, J, gradient = process.linearised(problem, theta, weights)
+        e, J, gradient = process.linearised(problem, theta, weights, state)
         return e, -J, gradient
     X, J = problem.response(theta, jacobian=True)
     return (problem.Y - X) / weights, -J / weights[:, :, None], None
@@ -252,8 +258,8 @@ def minimise(problem: AxisProblem, theta: np.ndarray, weights):
     stopped at a minimum."""
     lam = 1e-3
     free = problem.free
-    cost = weighted_cost(problem, theta, weights)
-    e, J, extra = _linearised(problem, theta, weights)
+    cost, state = _evaluate(problem, theta, weights)
+    e, J, extra = _linearised(problem, theta, weights, state)
     for iteration in range(1, ITERATIONS + 1):
         Jw = _stack(J[:, :, free])
         er = np.concatenate([e.ravel().real, e.ravel().imag])
@@ -271,7 +277,7 @@ def minimise(problem: AxisProblem, theta: np.ndarray, weights):
             if step is not None and np.all(np.isfinite(step)):
                 trial = theta.copy()
                 trial[free] += step
-                new = weighted_cost(problem, trial, weights)
+                new, state = _evaluate(problem, trial, weights)
                 if new < cost:
                     break
             lam *= 10
@@ -280,7 +286,7 @@ def minimise(problem: AxisProblem, theta: np.ndarray, weights):
         # The filter-error cost's log-determinant can be negative: relative to its size.
         decrease = (cost - new) / max(abs(cost), 1e-300)
         theta, cost, lam = trial, new, max(lam / 10, 1e-12)
-        e, J, extra = _linearised(problem, theta, weights)
+        e, J, extra = _linearised(problem, theta, weights, state)
         if decrease < RELATIVE_DECREASE:
             return theta, iteration, True
     return theta, ITERATIONS, False

@@ -147,24 +147,33 @@ def _solve(M: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 def cost(problem, theta: np.ndarray, noise: ProcessNoise) -> float:
     """J(θ) at fixed Q and R (module docstring); inf where the model has no response."""
+    return evaluate(problem, theta, noise)[0]
+
+
+def evaluate(problem, theta: np.ndarray, noise: ProcessNoise):
+    """J(θ) and what `linearised` needs of it at θ (None where J is inf), so that an accepted
+    step's evaluation is not done twice."""
     X, _ = problem.response(theta)
     if not np.all(np.isfinite(X)):
-        return np.inf
-    S, _, _ = noise.spectrum(problem.s, problem.unpack(theta)[0])
-    if not np.all(np.isfinite(S)):
-        return np.inf
-    W, _, logdet = whiten(S)
-    return float(np.sum(np.abs(np.einsum("fij,fj->fi", W, problem.Y - X)) ** 2)) + logdet
-
-
-def linearised(problem, theta: np.ndarray, noise: ProcessNoise):
-    """The whitened residual (F, n) and Jacobian of the response (F, n, P; the response forced
-    by ŵ too), and the log-determinant's gradient (P,; A's entries only)."""
+        return np.inf, None
     A = problem.unpack(theta)[0]
-    X, _ = problem.response(theta)
-    e = problem.Y - X
     S, T, phi = noise.spectrum(problem.s, A)
-    W, inverse, _ = whiten(S)
+    if not np.all(np.isfinite(S)):
+        return np.inf, None
+    W, inverse, logdet = whiten(S)
+    e = problem.Y - X
+    value = float(np.sum(np.abs(np.einsum("fij,fj->fi", W, e)) ** 2)) + logdet
+    return value, (e, T, phi, W, inverse)
+
+
+def linearised(problem, theta: np.ndarray, noise: ProcessNoise, state=None):
+    """The whitened residual (F, n) and Jacobian of the response (F, n, P; the response forced
+    by ŵ too), and the log-determinant's gradient (P,; A's entries only). `state`: `evaluate`'s
+    at the same θ, or None."""
+    A = problem.unpack(theta)[0]
+    if state is None:
+        _, state = evaluate(problem, theta, noise)
+    e, T, phi, W, inverse = state
     what = noise.Q * np.einsum("fia,fi->fa", T.conj(), np.einsum("fij,fj->fi", inverse, e))
     forcing = np.zeros_like(e)
     forcing[:, list(noise.rows)] = what
