@@ -74,3 +74,11 @@ def help_text(script: str) -> str:
     done = run(script, "--help", timeout_s=60)
     assert done.stdout.startswith("usage:"), done.stdout
     return done.stdout
+
+
+def refused(script: str, *args: str, saying: str, timeout_s: float = 60) -> None:
+    """`SCRIPT ARGS` asserted to stop with argparse's usage error (exit 2) before measuring
+    anything, its stderr saying `saying`."""
+    done = run(script, *args, timeout_s=timeout_s, ok=False)
+    assert done.returncode == 2, done.returncode
+    assert saying in done.stderr, done.stderr
