@@ -56,12 +56,13 @@ def _truth_errors(rig: Rig, recorder: Recorder, name: str, frames) -> np.ndarray
     return (frames.time[ok] - age[ok]) - truth
 
 
-async def test_sixty_seconds_of_three_sensors_lose_nothing_and_keep_time(tmp_path):
-    rig, recorder, writer, book = await _record(tmp_path, 60.0)
+async def test_twenty_seconds_of_three_sensors_lose_nothing_and_keep_time(tmp_path):
+    # Twenty seconds: 2000 frames a sensor, each checked; hours of it are benchmarks/soak's.
+    rig, recorder, writer, book = await _record(tmp_path, 20.0)
     for name in ("vn200", "airdata", "surfaces"):
         health = rig.drivers[name].health()
         assert len(rig.samples[name]) == rig.emitters[name].sent, name  # zero lost frames
-        assert rig.emitters[name].sent >= 59 * RATE
+        assert rig.emitters[name].sent >= 19 * RATE
         assert health.gaps == 0
         assert health.crc_errors == 0
     frames = recorder.window(-np.inf, np.inf)

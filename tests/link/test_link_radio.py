@@ -1,7 +1,7 @@
 """Messages between two ends of the link: real digi-xbee on each side, emulated XBee modules
 and an RF channel between them.
 
-Bad input tried: 20 % of over-the-air attempts lost, a 30 s outage, a payload larger than the
+Bad input tried: 20 % of over-the-air attempts lost, a 12 s outage, a payload larger than the
 radio takes, a well-checksummed frame that kills digi-xbee's reader thread, the ground's radio
 unplugged for 3 s, and the aircraft's session restarted while the ground's numbering goes on.
 """
@@ -18,6 +18,7 @@ from agent.clock import LoopClock
 from agent.excitation.plan import preset
 from agent.ident.document import ModeDocument
 from agent.link import messages
+from agent.link.session import RETRY_MAX_S
 from agent.sim.radio import EmulatedXBee, RfChannel
 from tests.link.pair import link_pair, wait_for
 
@@ -138,14 +139,16 @@ async def test_the_air_share_is_the_time_spent_sending(tmp_path):
     assert busy > 0.5  # the live view would be withheld here
 
 
-async def test_results_queued_during_a_30_s_outage_are_delivered_after_it(tmp_path):
+async def test_results_queued_during_a_12_s_outage_are_delivered_after_it(tmp_path):
     async with link_pair(tmp_path, deadline_s=3.0) as pair:
         await asyncio.sleep(0.3)
         assert pair.ground.session.link_up
         pair.channel.outage = True
         for k in range(3):
             pair.air.session.send_reliable(full_result(f"during-{k}"))
-        await asyncio.sleep(30.0)
+        # Three times the retries' longest interval: the backoff reaches its cap and the
+        # messages outlive retries at it.
+        await asyncio.sleep(3 * RETRY_MAX_S)
         assert not pair.ground.session.link_up  # the ground saw the link go
         assert not pair.ground.inbox
         pair.channel.outage = False

@@ -1,7 +1,9 @@
 """The truth identified models are judged against (agent.sim.truth): JSBSim's best linear
 approximation at the trim must reproduce JSBSim's own small-amplitude response — a doublet
 on each surface and a throttle step, each flown as a ± pair — with TIC ≤ 0.05 on every output
-the test moves, for each benchmark aircraft; and its modes must carry the right names.
+the test moves; and its modes must carry the right names. Here on the J-3 Cub (each aircraft's
+truth takes about 25 s to build); `benchmarks/truth_check.py` holds every aircraft of
+`make bench-jsbsim` to the same bound.
 
 Bad input tried: an aircraft JSBSim does not have."""
 
@@ -13,7 +15,7 @@ import pytest
 from agent.sim.plant import PlantError
 from agent.sim.truth import CHECK_TIC, check, linear_truth
 
-BENCHMARK = [("J3Cub", 60.0), ("c182", 90.0), ("pa28", 90.0)]
+BENCHMARK = [("J3Cub", 60.0)]
 # The outputs each test is mainly for.
 PRIMARY = {
     "throttle": ("Vt", "theta"),
