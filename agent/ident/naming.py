@@ -10,14 +10,16 @@ Rules (thesis §4.1.3; Klein & Morelli, *Aircraft System Identification*, 2006, 
    fastest is roll and the slowest spiral (a single real mode is roll when τ < 1 s, spiral
    when τ > 3 s). A pair damped at `DUTCH_ROLL_MAX_DAMPING` or more is a real pole that noise
    split in two, and counts as one real mode at its natural frequency.
-3. Longitudinal: of two or more complex pairs the fastest is the short period and the slowest
-   the phugoid; a single pair is the short period when α and q dominate its shape, the phugoid
-   when V and θ do. Without a short-period pair, the two fastest real modes (faster than a
-   phugoid pair), when α and q dominate both, are an overdamped short period (both named
-   so). Without a phugoid pair, once a short period is named, the two slowest real modes
-   slower than it, when V and θ dominate both, are an overdamped phugoid (both named so: a
-   phugoid damped past ζ = 1 is two slow real poles). Other real longitudinal modes (relaxed
-   stability) get no standard name.
+3. Longitudinal: of the complex pairs that V and θ dominate, the slowest is the phugoid; of
+   those that α and q dominate, the fastest, when faster than the phugoid, is the short
+   period (Klein & Morelli §2: the short period is an α–q motion at nearly constant speed,
+   the phugoid a V–θ exchange at nearly constant α). A pair that is neither stays unnamed.
+   Without a short-period pair, the two fastest real modes (faster than a phugoid pair),
+   when α and q dominate both, are an overdamped short period (both named so). Without a
+   phugoid pair, once a short period is named, the two slowest real modes slower than it,
+   when V and θ dominate both, are an overdamped phugoid (both named so: a phugoid damped
+   past ζ = 1 is two slow real poles). Other real longitudinal modes (relaxed stability)
+   get no standard name.
 4. Only modes that could be rigid-body aircraft modes are named: MSV ≥ `MIN_MSV` (they carry
    a real share of the response), EMAC ≥ `MIN_EMAC` when known (temporally consistent, not
    noise), and natural frequency ≤ `MAX_FREQUENCY` (small-aircraft rigid-body modes lie well
@@ -159,20 +161,25 @@ def _name_longitudinal(
     modes: Sequence[Mode], lon: list[int], roles: Sequence[str | None], names: dict[int, str]
 ) -> None:
     pairs = sorted((i for i in lon if modes[i].pair), key=lambda i: modes[i].frequency)
-    short = phugoid = None
-    if len(pairs) >= 2:
-        short, phugoid = pairs[-1], pairs[0]
-    elif len(pairs) == 1:
-        if _dominated(modes[pairs[0]], roles, SHORT_PERIOD_ROLES, PHUGOID_ROLES):
-            short = pairs[0]
-        elif _dominated(modes[pairs[0]], roles, PHUGOID_ROLES, SHORT_PERIOD_ROLES):
-            phugoid = pairs[0]
+    # Each pair by its shape: α and q for the short period, V and θ for the phugoid. Order
+    # alone misleads when the model has a pair that is neither: a glider's synthesised α
+    # drifting with the wind estimate gave a slow α pair below the phugoid, and the phugoid,
+    # the fastest pair there (its short period overdamped), was named the short period.
+    like_short = [
+        i for i in pairs if _dominated(modes[i], roles, SHORT_PERIOD_ROLES, PHUGOID_ROLES)
+    ]
+    like_phugoid = [
+        i for i in pairs if _dominated(modes[i], roles, PHUGOID_ROLES, SHORT_PERIOD_ROLES)
+    ]
+    phugoid = like_phugoid[0] if like_phugoid else None
+    above = modes[phugoid].frequency if phugoid is not None else 0.0
+    faster = [i for i in like_short if modes[i].frequency > above]
+    short = faster[-1] if faster else None
     reals = sorted((i for i in lon if not modes[i].pair), key=lambda i: modes[i].frequency)
     shorts = [short] if short is not None else []
     if short is None:
         # An overdamped short period: the two fastest real modes, faster than the phugoid
         # and mostly α and q (JSBSim's J-3 Cub: −6.4 and −10.1 1/s).
-        above = modes[phugoid].frequency if phugoid is not None else 0.0
         fast = [i for i in reals if modes[i].frequency > above][-2:]
         shorts = _both(modes, fast, roles, SHORT_PERIOD_ROLES, PHUGOID_ROLES)
     phugoids = [phugoid] if phugoid is not None else []

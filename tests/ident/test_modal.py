@@ -129,6 +129,27 @@ def test_longitudinal_names_from_frequency_and_shape():
     assert only_phugoid[0].name == "phugoid"
 
 
+def test_a_pair_is_named_by_its_shape_not_by_being_the_fastest_or_slowest():
+    """Bad input tried: the modes of a glider identified without vanes in turbulence — a slow
+    pair that α and q dominate (the synthesised α drifting with the wind estimate) below the
+    phugoid, and one fast real pole of an overdamped short period. Named by order, the
+    phugoid was the "short period" (94 % off, z 268 over ten seeds)."""
+    roles = ("airspeed", "alpha", "q", "theta")
+    drift = _mode(-0.065 + 0.061j, [0.1, 1, 0.3, 0.2])
+    phugoid = _mode(-0.036 + 0.286j, [1, 0.1, 0.2, 0.9])
+    fast = _mode(-3.7 + 0j, [0.05, 1, 0.6, 0.1])
+    named = name_modes([drift, phugoid, fast], roles)
+    assert [m.name for m in named] == [None, "phugoid", None]
+    assert [name for name, _ in missing_modes(named, roles)] == ["short period"]
+    # With a short-period pair beside them, it is named as before; a V–θ pair faster than
+    # an α–q pair does not make that α–q pair a short period.
+    short = _mode(-4 + 3j, [0.05, 1, 0.9, 0.2])
+    named = name_modes([drift, phugoid, short], roles)
+    assert [m.name for m in named] == [None, "phugoid", "short period"]
+    slow_short = _mode(-0.1 + 0.15j, [0.05, 1, 0.9, 0.2])
+    assert [m.name for m in name_modes([slow_short, phugoid], roles)] == [None, "phugoid"]
+
+
 def test_unclear_modes_stay_unnamed():
     roles = ("airspeed", "alpha", "q", "theta")
     reals = [_mode(-0.5 + 0j, [1, 0.1, 0.1, 1]), _mode(-6 + 0j, [0.1, 1, 1, 0.1])]
