@@ -126,10 +126,16 @@ def equation_error(problem: AxisProblem) -> np.ndarray:
     return problem.pack(A, B, taus, d)
 
 
-def output_error(problem: AxisProblem, theta: np.ndarray, rows: Sequence[int] = ()):
+def output_error(
+    problem: AxisProblem,
+    theta: np.ndarray,
+    rows: Sequence[int] = (),
+    direct: Sequence[int] = (),
+):
     """Levenberg–Marquardt on the weighted residuals, re-weighting between passes; then, with
     process-noise `rows` (positions among the states), the filter-error method's passes from
-    there (agent.ident.aircraft.process), its noise model re-estimated between them. Returns
+    there (agent.ident.aircraft.process), its noise model re-estimated between them (`direct`:
+    the rows of synthesised air angles, process.ProcessNoise's). Returns
     the parameters, the output-error weights at the end (σ per bin), the noise model (or
     None), the starting cost, the iterations and whether the last pass converged."""
     X, _ = problem.response(theta)
@@ -149,14 +155,14 @@ def output_error(problem: AxisProblem, theta: np.ndarray, rows: Sequence[int] = 
         return theta, sigma, None, cost_start, iterations, converged
     start, at_start = theta, (sigma, None, cost_start, iterations, converged)
     try:
-        noise = process.estimate(problem, theta, tuple(rows), smooth_bins)
+        noise = process.estimate(problem, theta, tuple(rows), smooth_bins, tuple(direct))
         _, width = smooth_bins(sigma, problem.s)
         if not process.significant(problem, theta, noise, width):
             return start, *at_start
         for _ in range(PASSES):
             theta, its, converged = minimise(problem, theta, noise)
             iterations += its
-            noise = process.estimate(problem, theta, tuple(rows), smooth_bins)
+            noise = process.estimate(problem, theta, tuple(rows), smooth_bins, tuple(direct))
     except np.linalg.LinAlgError:  # spectra that do not converge: output error stands
         return start, *at_start
     if not consistent(problem.unpack(start)[0], problem.unpack(theta)[0]):
@@ -334,11 +340,13 @@ def fit_axis(
     controls: Sequence[int] = (),
     powers: Mapping[int, int] | None = None,
     process_noise: bool = False,
+    synthesised: Sequence[int] = (),
 ) -> AxisFit:
     """One axis's model: `lagged` inputs reach it through fitted lags, THROTTLE_LAGS of them
     unless `powers` (input column → number) says otherwise; with `process_noise`, by the
     filter-error method, process noise on every state's equation but the kinematics'
-    (agent.ident.aircraft.process)."""
+    (agent.ident.aircraft.process), `synthesised` the states (positions in `states`) whose
+    outputs are air angles synthesised from the INS."""
     powers = {j: p for j, p in (powers or {}).items() if j in lagged}
     problem = AxisProblem(
         sp,
@@ -356,7 +364,10 @@ def fit_axis(
         )
     rows = [i for i in range(problem.n) if not problem.fixed_A[i].all()] if process_noise else []
     theta = equation_error(problem)
-    theta, sigma, noise_model, start, iterations, converged = output_error(problem, theta, rows)
+    direct = [i for i in synthesised if i in rows]
+    theta, sigma, noise_model, start, iterations, converged = output_error(
+        problem, theta, rows, direct
+    )
     A, B, taus, d = problem.unpack(theta)
     if not np.all(np.isfinite(A)):
         raise IdentificationFailed(f"{name}: the output-error fit diverged")

@@ -32,7 +32,7 @@ import scipy.signal
 
 from agent.channels import POWER_ROLES
 from agent.ident.aircraft.airangles import Synthesised
-from agent.ident.aircraft.axes import AXES, moved_axes
+from agent.ident.aircraft.axes import AXES, LONGITUDINAL, moved_axes
 from agent.ident.aircraft.fit import (
     COUPLED,
     AxisFit,
@@ -154,14 +154,22 @@ def fitted_axes(
             f"{', '.join(inputs[j] for j in throttle)} set aside: the measured "
             f"{', '.join(inputs[j] for j in measured)} carries the engine (a known input, at once)"
         )
-    # The filter-error method where its noise model is the physics: the vanes measure the
-    # air-relative V and α and nothing measures the gust, whose rate then enters their
-    # equations row by row (agent.ident.aircraft.process). With the wind measured the residual
-    # is the sensors' and output error holds; with α and β synthesised from the INS (no
-    # vanes) the gust enters every row through the aerodynamic derivatives, a structure the
-    # row-by-row model does not have, and on JSBSim's aircraft it made those fits worse.
-    filtered = settings.process_noise and not ready.gusts and not ready.air_angles
-    fits, engine = _fit_axes(sp, ready, present, throttle, len(batch), process_noise=filtered)
+    # The filter-error method wherever α's gust is not measured (agent.ident.aircraft.process):
+    # with the vanes, the air-relative V and α feel the gust's rate row by row; with α
+    # synthesised from the INS (no vanes) the state feels it too and the output, the inertial
+    # α, does not see it (the noise's direct path). With the wind measured the residual is
+    # the sensors' and output error holds.
+    filtered = settings.process_noise and "alpha" not in ready.gusts
+    synthesised = (LONGITUDINAL[0].index("alpha"),) if ready.air_angles else ()
+    fits, engine = _fit_axes(
+        sp,
+        ready,
+        present,
+        throttle,
+        len(batch),
+        process_noise=filtered,
+        synthesised=synthesised,
+    )
     engine |= {j: (0, {}) for j in measured if any(j in f.inputs for f in fits)}
     couplings: dict[str, Coupling] = {}
     structure = fits[0].name
@@ -353,10 +361,12 @@ def _fit_axes(
     throttle: list[int],
     experiments: int,
     process_noise: bool = True,
+    synthesised: Sequence[int] = (),
 ) -> list[AxisFit]:
     """Each present axis fitted alone, with its controls and the known inputs that act on it;
     the throttle and the gust rates through fitted lags; the longitudinal axis by the
-    filter-error method with `process_noise` (agent.ident.aircraft.process)."""
+    filter-error method with `process_noise` (agent.ident.aircraft.process; `synthesised`:
+    its states whose air angle the INS gave, fit.fit_axis's)."""
     known = {axis: [j for j, a in ready.extra_axes.items() if a == axis] for axis in AXES}
     if "longitudinal" not in present:  # α barely moves: its products only add unknowns
         known["lateral"] = [j for j in known["lateral"] if j not in ready.bilinear]
@@ -379,6 +389,7 @@ def _fit_axes(
             controls=ins,
             powers=powers,
             process_noise=filtered and not engines,
+            synthesised=synthesised,
         )
         for j in engines:
             order, criterion = _engine_order(sp, fitted, j, experiments)
@@ -405,6 +416,7 @@ def _fit_axes(
                 controls=ins,
                 powers=fitted.lag_powers,
                 process_noise=True,
+                synthesised=synthesised,
             )
         fits.append(fitted)
     return fits, engine
@@ -493,6 +505,7 @@ def _coupled(
                 controls=controls,
                 powers=powers,
                 process_noise=fitted.noise is not None,
+                synthesised=fitted.noise.direct if fitted.noise is not None else (),
             )
     joined = []
     for k, f in enumerate(fits):

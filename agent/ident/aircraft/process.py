@@ -34,8 +34,13 @@ Q and R (`estimate`): Fisher scoring of the same likelihood at fixed θ, the sco
 summed over each bin's neighbourhood (the fit's SMOOTH_BINS a side) and those of R over all bins;
 both held non-negative.
 
-Used (agent.ident.aircraft.model) where this model is the physics: vanes, and no measured
-wind. Only the longitudinal axis (`fit.fit_axis`): on JSBSim's aircraft the lateral axis's
+Without vanes (α synthesised from the INS, the inertial α) the gust forces the state the
+same way but the output does not see it: y = x + e g, and T's column for it is
+s Φ e − e (`ProcessNoise.direct`), the part through the states being the one that depends
+on θ.
+
+Used (agent.ident.aircraft.model) wherever nothing measures α's gust: the vanes alone, or
+no vanes. Only the longitudinal axis (`fit.fit_axis`): on JSBSim's aircraft the lateral axis's
 process-noise model moved the roll mode away from the truth on every variant tried
 (benchmarks/README.md, *The whole-aircraft method's terms*), where its output error holds it.
 """
@@ -57,25 +62,47 @@ EIGEN_FLOOR = 1e-12
 @dataclass(frozen=True)
 class ProcessNoise:
     """The residual's spectral model: process noise Q (F, m) on the states `rows` (positions
-    among the axis's states) and white sensor noise R (n,), at the fit's bins s (F,)."""
+    among the axis's states) and white sensor noise R (n,), at the fit's bins s (F,).
+    `direct`: the rows whose noise is the gust of an air angle synthesised from the INS (no
+    vanes), which the state feels and its output does not see (`transfer`)."""
 
     rows: tuple[int, ...]
     Q: np.ndarray
     R: np.ndarray
     s: np.ndarray
+    direct: tuple[int, ...] = ()
+
+    def gain(self, s: np.ndarray) -> np.ndarray:
+        """(F, m): what forces each row per unit of its noise, s for a `direct` row (the gust's
+        rate), 1 for the others."""
+        return np.stack([s if r in self.direct else np.ones_like(s) for r in self.rows], axis=1)
+
+    def transfer(self, s: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """T (F, n, m), the noise's path to the outputs, and its part through the states Φ E
+        (the rest does not depend on the model). A synthesised air angle's output is the
+        inertial one, the air-relative state less the gust: with the state forced by the
+        gust's rate, ẋ = A x + B u − s e g and y = x + e g, so T = −(s Φ e − e); the sign of a
+        column is immaterial to S."""
+        through = phi[:, :, list(self.rows)] * self.gain(s)[:, None, :]
+        T = through.copy()
+        for a, r in enumerate(self.rows):
+            if r in self.direct:
+                T[:, r, a] -= 1.0
+        return T, through
 
     def spectrum(self, s: np.ndarray, A: np.ndarray):
-        """S (F, n, n), T (F, n, m) and Φ = (sI − A)⁻¹ (F, n, n) at the model A."""
+        """S (F, n, n), T (F, n, m), T's part through the states and Φ = (sI − A)⁻¹ (F, n, n)
+        at the model A."""
         n = A.shape[0]
         phi = np.linalg.inv(s[:, None, None] * np.eye(n) - A)
-        T = phi[:, :, list(self.rows)]
+        T, through = self.transfer(s, phi)
         S = np.einsum("fia,fa,fja->fij", T, self.Q, T.conj()) + np.diag(self.R)
-        return 0.5 * (S + S.conj().transpose(0, 2, 1)), T, phi
+        return 0.5 * (S + S.conj().transpose(0, 2, 1)), T, through, phi
 
     def share(self, A: np.ndarray) -> np.ndarray:
         """Per output, the share of its residual's power (over the bins) the process noise
         explains."""
-        S, T, _ = self.spectrum(self.s, A)
+        S, T, _, _ = self.spectrum(self.s, A)
         process = np.einsum("fia,fa,fia->i", T, self.Q, T.conj()).real
         return process / np.maximum(np.einsum("fii->i", S).real, 1e-300)
 
@@ -89,17 +116,20 @@ def whiten(S: np.ndarray):
     return W, inverse, float(np.sum(np.log(w)))
 
 
-def estimate(problem, theta: np.ndarray, rows: tuple[int, ...], smooth) -> ProcessNoise:
+def estimate(
+    problem, theta: np.ndarray, rows: tuple[int, ...], smooth, direct: tuple[int, ...] = ()
+) -> ProcessNoise:
     """Q and R from the residuals at `theta` (module docstring): Fisher scoring from the
     output-error weights (Q = 0, R each output's mean residual power). `smooth`: the fit's
-    average over neighbouring bins (`fit.smooth_bins`)."""
+    average over neighbouring bins (`fit.smooth_bins`); `direct` as ProcessNoise's."""
     A = problem.unpack(theta)[0]
     X, _ = problem.response(theta)
     e = problem.Y - X
     s, n, m = problem.s, problem.n, len(rows)
     F = s.size
     level = np.mean(np.abs(e) ** 2, axis=0)
-    T = np.linalg.inv(s[:, None, None] * np.eye(n) - A)[:, :, list(rows)]
+    shape = ProcessNoise(tuple(rows), np.zeros((F, m)), level, s, tuple(direct))
+    T, _ = shape.transfer(s, np.linalg.inv(s[:, None, None] * np.eye(n) - A))
     Z = np.concatenate([T, np.broadcast_to(np.eye(n), (F, n, n))], axis=2)  # (F, n, m + n)
     Q, R = np.zeros((F, m)), level.copy()
     if not np.all(np.isfinite(T)):
@@ -121,7 +151,7 @@ def estimate(problem, theta: np.ndarray, rows: tuple[int, ...], smooth) -> Proce
         R = np.maximum(R, R_FLOOR * level)
         if not (np.all(np.isfinite(Q)) and np.all(np.isfinite(R))):
             raise np.linalg.LinAlgError("the process-noise spectra did not converge")
-    return ProcessNoise(tuple(rows), Q, R, s)
+    return ProcessNoise(tuple(rows), Q, R, s, tuple(direct))
 
 
 def significant(problem, theta: np.ndarray, noise: ProcessNoise, width: int) -> bool:
@@ -157,13 +187,13 @@ def evaluate(problem, theta: np.ndarray, noise: ProcessNoise):
     if not np.all(np.isfinite(X)):
         return np.inf, None
     A = problem.unpack(theta)[0]
-    S, T, phi = noise.spectrum(problem.s, A)
+    S, T, through, phi = noise.spectrum(problem.s, A)
     if not np.all(np.isfinite(S)):
         return np.inf, None
     W, inverse, logdet = whiten(S)
     e = problem.Y - X
     value = float(np.sum(np.abs(np.einsum("fij,fj->fi", W, e)) ** 2)) + logdet
-    return value, (e, T, phi, W, inverse)
+    return value, (e, T, through, phi, W, inverse)
 
 
 def linearised(problem, theta: np.ndarray, noise: ProcessNoise, state=None):
@@ -173,18 +203,18 @@ def linearised(problem, theta: np.ndarray, noise: ProcessNoise, state=None):
     A = problem.unpack(theta)[0]
     if state is None:
         _, state = evaluate(problem, theta, noise)
-    e, T, phi, W, inverse = state
+    e, T, through, phi, W, inverse = state
     what = noise.Q * np.einsum("fia,fi->fa", T.conj(), np.einsum("fij,fj->fi", inverse, e))
     forcing = np.zeros_like(e)
-    forcing[:, list(noise.rows)] = what
+    forcing[:, list(noise.rows)] = what * noise.gain(problem.s)
     known = problem.K
     problem.K = known + forcing
     try:
         _, J = problem.response(theta, jacobian=True)
     finally:
         problem.K = known
-    # ∂ log det S_k / ∂A_ij = 2 Re (T Q Tᴴ S⁻¹ Φ)_ji
-    process = np.einsum("fia,fa,fja->fij", T, noise.Q, T.conj())
+    # ∂ log det S_k / ∂A_ij = 2 Re (Φ E Q Tᴴ S⁻¹ Φ)_ji, Φ E the part of T through the states
+    process = np.einsum("fia,fa,fja->fij", through, noise.Q, T.conj())
     n = A.shape[0]
     gradient = np.zeros(theta.size)
     gradient[: n * n] = (2 * np.sum(process @ inverse @ phi, axis=0).real.T).ravel()
