@@ -518,7 +518,15 @@ def test_ctrl_c_under_json_is_exit_130_with_one_json_object(tmp_path, command):
     fifo = tmp_path / "lat.csv"
     os.mkfifo(fifo)
     argv = [sys.executable, "-m", "agent", command, str(fifo), *LAT, "--json"]
-    proc = subprocess.Popen(argv, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    # A terminal's Ctrl-C reaches a command that has SIGINT's default: a suite started in the
+    # background by a non-interactive shell ignores SIGINT, its children inherit that, and
+    # Python then leaves it ignored (the command hung for the whole deadline). An ignored
+    # disposition is inherited across exec, a handled one is reset to the default.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        proc = subprocess.Popen(argv, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     writer = None
     try:
         writer = _writer_once_read(fifo, proc)
