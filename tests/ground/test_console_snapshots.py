@@ -9,6 +9,7 @@ the new SVGs before committing them.
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -49,7 +50,12 @@ def matches(name: str, svg: str) -> None:
         SNAPSHOTS.mkdir(exist_ok=True)
         path.write_text(svg)
     assert path.exists(), f"no snapshot {path.name}: run with UPDATE_SNAPSHOTS=1 and review it"
-    assert svg == path.read_text(), f"{name} differs from {path}"
+    if svg != path.read_text():
+        # Kept for a look beside the snapshot: a difference seen once in a parallel run is
+        # otherwise gone with its process.
+        actual = Path(tempfile.gettempdir()) / f"{name}.actual.svg"
+        actual.write_text(svg)
+        raise AssertionError(f"{name} differs from {path}; this run's screen: {actual}")
 
 
 @pytest.mark.parametrize(
