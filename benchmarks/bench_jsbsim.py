@@ -813,6 +813,7 @@ def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validat
         rows: dict[tuple[str, str], list] = {}
         bounds: dict[str, list[tuple[float, list[float]]]] = {}
         flown = []
+        limits = _noise_free(setup, plan, args.nav, settings) if setup.turbulence == 0 else {}
         for seed in range(FIRST_SEED, FIRST_SEED + seeds):
             rec = setup.fly(plan, seed)
             flown.append(excursions(rec))
@@ -833,12 +834,14 @@ def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validat
                             np.nan,
                             None,
                             None,
+                            None,
                         )
                     )
                 tic = validation_tic(model, check) if check and model is not None else np.nan
                 scores = mode_z(result, truth) if model is not None else {}
+                own = mode_z(result, limits[nav]) if model is not None and nav in limits else {}
                 rows.setdefault((nav, "suas-sysid"), []).append(
-                    (errors, tic, seconds, _spiral_z(spiral, truth), scores)
+                    (errors, tic, seconds, _spiral_z(spiral, truth), scores, own)
                 )
                 if args.bound:
                     bounds.setdefault(nav, []).append(
@@ -857,9 +860,11 @@ def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validat
                     tic = validation_tic(model, check) if check else np.nan
                 except (IdentificationFailed, DataError, np.linalg.LinAlgError, ValueError):
                     errs, tic, seconds = [np.inf] * len(MODES), 1.0, np.nan
-                rows.setdefault(("–", peer), []).append((errs, tic, seconds, None, None))
+                rows.setdefault(("–", peer), []).append((errs, tic, seconds, None, None, None))
         for (nav, method), results in rows.items():
             _print(setup, excitation, nav, method, results)
+            if method == "suas-sysid" and nav in limits:
+                _print_limit(excitation, nav, results, mode_errors(limits[nav], truth))
             if method == "suas-sysid" and nav in bounds:
                 _print_bound(excitation, nav, bounds[nav])
         bank, speed, lowest = (
@@ -939,6 +944,42 @@ def _print(setup: Setup, excitation: str, nav: str, method: str, results: list) 
     if scores:
         rms = ", ".join(f"{k} {np.sqrt(np.mean(np.square(v))):.1f}" for k, v in scores.items())
         print(f"{'':8} {'':4} {excitation:4} {nav:7} z-scores' rms (error / reported σ): {rms}")
+
+
+def _noise_free(setup: Setup, plan: Plan, navs, settings: Settings) -> dict[str, dict]:
+    """Per `nav`, the named modes identified from the plan flown in calm air without sensor
+    noise: what the method gives on that manoeuvre when only the sensors' noise is taken
+    away. A standard error describes the scatter the noise causes around it; its distance
+    from the validated truth is a bias no standard error holds (the aircraft's nonlinearity at
+    the flown amplitude, the model's structure, the truth's own error)."""
+    record = setup.fly(plan, FIRST_SEED, noise=False)
+    out = {}
+    for nav in navs:
+        exp = experiment(record, setup, wind=nav == "ins", vanes=nav != "novanes")
+        try:
+            out[nav] = ours(exp, record.dt, setup, settings)[0]
+        except (IdentificationFailed, DataError):
+            continue
+    return out
+
+
+def _print_limit(excitation: str, nav: str, results: list, bias: list[float]) -> None:
+    """Calm rows: the z-scores against the noise-free estimate of the same manoeuvre
+    (`_noise_free`), and that estimate's error against the validated truth."""
+    scores: dict[str, list[float]] = {}
+    for r in results:
+        for k, v in (r[5] or {}).items():
+            scores.setdefault(k, []).append(v)
+    rms = ", ".join(f"{k} {np.sqrt(np.mean(np.square(v))):.1f}" for k, v in scores.items())
+    cells = ", ".join(
+        f"{m} {'miss' if not np.isfinite(e) else f'{100 * e:.1f}'}"
+        for m, e in zip(MODES, bias, strict=True)
+    )
+    print(
+        f"{'':8} {'':4} {excitation:4} {nav:7} z-scores' rms against the noise-free "
+        f"estimate of the same manoeuvre: {rms or '–'}; that estimate's error (%): {cells}",
+        flush=True,
+    )
 
 
 def _print_bound(excitation: str, nav: str, bounds: list[tuple[float, list[float]]]) -> None:

@@ -146,3 +146,18 @@ def test_the_novanes_rows_identify_the_record_as_an_aircraft_without_vanes_would
     assert exp.air_angles is not None
     assert exp.navigation is navigation
     assert bench.experiment(record, setup).air_angles is None
+
+
+def test_calm_rows_print_z_against_the_manoeuvres_noise_free_estimate(capsys):
+    """_print_limit: the rms over seeds of each mode's z against the noise-free estimate of
+    the same manoeuvre, and that estimate's own error against the truth (a miss as such)."""
+    bench = _bench()
+    seeds = [
+        ([0.01] * 4, 0.1, 0.2, None, {}, {"short period ωn": 1.0, "phugoid ζ": -3.0}),
+        ([0.01] * 4, 0.1, 0.2, None, {}, {"short period ωn": -2.0, "phugoid ζ": 4.0}),
+    ]
+    bias = [0.012, float("inf"), 0.0, 0.034]
+    bench._print_limit("full", "ins", seeds, bias)
+    out = capsys.readouterr().out
+    assert "short period ωn 1.6, phugoid ζ 3.5" in out  # √((1 + 4)/2), √((9 + 16)/2)
+    assert "short period 1.2, phugoid miss, Dutch roll 0.0, roll 3.4" in out
