@@ -528,6 +528,46 @@ def mode_z(result, truth: dict[str, list[complex]]) -> dict[str, float]:
     return out
 
 
+def mode_estimates(result) -> dict[str, tuple[float, float]]:
+    """Each named mode's estimate with its reported standard error, as `mode_z` scores them:
+    "ωn" and "ζ" of a pair or of a mode of two real poles, the real part of a real pole."""
+    out: dict[str, tuple[float, float]] = {}
+    orders = {o.name: o for o in result.second_order()}
+    for name in MODES:
+        mine = [m for m in result.modes if m.name == name]
+        if not mine:
+            continue
+        if name in orders:
+            o = orders[name]
+            if o.frequency_std and o.damping_std:
+                out[f"{name} ωn"] = (o.frequency, o.frequency_std)
+                out[f"{name} ζ"] = (o.damping, o.damping_std)
+            continue
+        mode = mine[0]
+        if mode.uncertainty is None:
+            continue
+        if mode.pair and mode.uncertainty.frequency > 0 and mode.uncertainty.damping > 0:
+            out[f"{name} ωn"] = (mode.frequency, mode.uncertainty.frequency)
+            out[f"{name} ζ"] = (mode.damping, mode.uncertainty.damping)
+        elif not mode.pair and mode.uncertainty.real > 0:
+            out[name] = (mode.eigenvalue.real, mode.uncertainty.real)
+    return out
+
+
+def mode_estimates_of(truth: dict[str, list[complex]]) -> dict[str, float]:
+    """The truth's values under `mode_estimates`'s names: ωn and ζ of a pair or of two real
+    poles, the real part of a single real pole."""
+    out: dict[str, float] = {}
+    for name in MODES:
+        poles = truth.get(name, [])
+        polynomial = _second_order(poles) if poles else None
+        if polynomial is not None:
+            out[f"{name} ωn"], out[f"{name} ζ"] = polynomial
+        elif len(poles) == 1:
+            out[name] = poles[0].real
+    return out
+
+
 def truth_bound(
     exp: Experiment, dt: float, setup: Setup, reference: Truth, settings: Settings = OURS
 ) -> tuple[float, list[float]]:
@@ -813,7 +853,6 @@ def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validat
         rows: dict[tuple[str, str], list] = {}
         bounds: dict[str, list[tuple[float, list[float]]]] = {}
         flown = []
-        limits = _noise_free(setup, plan, args.nav, settings) if setup.turbulence == 0 else {}
         for seed in range(FIRST_SEED, FIRST_SEED + seeds):
             rec = setup.fly(plan, seed)
             flown.append(excursions(rec))
@@ -839,9 +878,9 @@ def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validat
                     )
                 tic = validation_tic(model, check) if check and model is not None else np.nan
                 scores = mode_z(result, truth) if model is not None else {}
-                own = mode_z(result, limits[nav]) if model is not None and nav in limits else {}
+                estimates = mode_estimates(result) if model is not None else {}
                 rows.setdefault((nav, "suas-sysid"), []).append(
-                    (errors, tic, seconds, _spiral_z(spiral, truth), scores, own)
+                    (errors, tic, seconds, _spiral_z(spiral, truth), scores, estimates)
                 )
                 if args.bound:
                     bounds.setdefault(nav, []).append(
@@ -863,8 +902,8 @@ def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validat
                 rows.setdefault(("–", peer), []).append((errs, tic, seconds, None, None, None))
         for (nav, method), results in rows.items():
             _print(setup, excitation, nav, method, results)
-            if method == "suas-sysid" and nav in limits:
-                _print_limit(excitation, nav, results, mode_errors(limits[nav], truth))
+            if method == "suas-sysid":
+                _print_scatter(excitation, nav, results, mode_estimates_of(truth))
             if method == "suas-sysid" and nav in bounds:
                 _print_bound(excitation, nav, bounds[nav])
         bank, speed, lowest = (
@@ -946,38 +985,29 @@ def _print(setup: Setup, excitation: str, nav: str, method: str, results: list) 
         print(f"{'':8} {'':4} {excitation:4} {nav:7} z-scores' rms (error / reported σ): {rms}")
 
 
-def _noise_free(setup: Setup, plan: Plan, navs, settings: Settings) -> dict[str, dict]:
-    """Per `nav`, the named modes identified from the plan flown in calm air without sensor
-    noise: what the method gives on that manoeuvre when only the sensors' noise is taken
-    away. A standard error describes the scatter the noise causes around it; its distance
-    from the validated truth is a bias no standard error holds (the aircraft's nonlinearity at
-    the flown amplitude, the model's structure, the truth's own error)."""
-    record = setup.fly(plan, FIRST_SEED, noise=False)
-    out = {}
-    for nav in navs:
-        exp = experiment(record, setup, wind=nav == "ins", vanes=nav != "novanes")
-        try:
-            out[nav] = ours(exp, record.dt, setup, settings)[0]
-        except (IdentificationFailed, DataError):
-            continue
-    return out
-
-
-def _print_limit(excitation: str, nav: str, results: list, bias: list[float]) -> None:
-    """Calm rows: the z-scores against the noise-free estimate of the same manoeuvre
-    (`_noise_free`), and that estimate's error against the validated truth."""
-    scores: dict[str, list[float]] = {}
+def _print_scatter(excitation: str, nav: str, results: list, true: dict) -> None:
+    """Each mode's z-scores split in two over the row's seeds: the scatter about the seeds' own
+    mean over the reported σ (the rms with n − 1 degrees of freedom: near 1 when σ describes
+    the scatter that the noise and the turbulence cause), and that mean's distance from the
+    truth over the median σ (a bias every seed shares, which no standard error holds: the
+    aircraft's nonlinearity at the flown amplitude, the model's structure, the truth's own
+    error). The z against the truth is about the root of the sum of their squares."""
+    values: dict[str, list[tuple[float, float]]] = {}
     for r in results:
         for k, v in (r[5] or {}).items():
-            scores.setdefault(k, []).append(v)
-    rms = ", ".join(f"{k} {np.sqrt(np.mean(np.square(v))):.1f}" for k, v in scores.items())
-    cells = ", ".join(
-        f"{m} {'miss' if not np.isfinite(e) else f'{100 * e:.1f}'}"
-        for m, e in zip(MODES, bias, strict=True)
-    )
+            values.setdefault(k, []).append(v)
+    scatter, bias = [], []
+    for k, v in values.items():
+        if len(v) < 3:
+            continue
+        x, sigma = np.array(v).T
+        z = (x - x.mean()) / sigma
+        scatter.append(f"{k} {np.sqrt(np.sum(z**2) / (len(z) - 1)):.1f}")
+        if k in true:
+            bias.append(f"{k} {(x.mean() - true[k]) / np.median(sigma):+.1f}")
     print(
-        f"{'':8} {'':4} {excitation:4} {nav:7} z-scores' rms against the noise-free "
-        f"estimate of the same manoeuvre: {rms or '–'}; that estimate's error (%): {cells}",
+        f"{'':8} {'':4} {excitation:4} {nav:7} scatter over σ (rms about the seeds' mean): "
+        f"{', '.join(scatter) or '–'}; the mean's bias over σ: {', '.join(bias) or '–'}",
         flush=True,
     )
 

@@ -148,16 +148,27 @@ def test_the_novanes_rows_identify_the_record_as_an_aircraft_without_vanes_would
     assert bench.experiment(record, setup).air_angles is None
 
 
-def test_calm_rows_print_z_against_the_manoeuvres_noise_free_estimate(capsys):
-    """_print_limit: the rms over seeds of each mode's z against the noise-free estimate of
-    the same manoeuvre, and that estimate's own error against the truth (a miss as such)."""
+def test_each_rows_z_scores_are_split_into_scatter_and_bias(capsys):
+    """_print_scatter: each mode's scatter about the seeds' mean over its σ (rms with n − 1
+    degrees of freedom) and the mean's distance from the truth over the median σ; a mode seen
+    on fewer than three seeds is left out. mode_estimates_of: the truth's values by the same
+    names (ωn and ζ of a pair or of two real poles, the real part of one real pole)."""
     bench = _bench()
+    truth = {"phugoid": [-0.03 + 0.4j], "roll": [-5.0 + 0j], "short period": [-9.0, -4.0]}
+    true = bench.mode_estimates_of(truth)
+    assert true["phugoid ωn"] == pytest.approx(abs(-0.03 + 0.4j))
+    assert true["short period ωn"] == pytest.approx(6.0)
+    assert true["short period ζ"] == pytest.approx(13 / 12)
+    assert true["roll"] == -5.0
     seeds = [
-        ([0.01] * 4, 0.1, 0.2, None, {}, {"short period ωn": 1.0, "phugoid ζ": -3.0}),
-        ([0.01] * 4, 0.1, 0.2, None, {}, {"short period ωn": -2.0, "phugoid ζ": 4.0}),
+        ([0.0] * 4, 0.1, 0.2, None, {}, {"roll": (-5.2, 0.1), "phugoid ζ": (0.1, 0.01)}),
+        ([0.0] * 4, 0.1, 0.2, None, {}, {"roll": (-5.4, 0.1), "phugoid ζ": (0.1, 0.01)}),
+        ([0.0] * 4, 0.1, 0.2, None, {}, {"roll": (-5.3, 0.1)}),
     ]
-    bias = [0.012, float("inf"), 0.0, 0.034]
-    bench._print_limit("full", "ins", seeds, bias)
+    bench._print_scatter("full", "ins", seeds, true)
     out = capsys.readouterr().out
-    assert "short period ωn 1.6, phugoid ζ 3.5" in out  # √((1 + 4)/2), √((9 + 16)/2)
-    assert "short period 1.2, phugoid miss, Dutch roll 0.0, roll 3.4" in out
+    # roll: deviations +0.1, −0.1, 0 about the mean −5.3 over σ 0.1 → √(2/2) = 1; its mean
+    # 0.3 from the truth, 3σ; the phugoid's ζ, on two seeds only, is left out.
+    assert "scatter over σ (rms about the seeds' mean): roll 1.0;" in out
+    assert "the mean's bias over σ: roll -3.0" in out
+    assert "phugoid" not in out
