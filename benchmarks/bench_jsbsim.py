@@ -499,33 +499,12 @@ def mode_errors(found: dict[str, list[complex]], truth: dict[str, list[complex]]
 def mode_z(result, truth: dict[str, list[complex]]) -> dict[str, float]:
     """Each named mode's error over its reported standard error (the z-score), as the table
     judges it (`mode_errors`): "ωn" and "ζ" of a pair or of a mode of two real poles, the
-    real part of a real pole; the spiral has its own column. Over seeds, an rms near 1 says
-    the reported σ are honest, far above 1 that they claim too much."""
-    out: dict[str, float] = {}
-    orders = {o.name: o for o in result.second_order()}
-    for name in MODES:
-        true = truth.get(name, [])
-        mine = [m for m in result.modes if m.name == name]
-        if not true or not mine:
-            continue
-        polynomial = _second_order(true)
-        if name in orders and polynomial is not None:
-            o, (wn, zeta) = orders[name], polynomial
-            if o.frequency_std and o.damping_std:
-                out[f"{name} ωn"] = (o.frequency - wn) / o.frequency_std
-                out[f"{name} ζ"] = (o.damping - zeta) / o.damping_std
-            continue
-        mode = mine[0]
-        if mode.uncertainty is None:
-            continue
-        if mode.pair and polynomial is not None:
-            wn, zeta = polynomial
-            if mode.uncertainty.frequency > 0 and mode.uncertainty.damping > 0:
-                out[f"{name} ωn"] = (mode.frequency - wn) / mode.uncertainty.frequency
-                out[f"{name} ζ"] = (mode.damping - zeta) / mode.uncertainty.damping
-        elif not mode.pair and len(true) == 1 and mode.uncertainty.real > 0:
-            out[name] = (mode.eigenvalue.real - true[0].real) / mode.uncertainty.real
-    return out
+    real part of a real pole (`mode_estimates`, against the truth's by the same names); the
+    spiral has its own column. Over seeds, an rms near 1 says the reported σ are honest, far
+    above 1 that they claim too much."""
+    true = mode_estimates_of(truth)
+    estimates = mode_estimates(result)
+    return {k: (v - true[k]) / sigma for k, (v, sigma) in estimates.items() if k in true}
 
 
 def mode_estimates(result) -> dict[str, tuple[float, float]]:

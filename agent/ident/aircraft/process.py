@@ -73,29 +73,15 @@ class ProcessNoise:
     direct: tuple[int, ...] = ()
 
     def gain(self, s: np.ndarray) -> np.ndarray:
-        """(F, m): what forces each row per unit of its noise, s for a `direct` row (the gust's
-        rate), 1 for the others."""
-        return np.stack([s if r in self.direct else np.ones_like(s) for r in self.rows], axis=1)
-
-    def transfer(self, s: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """T (F, n, m), the noise's path to the outputs, and its part through the states Φ E
-        (the rest does not depend on the model). A synthesised air angle's output is the
-        inertial one, the air-relative state less the gust: with the state forced by the
-        gust's rate, ẋ = A x + B u − s e g and y = x + e g, so T = −(s Φ e − e); the sign of a
-        column is immaterial to S."""
-        through = phi[:, :, list(self.rows)] * self.gain(s)[:, None, :]
-        T = through.copy()
-        for a, r in enumerate(self.rows):
-            if r in self.direct:
-                T[:, r, a] -= 1.0
-        return T, through
+        """(F, m): what forces each row per unit of its noise (`transfer`)."""
+        return _gain(self.rows, self.direct, s)
 
     def spectrum(self, s: np.ndarray, A: np.ndarray):
         """S (F, n, n), T (F, n, m), T's part through the states and Φ = (sI − A)⁻¹ (F, n, n)
         at the model A."""
         n = A.shape[0]
         phi = np.linalg.inv(s[:, None, None] * np.eye(n) - A)
-        T, through = self.transfer(s, phi)
+        T, through = transfer(self.rows, self.direct, s, phi)
         S = np.einsum("fia,fa,fja->fij", T, self.Q, T.conj()) + np.diag(self.R)
         return 0.5 * (S + S.conj().transpose(0, 2, 1)), T, through, phi
 
@@ -105,6 +91,25 @@ class ProcessNoise:
         S, T, _, _ = self.spectrum(self.s, A)
         process = np.einsum("fia,fa,fia->i", T, self.Q, T.conj()).real
         return process / np.maximum(np.einsum("fii->i", S).real, 1e-300)
+
+
+def _gain(rows: tuple[int, ...], direct: tuple[int, ...], s: np.ndarray) -> np.ndarray:
+    """(F, m): s for a `direct` row (the gust's rate forces it), 1 for the others."""
+    return np.stack([s if r in direct else np.ones_like(s) for r in rows], axis=1)
+
+
+def transfer(rows: tuple[int, ...], direct: tuple[int, ...], s: np.ndarray, phi: np.ndarray):
+    """T (F, n, m), the noise on `rows` to the outputs, and its part through the states Φ E
+    (the rest does not depend on the model). A synthesised air angle's output (a `direct`
+    row) is the inertial one, the air-relative state less the gust: with the state forced by
+    the gust's rate, ẋ = A x + B u − s e g and y = x + e g, so T = −(s Φ e − e); the sign of a
+    column is immaterial to S."""
+    through = phi[:, :, list(rows)] * _gain(rows, direct, s)[:, None, :]
+    T = through.copy()
+    for a, r in enumerate(rows):
+        if r in direct:
+            T[:, r, a] -= 1.0
+    return T, through
 
 
 def whiten(S: np.ndarray):
@@ -128,8 +133,7 @@ def estimate(
     s, n, m = problem.s, problem.n, len(rows)
     F = s.size
     level = np.mean(np.abs(e) ** 2, axis=0)
-    shape = ProcessNoise(tuple(rows), np.zeros((F, m)), level, s, tuple(direct))
-    T, _ = shape.transfer(s, np.linalg.inv(s[:, None, None] * np.eye(n) - A))
+    T, _ = transfer(tuple(rows), tuple(direct), s, np.linalg.inv(s[:, None, None] * np.eye(n) - A))
     Z = np.concatenate([T, np.broadcast_to(np.eye(n), (F, n, n))], axis=2)  # (F, n, m + n)
     Q, R = np.zeros((F, m)), level.copy()
     if not np.all(np.isfinite(T)):
