@@ -178,9 +178,9 @@ def consistent(output: np.ndarray, filtered: np.ndarray) -> bool:
     where that one is, and none more than FASTEST times faster than output error's fastest.
     A process-noise model that does not fit the record can explain the slow motion as noise,
     or put a pole far beyond the band, where output error, which needs no noise model, holds
-    (JSBSim's glider in light turbulence, the vanes alone: a phugoid at +0.017 ± 0.278j 1/s
-    where output error has −0.007 ± 0.336j; through the card, a pole at +1.9·10⁴ 1/s beside
-    output error's +0.6, and the identification failed). Then output error is kept. A test
+    (JSBSim's glider in light turbulence, the vanes alone: an unstable phugoid where output
+    error's is stable; through the card, a pole far beyond the band, and the identification
+    failed; benchmarks/README.md). Then output error is kept. A test
     of their difference against output error's standard errors (Hausman's) rejected the
     better estimate where output error's own σ is too small (a gust larger than the
     manoeuvre)."""
