@@ -28,7 +28,7 @@ from agent.ground.config import GroundConfig
 from agent.ground.events import Command, Line
 from agent.link import messages
 from agent.link.codec import GROUND
-from agent.link.endpoint import open_endpoint
+from agent.link.endpoint import build_endpoint
 from agent.link.session import LinkSession
 from agent.logs import LogWriter, log_name
 from drivers.xbee.driver import XBeeRadio
@@ -83,9 +83,12 @@ class GroundStation:
         """Open the radio and the session (raises OSError/ValueError/RadioError with the
         reason)."""
         cfg = self.config.link
-        self.radio, self.session = await open_endpoint(
-            cfg, GROUND, self.base, self.clock, self.on_message
-        )
+        radio, session = build_endpoint(cfg, GROUND, self.base, self.clock, self.on_message)
+        # Held before it opens: close() then ends an open cut short (the console quit while
+        # digi-xbee still reads the module's parameters) and never leaves its reader on the port.
+        self.radio = radio
+        await radio.open()
+        self.session = session
         self._log = self.writer.open(log_name(self.writer.next_number(), "ground", "jsonl"))
         self.note("info", f"radio open ({Path(cfg.port).name}); aircraft {cfg.peer}")
 

@@ -89,13 +89,3 @@ def build_endpoint(
     )
     sessions.append(session)
     return radio, session
-
-
-async def open_endpoint(
-    cfg: Link, role: str, base: Path, clock: Clock, on_message: Callable
-) -> tuple[XBeeRadio, LinkSession]:
-    """`build_endpoint` with the radio opened now (the ground console: an operator at the
-    keyboard is told at once). Raises ValueError or the radio's error with the reason."""
-    radio, session = build_endpoint(cfg, role, base, clock, on_message)
-    await radio.open()
-    return radio, session

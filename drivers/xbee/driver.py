@@ -158,6 +158,10 @@ class XBeeRadio:
             raise RadioError(
                 f"{self.port}: the XBee did not answer in {OPEN_TIMEOUT_S:g} s"
             ) from exc
+        except asyncio.CancelledError:  # the caller gone (shutdown): the same, no error of ours
+            abandoned.set()
+            opening.add_done_callback(self._close_late)
+            raise
         if self._seam is None or self._seam.loop is not loop:
             self._seam = PacketSeam(loop, self._dispatch)
         device.add_packet_received_callback(self._seam.callback)
@@ -177,7 +181,11 @@ class XBeeRadio:
         if opening.cancelled() or opening.exception() is not None:
             return
         self.counters["late_opens_closed"] += 1
-        self._loop.run_in_executor(self._executor, opening.result().close)
+        try:
+            self._loop.run_in_executor(self._executor, opening.result().close)
+        except RuntimeError:  # the pool already shut down (close() ran): close it here
+            with contextlib.suppress(Exception):
+                opening.result().close()
 
     def _open_blocking(self, abandoned: threading.Event):
         device = DigiMeshDevice(self.port, self.baud)

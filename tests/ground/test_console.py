@@ -9,6 +9,7 @@ settings with a non-numeric p (not sent), the radio link going silent (shown as 
 
 from __future__ import annotations
 
+import asyncio
 import json
 import math
 import re
@@ -290,6 +291,41 @@ async def test_results_of_earlier_sessions_are_listed_at_start(tmp_path):
             await pilot.press("4")
             await until(pilot, lambda: "lat-3" in text_of(app, "#summary"), "the earlier result")
             assert app.query_one("#results").row_count == 1
+
+
+async def test_a_console_quit_while_its_radio_opens_leaves_no_reader_on_the_port(tmp_path):
+    """Bad input tried: the console quit while digi-xbee is still reading the module's
+    parameters (a busy laptop: the open takes seconds). The station holds the radio before it
+    opens, so closing it gives the open up and waits for it: no digi-xbee reader is left on
+    the port, nor the opening thread (the station used to learn of the radio only once it was
+    open, and a quit meanwhile left both running)."""
+    import threading
+
+    async def turn(_: float) -> None:  # one turn of the loop: the module (on it) not answered
+        await asyncio.sleep(0)
+
+    async with rig(tmp_path) as r:
+        before = set(threading.enumerate())  # the rig's own radio has its threads
+        station = GroundStation(r.config, LoopClock(), base=tmp_path)
+        running = asyncio.create_task(station.run(), name="ground")
+        await waiting.until(
+            lambda: any(
+                t.name.startswith("xbee-open") for t in set(threading.enumerate()) - before
+            ),
+            "the open under way",
+            pause=turn,
+        )
+        assert not station.radio.is_open
+        running.cancel()
+        await asyncio.gather(running, return_exceptions=True)
+        await station.close()
+        assert not station.radio.is_open
+        alive = [
+            t
+            for t in set(threading.enumerate()) - before
+            if t.is_alive() and (type(t).__name__ == "PacketListener" or "xbee-open" in t.name)
+        ]
+        assert not alive, alive
 
 
 def test_a_status_or_live_frame_still_waiting_gives_way_to_the_next():

@@ -254,7 +254,7 @@ async def test_an_agent_whose_radio_does_not_answer_at_start_records_and_links_l
     from agent.clock import LoopClock
     from agent.config import Autopilot, Config, Link, Recorder, Sensors
     from agent.link.codec import GROUND
-    from agent.link.endpoint import open_endpoint
+    from agent.link.endpoint import build_endpoint
     from agent.runtime import Agent
     from tests.link.pair import AIR_ADDR, GROUND_ADDR, KEY
 
@@ -291,9 +291,10 @@ async def test_an_agent_whose_radio_does_not_answer_at_start_records_and_links_l
         counter_file="ground.counter",
         seen_file="ground.seen",
     )
-    radio, session = await open_endpoint(
+    radio, session = build_endpoint(
         ground_link, GROUND, tmp_path, clock, lambda m, _seq: inbox.append(m)
     )
+    await radio.open()
     ground = [asyncio.create_task(session.run(), name="ground-session")]
     try:
         assert await wait_for(lambda: agent.radio is not None)
