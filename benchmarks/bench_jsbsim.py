@@ -775,14 +775,48 @@ def main() -> None:
         f"  {'TIC':>11}   s/id"
     )
     for name in args.aircraft:
-        flight = AIRCRAFT[name]
-        plant = Plant(
-            name, airspeed_kts=flight.speed_kts, altitude_ft=flight.altitude_ft, linearise=False
-        )
-        controls = tuple(c for c in INPUT_CHANNELS if c != "throttle" or plant.kind != "none")
         for turbulence in args.turbulence:
-            setup = Setup(name, flight, turbulence, controls, plant.true_airspeed)
-            run(setup, args, seeds, settings, peers, validate)
+            run(setup_for(name, turbulence), args, seeds, settings, peers, validate)
+
+
+def setup_for(name: str, turbulence: float) -> Setup:
+    """One benchmark aircraft (AIRCRAFT) in `turbulence`, flown with every control it has (no
+    throttle without an engine)."""
+    flight = AIRCRAFT[name]
+    plant = Plant(
+        name, airspeed_kts=flight.speed_kts, altitude_ft=flight.altitude_ft, linearise=False
+    )
+    controls = tuple(c for c in INPUT_CHANNELS if c != "throttle" or plant.kind != "none")
+    return Setup(name, flight, turbulence, controls, plant.true_airspeed)
+
+
+def sized_plans(setup: Setup, auto: bool = True) -> tuple[dict, dict, list]:
+    """The benchmark's manoeuvres for `setup` (EXCITATIONS), sized as the agent sizes them
+    when `auto` (the full preset by its calibration runs, the others by the model those runs
+    identified): the plans, each one's envelope refusals, and the calibration runs."""
+    full = preset("full", controls=setup.controls)
+    plans = {
+        "full": full,
+        "card": only(card(setup.controls), setup.controls),
+        "sweep": only(sweeps(), setup.controls),
+    }
+    refused: dict[str, tuple] = dict.fromkeys(plans, ())
+    if not auto:
+        return plans, refused, []
+    sized, predictor, runs, flown = calibrate(setup, full)
+    plans["full"], refused["full"] = sized.plan, sized.refusals
+    for other in ("card", "sweep"):
+        card_sized = sizing.size(
+            plans[other],
+            render(plans[other], CONFIG.rate_hz),
+            predictor,
+            CONFIG.sizing,
+            setup.surfaces,
+            setup.envelope,
+            flown=flown,
+        )
+        plans[other], refused[other] = card_sized.plan, card_sized.refusals
+    return plans, refused, runs
 
 
 def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validate: bool):
@@ -792,34 +826,14 @@ def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validat
         return
     reference = setup.truth()
     truth = reference.modes()
-    full = preset("full", controls=setup.controls)
-    plans = {
-        "full": full,
-        "card": only(card(setup.controls), setup.controls),
-        "sweep": only(sweeps(), setup.controls),
-    }
-    if args.sizing == "auto":
-        sized, predictor, runs, flown = calibrate(setup, full)
-        for k, (step, (bank, speed, lowest)) in enumerate(runs):
-            print(
-                f"{setup.name:8} {setup.turbulence:4.1f} calibration run {k + 1}: "
-                f"{_amplitudes(step)}; bank {bank:.0f}°, airspeed ±{speed:.1f} %, "
-                f"lowest {lowest:.0f} ft",
-                flush=True,
-            )
-        plans["full"] = sized.plan
-        refused = {"full": sized.refusals}
-        for other in ("card", "sweep"):
-            card_sized = sizing.size(
-                plans[other],
-                render(plans[other], CONFIG.rate_hz),
-                predictor,
-                CONFIG.sizing,
-                setup.surfaces,
-                setup.envelope,
-                flown=flown,
-            )
-            plans[other], refused[other] = card_sized.plan, card_sized.refusals
+    plans, refused, runs = sized_plans(setup, auto=args.sizing == "auto")
+    for k, (step, (bank, speed, lowest)) in enumerate(runs):
+        print(
+            f"{setup.name:8} {setup.turbulence:4.1f} calibration run {k + 1}: "
+            f"{_amplitudes(step)}; bank {bank:.0f}°, airspeed ±{speed:.1f} %, "
+            f"lowest {lowest:.0f} ft",
+            flush=True,
+        )
     for excitation in args.excitation:
         plan = plans[excitation]
         if args.sizing == "auto" and refused[excitation]:  # the agent would not arm it

@@ -25,12 +25,10 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
-from bench_jsbsim import AIRCRAFT, Setup, _second_order, calibrate, experiment, ours
+from bench_jsbsim import AIRCRAFT, Setup, _second_order, calibrate, experiment, ours, setup_for
 from scipy.optimize import curve_fit
 
 from agent.excitation.plan import PRESET_AMPLITUDE, Doublet, Plan, Segment, only, preset
-from agent.sim.offline import INPUT_CHANNELS
-from agent.sim.plant import Plant
 from agent.sizing import scaled
 
 FREE_FROM_S = 12.0  # the short period has died out
@@ -70,15 +68,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--aircraft", choices=list(AIRCRAFT), default="c182")
     args = parser.parse_args()
-    flight = AIRCRAFT[args.aircraft]
-    plant = Plant(
-        args.aircraft,
-        airspeed_kts=flight.speed_kts,
-        altitude_ft=flight.altitude_ft,
-        linearise=False,
-    )
-    controls = tuple(c for c in INPUT_CHANNELS if c != "throttle" or plant.kind != "none")
-    setup = Setup(args.aircraft, flight, 0.0, controls, plant.true_airspeed)
+    setup = setup_for(args.aircraft, 0.0)
+    controls = setup.controls
     phugoid = setup.truth().modes().get("phugoid")
     if not phugoid or _second_order(phugoid) is None:
         parser.error(f"{args.aircraft}: the truth has no phugoid pair")
