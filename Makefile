@@ -42,10 +42,10 @@ chromium:
 # `make test` runs the suite in two pytest-xdist processes (`TEST_WORKERS=0`: in one): most of
 # its time is the simulated flights' and the radios' real time, so two workers finish it in
 # about 10 min where one takes about 16.5 (measured here, 2026-11-27). A console snapshot that
-# differed in two of three earlier two-worker runs has not since its screenshots wait for three
-# frames alike (tests/ground/test_console_snapshots.py). `make test-loaded` keeps one process beside its two CPU hogs: two
-# workers and two hogs on two cores failed five real-time tests, which is four busy
-# processes on two cores, not the flight computer's load.
+# differed in two of three earlier two-worker runs has not since its screenshots wait for
+# three frames alike (tests/ground/test_console_snapshots.py). `make test-loaded` keeps one
+# process beside its two CPU hogs: two workers and two hogs on two cores failed five real-time
+# tests, which is four busy processes on two cores, not the flight computer's load.
 TEST_WORKERS ?= 2
 test: $(STAMP) chromium
 	$(BIN)/ruff check .

@@ -183,9 +183,10 @@ class XBeeRadio:
         self.counters["late_opens_closed"] += 1
         try:
             self._loop.run_in_executor(self._executor, opening.result().close)
-        except RuntimeError:  # the pool already shut down (close() ran): close it here
-            with contextlib.suppress(Exception):
-                opening.result().close()
+        except RuntimeError:  # the pool already shut down (close() ran): off the loop still
+            threading.Thread(
+                target=_close_quietly, args=(opening.result(),), name="xbee-close", daemon=True
+            ).start()
 
     def _open_blocking(self, abandoned: threading.Event):
         device = DigiMeshDevice(self.port, self.baud)
@@ -367,6 +368,11 @@ class XBeeRadio:
             if self._next_id not in self._pending:
                 return self._next_id
         raise RadioError("255 frames are waiting for a transmit status")
+
+
+def _close_quietly(device) -> None:
+    with contextlib.suppress(Exception):  # closing what was given up: nothing to report
+        device.close()
 
 
 def _nothing() -> None:
