@@ -3,9 +3,10 @@
 Bad input tried: NaN and inf rows, a non-numeric cell, a constant input column, a record too
 short for the requested p, one too short even for the automatic p = 1 and one too short for
 the aircraft method's parameters, a column that does not exist, a row with too many fields,
-non-uniform time, time going backwards, an empty file, two files at different rates, a
-missing file, an input also given as output, and no --inputs at all. Each gives a clear
-message and exit 2 (bad input), never a traceback.
+non-uniform time (a step 25 % long: irregular, refused; a gap of 1.5 sample times or more
+splits the record into a batch of its segments), time going backwards, an empty file, two
+files at different rates, a missing file, an input also given as output, and no --inputs at
+all. Each gives a clear message and exit 2 (bad input), never a traceback.
 """
 
 from __future__ import annotations
@@ -257,6 +258,67 @@ def test_batch_of_two_files_and_time_window(capsys, tmp_path):
     assert code == 0
     assert len(doc["trim"]) == 2
     assert np.allclose(doc["Ac"], reference.LATERAL.A, atol=1e-6)
+
+
+def _joined(tmp_path, jump_s: float = 30.08, tail: int = 0) -> tuple[Path, list[Path]]:
+    """Two 10 s records written as one file, the second's time jumping `jump_s` past the
+    first's end (a research aircraft's lateral files: two manoeuvres with a 30.08 s jump),
+    and `tail` samples after a second jump; with the two as files of their own."""
+    parts = [reference.make_record(reference.LATERAL, seed=s, duration=10.0) for s in (1, 2)]
+    columns = [p.columns() for p in parts]
+    if tail:
+        columns.append({k: v[:tail] for k, v in columns[0].items()})
+    joined: dict[str, list] = {k: [] for k in columns[0]}
+    offset = 0.0
+    for c in columns:
+        for k, v in c.items():
+            joined[k].append(v + offset if k == "time" else v)
+        offset = joined["time"][-1][-1] + jump_s - c["time"][0]
+    path = write(tmp_path / "joined.csv", {k: np.concatenate(v) for k, v in joined.items()})
+    files = [write(tmp_path / f"part{k}.csv", c) for k, c in enumerate(columns[:2])]
+    return path, files
+
+
+def test_a_record_with_gaps_is_split_into_a_batch_of_its_segments(capsys, tmp_path):
+    """Bad input tried: two manoeuvres joined in one file by a 30.08 s jump in time, and a
+    third stretch of 50 samples after another jump. The file is identified as the batch of
+    its uniform segments (the same model as the two written as files of their own), the
+    short stretch left out, and the notes say both; a window that leaves the gap out is one
+    record and no note."""
+    joined, files = _joined(tmp_path, tail=50)
+    code, doc = run_json(capsys, str(joined), *LAT, "--method", "time")
+    assert code == 0
+    assert len(doc["trim"]) == 2
+    notes = [w for w in doc["warnings"] if w.startswith("joined.csv:")]
+    assert any(
+        "2 gap(s) in time (30.08 s at" in w and "2 uniform segment(s) of the batch" in w
+        for w in notes
+    ), notes
+    assert any("shorter than 100 samples left out" in w and "(50 samples)" in w for w in notes)
+    code, batch = run_json(capsys, *map(str, files), *LAT, "--method", "time")
+    assert code == 0
+    assert np.allclose(doc["Ac"], batch["Ac"], rtol=1e-9, atol=1e-12)
+    # The window first: the gap outside it is no concern.
+    code, first = run_json(capsys, str(joined), *LAT, "--method", "time", "--end", "10")
+    assert code == 0
+    assert len(first["trim"]) == 1
+    assert not any(w.startswith("joined.csv:") for w in first["warnings"])
+
+
+def test_a_record_whose_segments_are_all_short_is_refused(capsys, tmp_path):
+    """Bad input tried: a file whose samples come in bursts of 50 between jumps: nothing an
+    identification could use, said so (exit 2), not a batch of fragments."""
+    rows = reference.make_record(reference.LATERAL, duration=10.0).columns()
+    time = rows["time"].copy()
+    time[50:] += 5.0
+    time[100:] += 5.0
+    rows = {**rows, "time": time}
+    path = write(tmp_path / "bursts.csv", {k: v[:150] for k, v in rows.items()})
+    code, doc = run_json(capsys, str(path), *LAT, "--trim", "none")
+    assert code == 2
+    assert (
+        "every segment between its 2 gap(s) is shorter than 100 samples" in doc["error"]["message"]
+    )
 
 
 def test_trim_none_keeps_the_offset_and_fails_honestly(capsys, lateral_csv):

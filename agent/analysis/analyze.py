@@ -198,10 +198,15 @@ def _experiment(path: Path, request: Request) -> tuple[Experiment, float]:
     if not own_log(path):
         single = replace(request, paths=(path,))
         try:
-            experiments, dt, _, _ = load_experiments(single)
+            loaded = load_experiments(single)
         except RecordError as exc:
             raise AnalyzeError(str(exc)) from exc
-        return experiments[0], dt
+        if len(loaded.experiments) > 1:  # one record, one run: its segments are not one
+            raise AnalyzeError(
+                f"{path}: {'; '.join(loaded.notes)}; a replay takes one uniform record: "
+                "choose a segment with --start/--end (sysid identify takes them all as a batch)"
+            )
+        return loaded.experiments[0], loaded.dt
     try:
         # Only the columns used are kept: memory goes with them, not with the log.
         air = request.air_angles

@@ -8,7 +8,14 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.analysis.records import Record, RecordError, read_record, select, trim_values
+from agent.analysis.records import (
+    Record,
+    RecordError,
+    read_record,
+    segments,
+    select,
+    trim_values,
+)
 from agent.config import IdentificationConfig as IdentConfig
 from agent.ident import Experiment, Identification, Settings, identify
 from agent.ident.aircraft.airangles import Sources, fill
@@ -40,8 +47,8 @@ class Outcome:
     """The identification with what it was computed from."""
 
     result: Identification
-    trim: list[dict[str, float]]  # per record, in order
-    records: int
+    trim: list[dict[str, float]]  # per experiment (a record, or its segment), in order
+    records: int  # experiments: a record split at its gaps counts each segment
     samples: int
 
 
@@ -58,12 +65,23 @@ def parse_trim(text: str) -> float:
     return seconds
 
 
-def load_experiments(
-    request: Request,
-) -> tuple[list[Experiment], float, list[dict[str, float]], int]:
-    """Read, select and de-trim every record; all must share one sample time. Each experiment
-    carries the trim removed from its outputs (its operating point) and, where the record has
-    every `navigation` column, the navigation: the aircraft method's kinematics and wind."""
+@dataclass(frozen=True)
+class Loaded:
+    """The request's experiments: one per record, or per uniform segment of a record with
+    gaps (`records.segments`), in order."""
+
+    experiments: list[Experiment]
+    dt: float
+    trim: list[dict[str, float]]  # per experiment
+    samples: int
+    notes: tuple[str, ...]  # gaps split, segments left out, air angles synthesised
+
+
+def load_experiments(request: Request) -> Loaded:
+    """Read, select (the window first: a gap outside it is no concern), split at gaps and
+    de-trim every record; all must share one sample time. Each experiment carries the trim
+    removed from its outputs (its operating point) and, where the record has every
+    `navigation` column, the navigation: the aircraft method's kinematics and wind."""
     overlap = set(request.inputs) & set(request.outputs)
     if overlap:
         raise RecordError(f"column(s) {', '.join(sorted(overlap))} are both input and output")
@@ -74,18 +92,23 @@ def load_experiments(
     optional = (*request.navigation, *(sources.needed if angles else ()))
     records: list[Record] = []
     air: list = []
+    notes: list[str] = []
     for path in request.paths:
-        record = read_record(path, names, optional=optional, absent=tuple(angles))
-        record = select(record, request.start, request.end)
-        made = None
-        if angles:
-            try:
-                columns, made = fill(record.columns, request.outputs, sources)
-            except ValueError as exc:
-                raise RecordError(f"{path}: {exc}") from None
-            record = replace(record, columns=columns)
-        records.append(record)
-        air.append(made)
+        whole = read_record(path, names, optional=optional, absent=tuple(angles))
+        parts, split = segments(select(whole, request.start, request.end))
+        notes += split
+        for record in parts:
+            made = None
+            if angles:
+                try:
+                    columns, made = fill(record.columns, request.outputs, sources)
+                except ValueError as exc:
+                    raise RecordError(f"{path}: {exc}") from None
+                record = replace(record, columns=columns)
+                if made is not None:
+                    notes.append(f"{path.name}: {made.note()}")
+            records.append(record)
+            air.append(made)
     dt = records[0].dt
     for rec in records[1:]:
         if abs(rec.dt - dt) > DT_TOLERANCE * dt:
@@ -112,16 +135,24 @@ def load_experiments(
                 u=u, y=y, operating_point=operating_point, navigation=navigation, air_angles=made
             )
         )
-    return experiments, dt, trim, sum(r.time.size for r in records)
+    return Loaded(
+        experiments=experiments,
+        dt=dt,
+        trim=trim,
+        samples=sum(r.time.size for r in records),
+        notes=tuple(dict.fromkeys(notes)),
+    )
 
 
 def run(request: Request, config: IdentConfig, settings: Settings) -> Outcome:
     """Identify the request's records as one batch."""
-    experiments, dt, trim, samples = load_experiments(request)
-    notes = tuple(
-        f"{path.name}: {e.air_angles.note()}"
-        for path, e in zip(request.paths, experiments, strict=True)
-        if e.air_angles is not None
+    loaded = load_experiments(request)
+    experiments, dt, trim, samples, notes = (
+        loaded.experiments,
+        loaded.dt,
+        loaded.trim,
+        loaded.samples,
+        loaded.notes,
     )
     roles: Sequence[str | None] = [config.channels.role_of(n) for n in request.outputs]
     result = identify(

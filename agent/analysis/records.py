@@ -1,13 +1,15 @@
 """Flight records as CSV: reading, validation, time selection and trim removal.
 
-A record is a CSV file with a header row, a `time` column in seconds (uniformly sampled) and
-named numeric columns. Every problem is reported as a `RecordError` naming the file, the line
-and the column, so a bad file is fixed rather than debugged.
+A record is a CSV file with a header row, a `time` column in seconds (uniformly sampled, or
+in uniform segments between gaps: `segments`) and named numeric columns. Every problem is
+reported as a `RecordError` naming the file, the line and the column, so a bad file is fixed
+rather than debugged.
 """
 
 from __future__ import annotations
 
 import csv
+import itertools
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -23,6 +25,14 @@ from agent.logs import csv_number
 MAX_JITTER = 0.01
 # Larger files are not flight records of one excitation; refuse rather than exhaust memory.
 MAX_ROWS = 5_000_000
+# A step in time this many sample times long or more is a gap: a logger paused, or two
+# manoeuvres written into one file. The record is split there into its uniform segments,
+# identified together as a batch (`segments`); a step between MAX_JITTER and this is no gap
+# but irregular sampling, which is refused.
+GAP_STEPS = 1.5
+# A segment of fewer samples than this between gaps (1 s at 100 Hz, 4 s at 25 Hz) holds no
+# manoeuvre an identification could use: it is left out, and the note says so.
+MIN_SEGMENT = 100
 
 
 class RecordError(ValueError):
@@ -98,7 +108,7 @@ def read_record(
     for name in extra:
         if not np.isfinite(columns[name]).all():
             del columns[name]
-    return Record(path=path, time=time, columns=columns, dt=_sample_time(path, time))
+    return Record(path=path, time=time, columns=columns, dt=_median_step(path, time))
 
 
 # The longest line a record may have: a flight record's row is a few hundred characters; a
@@ -301,18 +311,60 @@ def time_steps(path: Path, time: np.ndarray, spec: str = ".6g") -> np.ndarray:
     return steps
 
 
-def _sample_time(path: Path, time: np.ndarray) -> float:
+def _median_step(path: Path, time: np.ndarray) -> float:
+    """The record's sample time: its median step (the time checked to increase; a single
+    sample has none, and `select` refuses it)."""
+    if time.size < 2:
+        return float("nan")
+    return float(np.median(time_steps(path, time)))
+
+
+def segments(record: Record) -> tuple[list[Record], list[str]]:
+    """The record's uniformly sampled segments, split at its gaps (a step of GAP_STEPS sample
+    times or more), with a note for each split and each segment left out (shorter than
+    MIN_SEGMENT samples); a record without gaps is one segment and no note. Sampling that is
+    irregular without a gap (a step more than MAX_JITTER off the median, not a gap) is a
+    RecordError: it must be resampled, not cut."""
+    path, time, dt = record.path, record.time, record.dt
     steps = time_steps(path, time)
-    dt = float(np.median(steps))
+    gaps = np.flatnonzero(steps >= GAP_STEPS * dt)
     jitter = np.abs(steps - dt) / dt
-    if jitter.max() > MAX_JITTER:
+    jitter[gaps] = 0.0
+    if jitter.size and jitter.max() > MAX_JITTER:
         k = int(np.argmax(jitter))
         raise RecordError(
             f"{path}: sampling is not uniform: step {steps[k]:.6g} s at {time[k]:.6g} s against "
-            f"a median of {dt:.6g} s ({100 * jitter[k]:.1f} % > {100 * MAX_JITTER:.0f} %); "
-            "resample the record or cut out the gap with --start/--end"
+            f"a median of {dt:.6g} s ({100 * jitter[k]:.1f} % > {100 * MAX_JITTER:.0f} %; a "
+            f"step of {GAP_STEPS:g}× the median or more is a gap, and the record is split "
+            "there); resample the record"
         )
-    return dt
+    if not gaps.size:
+        return [record], []
+    bounds = [0, *(int(k) + 1 for k in gaps), time.size]
+    kept, notes, short = [], [], []
+    for a, b in itertools.pairwise(bounds):
+        if b - a < MIN_SEGMENT:
+            short.append(f"{time[a]:.6g}…{time[b - 1]:.6g} s ({b - a} samples)")
+            continue
+        columns = {name: values[a:b] for name, values in record.columns.items()}
+        kept.append(Record(path=path, time=time[a:b], columns=columns, dt=dt))
+    listed = ", ".join(f"{steps[k]:.6g} s at {time[k]:.6g} s" for k in gaps[:5])
+    more = f" and {gaps.size - 5} more" if gaps.size > 5 else ""
+    notes.append(
+        f"{path.name}: {gaps.size} gap(s) in time ({listed}{more}): identified as "
+        f"{len(kept)} uniform segment(s) of the batch"
+    )
+    if short:
+        notes.append(
+            f"{path.name}: segment(s) shorter than {MIN_SEGMENT} samples left out: "
+            + ", ".join(short)
+        )
+    if not kept:
+        raise RecordError(
+            f"{path}: every segment between its {gaps.size} gap(s) is shorter than "
+            f"{MIN_SEGMENT} samples; nothing left to identify"
+        )
+    return kept, notes
 
 
 def select(record: Record, start: float | None, end: float | None) -> Record:
@@ -328,7 +380,8 @@ def select(record: Record, start: float | None, end: float | None) -> Record:
             f"(the record spans {record.time[0]:.6g}…{record.time[-1]:.6g} s)"
         )
     columns = {name: values[keep] for name, values in record.columns.items()}
-    return Record(path=record.path, time=record.time[keep], columns=columns, dt=record.dt)
+    time = record.time[keep]
+    return Record(path=record.path, time=time, columns=columns, dt=_median_step(record.path, time))
 
 
 def trim_values(record: Record, names: Sequence[str], seconds: float) -> dict[str, float]:

@@ -365,3 +365,26 @@ def test_an_agent_log_takes_the_memory_of_the_columns_used(tmp_path, capsys):
         tracemalloc.stop()
     assert "fewer than 3 samples between --start and --end" in capsys.readouterr().err
     assert peak < path.stat().st_size / 2, (peak, path.stat().st_size)
+
+
+def test_a_foreign_record_with_a_gap_is_refused_by_name_not_cut_to_its_first_segment(
+    tmp_path, capsys
+):
+    """Bad input tried: a foreign CSV record (not the agent's log) of two manoeuvres joined by
+    a 30.08 s jump in time. A replay runs one uniform record: it says so and how to choose a
+    segment (exit 2), rather than replay the first one alone in silence; the window that
+    chooses one replays it."""
+    from agent.cli import main
+
+    parts = [reference.make_record(MODEL, seed=s, duration=10.0).columns() for s in (1, 2)]
+    second = {**parts[1], "time": parts[1]["time"] + parts[0]["time"][-1] + 30.08}
+    names = list(parts[0])
+    data = np.column_stack([np.concatenate([parts[0][n], second[n]]) for n in names])
+    path = tmp_path / "joined.csv"
+    np.savetxt(path, data, delimiter=",", fmt="%.9g", header=",".join(names), comments="")
+    lateral = ["--inputs", "aileron,rudder", "--outputs", "beta,p,r,phi"]
+    assert main(["analyze", str(path), *lateral]) == 2
+    err = capsys.readouterr().err
+    assert "1 gap(s) in time (30.08 s at" in err, err
+    assert "choose a segment with --start/--end" in err
+    assert main(["analyze", str(path), *lateral, "--end", "10", "--json"]) == 0
