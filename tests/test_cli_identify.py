@@ -684,8 +684,8 @@ def test_a_usage_error_under_json_is_one_json_object(capsys, argv):
 
 def test_odd_settings_and_values_get_one_clear_reason(tmp_path, capsys):
     """Bad input tried: --period nan (a ValueError traceback before), --order 1000 (its
-    reason used to be repeated for each of 13 p), a record scaled by 1e200 (called "nothing
-    moved" before: its squares overflow)."""
+    reason used to be repeated for each of 13 p), a record's inputs scaled by 1e200 (called
+    "nothing moved" before: its squares overflow)."""
     path = write(tmp_path / "lat.csv", reference.make_record(reference.LATERAL).columns())
     assert main(["identify", str(path), *LAT, "--method", "frequency", "--period", "nan"]) == 2
     assert "--period: nan: give a finite, positive number of seconds" in capsys.readouterr().err
@@ -694,7 +694,8 @@ def test_odd_settings_and_values_get_one_clear_reason(tmp_path, capsys):
     assert err.count("order 1000 is outside") == 1, err
     assert "p = 1, 2, 3" in err
     columns = reference.make_record(reference.LATERAL).columns()
-    huge = {k: (v if k == "time" else v * 1e200) for k, v in columns.items()}
+    # The inputs alone: outputs that large are refused first, as no flight in radians.
+    huge = {k: (v * 1e200 if k in ("aileron", "rudder") else v) for k, v in columns.items()}
     big = write(tmp_path / "big.csv", huge)
     assert main(["identify", str(big), *LAT]) == 2
     err = capsys.readouterr().err
@@ -736,3 +737,119 @@ def test_a_decimation_beyond_the_bound_is_refused_before_any_filter(tmp_path, la
     assert done.returncode == 2, done.stderr
     assert "identification.decimation" in done.stderr
     assert "an integer from 1 to 1000, got 10000000" in done.stderr
+
+
+def test_an_input_the_aircraft_method_cannot_place_is_refused_by_name(capsys, tmp_path):
+    """Bad input tried: a lateral record with a measured column given as a third input whose
+    name no channel role carries (a research aircraft's thrust column was dropped so, its
+    only trace deep in the result), and the elevator given with only lateral outputs. Each is
+    refused by name with the reason and the way out (exit 2); OKID/ERA (--method time) takes
+    the unknown one."""
+    columns = reference.make_record(reference.LATERAL, duration=10.0).columns()
+    rng = np.random.default_rng(3)
+    columns["T_meas"] = 100 + rng.standard_normal(columns["time"].size)
+    columns["elevator"] = 0.1 * rng.standard_normal(columns["time"].size)
+    path = write(tmp_path / "thrust.csv", columns)
+    outputs = ["--outputs", "beta,p,r,phi"]
+    code, doc = run_json(capsys, str(path), "--inputs", "aileron,rudder,T_meas", *outputs)
+    assert code == 2
+    message = doc["error"]["message"]
+    assert "input 'T_meas' has no role the aircraft method knows" in message
+    assert "thrust = 'T_meas'" in message
+    code, doc = run_json(capsys, str(path), "--inputs", "aileron,rudder,elevator", *outputs)
+    assert code == 2
+    assert "input 'elevator' (elevator) moves the longitudinal axis" in doc["error"]["message"]
+    assert "airspeed, alpha, q, theta missing" in doc["error"]["message"]
+    args = ["--inputs", "aileron,rudder,T_meas", *outputs, "--method", "time"]
+    code, doc = run_json(capsys, str(path), *args)
+    assert code == 0
+    assert doc["inputs"] == ["aileron", "rudder", "T_meas"]
+
+
+def _in_degrees(tmp_path, name: str, header: dict[str, str] | None = None) -> Path:
+    """The A.2 lateral record with its angles in degrees and rates in deg/s, its header's
+    cells renamed by `header` (a unit declared there), and the time in ms where asked."""
+    columns = reference.make_record(reference.LATERAL, duration=10.0).columns()
+    scaled = {
+        k: (np.degrees(v) if k in ("beta", "p", "r", "phi") else v) for k, v in columns.items()
+    }
+    if header and "time" in header:
+        scaled["time"] = scaled["time"] * 1000
+    return write(tmp_path / name, {(header or {}).get(k, k): v for k, v in scaled.items()})
+
+
+def test_a_record_in_degrees_is_named_so_and_read_once_its_units_are_declared(capsys, tmp_path):
+    """Bad input tried: the A.2 lateral record with its angles in degrees and its rates in
+    deg/s under plain names (a business jet's CSV in degrees was read as radians: a spurious
+    −1035 1/s mode and no warning). Refused, naming the column, what it reaches and the two
+    ways to declare its unit; identified once they are declared, in the header (`beta [deg]`,
+    `r (deg/s)`, `time [ms]`) or by --units, to the model of the same record in radians, with
+    the units read echoed in the result; a unit not known, or of another kind than the
+    column's role (a speed for an angle), is refused by name."""
+    plain = _in_degrees(tmp_path, "plain.csv")
+    code, doc = run_json(capsys, str(plain), *LAT, "--method", "time")
+    assert code == 2
+    message = doc["error"]["message"]
+    beta = reference.make_record(reference.LATERAL, duration=10.0).columns()["beta"]
+    peak = np.degrees(np.max(np.abs(beta)))
+    assert f"column 'beta' (beta) reaches {peak:.4g}; in rad no flight goes beyond 1" in message
+    assert "these look like degrees" in message
+    assert "'beta [deg]'" in message
+    assert "--units beta=deg" in message
+    si = write(
+        tmp_path / "si.csv", reference.make_record(reference.LATERAL, duration=10.0).columns()
+    )
+    code, reference_doc = run_json(capsys, str(si), *LAT, "--method", "time")
+    assert code == 0
+    header = {"time": "time [ms]", "beta": "beta [deg]", "p": "p [deg/s]", "r": "r (deg/s)"}
+    header["phi"] = "phi [degrees]"
+    declared = _in_degrees(tmp_path, "declared.csv", header)
+    code, doc = run_json(capsys, str(declared), *LAT, "--method", "time")
+    assert code == 0, doc
+    assert np.allclose(doc["Ac"], reference_doc["Ac"], rtol=1e-6, atol=1e-9)
+    assert doc["dt"] == pytest.approx(reference_doc["dt"])
+    (units,) = [w for w in doc["warnings"] if w.startswith("declared.csv: units:")]
+    assert "beta in deg, converted to rad" in units
+    assert "r in deg/s, converted to rad/s" in units
+    given = ["--units", "beta=deg,p=deg/s,r=deg/s,phi=deg"]
+    code, doc = run_json(capsys, str(plain), *LAT, "--method", "time", *given)
+    assert code == 0, doc
+    assert np.allclose(doc["Ac"], reference_doc["Ac"], rtol=1e-6, atol=1e-9)
+    assert main(["identify", str(plain), *LAT, "--units", "beta=furlongs"]) == 2
+    assert "unit 'furlongs' is not one of rad, deg" in capsys.readouterr().err
+    code, doc = run_json(capsys, str(plain), *LAT, "--units", "beta=kt")
+    assert code == 2
+    assert "'beta' is declared in kt, but its role beta is angle (rad)" in doc["error"]["message"]
+
+
+def test_a_longitudinal_record_without_a_throttle_column_is_told_how(capsys, tmp_path):
+    """Bad input tried: `--axes longitudinal` on a record with no throttle column (a glider's,
+    or a business jet's whose thrust was not logged): refused naming the column, and with
+    the options that identify it without it."""
+    columns = reference.make_record(reference.MODELS["longitudinal"], duration=10.0).columns()
+    del columns["throttle"]
+    path = write(tmp_path / "glider.csv", columns)
+    code, doc = run_json(capsys, str(path), "--axes", "longitudinal")
+    assert code == 2
+    message = doc["error"]["message"]
+    assert "no column(s) 'throttle'" in message
+    assert "without throttle: --inputs elevator --outputs Vt,alpha,q,theta" in message
+
+
+def test_sim_lists_its_aircraft_and_asks_for_the_speed_of_one_it_does_not_know(capsys):
+    """`sysid sim --list-aircraft`: the aircraft JSBSim holds, the benchmark's six with the
+    speed each flies at (their default). Bad input tried: an aircraft whose trim speed is not
+    known, without --speed-kts: refused (exit 2) by name before anything flies, where 60 kt
+    would have stalled it or failed its trim."""
+    from agent.sim.aircraft import FLOWN
+
+    assert main(["sim", "--list-aircraft", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert set(FLOWN) <= set(doc["aircraft"])
+    assert doc["benchmark"]["t6texan2"]["speed_kts"] == FLOWN["t6texan2"][0]
+    assert "c310" in doc["aircraft"]
+    assert main(["sim", "--list-aircraft"]) == 0
+    assert "t6texan2     150 kt" in capsys.readouterr().out
+    code, doc = main(["sim", "--aircraft", "c310", "--json"]), json.loads(capsys.readouterr().out)
+    assert code == 2
+    assert "give --speed-kts for c310" in doc["error"]["message"]

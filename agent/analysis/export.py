@@ -76,11 +76,37 @@ def load_models(path: str | Path) -> Models:
     except OSError as exc:
         raise ExportError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
     try:
-        stored = StoreFile.model_validate(json.loads(text))
+        loaded = json.loads(text)
+    except ValueError as exc:
+        raise ExportError(f"{path}: not JSON ({exc})") from exc
+    if isinstance(loaded, dict) and "model_id" not in loaded and "A" in loaded:
+        return Models([_from_identified(path, loaded)])
+    try:
+        stored = StoreFile.model_validate(loaded)
         model = _from_result(stored.model_id, stored.axes, stored.result, stored.the_trim())
     except (ValueError, KeyError, TypeError) as exc:
-        raise ExportError(f"{path}: not a model store file ({exc})") from exc
+        raise ExportError(
+            f"{path}: not a model store file nor a `sysid identify --json` result ({exc})"
+        ) from exc
     return Models([_with_data(path, stored, model)])
+
+
+def _from_identified(path: Path, loaded: dict) -> dict:
+    """A `sysid identify --json` result as an export dict: its id the file's name, its axes
+    `record`; the trim exported where it is one record's (a batch's records each have their
+    own operating point, all kept in the result itself)."""
+    try:
+        result = ResultDocument.model_validate(loaded)
+    except (ValueError, TypeError) as exc:
+        raise ExportError(f"{path}: not a `sysid identify --json` result ({exc})") from exc
+    trim = None
+    if len(result.trim) == 1:
+        (point,) = result.trim
+        trim = Trim(
+            inputs={n: point[n] for n in result.inputs},
+            outputs={n: point[n] for n in result.outputs},
+        )
+    return _from_result(path.stem, "record", result, trim)
 
 
 def _bounded(path: Path, data: bytes, what: str) -> str:

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from agent.analysis import units as unit_rules
 from agent.analysis.records import (
     Record,
     RecordError,
@@ -40,6 +41,10 @@ class Request:
     # Where α and β come from (vanes, or synthesised from the INS and an estimated wind where
     # a record has no vanes'); None: as recorded, never synthesised.
     air_angles: Sources | None = None
+    # Column → its unit (`--units`), over what the header declares (agent.analysis.units).
+    units: Mapping[str, str] = field(default_factory=dict)
+    # Column → its role (the config's channel names): what unit it is identified in.
+    roles: Mapping[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -94,7 +99,12 @@ def load_experiments(request: Request) -> Loaded:
     air: list = []
     notes: list[str] = []
     for path in request.paths:
-        whole = read_record(path, names, optional=optional, absent=tuple(angles))
+        try:
+            whole = read_record(path, names, optional=optional, absent=tuple(angles))
+        except RecordError as exc:
+            raise RecordError(str(exc) + _without(exc.missing, request)) from None
+        whole, read = _in_units(whole, request)
+        notes += read
         parts, split = segments(select(whole, request.start, request.end))
         notes += split
         for record in parts:
@@ -142,6 +152,40 @@ def load_experiments(request: Request) -> Loaded:
         samples=sum(r.time.size for r in records),
         notes=tuple(dict.fromkeys(notes)),
     )
+
+
+def _without(missing: Sequence[str], request: Request) -> str:
+    """The options that identify the record without the inputs it lacks (a longitudinal
+    record of a glider, or of an aircraft whose throttle was not logged, under --axes
+    longitudinal), when only inputs are missing and some remain; else nothing."""
+    rest = [n for n in request.inputs if n not in missing]
+    if not missing or not rest or any(n not in request.inputs for n in missing):
+        return ""
+    return (
+        f"; without {', '.join(missing)}: --inputs {','.join(rest)} "
+        f"--outputs {','.join(request.outputs)}"
+    )
+
+
+def _in_units(record: Record, request: Request) -> tuple[Record, list[str]]:
+    """The record's columns in the units their roles are identified in: each declared unit
+    (`--units` over the header's) converted, each undeclared column checked for values no
+    flight reaches in its role's unit (agent.analysis.units); with a note of the units read."""
+    declared = {**record.units, **request.units}
+    columns = dict(record.columns)
+    read = []
+    for name, values in record.columns.items():
+        role = request.roles.get(name)
+        try:
+            if name in declared:
+                columns[name], what = unit_rules.converted(values, name, declared[name], role)
+                read.append(what)
+            elif (why := unit_rules.implausible(values, name, role)) is not None:
+                raise RecordError(f"{record.path}: {why}")
+        except unit_rules.UnitError as exc:
+            raise RecordError(f"{record.path}: {exc}") from None
+    notes = [f"{record.path.name}: units: {'; '.join(read)}"] if read else []
+    return replace(record, columns=columns), notes
 
 
 def run(request: Request, config: IdentConfig, settings: Settings) -> Outcome:

@@ -12,11 +12,12 @@ import csv
 import itertools
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from agent.analysis.units import TIME_UNITS, split_header
 from agent.logs import csv_number
 
 # Sampling jitter allowed, as a fraction of the median step: loggers stamp samples with some
@@ -36,7 +37,12 @@ MIN_SEGMENT = 100
 
 
 class RecordError(ValueError):
-    """A record cannot be used as given; the message says where and why."""
+    """A record cannot be used as given; the message says where and why (`missing`: the
+    columns asked for that the header lacks, when that is why)."""
+
+    def __init__(self, message: str, missing: tuple[str, ...] = ()):
+        super().__init__(message)
+        self.missing = missing
 
 
 @dataclass(frozen=True)
@@ -47,6 +53,9 @@ class Record:
     time: np.ndarray
     columns: dict[str, np.ndarray]
     dt: float
+    # Column → the unit its header declares (`alpha [deg]`; agent.analysis.units), the
+    # values as written: `agent.analysis.identify` converts them.
+    units: dict[str, str] = field(default_factory=dict)
 
     def matrix(self, names: Sequence[str]) -> np.ndarray:
         """The named columns as an (l × len(names)) array."""
@@ -76,6 +85,9 @@ def read_record(
                 raise RecordError(f"{path}: the file is empty; expected a header row")
             header = [h.strip() for h in next(csv.reader([line]))]
             _check_header(path, header)
+            declared = [split_header(h) for h in header]
+            header = [n for n, _ in declared]
+            header_units = {n: u for n, u in declared if u is not None}
             names = [n for n in names if n in header or n not in absent]
             index = _column_index(path, header, ["time", *names])
             extra = [
@@ -108,7 +120,12 @@ def read_record(
     for name in extra:
         if not np.isfinite(columns[name]).all():
             del columns[name]
-    return Record(path=path, time=time, columns=columns, dt=_median_step(path, time))
+    scale = TIME_UNITS.get(header_units.pop("time", "s"))
+    if scale is None:
+        raise RecordError(f"{path}: the time column's unit must be one of {', '.join(TIME_UNITS)}")
+    time = time * scale
+    units = {n: u for n, u in header_units.items() if n in columns}
+    return Record(path=path, time=time, columns=columns, dt=_median_step(path, time), units=units)
 
 
 # The longest line a record may have: a flight record's row is a few hundred characters; a
@@ -227,7 +244,8 @@ def _column_index(path: Path, header: list[str], wanted: list[str]) -> list[int]
     if missing:
         raise RecordError(
             f"{path}: no column(s) {', '.join(repr(n) for n in missing)}; "
-            f"the header has {', '.join(header)}"
+            f"the header has {', '.join(header)}",
+            missing=tuple(missing),
         )
     duplicated = sorted({n for n in wanted if header.count(n) > 1})
     if duplicated:
@@ -347,7 +365,7 @@ def segments(record: Record) -> tuple[list[Record], list[str]]:
             short.append(f"{time[a]:.6g}…{time[b - 1]:.6g} s ({b - a} samples)")
             continue
         columns = {name: values[a:b] for name, values in record.columns.items()}
-        kept.append(Record(path=path, time=time[a:b], columns=columns, dt=dt))
+        kept.append(replace(record, time=time[a:b], columns=columns))
     listed = ", ".join(f"{steps[k]:.6g} s at {time[k]:.6g} s" for k in gaps[:5])
     more = f" and {gaps.size - 5} more" if gaps.size > 5 else ""
     notes.append(
@@ -381,7 +399,7 @@ def select(record: Record, start: float | None, end: float | None) -> Record:
         )
     columns = {name: values[keep] for name, values in record.columns.items()}
     time = record.time[keep]
-    return Record(path=record.path, time=time, columns=columns, dt=_median_step(record.path, time))
+    return replace(record, time=time, columns=columns, dt=_median_step(record.path, time))
 
 
 def trim_values(record: Record, names: Sequence[str], seconds: float) -> dict[str, float]:

@@ -180,12 +180,21 @@ def hankel(cases: Sequence[Case], outcomes: Sequence[Outcome], path: BinaryIO) -
     plt.close(fig)
 
 
-def _phase_line(f: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(f, phase in degrees) with the phase in (−180°, 180°] and a gap where it wraps, so the
-    line is not drawn across the plot."""
-    wrapped = np.degrees(np.angle(h))
-    jumps = np.flatnonzero(np.abs(np.diff(wrapped)) > 180.0) + 1
-    return np.insert(f, jumps, np.nan), np.insert(wrapped, jumps, np.nan)
+def unwrapped_phase(h: np.ndarray) -> np.ndarray:
+    """The phase of a response along its frequency grid, in degrees, unwrapped (continuous, as
+    CIFER and SIDPAC plot it: a lag past −180° reads as −200°, not +160°), its lowest
+    frequency's in (−180°, 180°]."""
+    return np.degrees(np.unwrap(np.angle(h)))
+
+
+def nearest_branch(
+    f: np.ndarray, phase: np.ndarray, grid: np.ndarray, line: np.ndarray
+) -> np.ndarray:
+    """Measured phases (degrees, any branch) each moved by whole turns to the branch nearest
+    the model's unwrapped `line` over `grid` at its frequency: the points sit on the line they
+    are judged against, not 360° away from it."""
+    reference = np.interp(np.log(f), np.log(grid), line)
+    return phase + 360.0 * np.round((reference - phase) / 360.0)
 
 
 def frequency_responses(
@@ -221,7 +230,8 @@ def frequency_responses(
             mag, ph, coh = axes[3 * i, j], axes[3 * i + 1, j], axes[3 * i + 2, j]
             mag.set_title(f"{iname} → {oname}", fontsize=8)
             mag.semilogx(grid, 20 * np.log10(np.abs(hm[:, j, i])), color=COLOURS[0], lw=1.2)
-            ph.semilogx(*_phase_line(grid, hm[:, j, i]), color=COLOURS[0], lw=1.2)
+            line = unwrapped_phase(hm[:, j, i])
+            ph.semilogx(grid, line, color=COLOURS[0], lw=1.2)
             if f.size:
                 h = measured.H[excited, j, i]
                 g = measured.coherence[excited, j, i]
@@ -230,7 +240,8 @@ def frequency_responses(
                     mag.semilogx(
                         f[keep], 20 * np.log10(np.abs(h[keep])), marker, color=colour, ms=3
                     )
-                    ph.semilogx(f[keep], np.degrees(np.angle(h[keep])), marker, color=colour, ms=3)
+                    phase = nearest_branch(f[keep], np.degrees(np.angle(h[keep])), grid, line)
+                    ph.semilogx(f[keep], phase, marker, color=colour, ms=3)
                     coh.semilogx(f[keep], g[keep], marker, color=colour, ms=3)
                 share = measured.low_coherence(i, j)
                 if share is not None and share > 0.5:

@@ -149,6 +149,12 @@ positive_seconds = checked(
     "number of seconds",
     "give a finite, positive number of seconds",
 )
+knots = checked(
+    float,
+    lambda v: math.isfinite(v) and v > 0,
+    "speed in knots",
+    "give a finite, positive speed in knots",
+)
 port = checked(
     int, lambda p: 0 <= p <= 65535, "port number", "not a UDP port: give 0 (any) to 65535"
 )
@@ -172,6 +178,22 @@ def trim(text: str) -> float:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def units(text: str) -> dict[str, str]:
+    from agent.analysis.units import UnitError, parse_units
+
+    try:
+        return parse_units(text)
+    except UnitError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _navigation_role(channels, name: str) -> str | None:
+    """The navigation role (psi, vn, ve, vd) a column name carries, or None."""
+    from agent.channels import NAVIGATION_ROLES
+
+    return next((r for r in NAVIGATION_ROLES if getattr(channels, r) == name), None)
+
+
 def identification_options(parser: argparse.ArgumentParser) -> None:
     """The options `sysid identify`, `analyze` and `report` share."""
     parser.add_argument("--inputs", type=names, metavar="NAMES", help="input columns, a,b,…")
@@ -183,6 +205,13 @@ def identification_options(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--order", type=positive_int, metavar="N", help="model order")
     parser.add_argument("--markov", type=positive_int, metavar="P", help="Markov parameters")
+    parser.add_argument(
+        "--units",
+        type=units,
+        metavar="NAME=UNIT,…",
+        help="the unit of a column where its header does not say (alpha=deg, p=deg/s, "
+        "airspeed=kt): converted to the unit its role is identified in",
+    )
     parser.add_argument("--start", type=float, metavar="T0", help="first time used, s")
     parser.add_argument("--end", type=float, metavar="T1", help="last time used, s")
     parser.add_argument(
@@ -260,15 +289,64 @@ def service_options(parser: argparse.ArgumentParser, config: Path, base_holds: s
     )
 
 
-def aircraft_options(args: argparse.Namespace, **more):
-    """The simulated aircraft's options (agent.sim.aircraft) from the --aircraft, --speed-kts,
-    --turbulence, --seed and --no-vanes that `sysid sim` and `sim-aircraft` each define, and
-    `more`."""
-    from agent.sim.aircraft import AircraftOptions
+def aircraft_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options that choose and trim the simulated aircraft (`sysid sim`, `sim-aircraft`)."""
+    parser.add_argument(
+        "--aircraft",
+        default="J3Cub",
+        help="the JSBSim aircraft to fly (default J3Cub; `sysid sim --list-aircraft` lists "
+        "them, with the speeds the benchmark's are flown at)",
+    )
+    parser.add_argument(
+        "--speed-kts",
+        type=knots,
+        default=None,
+        metavar="KT",
+        help="calibrated airspeed to trim at, kt (default: the benchmark's for its six "
+        "aircraft, e.g. 60 for the J3Cub, 150 for the t6texan2; needed for any other)",
+    )
+    parser.add_argument(
+        "--altitude-ft",
+        type=float,
+        default=None,
+        metavar="FT",
+        help="height above the ground to trim at, ft (default 1000; 3000 for the sgs126: a "
+        "glider sinks all flight)",
+    )
+    parser.add_argument(
+        "--turbulence",
+        type=turbulence,
+        default=0.0,
+        help="Dryden intensity: 0 none, 1 light (W20 = 5 ft/s), at most 15 (severe)",
+    )
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="JSBSim's random seed: the turbulence and the sensors' noise (0 and 1 give one "
+        "turbulence sequence); the same seed flies the same air",
+    )
+    parser.add_argument(
+        "--no-vanes",
+        action="store_true",
+        help="air data with the airspeed only (no α, β vanes): the agent synthesises α and β "
+        "from the INS",
+    )
 
+
+def aircraft_options(args: argparse.Namespace, **more):
+    """The simulated aircraft's options (agent.sim.aircraft) from `aircraft_arguments`, and
+    `more`; an aircraft whose trim speed is not known and not given is refused."""
+    from agent.sim.aircraft import AircraftOptions, flown_at
+
+    try:
+        speed, altitude = flown_at(args.aircraft, args.speed_kts, args.altitude_ft)
+    except ValueError as exc:
+        raise refused(str(exc)) from None
     return AircraftOptions(
         aircraft=args.aircraft,
-        speed_kts=args.speed_kts,
+        speed_kts=speed,
+        altitude_ft=altitude,
         turbulence=args.turbulence,
         seed=args.seed,
         vanes=not args.no_vanes,
@@ -350,6 +428,12 @@ def identification_request(args: argparse.Namespace, paths, *, sampled_inputs: b
         trim_seconds=trim_s,
         navigation=config.channels.navigation(),
         air_angles=Sources.of(config.channels, args.air_angles or config.air_angles),
+        units=getattr(args, "units", None) or {},
+        roles={
+            n: role
+            for n in (*inputs, *outputs, *config.channels.navigation())
+            if (role := config.channels.role_of(n) or _navigation_role(config.channels, n))
+        },
     )
     settings = Settings.from_config(
         config,

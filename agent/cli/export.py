@@ -14,7 +14,8 @@ def add_parser(sub) -> None:
         "export",
         help="identified models (and data) to MATLAB .mat or JSON; derivatives to CSV",
         description="Export the models of a result log, a model store file "
-        "(models/<axes>_nominal.json) or a ground log; variable names in docs/post-flight.md.",
+        "(models/<axes>_nominal.json), a ground log or a `sysid identify --json` result; "
+        "variable names in docs/post-flight.md.",
     )
     parser.add_argument("source", type=Path, metavar="SOURCE")
     parser.add_argument(

@@ -21,26 +21,12 @@ def add_parser(sub) -> None:
         description="Simulated aircraft, emulated ArduPlane, sensors and "
         "radios, the real agent, and a scripted ground operator.",
     )
-    parser.add_argument("--aircraft", default="J3Cub")
-    parser.add_argument("--speed-kts", type=float, default=60.0)
+    common.aircraft_arguments(parser)
     parser.add_argument(
-        "--altitude-ft",
-        type=float,
-        default=1000.0,
-        help="height above the ground to trim at (a glider sinks all flight: start high)",
-    )
-    parser.add_argument(
-        "--turbulence",
-        type=common.turbulence,
-        default=0.0,
-        help="Dryden intensity: 0 none, 1 light (W20 = 5 ft/s), at most 15 (severe)",
-    )
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument(
-        "--no-vanes",
+        "--list-aircraft",
         action="store_true",
-        help="air data with the airspeed only (no α, β vanes): the agent synthesises α and β "
-        "from the INS",
+        help="list the JSBSim aircraft it can fly, with the speeds the benchmark's six are "
+        "flown at, and exit",
     )
     parser.add_argument("--preset", choices=PRESETS, default="full")
     parser.add_argument(
@@ -75,9 +61,11 @@ def run(args: argparse.Namespace) -> int:
     from agent.sim.flight import SimError, SimOptions, fly, format_report, interactive
     from agent.sim.plant import PlantError
 
+    if args.list_aircraft:
+        return _list_aircraft(args.json)
     progress = None if args.json else (lambda text: print(text, flush=True))
     options = SimOptions(
-        plane=common.aircraft_options(args, altitude_ft=args.altitude_ft),
+        plane=common.aircraft_options(args),
         preset=args.preset,
         runs=args.runs or (SIZED_RUNS if args.sizing else 1),
         sizing=args.sizing,
@@ -101,3 +89,22 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(format_report(report))
     return common.EXIT_OK if not report["failure"] else common.EXIT_FAILED
+
+
+def _list_aircraft(as_json: bool) -> int:
+    """`sysid sim --list-aircraft`: the aircraft JSBSim holds, the benchmark's with their
+    trim speed and height."""
+    from agent.sim.aircraft import FLOWN, jsbsim_aircraft
+
+    names = jsbsim_aircraft()
+    if as_json:
+        flown = {n: {"speed_kts": v, "altitude_ft": h, "kind": k} for n, (v, h, k) in FLOWN.items()}
+        common.print_json({"aircraft": names, "benchmark": flown})
+        return common.EXIT_OK
+    print("flown by the benchmark (sysid sim --aircraft NAME flies it at this speed):")
+    for name, (speed, height, kind) in FLOWN.items():
+        print(f"  {name:10} {speed:5.0f} kt  {height:5.0f} ft  {kind}")
+    others = [n for n in names if n not in FLOWN]
+    print(f"also in JSBSim ({len(others)}; give --speed-kts, and expect no trim for some):")
+    print("  " + ", ".join(others))
+    return common.EXIT_OK

@@ -15,23 +15,7 @@ def add_parser(sub) -> None:
         description="Fly the simulated aircraft and print where its MAVLink port and sensor "
         "pseudo-terminals are, so `sysid agent` can be pointed at it as at a real aircraft.",
     )
-    parser.add_argument("--aircraft", default="J3Cub", help="JSBSim aircraft (default J3Cub)")
-    parser.add_argument("--speed-kts", type=float, default=60.0)
-    parser.add_argument("--altitude-ft", type=float, default=1000.0)
-    parser.add_argument(
-        "--turbulence",
-        type=common.turbulence,
-        default=0.0,
-        help="Dryden intensity: 0 none, 1 light (W20 = 5 ft/s), 5 ≈ MIL-F-8785C light (15 kt), "
-        "at most 15 (severe)",
-    )
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument(
-        "--no-vanes",
-        action="store_true",
-        help="air data with the airspeed only (no α, β vanes): the agent synthesises α and β "
-        "from the INS",
-    )
+    common.aircraft_arguments(parser)
     parser.add_argument(
         "--mavlink-port",
         type=common.port,
@@ -72,7 +56,6 @@ def run(args: argparse.Namespace) -> int:
 
     options = common.aircraft_options(
         args,
-        altitude_ft=args.altitude_ft,
         noise=not args.no_noise,
         mavlink_port=args.mavlink_port,
         sensor_rate_hz=args.sensor_rate,

@@ -16,7 +16,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from agent.channels import INPUT_ROLES
+from agent.channels import INPUT_ROLES, POWER_ROLES
 from agent.ident import aircraft, frequency, okid
 from agent.ident.candidates import Candidate, choose_markov, run_candidate
 from agent.ident.convert import (
@@ -83,6 +83,44 @@ def check_channels(
             )
 
 
+def _every_input_used(
+    inputs: Sequence[str],
+    roles: Sequence[str | None],
+    output_roles: Sequence[str | None],
+    present: dict[str, tuple[list[int], list[int]]],
+) -> None:
+    """A DataError naming each input the whole-aircraft method would not use: one without a
+    role it knows, or one whose axis's outputs the record lacks. An input asked for is used
+    or refused with the reason, never dropped in silence (a record's measured thrust,
+    named `thrust` but not so in the config, was)."""
+    used = {j for _, ins in present.values() for j in ins}
+    known = (*INPUT_ROLES, *POWER_ROLES)
+    reasons = []
+    for j, name in enumerate(inputs):
+        if j in used:
+            continue
+        role = roles[j]
+        if role not in known:
+            reasons.append(
+                f"input {name!r} has no role the aircraft method knows: name its column in "
+                f"[identification.channels] as one of {', '.join(known)} (e.g. thrust = "
+                f"{name!r} for a measured thrust)"
+            )
+            continue
+        axis = next(a for a, (_, ins) in aircraft.AXES.items() if role in ins)
+        outs, _ = aircraft.AXES[axis]
+        lacking = [o for o in outs if o not in output_roles]
+        reasons.append(
+            f"input {name!r} ({role}) moves the {axis} axis, whose outputs the record does "
+            f"not give ({', '.join(lacking)} missing)"
+        )
+    if reasons:
+        raise DataError(
+            "; ".join(reasons) + ": leave it out of --inputs, or give --method time (OKID/ERA "
+            "takes any input)"
+        )
+
+
 def identify(
     experiments: Sequence[okid.Experiment] | okid.Experiment,
     dt: float,
@@ -128,6 +166,7 @@ def identify(
                 "method 'aircraft' needs the four outputs of an axis (airspeed, alpha, q, "
                 "theta or beta, p, r, phi) and its inputs, named by their roles"
             )
+        _every_input_used(inputs, in_roles, out_roles, present)
         if decimated:
             raise DataError(
                 f"method 'aircraft' fits the record's spectra at its own rate and takes no "

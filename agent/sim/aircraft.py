@@ -57,6 +57,44 @@ NOISE = {
 }
 
 
+# The JSBSim aircraft this project flies in its benchmarks (benchmarks/bench_jsbsim.py), each
+# with the speed (kt) and height above the ground (ft) it is trimmed at there, and what it is.
+# Any other aircraft JSBSim has flies too, at a speed the user gives (`flown_at`).
+FLOWN: dict[str, tuple[float, float, str]] = {
+    "J3Cub": (60.0, 1000.0, "light piston, tailwheel"),
+    "c182": (90.0, 1000.0, "piston single"),
+    "pa28": (90.0, 1000.0, "piston single, low wing"),
+    "c172r": (95.0, 1000.0, "four-seat trainer"),
+    "t6texan2": (150.0, 1000.0, "turbine trainer, direct thrust"),
+    "sgs126": (50.0, 3000.0, "glider, unpowered"),
+}
+
+
+def jsbsim_aircraft() -> list[str]:
+    """The aircraft JSBSim's package holds (a folder with its NAME.xml), sorted."""
+    import jsbsim
+
+    root = Path(jsbsim.get_default_root_dir()) / "aircraft"
+    return sorted(d.name for d in root.iterdir() if d.is_dir() and (d / f"{d.name}.xml").is_file())
+
+
+def flown_at(
+    aircraft: str, speed_kts: float | None, altitude_ft: float | None
+) -> tuple[float, float]:
+    """The speed and height to fly `aircraft` at: as given, else FLOWN's; a ValueError for
+    an aircraft not in FLOWN with no speed given (a speed is the aircraft's own: 60 kt stalls
+    a turboprop and overspeeds a glider)."""
+    known = FLOWN.get(aircraft)
+    if speed_kts is None and known is None:
+        raise ValueError(
+            f"give --speed-kts for {aircraft}: its trim speed is known here only for "
+            f"{', '.join(FLOWN)} (sysid sim --list-aircraft)"
+        )
+    speed = speed_kts if speed_kts is not None else known[0]
+    height = altitude_ft if altitude_ft is not None else (known or FLOWN["J3Cub"])[1]
+    return speed, height
+
+
 # Shaped like drivers/serialio.py's LinkStats only: how to fly, not what a link has seen.
 @dataclass
 class AircraftOptions:

@@ -4,7 +4,7 @@ The models come from the agent's own identification path (`Identification.identi
 A.2 lateral record, the worker job run on a thread pool), its result log and its model store.
 
 Bad input tried: a file with no identified model, a damaged store file, an unknown model id,
-an output that is neither .mat nor .json.
+an output that is neither .mat nor .json, a failed `sysid identify --json`'s error object.
 """
 
 from __future__ import annotations
@@ -309,3 +309,33 @@ def test_a_source_without_line_ends_is_refused_at_its_bound(tmp_path):
     assert done.returncode == 2, done.stderr
     assert "/dev/zero: line 1 is longer than 16777216 bytes" in done.stderr
     assert not (tmp_path / "x.mat").exists()
+
+
+def test_what_sysid_identify_printed_exports_as_it_is(tmp_path, capsys):
+    """What a user just identified (`sysid identify --json > model.json`) exports to MATLAB
+    (it was refused: "not a model store file"): its matrices, modes and its one record's
+    trim. Bad input tried: the `--json` error object of a failed identify, refused by name."""
+    from agent.cli import main
+
+    record = ROOT / "examples" / "a2_lateral.csv"
+    lateral = ["--inputs", "aileron,rudder", "--outputs", "beta,p,r,phi"]
+    assert main(["identify", str(record), *lateral, "--json"]) == 0
+    identified = tmp_path / "model.json"
+    identified.write_text(capsys.readouterr().out)
+    done = sysid("export", str(identified), "--out", str(tmp_path / "model.mat"), cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    doc = json.loads(identified.read_text())
+    m = loadmat(tmp_path / "model.mat", simplify_cells=True)["model"]
+    for key in ("A", "B", "C", "D"):
+        np.testing.assert_array_equal(np.atleast_2d(m[key]), np.array(doc[key]))
+    lam = np.sort_complex(np.atleast_1d(m["eigenvalues"]))
+    expected = np.sort_complex([complex(*x["eigenvalue"]) for x in doc["modes"]])
+    np.testing.assert_allclose(lam, expected)
+    assert m["u0"][0] == pytest.approx(doc["trim"][0]["aileron"])
+    assert m["y0"][3] == pytest.approx(doc["trim"][0]["phi"])
+    assert main(["identify", str(tmp_path / "absent.csv"), *lateral, "--json"]) == 2
+    failed = tmp_path / "failed.json"
+    failed.write_text(capsys.readouterr().out)
+    done = sysid("export", str(failed), "--out", str(tmp_path / "failed.mat"), cwd=tmp_path)
+    assert done.returncode == 2
+    assert "not a model store file nor a `sysid identify --json` result" in done.stderr

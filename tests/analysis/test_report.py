@@ -222,3 +222,21 @@ def test_the_figures_of_a_model_without_a_control_its_record_left_at_trim(tmp_pa
     bode = BytesIO()
     frequency_responses(case, outcome, bode)
     assert bode.getvalue().startswith(b"\x89PNG")
+
+
+def test_the_phase_is_read_unwrapped_as_cifer_and_sidpac_plot_it():
+    """A third-order lag, 1/(s + 1)³, whose phase falls from 0° to −270°: the model's line is
+    continuous (it wrapped to +180° at −180° and jumped across the panel), and measured points
+    given on the principal branch are drawn on the line's (−200°, not +160°)."""
+    from agent.analysis.report import nearest_branch, unwrapped_phase
+
+    grid = np.logspace(-2, 2, 300)
+    h = 1 / (2j * np.pi * grid + 1) ** 3
+    line = unwrapped_phase(h)
+    np.testing.assert_allclose(line, np.degrees(-3 * np.arctan(2 * np.pi * grid)), atol=1e-6)
+    assert line[-1] < -260
+    f = np.logspace(-1.5, 1.5, 25)
+    exact = np.degrees(-3 * np.arctan(2 * np.pi * f))
+    principal = np.degrees(np.angle(1 / (2j * np.pi * f + 1) ** 3))
+    assert np.any(principal > 0)  # past −180° the principal branch is positive
+    np.testing.assert_allclose(nearest_branch(f, principal, grid, line), exact, atol=1e-6)

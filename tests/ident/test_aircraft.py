@@ -1004,3 +1004,22 @@ def test_a_filter_error_estimate_that_leaves_output_errors_modes_is_not_kept():
     assert not consistent(output, model(19415.0, -3.211, -0.013 + 0.295j))
     assert not consistent(model(-3.6, -0.007 + 0.336j), model(-3.6, 0.017 + 0.278j))
     assert consistent(model(-3.6, -0.007 + 0.336j), model(-3.2, -0.03 + 0.30j))
+
+
+def test_an_oscillation_longer_than_the_record_is_said_to_be_undetermined():
+    """Bad input tried: the full preset's record cut to less than one phugoid period (a
+    business jet's phugoid from two 25 s records of one manoeuvre came out 48 % apart with
+    nothing said). The result names the phugoid as not determined by the record, with its
+    period and the record's length; the whole record, several periods long, says nothing."""
+    A, B, C = aircraft_with_engine_lag()
+    record = full_preset_record(A, B, C)
+    phugoid = min((p for p in np.linalg.eigvals(A[:8, :8]) if p.imag > 1e-6), key=lambda p: abs(p))
+    period = 2 * np.pi / phugoid.imag
+    whole = aircraft_identify(Experiment(record.u, record.y))
+    assert len(record.u) * DT > 2 * period
+    assert not [w for w in whole.warnings if "not determined by this record" in w]
+    n = int(0.8 * period / DT)
+    short = aircraft_identify(Experiment(record.u[:n], record.y[:n]))
+    flagged = [w for w in short.warnings if "not determined by this record" in w]
+    assert [w.split(" not determined")[0] for w in flagged] == ["phugoid"]
+    assert f"longer than the record ({n * DT:.3g} s)" in flagged[0]

@@ -261,6 +261,7 @@ def identify(fitted: Fitted, settings: Settings) -> Identification:
     )
     orders = [second_order_std(o, refinement) for o in second_order(modes)]
     warnings += _poorly_resolved(modes, orders, sp, present)
+    warnings += _longer_than_the_record(modes, span)
     prep = Preprocessing(
         record_dt=dt,
         dt=dt,
@@ -767,6 +768,26 @@ def _poorly_resolved(
             f"{frequency:.3g} rad/s{how}; the {axis} controls put {share:.1%} of their power "
             "within a factor 2 of it"
             + (f" (the analysed band starts at {sp.band_hz[0]:.3g} Hz)" if not near.any() else "")
+        )
+    return notes
+
+
+def _longer_than_the_record(modes: Sequence[Mode], span: float) -> list[str]:
+    """A named oscillation whose period is longer than the longest record, said by name: the
+    record holds less than a cycle of it, and its ωn and ζ rest on the model's structure more
+    than on the data, whatever its σ says (a business jet's phugoid from two 25 s records of
+    one manoeuvre came out 48 % apart)."""
+    notes = []
+    for m in modes:
+        damped = abs(m.eigenvalue.imag)
+        if not m.name or damped <= 0 or 2 * np.pi / damped <= span:
+            continue
+        period = 2 * np.pi / damped
+        notes.append(
+            f"{m.name} not determined by this record: its period of {period:.3g} s is longer "
+            f"than the record ({span:.3g} s), less than one cycle of it; its ωn and ζ rest on "
+            "the model's structure, and a repeat manoeuvre can give others (a record of two "
+            "periods or more determines it)"
         )
     return notes
 
