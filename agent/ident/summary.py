@@ -24,6 +24,19 @@ def _pct(value: float | None) -> str:
     return "   —" if value is None else f"{value:4.0f}"
 
 
+# The mode table's indicators: (heading, width, Mode attribute); ERA_ONLY are shown only where
+# a mode has them.
+INDICATORS = (
+    ("MSV", 6, "msv"),
+    ("MCI", 5, "mci"),
+    ("MOI", 5, "moi"),
+    ("EMAC", 6, "emac"),
+    ("MPC", 5, "mpc"),
+    ("CMI", 5, "cmi"),
+)
+ERA_ONLY = ("emac", "cmi")
+
+
 def format_text(result: Identification, records: int, samples: int) -> str:
     """A readable report: data and settings, what the method found, mode table, fit."""
     prep = result.preprocessing
@@ -34,16 +47,26 @@ def format_text(result: Identification, records: int, samples: int) -> str:
         f"{1 / result.dt:.4g} Hz (decimation {prep.factor}, band {prep.band_hz:.3g} Hz)",
         *_method_lines(result),
         "",
-        f"{'mode':<13}{'eigenvalue 1/s':<24}{'ωn rad/s':>9}{'ζ':>7}{'τ s':>8}"
-        f"{'MSV':>6}{'MCI':>5}{'MOI':>5}{'EMAC':>6}{'MPC':>5}{'CMI':>5}"
-        + ("   1-σ ωn      1-σ ζ" if result.refinement is not None else ""),
     ]
+    # ERA's indicators (EMAC, CMI) only where the method has them: the whole-aircraft method
+    # has no Hankel realisation to measure them in, and a column of dashes says nothing.
+    shown = [
+        (label, width, key)
+        for label, width, key in INDICATORS
+        if key not in ERA_ONLY or any(getattr(m, key) is not None for m in result.modes)
+    ]
+    lines.append(
+        f"{'mode':<13}{'eigenvalue 1/s':<24}{'ωn rad/s':>9}{'ζ':>7}{'τ s':>8}"
+        + "".join(f"{label:>{width}}" for label, width, _ in shown)
+        + ("   1-σ ωn      1-σ ζ" if result.refinement is not None else "")
+    )
     for mode in result.modes:
         tau = "" if mode.time_constant is None else f"{mode.time_constant:8.3f}"
         lines.append(
             f"{mode.name or '—':<13}{_fmt_eig(mode):<24}{mode.frequency:9.3f}{mode.damping:7.3f}"
-            f"{tau:>8}{_pct(mode.msv):>6}{_pct(mode.mci):>5}{_pct(mode.moi):>5}"
-            f"{_pct(mode.emac):>6}{_pct(mode.mpc):>5}{_pct(mode.cmi):>5}" + _fmt_std(mode)
+            f"{tau:>8}"
+            + "".join(f"{_pct(getattr(mode, key)):>{width}}" for _, width, key in shown)
+            + _fmt_std(mode)
         )
     lines += [
         f"{o.name} as one mode (its two real poles): ωn {o.frequency:.4g} rad/s"

@@ -626,6 +626,11 @@ def _report(
                     "frequency_rad_s": abs(lam),
                     "damping": mode.damping,
                     "emac": mode.emac,
+                    "sigma_pct": (
+                        None
+                        if mode.frequency_std_rad_s is None or not abs(lam)
+                        else 100 * mode.frequency_std_rad_s / abs(lam)
+                    ),
                     "msv": mode.msv,
                     "truth": None if ref is None else [ref.real, ref.imag],
                     "error": None if ref is None else abs(lam - ref) / abs(ref),
@@ -701,13 +706,16 @@ def format_report(report: dict) -> str:
     if report["failure"]:
         lines.append(f"identification failed: {report['failure']}")
         return "\n".join([*lines, *(f"notice: {text}" for text in report["notices"])])
-    lines.append(f"{'mode':<14}{'identified':>22}{'JSBSim':>22}{'error':>8}{'EMAC %':>8}")
+    # ERA's EMAC where the method has it; the whole-aircraft method's Cramér–Rao σ of ωn else.
+    era = any(row["emac"] is not None for row in report["modes"])
+    key, heading, form = ("emac", "EMAC %", ".0f") if era else ("sigma_pct", "σ(ωn) %", ".2f")
+    lines.append(f"{'mode':<14}{'identified':>22}{'JSBSim':>22}{'error':>8}{heading:>9}")
     for row in report["modes"]:
         lam = complex(*row["eigenvalue"])
         ref = "" if row["truth"] is None else f"{complex(*row['truth']):.3f}"
         err = "" if row["error"] is None else f"{100 * row['error']:.1f}%"
-        emac = "" if row["emac"] is None else f"{row['emac']:.0f}"
-        lines.append(f"{row['name'] or '-':<14}{lam:>22.3f}{ref:>22}{err:>8}{emac:>8}")
+        value = "" if row.get(key) is None else f"{row[key]:{form}}"
+        lines.append(f"{row['name'] or '-':<14}{lam:>22.3f}{ref:>22}{err:>8}{value:>9}")
     s = report["suggestion"]
     if report.get("air_angles") == "synthesised":
         lines.append("alpha, beta: synthesised from the INS and an estimated wind (no vanes)")

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -177,3 +178,42 @@ def test_a_mode_of_two_real_poles_is_also_given_as_one_by_its_wn_and_zeta():
     assert found.document().second_order == []  # its own modes: pairs and single poles
     assert "Dutch roll as one mode" not in text  # a complex pair: its own line says it
     assert "roll as one mode" not in text
+
+
+def test_the_tables_show_what_the_method_has_not_eras_dashes(capsys):
+    """The whole-aircraft method realises no ERA model: its `sysid identify` table has no EMAC
+    or CMI column of dashes, and `sysid sim`'s table shows each mode's Cramér–Rao σ(ωn) where
+    the EMAC column was empty; OKID/ERA keeps both columns."""
+    from agent.cli import main
+    from agent.sim.flight import format_report
+
+    record = Path(__file__).resolve().parents[2] / "examples" / "a2_lateral.csv"
+    lateral = ["--inputs", "aileron,rudder", "--outputs", "beta,p,r,phi"]
+    assert main(["identify", str(record), *lateral]) == 0
+    aircraft = capsys.readouterr().out
+    assert "EMAC" not in aircraft
+    assert "CMI" not in aircraft
+    assert "—  100" not in aircraft
+    assert main(["identify", str(record), *lateral, "--method", "time"]) == 0
+    era = capsys.readouterr().out
+    assert "EMAC" in era
+    assert "CMI" in era
+    row = {"name": "roll", "eigenvalue": [-1.5, 0.0], "truth": [-1.55, 0.0], "error": 0.032}
+    report = {
+        "aircraft": "J3Cub",
+        "preset": "lateral",
+        "runs": 1,
+        "history": [],
+        "failure": None,
+        "modes": [{**row, "emac": None, "sigma_pct": 1.234}],
+        "suggestion": {"update": True, "steps": []},
+        "tic_avg": 0.1,
+        "decision": "accepted",
+        "notices": [],
+    }
+    text = format_report(report)
+    assert "σ(ωn) %" in text
+    assert "1.23" in text
+    assert "EMAC" not in text
+    report["modes"] = [{**row, "emac": 97.0, "sigma_pct": None}]
+    assert "EMAC %" in format_report(report)
