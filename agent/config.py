@@ -183,7 +183,9 @@ class IdentificationConfig(Section):
     """true: inputs are held between samples (commands; a zero-order hold). false: they are
     samples of continuously varying signals. "auto": the agent's own recordings (onboard, and
     its flight logs replayed by `sysid analyze`) are the surface potentiometers' samples of
-    moving surfaces, so not held; other records (`sysid identify` on CSV) are held."""
+    moving surfaces, so not held; other records' (`sysid identify` on CSV) by their data: held
+    where every moved input is a staircase or carries no sensor noise (a command), sampled
+    where one carries a sensor's noise (a measured position); the result says which."""
     smoothing_s: float | None = Field(None, gt=0.0)
     """Savitzky–Golay smoothing window in seconds (cubic), on inputs and outputs; unset: none."""
     method: Literal["auto", "time", "frequency", "aircraft"] = "auto"

@@ -853,3 +853,65 @@ def test_sim_lists_its_aircraft_and_asks_for_the_speed_of_one_it_does_not_know(c
     code, doc = main(["sim", "--aircraft", "c310", "--json"]), json.loads(capsys.readouterr().out)
     assert code == 2
     assert "give --speed-kts for c310" in doc["error"]["message"]
+
+
+def test_a_lateral_csv_with_airspeed_and_pitch_columns_has_its_kinematics(capsys, tmp_path):
+    """A lateral run (--outputs beta,p,r,phi) of a CSV that also records the airspeed and θ
+    (the config's Vt and theta): they are read as the flight's states and the kinematics are
+    known (a research aircraft's lateral file reported `kinematics: false`); the same file
+    without those columns has none."""
+    from tests.ident.test_aircraft import DT, gusty_record
+
+    u, air, op, _, _ = gusty_record(seed=5, gust=0.0)
+    x = air + op
+    columns = {"time": np.arange(len(u)) * DT, "aileron": u[:, 2], "rudder": u[:, 3]}
+    columns |= dict(zip(("beta", "p", "r", "phi"), x[:, 4:8].T, strict=True))
+    lateral = ["--inputs", "aileron,rudder", "--outputs", "beta,p,r,phi"]
+    bare = write(tmp_path / "bare.csv", columns)
+    full = write(tmp_path / "full.csv", {**columns, "Vt": x[:, 0], "theta": x[:, 3]})
+    code, doc = run_json(capsys, str(full), *lateral)
+    assert code == 0
+    assert doc["aircraft"]["kinematics"] is True
+    code, doc = run_json(capsys, str(bare), *lateral)
+    assert code == 0
+    assert doc["aircraft"]["kinematics"] is False
+
+
+def test_held_or_sampled_inputs_are_chosen_by_the_data_and_said(capsys, tmp_path):
+    """`held_inputs = "auto"` on a CSV record: computed commands (the A.2 record's multisine,
+    and the same played as a staircase updated every 4 samples) are held between samples;
+    measured positions (the same with a potentiometer's 0.07° of noise) are interpolated —
+    held, a research aircraft's roll mode came out 5 % off where interpolated it was 1 % —
+    and the result says which, by name."""
+    columns = reference.make_record(reference.LATERAL, duration=10.0).columns()
+    noisy = dict(columns)
+    rng = np.random.default_rng(0)
+    for c in ("aileron", "rudder"):
+        noisy[c] = columns[c] + rng.normal(0.0, 0.07, columns[c].size)
+    stairs = {
+        **columns,
+        **{c: np.repeat(columns[c][::4], 4)[: columns[c].size] for c in ("aileron", "rudder")},
+    }
+    notes = {}
+    for name, values in (("clean", columns), ("noisy", noisy), ("stairs", stairs)):
+        code, doc = run_json(capsys, str(write(tmp_path / f"{name}.csv", values)), *LAT)
+        assert code == 0, doc
+        notes[name] = [w for w in doc["warnings"] if w.startswith("inputs taken as")]
+    assert notes["clean"] == [notes["stairs"][0]]
+    assert notes["clean"][0].startswith("inputs taken as commands held between samples")
+    (sampled,) = notes["noisy"]
+    assert "sampled positions, interpolated between samples: aileron, rudder" in sampled
+    # What the columns are, where the record says (`sysid import` writes it for the servo
+    # outputs): commands, held, whatever their data look like.
+    declared = tmp_path / "declared.csv"
+    text = (tmp_path / "noisy.csv").read_text()
+    declared.write_text("# commands: aileron, rudder\n" + text)
+    code, doc = run_json(capsys, str(declared), *LAT)
+    assert code == 0
+    (note,) = [w for w in doc["warnings"] if w.startswith("inputs taken as")]
+    assert "the record declares aileron, rudder commands" in note
+    config = tmp_path / "held.toml"
+    config.write_text("[identification]\nheld_inputs = false\n")
+    code, doc = run_json(capsys, str(tmp_path / "clean.csv"), *LAT, "--config", str(config))
+    assert code == 0
+    assert not [w for w in doc["warnings"] if w.startswith("inputs taken as")]

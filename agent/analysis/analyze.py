@@ -152,12 +152,15 @@ def build_cases(
     """Every identification the analysis needs, and the records' sample time. `settings`:
     made with `sampled_inputs` when any of the logs is the agent's own (`own_log`), as onboard.
     `roles` and `input_roles`: the outputs' and inputs' roles (None where a channel has none)."""
-    data, contexts, rates = [], [], []
+    data, contexts, rates, commands = [], [], [], []
     for path in request.paths:
-        exp, dt = _experiment(Path(path), request)
+        exp, dt, declared = _experiment(Path(path), request)
         data.append((exp.u, exp.y))
         contexts.append((exp.operating_point, exp.navigation, exp.air_angles))
         rates.append(dt)
+        commands.append(declared)
+    if settings.held_inputs is None and set(request.inputs) <= frozenset.intersection(*commands):
+        settings = replace(settings, held_inputs=True)  # servo outputs, as `sysid identify`
     dt = rates[0]
     if any(abs(r - dt) > 0.01 * dt for r in rates):
         raise AnalyzeError(f"the logs are sampled at different rates ({sorted(set(rates))} s)")
@@ -189,8 +192,8 @@ def build_cases(
     return cases, dt
 
 
-def _experiment(path: Path, request: Request) -> tuple[Experiment, float]:
-    """(experiment, dt) of one log. The agent's own logs go
+def _experiment(path: Path, request: Request) -> tuple[Experiment, float, frozenset[str]]:
+    """(experiment, dt, the columns it declares commands) of one log. The agent's own logs go
     through the agent's window code (edge rows without data cut, gaps up to 0.1 s bridged,
     trim removed), as onboard; any other record through `sysid identify`'s strict reader.
     Either way the experiment carries its operating point and, where the log has the INS's
@@ -206,7 +209,7 @@ def _experiment(path: Path, request: Request) -> tuple[Experiment, float]:
                 f"{path}: {'; '.join(loaded.notes)}; a replay takes one uniform record: "
                 "choose a segment with --start/--end (sysid identify takes them all as a batch)"
             )
-        return loaded.experiments[0], loaded.dt
+        return loaded.experiments[0], loaded.dt, loaded.commands
     try:
         # Only the columns used are kept: memory goes with them, not with the log.
         air = request.air_angles
@@ -266,7 +269,8 @@ def _experiment(path: Path, request: Request) -> tuple[Experiment, float]:
         y = y + operating_point
         operating_point = np.zeros_like(operating_point)
     nav = jobs.window_navigation(values, request.inputs, request.outputs, request.navigation)
-    return Experiment(u, y, operating_point=operating_point, navigation=nav, air_angles=made), dt
+    experiment = Experiment(u, y, operating_point=operating_point, navigation=nav, air_angles=made)
+    return experiment, dt, frozenset()
 
 
 def _check_time(path: Path, time: np.ndarray) -> None:

@@ -10,6 +10,7 @@ import numpy as np
 
 from agent.analysis import units as unit_rules
 from agent.analysis.records import (
+    COMMANDS,
     Record,
     RecordError,
     read_record,
@@ -45,6 +46,10 @@ class Request:
     units: Mapping[str, str] = field(default_factory=dict)
     # Column → its role (the config's channel names): what unit it is identified in.
     roles: Mapping[str, str] = field(default_factory=dict)
+    # Role → column of the aircraft states not among the outputs (a lateral run's airspeed and
+    # θ), read where a record has them: the whole-aircraft method's kinematics
+    # (`Experiment.flight`).
+    flight: Mapping[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -80,6 +85,7 @@ class Loaded:
     trim: list[dict[str, float]]  # per experiment
     samples: int
     notes: tuple[str, ...]  # gaps split, segments left out, air angles synthesised
+    commands: frozenset[str] = frozenset()  # columns every record declares commands
 
 
 def load_experiments(request: Request) -> Loaded:
@@ -94,7 +100,8 @@ def load_experiments(request: Request) -> Loaded:
     sources = request.air_angles
     synthesisable = sources is not None and sources.mode != "vanes"
     angles = {sources.alpha, sources.beta} & set(request.outputs) if synthesisable else set()
-    optional = (*request.navigation, *(sources.needed if angles else ()))
+    flight = {r: n for r, n in request.flight.items() if n not in names}
+    optional = (*request.navigation, *(sources.needed if angles else ()), *flight.values())
     records: list[Record] = []
     air: list = []
     notes: list[str] = []
@@ -140,9 +147,15 @@ def load_experiments(request: Request) -> Loaded:
         navigation = None
         if request.navigation and all(n in rec.columns for n in request.navigation):
             navigation = rec.matrix(request.navigation)
+        states = {r: rec.columns[n] for r, n in flight.items() if n in rec.columns}
         experiments.append(
             Experiment(
-                u=u, y=y, operating_point=operating_point, navigation=navigation, air_angles=made
+                u=u,
+                y=y,
+                operating_point=operating_point,
+                navigation=navigation,
+                air_angles=made,
+                flight=states or None,
             )
         )
     return Loaded(
@@ -151,6 +164,7 @@ def load_experiments(request: Request) -> Loaded:
         trim=trim,
         samples=sum(r.time.size for r in records),
         notes=tuple(dict.fromkeys(notes)),
+        commands=frozenset.intersection(*(r.commands for r in records)),
     )
 
 
@@ -198,6 +212,14 @@ def run(request: Request, config: IdentConfig, settings: Settings) -> Outcome:
         loaded.samples,
         loaded.notes,
     )
+    if settings.held_inputs is None and set(request.inputs) <= loaded.commands:
+        # What the columns are, where the record says: servo outputs, held between updates.
+        settings = replace(settings, held_inputs=True)
+        notes = (
+            f"inputs taken as commands held between samples: the record declares "
+            f"{', '.join(request.inputs)} commands ('{COMMANDS} …', servo outputs)",
+            *notes,
+        )
     roles: Sequence[str | None] = [config.channels.role_of(n) for n in request.outputs]
     result = identify(
         experiments,

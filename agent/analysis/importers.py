@@ -51,6 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agent.analysis.records import COMMANDS
 from agent.config import Surface
 
 DEG = np.pi / 180.0
@@ -126,6 +127,11 @@ class Imported:
             out.write(f"# {note}\n")
         if self.missing:
             out.write(f"# not in the log: {', '.join(self.missing)}\n")
+        # The surfaces come from the servo outputs: commands, held between updates
+        # (`sysid identify` holds them; agent.analysis.records.COMMANDS).
+        commands = [c for c in self.columns if c.endswith("_pwm") or f"{c}_pwm" in self.columns]
+        if commands:
+            out.write(f"{COMMANDS} {', '.join(commands)}\n")
         names = list(self.columns)
         out.write(",".join(["time", *names]) + "\n")
         table = np.column_stack([self.time, *(self.columns[n] for n in names)])

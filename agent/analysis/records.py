@@ -31,6 +31,9 @@ MAX_ROWS = 5_000_000
 # identified together as a batch (`segments`); a step between MAX_JITTER and this is no gap
 # but irregular sampling, which is refused.
 GAP_STEPS = 1.5
+# A comment line that names the record's columns which are commands held between updates
+# (servo outputs: `sysid import` writes it), not sampled measurements.
+COMMANDS = "# commands:"
 # A segment of fewer samples than this between gaps (1 s at 100 Hz, 4 s at 25 Hz) holds no
 # manoeuvre an identification could use: it is left out, and the note says so.
 MIN_SEGMENT = 100
@@ -56,6 +59,8 @@ class Record:
     # Column → the unit its header declares (`alpha [deg]`; agent.analysis.units), the
     # values as written: `agent.analysis.identify` converts them.
     units: dict[str, str] = field(default_factory=dict)
+    # The columns its comment lines declare commands (COMMANDS): held between samples.
+    commands: frozenset[str] = frozenset()
 
     def matrix(self, names: Sequence[str]) -> np.ndarray:
         """The named columns as an (l × len(names)) array."""
@@ -78,9 +83,11 @@ def read_record(
     try:
         with path.open(newline="", encoding="utf-8-sig") as handle:
             # Our flight and excitation logs start with "# " comment lines (units, config hash).
-            comments = 0
+            comments, commands = 0, set()
             while (line := _line(path, handle)).startswith("#"):
                 comments += 1
+                if line.startswith(COMMANDS):
+                    commands |= {n.strip() for n in line[len(COMMANDS) :].split(",") if n.strip()}
             if not line.strip():
                 raise RecordError(f"{path}: the file is empty; expected a header row")
             header = [h.strip() for h in next(csv.reader([line]))]
@@ -125,7 +132,14 @@ def read_record(
         raise RecordError(f"{path}: the time column's unit must be one of {', '.join(TIME_UNITS)}")
     time = time * scale
     units = {n: u for n, u in header_units.items() if n in columns}
-    return Record(path=path, time=time, columns=columns, dt=_median_step(path, time), units=units)
+    return Record(
+        path=path,
+        time=time,
+        columns=columns,
+        dt=_median_step(path, time),
+        units=units,
+        commands=frozenset(commands),
+    )
 
 
 # The longest line a record may have: a flight record's row is a few hundred characters; a

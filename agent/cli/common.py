@@ -405,6 +405,7 @@ def identification_request(args: argparse.Namespace, paths, *, sampled_inputs: b
     """(config, request, settings) from the shared identification options; `sampled_inputs`:
     the records are the agent's own (`Settings.from_config`), not CSV records."""
     from agent.analysis import identify as identify_cmd
+    from agent.channels import OUTPUT_ROLES
     from agent.config import MAX_DECIMATION
     from agent.ident.aircraft.airangles import Sources
     from agent.ident.settings import Settings
@@ -419,6 +420,13 @@ def identification_request(args: argparse.Namespace, paths, *, sampled_inputs: b
     if not inputs or not outputs:
         raise refused("give --inputs and --outputs, or --axes lateral|longitudinal|full")
     trim_s = config.trim_seconds if args.trim is None else args.trim
+    # The aircraft's states the outputs leave out, read where a record has them: their
+    # kinematics (a lateral run's airspeed and θ).
+    flight = {
+        role: name
+        for role in OUTPUT_ROLES
+        if (name := getattr(config.channels, role)) not in outputs and name not in inputs
+    }
     request = identify_cmd.Request(
         paths=tuple(paths),
         inputs=inputs,
@@ -431,9 +439,10 @@ def identification_request(args: argparse.Namespace, paths, *, sampled_inputs: b
         units=getattr(args, "units", None) or {},
         roles={
             n: role
-            for n in (*inputs, *outputs, *config.channels.navigation())
+            for n in (*inputs, *outputs, *config.channels.navigation(), *flight.values())
             if (role := config.channels.role_of(n) or _navigation_role(config.channels, n))
         },
+        flight=flight,
     )
     settings = Settings.from_config(
         config,

@@ -52,6 +52,10 @@ class Job:
     air_angles: Sources | None = None
     """Where the window's α and β come from (`agent.ident.aircraft.airangles.fill`): the
     vanes', or synthesised from the INS and an estimated wind; None: as recorded."""
+    flight: tuple[tuple[str, str], ...] = ()
+    """(role, channel) of the aircraft states the outputs leave out (a lateral run's airspeed
+    and θ): read from the window where it has them whole, the aircraft method's kinematics
+    (`Experiment.flight`)."""
 
 
 def window_and_trim(values: dict[str, np.ndarray], inputs, outputs, dt: float, trim_s: float):
@@ -89,6 +93,17 @@ def window_navigation(values, inputs, outputs, names) -> np.ndarray | None:
     """The navigation columns `names` over the rows `window_and_trim` keeps, or None (see
     `_navigation`)."""
     return _navigation(values, names, _complete(values, inputs, outputs))
+
+
+def window_flight(values, inputs, outputs, flight) -> dict[str, np.ndarray] | None:
+    """The flight states (role → absolute values) over the rows `window_and_trim` keeps:
+    each (role, channel) of `flight` the window has with data in every row; None for none."""
+    keep = _complete(values, inputs, outputs)
+    out = {}
+    for role, name in flight:
+        if name in values and np.isfinite(column := np.asarray(values[name][keep])).all():
+            out[role] = column
+    return out or None
 
 
 def _navigation(values, names, keep: slice) -> np.ndarray | None:
@@ -159,7 +174,10 @@ def run(job: Job) -> Outcome:
         # Its absolute trim and navigation, for the aircraft method's kinematics and wind.
         op = np.array([trim["outputs"][n] for n in job.outputs])
         nav = window_navigation(window, job.inputs, job.outputs, job.navigation)
-        experiments.append(Experiment(u, y, operating_point=op, navigation=nav, air_angles=made))
+        states = window_flight(window, job.inputs, job.outputs, job.flight)
+        experiments.append(
+            Experiment(u, y, operating_point=op, navigation=nav, air_angles=made, flight=states)
+        )
     try:
         result = identify(
             experiments,

@@ -19,7 +19,7 @@ parameters Y_k = C A^{k−1} B follow by the recursion of eq. 4.14.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -52,13 +52,16 @@ class Experiment:
     outputs' trim values that were removed (m,), and `navigation`, the INS's heading and
     north, east and down velocities (l × 4, absolute, rad and m/s) that the wind is measured
     from; `air_angles`, where α and β were synthesised from the INS and an estimated wind (no
-    vanes: agent.ident.aircraft.airangles), how: the gust's α and β are then not measured."""
+    vanes: agent.ident.aircraft.airangles), how: the gust's α and β are then not measured;
+    `flight`, the absolute time histories (l,) of aircraft states the record measures but the
+    model does not output, by role (a lateral run's airspeed and θ): their kinematics."""
 
     u: np.ndarray
     y: np.ndarray
     operating_point: np.ndarray | None = None
     navigation: np.ndarray | None = None
     air_angles: Synthesised | None = None
+    flight: Mapping[str, np.ndarray] | None = None
 
     @property
     def length(self) -> int:
@@ -86,6 +89,22 @@ def _optional(exp, index: int, length: int, outputs: int):
     return op, nav
 
 
+def _flight(exp, index: int, length: int) -> dict[str, np.ndarray] | None:
+    """The experiment's flight states (`Experiment.flight`), checked (None when absent)."""
+    flight = getattr(exp, "flight", None)
+    if not flight:
+        return None
+    out = {}
+    for role, values in flight.items():
+        values = np.asarray(values, dtype=float).ravel()
+        if values.shape != (length,) or not np.isfinite(values).all():
+            raise DataError(
+                f"experiment {index}: the flight state {role!r} needs {length} finite values"
+            )
+        out[str(role)] = values
+    return out
+
+
 def as_experiments(experiments: Sequence[Experiment] | Experiment) -> list[Experiment]:
     """Validate a batch of experiments: consistent channel counts, finite values, 2-D arrays."""
     batch = [experiments] if isinstance(experiments, Experiment) else list(experiments)
@@ -106,7 +125,10 @@ def as_experiments(experiments: Sequence[Experiment] | Experiment) -> list[Exper
             raise DataError(f"experiment {index}: inputs or outputs contain NaN or infinity")
         op, nav = _optional(exp, index, u.shape[0], y.shape[1])
         air = getattr(exp, "air_angles", None)
-        clean.append(Experiment(u=u, y=y, operating_point=op, navigation=nav, air_angles=air))
+        flight = _flight(exp, index, u.shape[0])
+        clean.append(
+            Experiment(u=u, y=y, operating_point=op, navigation=nav, air_angles=air, flight=flight)
+        )
     r, m = clean[0].u.shape[1], clean[0].y.shape[1]
     for index, exp in enumerate(clean):
         if exp.u.shape[1] != r or exp.y.shape[1] != m:

@@ -83,6 +83,67 @@ def check_channels(
             )
 
 
+# A sampled position carries its sensor's white noise, and a record's third differences are
+# then the noise's: white noise's third differences have a lag-one correlation of −3/4, and
+# successive ones share their sign about a quarter of the time; a computed command's, smooth
+# between samples, nearly always (a few jumps aside, which the share does not feel). A moved
+# input whose successive third differences share their sign in under NOISY of its samples
+# carries a sensor's noise: it is a measured position.
+NOISY = 0.5
+# A moved input that repeats its last value exactly in at least this share of its samples
+# away from rest is a staircase: a command held between updates slower than the record's rate.
+STAIRCASE = 0.5
+
+
+def held_by_data(raw: Sequence[okid.Experiment], inputs: Sequence[str]) -> tuple[bool, str]:
+    """Whether a record's inputs are held between samples, by the data, with the note that
+    says why: held when every moved input is a staircase (STAIRCASE) or carries no sensor
+    noise (NOISY) — commands; else sampled, interpolated between samples — a measured position
+    carries its sensor's noise, and held it would put every response half a sample late."""
+    measured = []
+    for j, name in enumerate(inputs):
+        columns = [np.asarray(e.u)[:, j] for e in raw if np.ptp(np.asarray(e.u)[:, j]) > 0]
+        if not columns:  # never moved: nothing to hold or interpolate
+            continue
+        if _staircase(columns) or not _noisy(columns):
+            continue
+        measured.append(name)
+    if measured:
+        return False, (
+            f"inputs taken as sampled positions, interpolated between samples: "
+            f"{', '.join(measured)} carry a sensor's noise (held_inputs = false in "
+            "[identification] says otherwise)"
+        )
+    return True, (
+        "inputs taken as commands held between samples: none carries a sensor's noise "
+        "(held_inputs = false in [identification] says otherwise)"
+    )
+
+
+def _staircase(columns: Sequence[np.ndarray]) -> bool:
+    """Whether the columns repeat their last value in STAIRCASE of the samples where they are
+    away from rest (a tenth of their range from their median): a command held between
+    updates. A measured position repeats at rest (its quantisation) but not while moving."""
+    repeats, moving = 0, 0
+    for c in columns:
+        away = np.abs(c[1:] - np.median(c)) > 0.1 * np.ptp(c)
+        repeats += int(np.sum(np.diff(c)[away] == 0))
+        moving += int(away.sum())
+    return moving > 0 and repeats >= STAIRCASE * moving
+
+
+def _noisy(columns: Sequence[np.ndarray]) -> bool:
+    """Whether the columns' successive third differences share their sign in under NOISY of
+    the samples (zeros left out): a sensor's white noise, not a smooth command."""
+    same, pairs = 0, 0
+    for c in columns:
+        d = np.sign(np.diff(c, 3))
+        d = d[d != 0]
+        same += int(np.sum(d[1:] == d[:-1]))
+        pairs += max(d.size - 1, 0)
+    return pairs >= 10 and same < NOISY * pairs
+
+
 def _every_input_used(
     inputs: Sequence[str],
     roles: Sequence[str | None],
@@ -144,6 +205,19 @@ def identify(
     if dt <= 0:
         raise DataError(f"sample time must be positive, got {dt}")
     inputs, outputs = _names(raw, input_names, output_names)
+    if settings.held_inputs is None:
+        held, hold_note = held_by_data(raw, inputs)
+        settings = replace(settings, held_inputs=held)
+        result = identify(
+            raw,
+            dt,
+            input_names=inputs,
+            output_names=outputs,
+            output_roles=output_roles,
+            settings=settings,
+            input_roles=input_roles,
+        )
+        return replace(result, warnings=(hold_note, *result.warnings))
     in_roles = tuple(input_roles) if input_roles is not None else inputs
     out_roles = tuple(output_roles) if output_roles is not None else ()
     present = aircraft.axes_present(in_roles, out_roles)

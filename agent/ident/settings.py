@@ -25,7 +25,9 @@ class Settings:
     hankel_blocks: int | None = None
     decimation: int | None = None  # None: automatic from the band; 1: none (OKID's only)
     band_hz: float | None = None  # None: from the inputs' spectra
-    held_inputs: bool = True  # inputs held between samples (commands, zero-order hold)
+    # Inputs held between samples (commands, zero-order hold), or not (sampled measurements,
+    # interpolated); None: chosen by the data (`agent.ident.pipeline.held_by_data`).
+    held_inputs: bool | None = True
     smoothing_s: float | None = None  # Savitzky–Golay window; None: no smoothing
     refine: bool = True  # output-error refinement of the OKID/ERA model
     # "auto": "aircraft" when an axis's four outputs are named and p, order are None, else
@@ -60,7 +62,8 @@ class Settings:
         """The settings of an `[identification]` section; the keywords given (not None)
         override it, as command-line options do. `sampled_inputs`: the inputs are the agent's
         own recording of the surfaces' positions (potentiometers sampling moving surfaces),
-        which `held_inputs = "auto"` treats as not held."""
+        which `held_inputs = "auto"` treats as not held; other records' it chooses by their
+        data."""
         held = config.held_inputs
         return cls(
             markov=markov if markov is not None else _auto(config.markov),
@@ -72,7 +75,7 @@ class Settings:
             hankel_blocks=config.hankel_blocks,
             decimation=decimation if decimation is not None else _auto(config.decimation),
             band_hz=config.band_hz,
-            held_inputs=(not sampled_inputs) if held == "auto" else held,
+            held_inputs=(False if sampled_inputs else None) if held == "auto" else held,
             smoothing_s=config.smoothing_s,
             refine=config.refine if refine is None else refine,
             method=method or config.method,

@@ -20,7 +20,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from agent.channels import AXIS_SETS
+from agent.channels import AXIS_SETS, OUTPUT_ROLES
 from agent.clock import Clock
 from agent.config import Config
 from agent.excitation.scheduler import Window
@@ -355,7 +355,14 @@ class Identifier:
         model_id = await self._in_store(self.models.reserve_id, axes)
         navigation = channels.navigation()
         air = Sources.of(channels, self.config.identification.air_angles)
-        needed = {*inputs, *outputs, *navigation, *air.needed}
+        # The aircraft's states a run's outputs leave out (a lateral run's airspeed and θ):
+        # their kinematics.
+        flight = tuple(
+            (role, name)
+            for role in OUTPUT_ROLES
+            if (name := getattr(channels, role)) not in outputs
+        )
+        needed = {*inputs, *outputs, *navigation, *air.needed, *(n for _, n in flight)}
         columns = {c: v for c, v in self.recorder.frames(rows).values.items() if c in needed}
         dt = 1.0 / self.config.recorder.rate_hz
         batch = self._batch.setdefault(axes, []) if ident.batch else []
@@ -373,6 +380,7 @@ class Identifier:
             trim_s=self.config.identification.trim_seconds,
             navigation=navigation,
             air_angles=air,
+            flight=flight,
         )
         self._enter("identifying", axes, len(rows))
         outcome = await loop.run_in_executor(self._pool, jobs.run, job)

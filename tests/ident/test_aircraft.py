@@ -1023,3 +1023,36 @@ def test_an_oscillation_longer_than_the_record_is_said_to_be_undetermined():
     flagged = [w for w in short.warnings if "not determined by this record" in w]
     assert [w.split(" not determined")[0] for w in flagged] == ["phugoid"]
     assert f"longer than the record ({n * DT:.3g} s)" in flagged[0]
+
+
+def test_a_lateral_run_uses_the_kinematics_of_the_airspeed_and_pitch_it_measures():
+    """A lateral-only identification of a record that also measures the airspeed and θ (a
+    research aircraft's lateral CSV: `kinematics: false`, φ̇ fitted freely as 0.927 p − 0.080
+    β where the data give the kinematic rate). Given as the experiment's flight states, they
+    make the kinematics known: φ's row is the kinematics at the trim (p + tan θ r), fixed,
+    not fitted; without them it is fitted."""
+    u, air, op, _, _ = gusty_record(seed=5, gust=0.0)
+    lateral = slice(4, 8)
+    flight = {"airspeed": air[:, 0] + op[0], "theta": air[:, 3] + op[3]}
+    names = ("beta", "p", "r", "phi")
+
+    def lateral_identify(**extra):
+        record = Experiment(u[:, 2:], air[:, lateral], operating_point=op[lateral], **extra)
+        return identify(
+            record,
+            DT,
+            input_names=("aileron", "rudder"),
+            output_names=names,
+            output_roles=names,
+            settings=Settings(held_inputs=False),
+        )
+
+    known = lateral_identify(flight=flight)
+    blind = lateral_identify()
+    assert known.aircraft.kinematics
+    assert not blind.aircraft.kinematics
+    kinematic_row = kinematic_jacobian(op)[7, 4:8]  # φ̇ over β, p, r, φ at the trim
+    assert kinematic_row[2] != 0  # tan θ r: the trim is pitched
+    np.testing.assert_allclose(known.continuous.A[3, :4], kinematic_row, atol=1e-12)
+    # Fitted without them: close on this noise-free record, but the data's, not the rule's.
+    assert np.max(np.abs(blind.continuous.A[3, :4] - kinematic_row)) > 1e-6

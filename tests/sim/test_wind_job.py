@@ -87,6 +87,38 @@ def test_an_ins_dropout_or_no_ins_channels_identify_without_the_wind(window):
     assert not _job(without).wind.measured
 
 
+def test_a_lateral_job_uses_the_kinematics_of_the_airspeed_and_pitch_in_its_window(window):
+    """A lateral run's job (outputs β, p, r, φ) whose window also holds the airspeed and θ, as
+    the agent's recorder does: their kinematics are known (they were not: a lateral run
+    fitted φ̇ freely); with θ gapped for a second (an INS dropout), not."""
+    inputs, outputs = CHANNELS.axis_set("lateral")
+    flight = tuple(
+        (role, name) for role, name in zip(ROLES, OUTPUTS, strict=True) if name not in outputs
+    )
+
+    def lateral(values):
+        job = Job(
+            model_id="lat-1",
+            axes="lateral",
+            record_dt=DT,
+            inputs=inputs,
+            outputs=outputs,
+            roles=ROLES[4:],
+            experiments=(),
+            settings=Settings(held_inputs=False),
+            window=values,
+            flight=flight,
+        )
+        outcome = run(job)
+        assert outcome.ok, outcome.reason
+        return outcome.result.aircraft
+
+    assert lateral(window).kinematics
+    gapped = {**window, "theta": window["theta"].copy()}
+    gapped["theta"][3000:3100] = np.nan
+    assert not lateral(gapped).kinematics
+
+
 def _csv(path, values: dict[str, np.ndarray], header: str = "") -> None:
     names = list(values)
     table = np.column_stack([np.arange(len(values[names[0]])) * DT, *values.values()])

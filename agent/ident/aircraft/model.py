@@ -352,6 +352,7 @@ def _columns(exp: Experiment, inputs: list[int], outputs: list[int]) -> Experime
         operating_point=None if op is None else np.asarray(op)[outputs],
         navigation=exp.navigation,
         air_angles=exp.air_angles,
+        flight=exp.flight,
     )
 
 

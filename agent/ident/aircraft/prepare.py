@@ -124,7 +124,11 @@ def prepare(
     `trim_samples`: the records' first samples whose mean is the trim; `dt` (s): the records'
     sample time, for the gust rates."""
     index = {role: k for k, role in enumerate(output_roles) if role is not None}
-    if "airspeed" not in index or any(e.operating_point is None for e in batch):
+    # The kinematics need the airspeed and θ: outputs, or measured as the flight's states
+    # (`Experiment.flight`) in every experiment.
+    flown = set.intersection(*(set(e.flight or {}) for e in batch))
+    known = set(index) | flown
+    if not {"airspeed", "theta"} <= known or any(e.operating_point is None for e in batch):
         return Prepared(
             batch=[Experiment(e.u, e.y) for e in batch],
             air_angles=tuple(e.air_angles for e in batch if e.air_angles is not None),
@@ -141,7 +145,7 @@ def prepare(
     terms = _Terms(
         gusts=gusts,
         rated=tuple(role for role in GUST_RATES if role in gusts),
-        drag=sideslip_drag and "beta" in index,
+        drag=sideslip_drag and "beta" in index and "airspeed" in index,
         bilinear=alpha_products and all(role in index for role in ("alpha", *BILINEAR)),
     )
     out, known, jacobians, squares, motion, count = _assemble(batch, index, terms, trim_samples, dt)
@@ -232,6 +236,8 @@ def _known_inputs(e: Experiment, index: dict[str, int], terms: _Terms, trim_samp
     for k, role in enumerate(KINEMATIC_STATES):
         if role in index:
             x[:, k] = e.y[:, index[role]] + e.operating_point[index[role]]
+        elif e.flight and role in e.flight:  # measured, not modelled: its kinematics only
+            x[:, k] = e.flight[role]
     u, y = e.u, e.y.copy()
     # Sideslip drag's regressor: the air-relative β (the vane's), before the wind's
     # correction below puts the inertial β in its place.
