@@ -21,6 +21,10 @@ from agent.analysis.records import (
 from agent.config import IdentificationConfig as IdentConfig
 from agent.ident import Experiment, Identification, Settings, identify
 from agent.ident.aircraft.airangles import Sources, fill
+from agent.ident.convert import StateSpace
+from agent.ident.document import ResultDocument, ValidationDocument
+from agent.ident.fit import fit, validation_fit
+from agent.ident.job import prepared
 
 # Two records are one batch only if their sample times agree this closely.
 DT_TOLERANCE = 0.01
@@ -60,6 +64,17 @@ class Outcome:
     trim: list[dict[str, float]]  # per experiment (a record, or its segment), in order
     records: int  # experiments: a record split at its gaps counts each segment
     samples: int
+    tic_validation: np.ndarray | None = None  # own records, x(0) and biases estimated
+    validation: ValidationDocument | None = None  # held-out records (--validate)
+
+    def document(self) -> ResultDocument:
+        """The result as `sysid identify --json` prints it, with its validation scores."""
+        doc = self.result.document(self.trim)
+        update: dict = {"validation": self.validation}
+        if self.tic_validation is not None:
+            scores = map(float, self.tic_validation)
+            update["tic_validation"] = dict(zip(doc.outputs, scores, strict=True))
+        return doc.model_copy(update=update)
 
 
 def parse_trim(text: str) -> float:
@@ -202,8 +217,44 @@ def _in_units(record: Record, request: Request) -> tuple[Record, list[str]]:
     return replace(record, columns=columns), notes
 
 
-def run(request: Request, config: IdentConfig, settings: Settings) -> Outcome:
-    """Identify the request's records as one batch."""
+def scores(
+    doc: ResultDocument, experiments: Sequence[Experiment], dt: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The model's TIC per output on `experiments` (sampled every `dt`, preprocessed as its
+    own data were): from each record's trim (x(0) = 0, no bias), and with its initial state and
+    a bias on each output estimated, as a validation scores it (`validation_fit`)."""
+    batch, _ = prepared(doc.preprocessing, dt, tuple((e.u, e.y) for e in experiments))
+    model = StateSpace(*(np.asarray(m, dtype=float) for m in (doc.A, doc.B, doc.C, doc.D)))
+    start = [np.zeros(model.A.shape[0])] * len(batch)
+    return fit(model, batch, initial_states=start).tic, validation_fit(model, batch).tic
+
+
+def held_out(
+    request: Request, doc: ResultDocument, dt: float, paths: Sequence[Path]
+) -> ValidationDocument:
+    """The model on held-out records (`--validate`), read as the request's own."""
+    loaded = load_experiments(replace(request, paths=tuple(paths)))
+    if abs(loaded.dt - dt) > DT_TOLERANCE * dt:
+        raise RecordError(
+            f"{paths[0]} is sampled every {loaded.dt:.6g} s but the model's records every "
+            f"{dt:.6g} s; a validation record needs their sample rate"
+        )
+    from_trim, tic = scores(doc, loaded.experiments, dt)
+    names = doc.outputs
+    return ValidationDocument(
+        files=[str(p) for p in paths],
+        tic=dict(zip(names, map(float, tic), strict=True)),
+        tic_avg=float(np.mean(tic)),
+        tic_from_trim=dict(zip(names, map(float, from_trim), strict=True)),
+        tic_from_trim_avg=float(np.mean(from_trim)),
+    )
+
+
+def run(
+    request: Request, config: IdentConfig, settings: Settings, validate: Sequence[Path] = ()
+) -> Outcome:
+    """Identify the request's records as one batch; `validate`: held-out records the model
+    is then scored on (`held_out`)."""
     loaded = load_experiments(request)
     experiments, dt, trim, samples, notes = (
         loaded.experiments,
@@ -231,4 +282,14 @@ def run(request: Request, config: IdentConfig, settings: Settings) -> Outcome:
         settings=settings,
     )
     result = replace(result, warnings=(*notes, *result.warnings))
-    return Outcome(result=result, trim=trim, records=len(experiments), samples=samples)
+    doc = result.document(trim)
+    _, own = scores(doc, experiments, dt)
+    validation = held_out(request, doc, dt, validate) if validate else None
+    return Outcome(
+        result=result,
+        trim=trim,
+        records=len(experiments),
+        samples=samples,
+        tic_validation=own,
+        validation=validation,
+    )

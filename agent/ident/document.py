@@ -255,6 +255,18 @@ class StateSpaceDocument(Document):
         return StateSpace(*(np.asarray(m, dtype=float) for m in (self.A, self.B, self.C, self.D)))
 
 
+class ValidationDocument(Document):
+    """The model on held-out records (`sysid identify --validate`): each output's TIC with each
+    record's initial state and a bias on each output estimated, as a validation scores it,
+    and from the record's trim (x(0) = 0, no bias) beside it."""
+
+    files: list[str]
+    tic: dict[str, float]
+    tic_avg: float
+    tic_from_trim: dict[str, float]
+    tic_from_trim_avg: float
+
+
 class ResultDocument(Document):
     """One identification. The discrete model (A, B, C, D at dt) and the contract's keys first,
     then the parts; `sysid identify --json` prints exactly this."""
@@ -289,6 +301,13 @@ class ResultDocument(Document):
     pure sample delay, has no continuous-time eigenvalue)."""
     second_order: list[SecondOrderMode] = []
     """Each named mode of two real poles (an overdamped short period) as one mode: ωn, ζ."""
+    tic_validation: dict[str, float] | None = None
+    """Each output's TIC on the model's own records with each record's initial state and a
+    bias on each output estimated (`agent.ident.fit.validation_fit`), as a validation scores
+    it: a record that does not start trimmed is not held against the model (`tic` is from
+    the trim). None where not computed (onboard)."""
+    validation: ValidationDocument | None = None
+    """The model on held-out records (`sysid identify --validate`); None: none given."""
 
     @model_validator(mode="before")
     @classmethod

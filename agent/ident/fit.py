@@ -214,6 +214,24 @@ class Fit:
         return float(np.mean(self.tic))
 
 
+def with_output_biases(model: StateSpace) -> StateSpace:
+    """`model` with a constant bias on each output as states of their own (A = I, no input):
+    estimated with its initial state (`fit`), they take a record's offsets from its trim (it
+    did not start trimmed, or a sensor's zero moved) out of the score, as a validation does."""
+    n, m = model.A.shape[0], model.C.shape[0]
+    r = model.B.shape[1]
+    A = np.block([[model.A, np.zeros((n, m))], [np.zeros((m, n)), np.eye(m)]])
+    B = np.vstack([model.B, np.zeros((m, r))])
+    C = np.hstack([model.C, np.eye(m)])
+    return StateSpace(A, B, C, model.D)
+
+
+def validation_fit(model: StateSpace, experiments: Sequence[Experiment]) -> Fit:
+    """`model` scored as a validation scores it: each record's initial state and a constant
+    bias on each output estimated by least squares (`with_output_biases`), then the TIC."""
+    return fit(with_output_biases(model), experiments)
+
+
 def fit(
     model: StateSpace,
     experiments: Sequence[Experiment],
