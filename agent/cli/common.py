@@ -212,6 +212,12 @@ def identification_options(parser: argparse.ArgumentParser) -> None:
         help="the unit of a column where its header does not say (alpha=deg, p=deg/s, "
         "airspeed=kt): converted to the unit its role is identified in",
     )
+    parser.add_argument(
+        "--select",
+        action="store_true",
+        help="model-structure selection (whole-aircraft method): derivatives whose standard "
+        "error is above their value fixed at 0, listed in the result; judge it with --validate",
+    )
     parser.add_argument("--start", type=float, metavar="T0", help="first time used, s")
     parser.add_argument("--end", type=float, metavar="T1", help="last time used, s")
     parser.add_argument(
@@ -453,6 +459,7 @@ def identification_request(args: argparse.Namespace, paths, *, sampled_inputs: b
         refine=args.refine,
         method=args.method,
         period_s=args.period,
+        select=getattr(args, "select", False),
     )
     return config, request, settings
 

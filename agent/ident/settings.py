@@ -45,6 +45,9 @@ class Settings:
     # The longitudinal axis fitted by the filter-error method, the turbulence the record does
     # not measure modelled as process noise (agent.ident.aircraft.process); off, output error.
     process_noise: bool = True
+    # Model-structure selection (agent.ident.aircraft.fit.selected): the derivatives whose
+    # standard error is above their value fixed at zero, axis by axis (`--select`).
+    select: bool = False
 
     @classmethod
     def from_config(
@@ -58,6 +61,7 @@ class Settings:
         refine: bool | None = None,
         method: Method | None = None,
         period_s: float | None = None,
+        select: bool = False,
     ) -> Settings:
         """The settings of an `[identification]` section; the keywords given (not None)
         override it, as command-line options do. `sampled_inputs`: the inputs are the agent's
@@ -81,6 +85,7 @@ class Settings:
             method=method or config.method,
             period_s=period_s if period_s is not None else config.period_s,
             noise_model=config.noise_model,
+            select=select,
         )
 
 

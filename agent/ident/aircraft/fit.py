@@ -89,6 +89,8 @@ class AxisFit:
     # The filter-error method's noise model (agent.ident.aircraft.process), or None (output
     # error: the weights are bin_std).
     noise: ProcessNoise | None = None
+    # The entries fixed at zero by the model structure's selection (`selected`).
+    zeros: tuple[tuple[str, int, int], ...] = ()
 
     @property
     def weights(self) -> np.ndarray | ProcessNoise:
@@ -341,12 +343,14 @@ def fit_axis(
     powers: Mapping[int, int] | None = None,
     process_noise: bool = False,
     synthesised: Sequence[int] = (),
+    zeros: Sequence[tuple[str, int, int]] = (),
 ) -> AxisFit:
     """One axis's model: `lagged` inputs reach it through fitted lags, THROTTLE_LAGS of them
     unless `powers` (input column → number) says otherwise; with `process_noise`, by the
     filter-error method, process noise on every state's equation but the kinematics'
     (agent.ident.aircraft.process), `synthesised` the states (positions in `states`) whose
-    outputs are air angles synthesised from the INS."""
+    outputs are air angles synthesised from the INS; `zeros`: entries fixed at zero
+    (AxisProblem's)."""
     powers = {j: p for j, p in (powers or {}).items() if j in lagged}
     problem = AxisProblem(
         sp,
@@ -356,6 +360,7 @@ def fit_axis(
         experiments=experiments,
         controls=controls,
         powers=powers,
+        zeros=zeros,
     )
     if problem.s.size * problem.n < problem.size:  # a record too short: bad input
         raise DataError(
@@ -394,7 +399,50 @@ def fit_axis(
         controls=tuple(controls),
         lag_powers=powers,
         noise=noise_model,
+        zeros=tuple(zeros),
     )
+
+
+# Model-structure selection (`selected`): an A or B entry whose Cramér–Rao standard error is
+# above its magnitude (t below SIGNIFICANT) is fixed at zero and the axis fitted again, until
+# none is: FVSysID's and SIDPAC's rule for the parameters a record does not determine.
+SIGNIFICANT = 1.0
+SELECTION_ROUNDS = 5
+
+
+def selected(sp: Transforms, fitted: AxisFit, *, controls: int, experiments: int) -> AxisFit:
+    """`fitted` with the entries of A, and of B for its first `controls` input columns (the
+    controls, not the known inputs), that the record does not determine fixed at zero
+    (SIGNIFICANT), fitted again round by round (SELECTION_ROUNDS at most); the fixed entries
+    are in its `zeros`. The kinematics' fixed entries stay as they are."""
+    n, r = len(fitted.states), len(fitted.inputs)
+    for _ in range(SELECTION_ROUNDS):
+        std = np.sqrt(np.clip(np.diag(fitted.covariance), 0.0, None))
+        values = np.concatenate([fitted.A.ravel(), fitted.B.ravel()])
+        done = set(fitted.zeros)
+        weak = []
+        for k, (value, sigma) in enumerate(zip(values, std, strict=True)):
+            matrix, (i, j) = ("A", divmod(k, n)) if k < n * n else ("B", divmod(k - n * n, r))
+            if sigma == 0 or (matrix == "B" and fitted.inputs[j] >= controls):
+                continue  # fixed (the kinematics'), or a known input's gain
+            if (matrix, i, j) not in done and abs(value) < SIGNIFICANT * sigma:
+                weak.append((matrix, i, j))
+        if not weak:
+            return fitted
+        fitted = fit_axis(
+            sp,
+            name=fitted.name,
+            states=fitted.states,
+            inputs=fitted.inputs,
+            lagged=tuple(fitted.lags),
+            experiments=experiments,
+            controls=fitted.controls,
+            powers=fitted.lag_powers,
+            process_noise=fitted.noise is not None,
+            synthesised=fitted.noise.direct if fitted.noise is not None else (),
+            zeros=(*fitted.zeros, *weak),
+        )
+    return fitted
 
 
 def coupling(

@@ -40,6 +40,7 @@ from agent.ident.aircraft.fit import (
     fit_axis,
     known_gain,
     lag_order_cost,
+    selected,
 )
 from agent.ident.aircraft.prepare import Prepared, prepare
 from agent.ident.aircraft.problem import ENGINE_ORDERS, THROTTLE_LAGS
@@ -177,6 +178,9 @@ def fitted_axes(
         fits, couplings, structure = _coupled(
             sp, fits, ready, engine, r=len(inputs), experiments=len(batch)
         )
+    if settings.select:
+        fits, fixed = _structure(sp, fits, inputs, outputs, experiments=len(batch))
+        notes.append(fixed)
     return Fitted(
         dt=dt,
         sp=sp,
@@ -516,6 +520,33 @@ def _coupled(
         if by:
             joined.append(f"{f.name} coupled by {' and '.join(by)}")
     return fits, found, "decoupled" + (f", {' and '.join(joined)}" if joined else "")
+
+
+def _structure(
+    sp: Transforms,
+    fits: list[AxisFit],
+    inputs: tuple[str, ...],
+    outputs: tuple[str, ...],
+    *,
+    experiments: int,
+) -> tuple[list[AxisFit], str]:
+    """Each axis with the entries its record does not determine fixed at zero (`selected`,
+    `settings.select`), and the note that lists them (ẋ_row ← column)."""
+    width, r = sp.U.shape[1], len(inputs)
+    chosen, listed = [], []
+    for f in fits:
+        source = augment(sp) if any(j >= width for j in f.inputs) else sp
+        f = selected(source, f, controls=r, experiments=experiments)
+        chosen.append(f)
+        for matrix, i, j in f.zeros:
+            by = outputs[f.states[j]] if matrix == "A" else inputs[f.inputs[j]]
+            listed.append(f"{outputs[f.states[i]]}' ← {by}")
+    if not listed:
+        return chosen, "model structure selected: every derivative determined (none fixed)"
+    return chosen, (
+        f"model structure selected: {len(listed)} derivative(s) fixed at 0, their standard "
+        f"error above their value: {', '.join(listed)}"
+    )
 
 
 def augment(sp: Transforms) -> Transforms:

@@ -42,7 +42,10 @@ class AxisProblem:
         experiments: int,
         controls: Sequence[int] = (),
         powers: Mapping[int, int] | None = None,
+        zeros: Sequence[tuple[str, int, int]] = (),
     ):
+        """`zeros`: the entries fixed at zero (("A" or "B", row, column)), a model structure
+        chosen by the data (agent.ident.aircraft.fit.selected)."""
         states, inputs = list(states), list(inputs)
         if controls:
             sp = excited(sp, controls)
@@ -77,6 +80,11 @@ class AxisProblem:
             if column in inputs:
                 j = inputs.index(column)
                 self.fixed_B[[i for i, c in enumerate(states) if c != row], j] = True
+        for matrix, i, j in zeros:
+            if matrix == "A":
+                self.fixed_A[i, j], self.A0[i, j] = True, 0.0
+            else:
+                self.fixed_B[i, j] = True
         self.free = np.concatenate(
             [
                 ~self.fixed_A.ravel(),
