@@ -224,31 +224,30 @@ def test_the_model_is_checked_on_its_own_data(plan_and_timeline):
     assert more["bank_deg"] == pytest.approx(2.0 * base["bank_deg"], rel=0.01)
 
 
-def test_an_attitudes_slow_drift_is_no_scale_error(plan_and_timeline):
-    """Bad input tried: data from an aircraft whose spiral is neutral where the model's is
-    stable (a small error in the slowest mode, all a minute's run needs): its bank keeps what
-    each input gave it where the model's decays back, a drift that follows the predicted bank's
-    own slow part. A gain fitted on the whole run takes it for a scale error (1.45 here; the
-    T-6's card was sized to a bank it then flew at two thirds); fitted on the bank less its
-    slow drift it stays near 1, and the drift is still in the unexplained part the envelope
-    is checked with."""
-    _, timeline = plan_and_timeline
+def test_an_attitudes_slow_drift_is_no_scale_error():
+    """Bad input tried: the full preset's record of an aircraft whose spiral is a fifth as
+    stable as the model's (a small error in the slowest mode, all a long run needs): its bank
+    drifts further than the model's after each input, a drift that follows the predicted
+    bank's own slow part. A gain fitted on the whole run took it for a scale error (1.08 here;
+    JSBSim's T-6 in calm air, 1.54, and its card then flew 7° of the 11° of bank it was sized
+    to). Fitted on the bank less its slow drift the gain stays at 1, and the drift is still in
+    the unexplained part the envelope is checked with."""
+    timeline = render(preset("full"), EX.rate_hz)
     predictor = lateral()
     values, vectors = np.linalg.eig(LATERAL.A)
     spiral = int(np.argmin(np.where(np.abs(values.imag) > 0, np.inf, np.abs(values.real))))
-    neutral = values.copy()
-    neutral[spiral] = 0.0
-    A = np.real(vectors @ np.diag(neutral) @ np.linalg.inv(vectors))
+    weaker = values.copy()
+    weaker[spiral] = values[spiral] / 5
+    A = np.real(vectors @ np.diag(weaker) @ np.linalg.inv(vectors))
     Ad, Bd = discretize(A, LATERAL.B, DT)
     aircraft = StateSpace(Ad, Bd, np.eye(4), np.zeros((4, 2)))
     u = predictor.commands(timeline, {"aileron": 1.0, "rudder": 1.0})
-    u = np.vstack([u, np.zeros((round(30.0 / DT), u.shape[1]))])  # and free flight after it
     y = simulate(aircraft, u)
     predicted = simulate(predictor.model, u)
     drift = np.degrees(np.max(np.abs(y[:, ROLES["phi"]] - predicted[:, ROLES["phi"]])))
     assert drift > 1.0  # the record drifts away from the model's bank
     gains, unexplained, _ = sizing.checked(predictor, [(u, y)])
-    assert gains.get("bank_deg", 1.0) < 1.1
+    assert gains.get("bank_deg", 1.0) < 1.02
     assert unexplained["bank_deg"] >= 0.9 * drift
 
 
