@@ -74,6 +74,18 @@ SLACK = 1.01
 CORRECTED = ("bank_deg", "airspeed_pct", "alpha_deg", "beta_deg", "pitch_deg")
 SMOOTH_S = 0.5
 MAX_CORRECTION = 4.0
+# The attitudes are the integrals of the rates: a model's small error in a rate's slowest
+# response (a spiral a little more stable than the aircraft's, a trim) grows without bound over
+# a long run and follows the predicted attitude's own slow part, so a gain fitted on the whole
+# run takes that drift for a scale error (JSBSim's T-6, calm air: its bank's gain 1.54 and its
+# card's aileron sized to a bank it then flew at 7° of its 11°). Their gain is fitted on both
+# sides less their mean over DRIFT_S about each sample; what the corrected prediction leaves,
+# the drift included, is still the unexplained part. That gain is taken only where it explains
+# the attitude's drift-free part (what it leaves there at most UNKNOWN_SHARE of that part's
+# peak): a bank the gusts dominate (JSBSim's C172R in moderate turbulence) shows nothing of
+# the model's scale, and the whole run's gain, when larger, is kept.
+INTEGRATED = ("bank_deg", "pitch_deg")
+DRIFT_S = 10.0
 # A quantity whose unexplained excursion is more than this share of its data's own excursion
 # is one the model does not know: it is predicted from the data instead, its measured peak
 # grown as its controls grow (`Predictor.extrapolated`).
@@ -1056,10 +1068,11 @@ def checked(
 ) -> tuple[dict[str, float], dict[str, float], dict[str, float]]:
     """The model checked on its own data, quantity by quantity (CORRECTED; both sides
     smoothed over SMOOTH_S): the correction, the least-squares gain of the measured excursion
-    on the one the model predicts from the same recorded inputs, when above 1 (at most
-    MAX_CORRECTION); the unexplained excursion, the largest of what the corrected
-    prediction leaves (turbulence, an untrimmed drift); and the quantities the model does not
-    know, with their data's peak excursion (`Predictor.extrapolated`). The correction scales
+    on the one the model predicts from the same recorded inputs (an attitude's on both less
+    their slow drift where that explains them, INTEGRATED), when above 1 (at most
+    MAX_CORRECTION); the unexplained excursion, the largest of what the corrected prediction
+    leaves (turbulence, an untrimmed drift); and the quantities the model does not know, with
+    their data's peak excursion (`Predictor.extrapolated`). The correction scales
     the model's predictions of the response to the inputs. The unexplained excursion is added
     to the peaks the envelope is checked against, not to those the targets size (a plan sized
     smaller in turbulence would only stand less above it), unless it is most of what the data
@@ -1068,6 +1081,7 @@ def checked(
     unexplained: dict[str, float] = {}
     measured_peak: dict[str, float] = {}
     window = max(1, round(SMOOTH_S / predictor.dt))
+    drift = max(1, round(DRIFT_S / predictor.dt))
     for u, y in experiments:
         if len(u) <= window:
             continue
@@ -1081,19 +1095,35 @@ def checked(
             if q not in measured or q not in predicted:
                 continue
             m, p = measured[q] - measured[q][0], predicted[q] - predicted[q][0]
-            power = float(p @ p)
+            fm, fp = (_drift_free(m, drift), _drift_free(p, drift)) if q in INTEGRATED else (m, p)
+            power = float(fp @ fp)
             if power <= 0:
                 continue
-            gain = float(np.clip((m @ p) / power, 1.0, MAX_CORRECTION))
+            gain = float(np.clip((fm @ fp) / power, 1.0, MAX_CORRECTION))
+            peak = float(np.max(np.abs(m)))
+            left = float(np.max(np.abs(m - gain * p)))
+            fast = float(np.max(np.abs(fm - gain * fp)))
+            if q in INTEGRATED and fast > UNKNOWN_SHARE * float(np.max(np.abs(fm))):
+                # Not explained without the drift either (INTEGRATED): the larger gain.
+                gain = max(gain, float(np.clip((m @ p) / (p @ p), 1.0, MAX_CORRECTION)))
+                left = float(np.max(np.abs(m - gain * p)))
             gains[q] = max(gains.get(q, 1.0), gain)
-            unexplained[q] = max(unexplained.get(q, 0.0), float(np.max(np.abs(m - gain * p))))
-            measured_peak[q] = max(measured_peak.get(q, 0.0), float(np.max(np.abs(m))))
+            unexplained[q] = max(unexplained.get(q, 0.0), left)
+            measured_peak[q] = max(measured_peak.get(q, 0.0), peak)
     unknown = {
         q: peak
         for q, peak in measured_peak.items()
         if unexplained.get(q, 0.0) > UNKNOWN_SHARE * peak
     }
     return {q: g for q, g in gains.items() if g > 1.0}, unexplained, unknown
+
+
+def _drift_free(signal: np.ndarray, window: int) -> np.ndarray:
+    """`signal` less its mean over `window` samples about each one (the ends held)."""
+    if window < 2 or signal.size < window:
+        return signal - signal.mean()
+    padded = np.pad(signal, (window // 2, window - 1 - window // 2), mode="edge")
+    return signal - np.convolve(padded, np.ones(window) / window, mode="valid")
 
 
 def _smoothed(responses: Mapping[str, np.ndarray], window: int) -> dict[str, np.ndarray]:
