@@ -310,7 +310,13 @@ async def simulated(
     needs the operator, whose link coming up tells that the agent is up)."""
     say = options.progress or (lambda text: None)
     with contextlib.ExitStack() as stack:
-        tmp = options.directory or Path(stack.enter_context(tempfile.TemporaryDirectory()))
+        # Absolute: the agent resolves its config's paths against this directory, and a
+        # relative one (`--keep flight`) was taken twice (flight/flight/link.key: no link).
+        tmp = (
+            Path(options.directory).resolve()
+            if options.directory
+            else Path(stack.enter_context(tempfile.TemporaryDirectory()))
+        )
         params = params or Params(switch_channel=7)
         async with _parts(options, Path(tmp), params, say, operator, agent_process) as sim:
             yield sim

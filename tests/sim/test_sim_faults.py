@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import asyncio
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -238,3 +239,16 @@ async def test_an_aileron_reversed_in_the_autopilot_is_told_after_its_first_doub
         assert "direction in [excitation.surfaces]" in notice.text
         assert sim.agent.counters["surface_reversed"] == 1
         assert sim.agent.counters["surface_not_following"] == 0
+
+
+async def test_a_flight_kept_in_a_relative_directory_comes_up(tmp_path, monkeypatch):
+    """Bad input tried: `sysid sim --keep flight`, a directory relative to where it runs (the
+    post-flight walkthrough's): the agent looked for its link key at flight/flight/link.key,
+    flew without the link and the ground never heard it. It comes up, and its logs and key
+    are where the walkthrough looks for them."""
+    monkeypatch.chdir(tmp_path)
+    async with simulated(SimOptions(preset="lateral", directory=Path("flight"))) as sim:
+        assert sim.ground is not None
+    assert (tmp_path / "flight" / "link.key").is_file()
+    assert any((tmp_path / "flight" / "logs").glob("*_exec_*.jsonl"))
+    assert not (tmp_path / "flight" / "flight").exists()
