@@ -156,7 +156,7 @@ def build_cases(
     for path in request.paths:
         exp, dt, declared = _experiment(Path(path), request)
         data.append((exp.u, exp.y))
-        contexts.append((exp.operating_point, exp.navigation, exp.air_angles))
+        contexts.append((exp.operating_point, exp.navigation, exp.air_angles, exp.flight))
         rates.append(dt)
         commands.append(declared)
     if settings.held_inputs is None and set(request.inputs) <= frozenset.intersection(*commands):
@@ -220,6 +220,7 @@ def _experiment(path: Path, request: Request) -> tuple[Experiment, float, frozen
             *request.outputs,
             *request.navigation,
             *(air.needed if air is not None else ()),
+            *request.flight.values(),
         )
         columns, rows = read_log(path, used)
     except LogError as exc:  # names the line and column
@@ -269,7 +270,11 @@ def _experiment(path: Path, request: Request) -> tuple[Experiment, float, frozen
         y = y + operating_point
         operating_point = np.zeros_like(operating_point)
     nav = jobs.window_navigation(values, request.inputs, request.outputs, request.navigation)
-    experiment = Experiment(u, y, operating_point=operating_point, navigation=nav, air_angles=made)
+    flight = tuple(request.flight.items())
+    states = jobs.window_flight(values, request.inputs, request.outputs, flight)
+    experiment = Experiment(
+        u, y, operating_point=operating_point, navigation=nav, air_angles=made, flight=states
+    )
     return experiment, dt, frozenset()
 
 

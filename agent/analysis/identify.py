@@ -218,12 +218,17 @@ def _in_units(record: Record, request: Request) -> tuple[Record, list[str]]:
 
 
 def scores(
-    doc: ResultDocument, experiments: Sequence[Experiment], dt: float
+    doc: ResultDocument, experiments: Sequence[Experiment], dt: float, request: Request
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The model's TIC per output on `experiments` (sampled every `dt`, preprocessed as its
-    own data were): from each record's trim (x(0) = 0, no bias), and with its initial state and
-    a bias on each output estimated, as a validation scores it (`validation_fit`)."""
-    batch, _ = prepared(doc.preprocessing, dt, tuple((e.u, e.y) for e in experiments))
+    """The model's TIC per output on `experiments` (the request's columns, sampled every
+    `dt`, preprocessed as its own data were): from each record's trim (x(0) = 0, no bias),
+    and with its initial state and a bias on each output estimated, as a validation scores it
+    (`validation_fit`). The model's own inputs and outputs only: a control the record left at
+    trim, or an axis it did not move, is not in the model."""
+    ins = [list(request.inputs).index(n) for n in doc.inputs]
+    outs = [list(request.outputs).index(n) for n in doc.outputs]
+    data = tuple((e.u[:, ins], e.y[:, outs]) for e in experiments)
+    batch, _ = prepared(doc.preprocessing, dt, data)
     model = StateSpace(*(np.asarray(m, dtype=float) for m in (doc.A, doc.B, doc.C, doc.D)))
     start = [np.zeros(model.A.shape[0])] * len(batch)
     return fit(model, batch, initial_states=start).tic, validation_fit(model, batch).tic
@@ -239,7 +244,7 @@ def held_out(
             f"{paths[0]} is sampled every {loaded.dt:.6g} s but the model's records every "
             f"{dt:.6g} s; a validation record needs their sample rate"
         )
-    from_trim, tic = scores(doc, loaded.experiments, dt)
+    from_trim, tic = scores(doc, loaded.experiments, dt, request)
     names = doc.outputs
     return ValidationDocument(
         files=[str(p) for p in paths],
@@ -283,7 +288,7 @@ def run(
     )
     result = replace(result, warnings=(*notes, *result.warnings))
     doc = result.document(trim)
-    _, own = scores(doc, experiments, dt)
+    _, own = scores(doc, experiments, dt, request)
     validation = held_out(request, doc, dt, validate) if validate else None
     return Outcome(
         result=result,

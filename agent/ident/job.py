@@ -46,7 +46,8 @@ class Job:
     contexts: tuple[tuple, ...] = ()
     """Per experiment, its operating point and navigation (`Experiment`) where they are known
     (a replayed log), for the aircraft method's kinematics and wind, and optionally third how
-    its α and β were synthesised (`Experiment.air_angles`); empty: none."""
+    its α and β were synthesised (`Experiment.air_angles`) and fourth its flight states
+    (`Experiment.flight`); empty: none."""
     input_roles: tuple[str, ...] = ()
     """The inputs' roles ("" for none); empty: those of `axes`' axis set."""
     air_angles: Sources | None = None
@@ -153,7 +154,14 @@ def run(job: Job) -> Outcome:
     contexts = job.contexts or ((None, None),) * len(job.experiments)
     pairs = zip(job.experiments, contexts, strict=True)
     experiments = [
-        Experiment(u, y, operating_point=c[0], navigation=c[1], air_angles=(*c, None)[2])
+        Experiment(
+            u,
+            y,
+            operating_point=c[0],
+            navigation=c[1],
+            air_angles=(*c, None, None)[2],
+            flight=(*c, None, None)[3],
+        )
         for (u, y), c in pairs
     ]
     extra: dict = {}

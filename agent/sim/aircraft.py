@@ -82,9 +82,11 @@ def flown_at(
     aircraft: str, speed_kts: float | None, altitude_ft: float | None
 ) -> tuple[float, float]:
     """The speed and height to fly `aircraft` at: as given, else FLOWN's; a ValueError for
-    an aircraft not in FLOWN with no speed given (a speed is the aircraft's own: 60 kt stalls
-    a turboprop and overspeeds a glider)."""
+    an aircraft JSBSim does not have, or one not in FLOWN with no speed given (a speed is the
+    aircraft's own: 60 kt stalls a turboprop and overspeeds a glider)."""
     known = FLOWN.get(aircraft)
+    if known is None and aircraft not in jsbsim_aircraft():
+        raise ValueError(f"JSBSim has no aircraft {aircraft!r} (sysid sim --list-aircraft)")
     if speed_kts is None and known is None:
         raise ValueError(
             f"give --speed-kts for {aircraft}: its trim speed is known here only for "

@@ -105,7 +105,7 @@ def test_sim_json_on_an_aircraft_jsbsim_does_not_have_is_one_error_object():
     assert error == {
         "kind": "error",
         "exit": 2,
-        "message": "JSBSim has no aircraft 'no-such-aircraft'",
+        "message": "JSBSim has no aircraft 'no-such-aircraft' (sysid sim --list-aircraft)",
     }
 
 

@@ -170,7 +170,11 @@ async def test_a_hostile_transmitter_and_half_the_frames_lost_change_nothing(tmp
         await asyncio.sleep(0.5)
         ap = sim.aircraft.autopilot
         overrides = ap.overrides
-    assert 0 < delivered < sent  # half the attempts lost, MAC retries bring most through
+    # Half the attempts lost, MAC retries bring most through: all of them on about one run in
+    # fifty (each frame four tries, lost on 1/16: (15/16)^60 = 2 %), so no share is asserted.
+    tried = sent - intruder.counters["too_large"]  # garbage over the payload limit: refused
+    assert delivered + intruder.counters["lost"] == tried
+    assert delivered > tried // 2
     # Every hostile frame that arrived was dropped and counted, none reached the agent.
     assert dropped - dropped_before == delivered, counters
     assert counters["bad_tag"] >= 1
