@@ -93,10 +93,14 @@ async def test_screen(tmp_path, tab, size):
 async def test_frequency_response_view(tmp_path):
     """The Results tab scrolled to a pair's frequency response, asked of the aircraft."""
     async with rig(tmp_path) as r:
-        station = GroundStation(r.config, VirtualClock(1000.0), base=tmp_path)
+        # The radio's signal strength asked often and waited for, as in `test_screen`: asked
+        # every 2 s it arrived before the picture on a loaded machine only.
+        config = r.config.model_copy(update={"rssi_s": 0.1})
+        station = GroundStation(config, VirtualClock(1000.0), base=tmp_path)
         app = Console(station)
         async with app.run_test(size=(120, 44)) as pilot:
             await until(pilot, lambda: station.heard.status is not None, "status")
+            await until(pilot, lambda: station.rssi_dbm is not None, "RSSI")
             r.aircraft.session.send_reliable(result("lat-1"))
             await until(pilot, lambda: len(station.heard.results) == 1, "result")
             await pilot.press("4")
