@@ -77,13 +77,13 @@ MAX_CORRECTION = 4.0
 # The attitudes are the integrals of the rates: a model's small error in a rate's slowest
 # response (a spiral a little more stable than the aircraft's, a trim) grows without bound over
 # a long run and follows the predicted attitude's own slow part, so a gain fitted on the whole
-# run takes that drift for a scale error (JSBSim's T-6, calm air: its bank's gain 1.54 and its
-# card's aileron sized to a bank it then flew at 7° of its 11°). Their gain is fitted on both
-# sides less their mean over DRIFT_S about each sample; what the corrected prediction leaves,
-# the drift included, is still the unexplained part. That gain is taken only where it explains
+# run takes that drift for a scale error, and the plan it sizes flies well short of its
+# targets (docs/excitation.md, *Checked on its own data*). Their gain is fitted on both sides
+# less their mean over DRIFT_S about each sample; what the corrected prediction leaves, the
+# drift included, is still the unexplained part. That gain is taken only where it explains
 # the attitude's drift-free part (what it leaves there at most UNKNOWN_SHARE of that part's
-# peak): a bank the gusts dominate (JSBSim's C172R in moderate turbulence) shows nothing of
-# the model's scale, and the whole run's gain, when larger, is kept.
+# peak): a bank the gusts dominate shows nothing of the model's scale, and the whole run's
+# gain, when larger, is kept (the side that flies the smaller plan).
 INTEGRATED = ("bank_deg", "pitch_deg")
 DRIFT_S = 10.0
 # A quantity whose unexplained excursion is more than this share of its data's own excursion

@@ -3,11 +3,11 @@ converted to the unit each role is identified in (agent.channels.UNITS: surfaces
 angles and rates in radians, speeds in m/s), and a column without a declared unit checked
 for values no aircraft flies in that unit ("these look like degrees").
 
-A record from another system is as likely in degrees as in radians: the business jet's
-longitudinal CSV in degrees, read as radians (α of 2.26 rad), gave a spurious −1035 1/s mode
-and no phugoid, with no warning (issue 36). The checks name only what cannot be flight in
-the expected unit; a record in degrees whose every angle stays below the limits (a level
-flight's 0.5°) passes them, so the unit a user knows is best declared.
+A record from another system is as likely in degrees as in radians, and angles in degrees
+read as radians make a model with spurious fast modes and no warning. The checks name only
+what cannot be flight in the expected unit; a record in degrees whose every angle stays
+below the limits (level flight's half degree) passes them, so the unit a user knows is best
+declared.
 """
 
 from __future__ import annotations

@@ -807,8 +807,7 @@ def _poorly_resolved(
 def _longer_than_the_record(modes: Sequence[Mode], span: float) -> list[str]:
     """A named oscillation whose period is longer than the longest record, said by name: the
     record holds less than a cycle of it, and its ωn and ζ rest on the model's structure more
-    than on the data, whatever its σ says (a business jet's phugoid from two 25 s records of
-    one manoeuvre came out 48 % apart)."""
+    than on the data, whatever its σ says: a repeat of the manoeuvre can give another."""
     notes = []
     for m in modes:
         damped = abs(m.eigenvalue.imag)
