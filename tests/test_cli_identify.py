@@ -785,7 +785,8 @@ def test_a_record_in_degrees_is_named_so_and_read_once_its_units_are_declared(ca
     ways to declare its unit; identified once they are declared, in the header (`beta [deg]`,
     `r (deg/s)`, `time [ms]`) or by --units, to the model of the same record in radians, with
     the units read echoed in the result; a unit not known, or of another kind than the
-    column's role (a speed for an angle), is refused by name."""
+    column's role (a speed for an angle), a --units entry without its unit and a time column
+    declared in degrees are refused by name."""
     plain = _in_degrees(tmp_path, "plain.csv")
     code, doc = run_json(capsys, str(plain), *LAT, "--method", "time")
     assert code == 2
@@ -820,6 +821,13 @@ def test_a_record_in_degrees_is_named_so_and_read_once_its_units_are_declared(ca
     code, doc = run_json(capsys, str(plain), *LAT, "--units", "beta=kt")
     assert code == 2
     assert "'beta' is declared in kt, but its role beta is angle (rad)" in doc["error"]["message"]
+    # A --units entry without its unit, and a time column declared in degrees.
+    assert main(["identify", str(plain), *LAT, "--units", "beta"]) == 2
+    assert "--units takes NAME=UNIT,…; got 'beta'" in capsys.readouterr().err
+    odd = _in_degrees(tmp_path, "odd_time.csv", {"time": "time [deg]"})
+    code, doc = run_json(capsys, str(odd), *LAT)
+    assert code == 2
+    assert "the time column's unit must be one of s, sec" in doc["error"]["message"]
 
 
 def test_a_longitudinal_record_without_a_throttle_column_is_told_how(capsys, tmp_path):
