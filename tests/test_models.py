@@ -13,7 +13,14 @@ import numpy as np
 import pytest
 
 from agent.ident import job as jobs
-from agent.ident.document import ModeDocument, OkidDocument, ResultDocument
+from agent.ident.document import (
+    AircraftDocument,
+    AxisDocument,
+    ModeDocument,
+    OkidDocument,
+    ResultDocument,
+    Wind,
+)
 from agent.ident.errors import DataError
 from agent.models import CANDIDATES_KEPT, Candidate, ModelStore, suggest
 from tests.documents import INPUTS, OUTPUTS, lateral_document
@@ -423,3 +430,81 @@ def test_a_model_stored_before_the_typed_document_is_read_back(tmp_path):
     assert ResultDocument.model_validate(earlier) == new
     aircraft = earlier | {"method": "aircraft", "markov": 0, "singular_values": []}
     assert ResultDocument.model_validate(aircraft).okid is None
+
+
+def turbulent(
+    model_id: str,
+    *,
+    roll: float = -9.0,
+    roll_std: float = 0.4,
+    excited: float = 0.2,
+    tic: float = 0.45,
+) -> Candidate:
+    """A lateral whole-aircraft model from a record in turbulence it does not measure: its
+    whole-record TIC `tic`, its TIC at the excited bins `excited`, modes with standard errors."""
+    modes = [
+        mode("Dutch roll", (-0.8, 3.0), None, frequency_std_rad_s=0.1, eigenvalue_std=(0.05, 0.1)),
+        mode("roll", (roll, 0.0), None, frequency_std_rad_s=roll_std, eigenvalue_std=(roll_std, 0)),
+        mode("spiral", (-0.03, 0.0), None, frequency_std_rad_s=0.03, eigenvalue_std=(0.03, 0.0)),
+    ]
+    axis = AxisDocument(
+        name="lateral",
+        outputs=list(OUTPUTS),
+        inputs=list(INPUTS),
+        iterations=5,
+        converged=True,
+        tic_excited=dict.fromkeys(OUTPUTS, excited),
+    )
+    aircraft = AircraftDocument(
+        band_hz=(0.1, 2.0),
+        bins=120,
+        kinematics=True,
+        wind=Wind(measured=True, gust_rms={}),
+        model="lateral",
+        axes=[axis],
+    )
+    c = _with(candidate(model_id, tic=tic, modes=modes, record_s=60.0), aircraft=aircraft)
+    return c
+
+
+def test_in_unmeasured_turbulence_the_fit_is_judged_at_the_excited_bins_and_by_a_repeat():
+    """A record whose turbulence nothing measures fails the whole record's TIC whatever the
+    model (the truth's own reaches 0.41-0.48 on JSBSim's glider): the fit step then takes the
+    excited bins' TIC and an independent record's model giving the same modes. Bad input
+    tried: no earlier record; an earlier roll 5 σ away; an earlier roll too weak to repeat
+    anything (σ 50 %); an excited-bin TIC of 0.35; a diverged simulation (TIC 1); a weak mode
+    of its own; an OKID model (no excited-bin TIC). The spiral, undetermined (σ 100 %), is
+    reported and not judged, as a missing one is not."""
+    c = turbulent("b")
+    alone = suggest(c, None, None, None)
+    assert alone.checks["fit"] is False
+    assert "0.200 at the excited bins (lateral)" in alone.steps[3]
+    assert "no earlier record to repeat it" in alone.steps[3]
+    again = suggest(c, None, None, None, earlier=turbulent("a", roll=-8.5, roll_std=0.5))
+    assert again.checks == {"stability": True, "quality": True, "modes": True, "fit": True}
+    assert again.update
+    assert "a's modes repeat (largest difference 0.8 σ ≤ 3, roll)" in again.steps[3]
+    assert "turbulence" in again.steps[3]
+    differ = suggest(c, None, None, None, earlier=turbulent("a", roll=-6.5, roll_std=0.3))
+    assert not differ.checks["fit"]
+    assert "a's modes DIFFER (largest difference 5.0 σ > 3, roll)" in differ.steps[3]
+    vague = suggest(c, None, None, None, earlier=turbulent("a", roll=-9.0, roll_std=4.5))
+    assert not vague.checks["fit"]
+    assert "a's roll is weak: nothing to repeat" in vague.steps[3]
+    earlier = turbulent("a")
+    for bad, text in (
+        (turbulent("b", excited=0.35), "0.350 at the excited bins (lateral) ≥ 0.3"),
+        (turbulent("b", tic=1.0), "its simulation of the record diverged"),
+        (turbulent("b", roll_std=3.0), "but a mode is weak"),
+        (_with(turbulent("b"), aircraft=None), "TIC_jj 0.450 ≥ 0.3"),
+    ):
+        verdict = suggest(bad, None, None, None, earlier=earlier)
+        assert not verdict.checks["fit"]
+        assert verdict.steps[3] == "3 " + text or text in verdict.steps[3]
+    spiral = _with(
+        c, modes=[*c.result.modes[:2], mode("spiral", (-0.05, 0.0), None, frequency_std_rad_s=0.05)]
+    )
+    passed = suggest(spiral, None, None, None, earlier=earlier)
+    assert passed.checks["quality"]
+    assert "spiral not determined by the record, not judged" in passed.steps[1]
+    assert passed.checks["fit"]

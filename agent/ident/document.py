@@ -195,6 +195,9 @@ class AxisDocument(Document):
     # with each output's share of its residual power that the process noise explains.
     estimator: Literal["output error", "filter error"] = "output error"
     process_share: dict[str, float] = {}
+    # Each output's Theil inequality coefficient at the bins the fit used (the controls'
+    # excited bins; agent.ident.aircraft.fit.excited_tic).
+    tic_excited: dict[str, float] = {}
 
 
 class Engine(Document):

@@ -46,7 +46,9 @@ RESULTS_KEPT = 100
 # stable and fits its own data below this TIC: looser than the suggestion's 0.3, because a
 # build-up run's small response stands less above the sensors' noise (the J-3 Cub's quarter-
 # amplitude full preset fitted at 0.34 in calm air, its modes within 2.2 %), and a sizing needs
-# the response's size, not a nominal model.
+# the response's size, not a nominal model. A candidate that passed the suggestion's fit step
+# sizes too: in turbulence no sensor measures, the whole record's TIC is the gust's, not the
+# model's (agent.models: the fit step).
 SIZING_TIC = 0.5
 # With no update period set, how often the periodic task looks again (s).
 PERIODIC_IDLE_S = 1.0
@@ -91,8 +93,8 @@ class Identifier:
         self._pool: Executor | None = None  # the worker; replaced if it dies
         self._batch: dict[str, list] = {}  # by axes: the experiments of a batch so far
         self._self_check: dict[str, str] = {}  # by axes: a new nominal to check next run
-        # By axes: the newest candidate that is stable and fits its own data to SIZING_TIC
-        # (sizes plans while no model is nominal yet).
+        # By axes: the newest candidate that is stable and fits its own data to SIZING_TIC,
+        # or passed the fit step (sizes plans while no model is nominal yet).
         self.newest: dict[str, Candidate] = {}
         # By axes: the latest candidate, good or not (what its run flew grows the build-up).
         self.latest: dict[str, Candidate] = {}
@@ -211,8 +213,8 @@ class Identifier:
     async def sizing_model(self, axes: str) -> tuple[Candidate, str] | None:
         """The model a plan of `axes` is sized by, and how to name it: the nominal of those
         axes, else the full model's, else the newest candidate of this flight that is stable
-        and fits its own data below SIZING_TIC (`newest`), those axes' first. None: no model
-        yet."""
+        and fits its own data below SIZING_TIC or passed the suggestion's fit step
+        (`newest`), those axes' first. None: no model yet."""
         for wanted in dict.fromkeys((axes, "full")):
             nominal = await self._in_store(self.models.nominal, wanted)
             if nominal is not None:
@@ -400,10 +402,15 @@ class Identifier:
             record_s=len(outcome.experiment[0]) * dt,
             trim=outcome.trim,
         )
-        suggestion = await self._compare(candidate, len(rows))
+        # Step 3's repeat test takes the axes' last model, where its record is not also this
+        # one's (a batch holds the earlier records: not independent).
+        earlier = None if ident.batch else self.latest.get(axes)
+        suggestion = await self._compare(candidate, len(rows), earlier)
         await self._in_store(self.models.add, candidate)
         self.latest[axes] = candidate
-        if suggestion.checks.get("stability") and candidate.tic_jj < SIZING_TIC:
+        if suggestion.checks.get("stability") and (
+            candidate.tic_jj < SIZING_TIC or suggestion.checks.get("fit")
+        ):
             self.newest[axes] = candidate
         record = ResultRecord(
             model_id=model_id,
@@ -418,22 +425,25 @@ class Identifier:
         self.writer.write(self._log, record.line())
         self.downlink.send(result_message(candidate, suggestion))
 
-    async def _compare(self, candidate: Candidate, samples: int) -> Suggestion:
+    async def _compare(
+        self, candidate: Candidate, samples: int, earlier: Candidate | None
+    ) -> Suggestion:
         """The figure 5.2 suggestion: against the nominal (if any), each model's TIC on the
-        other's data (TIC_jN, TIC_Nj), computed in the worker."""
+        other's data (TIC_jN, TIC_Nj), computed in the worker; `earlier`: the axes' model
+        before this one (models.suggest)."""
         axes = candidate.axes
         nominal = await self._in_store(self.models.nominal, axes)
         if nominal is None:
-            return suggest(candidate, None, None, None)
+            return suggest(candidate, None, None, None, earlier=earlier)
         uncompared = jobs.uncompared(candidate.result, nominal.result)
         if uncompared:
-            return suggest(candidate, nominal, None, None, uncompared)
+            return suggest(candidate, nominal, None, None, uncompared, earlier=earlier)
         self._enter("comparing with nominal", axes, samples)
         tic_jn = await self._cross_tic(candidate, nominal)
         tic_nj = await self._cross_tic(nominal, candidate)
         await self._check_new_nominal(axes, nominal, tic_nj, candidate)
         self._leave(axes, samples)
-        return suggest(candidate, nominal, tic_jn, tic_nj)
+        return suggest(candidate, nominal, tic_jn, tic_nj, earlier=earlier)
 
     async def _cross_tic(self, model: Candidate, data: Candidate) -> float:
         """TIC_avg of `model` on `data`'s experiments."""

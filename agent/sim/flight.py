@@ -582,9 +582,10 @@ async def console_flight(options: SimOptions):
 
 def _operator_accepts(result: messages.Result, first: bool) -> bool:
     """The scripted operator: follows the suggestion; with no nominal model yet, accepts a
-    stable candidate that fits its own data (TIC_jj < 0.3) and has every mode its axes must
-    have as the first nominal, even if the quality step flagged a mode — a human
-    establishing a baseline would."""
+    stable candidate that passes the fit step (agent.models: TIC_jj < 0.3, or in unmeasured
+    turbulence the excited bins and a repeat) and has every mode its axes must have as the
+    first nominal, even if the quality step flagged a mode — a human establishing a baseline
+    would."""
     if result.suggest_update:
         return True
     checks = result.checks

@@ -91,6 +91,8 @@ class AxisFit:
     noise: ProcessNoise | None = None
     # The entries fixed at zero by the model structure's selection (`selected`).
     zeros: tuple[tuple[str, int, int], ...] = ()
+    # Theil's inequality coefficient of each state at the bins the fit used (`excited_tic`).
+    tic_excited: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def weights(self) -> np.ndarray | ProcessNoise:
@@ -232,6 +234,22 @@ def _cost(residual: np.ndarray, sigma: np.ndarray) -> float:
 def _stack(J: np.ndarray) -> np.ndarray:
     J = J.reshape(-1, J.shape[-1])
     return np.vstack([J.real, J.imag])
+
+
+def excited_tic(problem: AxisProblem, theta: np.ndarray) -> np.ndarray:
+    """Theil's inequality coefficient of each state's fitted transform against the record's,
+    over the bins the fit used: the controls' excited bins, where the record's information
+    about the model lies. Between them the record holds only the response to what it did not
+    measure (unmeasured turbulence) and noise, which no model of the inputs predicts and which
+    the time-domain TIC counts in full (agent.models: the fit step). 1 where the model has no
+    response."""
+    X, _ = problem.response(theta)
+    if not np.all(np.isfinite(X)):
+        return np.ones(problem.n)
+    Y = problem.Y
+    error = np.sqrt(np.sum(np.abs(Y - X) ** 2, axis=0))
+    scale = np.sqrt(np.sum(np.abs(Y) ** 2, axis=0)) + np.sqrt(np.sum(np.abs(X) ** 2, axis=0))
+    return np.where(scale > 0, error / np.where(scale > 0, scale, 1.0), 0.0)
 
 
 def weighted_cost(problem: AxisProblem, theta: np.ndarray, weights) -> float:
@@ -400,6 +418,7 @@ def fit_axis(
         lag_powers=powers,
         noise=noise_model,
         zeros=tuple(zeros),
+        tic_excited=excited_tic(problem, theta),
     )
 
 

@@ -608,6 +608,9 @@ def _report(
                 converged=f.converged,
                 estimator="output error" if f.noise is None else "filter error",
                 process_share=_process_share(f, outputs),
+                tic_excited={
+                    outputs[i]: float(t) for i, t in zip(f.states, f.tic_excited, strict=True)
+                },
             )
             for f in fits
         ],
