@@ -18,13 +18,13 @@ import math
 import os
 import random
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from agent.clock import Clock
 from agent.config import SurfacePort
 from agent.sim import devices
-from agent.sim.ardupilot import OUTPUTS, EmulatedArduPlane, Params, normalised_to_pwm
+from agent.sim.ardupilot import OUTPUTS, EmulatedArduPlane, Params, normalised_to_pwm, setup
 from agent.sim.dataflash import DataFlashWriter
 from agent.sim.pilot import ScriptedPilot
 from agent.sim.plant import Plant
@@ -163,8 +163,12 @@ class SimAircraft:
         )
         sticks = {ch: normalised_to_pwm(ch, self.plant.trim[name]) for ch, name in OUTPUTS.items()}
         self.pilot = ScriptedPilot(sticks, options.params.switch_channel)
+        # ArduPlane set up for this aircraft as its pilot would (ardupilot.setup), under
+        # whatever the options give.
+        state = self.plant.state()
+        params = replace(options.params, fbwa=setup(state) | options.params.fbwa)
         self.autopilot = EmulatedArduPlane(
-            options.params,
+            params,
             self.pilot,
             dt=1.0 / TICK_HZ,
             trim=self.plant.trim,

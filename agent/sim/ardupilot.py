@@ -1,4 +1,4 @@
-"""An emulated ArduPlane in MANUAL, speaking real MAVLink (pymavlink) over UDP.
+"""An emulated ArduPlane in MANUAL or FBWA, speaking real MAVLink (pymavlink) over UDP.
 
 What it does, as ArduPlane does it (docs/protocols.md, *ArduPlane through MAVSDK*):
 - HEARTBEAT at 1 Hz as a fixed-wing ArduPilot (custom mode 0 = MANUAL, armed).
@@ -13,6 +13,15 @@ What it does, as ArduPlane does it (docs/protocols.md, *ArduPlane through MAVSDK
 - MANUAL: servo outputs follow the RC inputs; overridden channels report the override in
   RC_CHANNELS. The outputs drive the JSBSim surfaces through a servo model (transport delay,
   rate limit, travel limit).
+- FBWA (custom mode 5), entered by MAV_CMD_DO_SET_MODE or SET_MODE as ArduPlane takes them:
+  the roll, pitch and rudder sticks (or their overrides) are the attitude demand and ArduPlane's
+  own laws (agent.sim.fbwa, run at its 50 Hz loop) move the surfaces; the throttle stays the
+  pilot's. Surfaces go out as ArduPlane's servo outputs do: ±45° of notional travel is
+  SERVOn_MIN…SERVOn_MAX about SERVOn_TRIM, where the installer's trim holds the trimmed
+  aircraft.
+- Parameters by name (PARAM_REQUEST_LIST, PARAM_REQUEST_READ, PARAM_SET → PARAM_VALUE as
+  MAV_PARAM_TYPE_REAL32, with their count and index): FBWA's (agent.sim.fbwa.DEFAULTS). A
+  PARAM_SET of a name the vehicle does not have gets no answer, as ArduPlane gives none.
 """
 
 from __future__ import annotations
@@ -27,17 +36,31 @@ import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from agent.sim.dataflash import DataFlashWriter
+from agent.sim.fbwa import DEFAULTS as FBWA_DEFAULTS
+from agent.sim.fbwa import LOOP_HZ, TRAVEL_DEG, Fbwa, Sensed
 
 log = logging.getLogger(__name__)
 
 CHANNELS = 18
 IGNORE, RELEASE_LOW, RELEASE_HIGH = 65535, 0, 65534
-MANUAL = 0
+MANUAL, FBWA = 0, 5  # ArduPlane's custom mode numbers
+MODES = {MANUAL: "MANUAL", FBWA: "FBWA"}
 BASE_MODE = (
     mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
     | mavlink.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
     | mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 )
+# ArduPlane's heartbeat adds this flag in its stabilised modes.
+STABILISED = mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
+# An RC input's half range (RCn_MAX − RCn_TRIM with ArduPilot's defaults), µs: FBWA's stick is
+# (pwm − RCn_TRIM) over it, within ±1. RCn_TRIM is the stick at rest when the radio was
+# calibrated, the transmitter's trim included: the emulation takes the pilot's trimmed sticks.
+RC_HALF_RANGE = 400
+# ArduPlane's SERVOn_MIN/MAX about SERVOn_TRIM: ±45° of notional surface is ±400 µs.
+SERVO_HALF_RANGE = 400
+# The ISA troposphere's density ratio (1 − ISA_LAPSE h)^ISA_EXPONENT, h in metres: EAS2TAS.
+ISA_LAPSE = 2.25577e-5
+ISA_EXPONENT = 4.2559
 # Default stream intervals (s) before the GCS asks for others; ArduPilot's SRx_ defaults are
 # a few Hz.
 DEFAULT_INTERVAL = {
@@ -73,6 +96,9 @@ class Params:
     """Normalised travel per second (±1 is full travel): 0.5 s end to end."""
     servo_travel: float = 1.0
     reversed: dict[int, bool] = field(default_factory=dict)
+    fbwa: dict[str, float] = field(default_factory=dict)
+    """FBWA's parameters where the aircraft's setup differs from ArduPlane's defaults
+    (SCALING_SPEED and the airspeed limits for its speed, PTCH_TRIM_DEG for its trim)."""
 
 
 # How each servo is linked to JSBSim's control: +1 when a larger PWM moves the control's
@@ -83,6 +109,25 @@ class Params:
 # and rudder servos are linked the other way round, as an installer fits them for the aircraft
 # to answer the sticks; SERVOn_REVERSED (`Params.reversed`) stays 0.
 LINKAGE = {1: 1, 2: -1, 3: 1, 4: -1}
+
+
+def setup(trim: dict[str, float]) -> dict[str, float]:
+    """FBWA's parameters as a pilot sets ArduPlane up for an aircraft trimmed at `trim` (the
+    plant's state): SCALING_SPEED its trimmed equivalent airspeed, AIRSPEED_MIN and _MAX
+    about it (ArduPlane's defaults, 9 to 22 m/s about 15, are a small UAV's), PTCH_TRIM_DEG
+    its trimmed pitch (the attitude FBWA holds hands off)."""
+    eas = trim["Vt"] / eas_to_tas(trim.get("alt", 0.0))
+    return {
+        "SCALING_SPEED": round(eas, 1),
+        "AIRSPEED_MIN": round(0.6 * eas, 1),
+        "AIRSPEED_MAX": round(1.5 * eas, 1),
+        "PTCH_TRIM_DEG": round(float(np.degrees(trim["theta"])), 2),
+    }
+
+
+def eas_to_tas(altitude_m: float) -> float:
+    """True over equivalent airspeed in the ISA troposphere (ArduPilot's EAS2TAS)."""
+    return float((1.0 - ISA_LAPSE * max(altitude_m, 0.0)) ** (-ISA_EXPONENT / 2))
 
 
 def pwm_to_normalised(channel: int, pwm: float) -> float:
@@ -158,6 +203,15 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
             for ch in OUTPUTS
         }
         self.outputs: dict[int, int] = {ch: normalised_to_pwm(ch, start[ch]) for ch in OUTPUTS}
+        # The installer's SERVOn_TRIM: the trimmed aircraft's surface positions; RCn_TRIM: the
+        # pilot's sticks at rest.
+        self.servo_trim = dict(self.outputs)
+        self.rc_trim = {ch: pilot(0.0)[ch - 1] for ch in OUTPUTS}
+        self.mode = MANUAL
+        self.fbwa = Fbwa(dict(params.fbwa))
+        self._fbwa_every = max(1, round(1.0 / (LOOP_HZ * dt)))
+        self.surfaces: dict[str, float] = {}
+        """FBWA's last surface outputs and attitude demand (notional degrees)."""
 
     @property
     def overrides(self) -> dict[int, tuple[int, float]]:
@@ -204,6 +258,11 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
                 self._override(message)
             elif kind == "COMMAND_LONG":
                 self._command(message, addr)
+            elif kind == "SET_MODE":
+                if message.target_system == self.params.sysid:
+                    self._set_mode(int(message.custom_mode))
+            elif kind.startswith("PARAM_"):
+                self._param(message, addr)
 
     def _override(self, m) -> None:
         p = self.params
@@ -245,10 +304,66 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
             else:
                 self.intervals[msg_id] = interval_us * 1e-6
             result = mavlink.MAV_RESULT_ACCEPTED
+        elif m.command == mavlink.MAV_CMD_DO_SET_MODE:
+            custom = int(m.param1) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+            ok = bool(custom) and self._set_mode(int(m.param2))
+            result = mavlink.MAV_RESULT_ACCEPTED if ok else mavlink.MAV_RESULT_FAILED
         ack = self.mav.command_ack_encode(
             m.command, result, 0, 0, m.get_srcSystem(), m.get_srcComponent()
         )
         self._send(ack, [addr])
+
+    def _set_mode(self, mode: int) -> bool:
+        """Enter `mode` (False: not one this vehicle flies). FBWA starts from its laws'
+        reset state, as ArduPlane's mode change resets the controllers."""
+        if mode not in MODES:
+            self.counters["modes_refused"] += 1
+            return False
+        if mode != self.mode:
+            self.mode = mode
+            self.fbwa = Fbwa(dict(self.fbwa.params))
+            self.counters["mode_changes"] += 1
+            if self.dataflash is not None and self._boot is not None:
+                us = int((self._now - self._boot) * 1e6)
+                self.dataflash.write("MODE", TimeUS=us, Mode=mode, ModeNum=mode)
+        return True
+
+    def _param(self, m, addr) -> None:
+        """PARAM_REQUEST_LIST / _READ / PARAM_SET, answered with PARAM_VALUE as ArduPlane
+        does: each name with its index and the count."""
+        if getattr(m, "target_system", self.params.sysid) != self.params.sysid:
+            return
+        names = list(FBWA_DEFAULTS)
+        kind = m.get_type()
+        if kind == "PARAM_REQUEST_LIST":
+            for name in names:
+                self._param_value(name, names, addr)
+            return
+        if kind == "PARAM_REQUEST_READ":
+            name = m.param_id if m.param_index < 0 else None
+            if name is None and 0 <= m.param_index < len(names):
+                name = names[m.param_index]
+            if name in FBWA_DEFAULTS:
+                self._param_value(name, names, addr)
+            return
+        if kind == "PARAM_SET":
+            name = m.param_id
+            if name not in FBWA_DEFAULTS or not np.isfinite(m.param_value):
+                self.counters["params_refused"] += 1
+                return
+            self.fbwa.set(name, float(m.param_value))
+            self.counters["params_set"] += 1
+            self._param_value(name, names, None)  # ArduPlane announces a change to every GCS
+
+    def _param_value(self, name: str, names: list[str], addr) -> None:
+        message = self.mav.param_value_encode(
+            name.encode(),
+            float(self.fbwa.params[name]),
+            mavlink.MAV_PARAM_TYPE_REAL32,
+            len(names),
+            names.index(name),
+        )
+        self._send(message, [addr] if addr else None)
 
     # -- the vehicle ----------------------------------------------------------------------
 
@@ -272,9 +387,12 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
             self._boot = now
         rc = self.rc_inputs(now)
         commands = {}
+        if self.mode == FBWA and self._ticks % self._fbwa_every == 0:
+            self._stabilise(state, rc)
         for ch, name in OUTPUTS.items():
-            self.outputs[ch] = rc[ch - 1]
-            command = pwm_to_normalised(ch, rc[ch - 1])
+            if self.mode == MANUAL or name == "throttle":
+                self.outputs[ch] = rc[ch - 1]
+            command = pwm_to_normalised(ch, self.outputs[ch])
             if self.params.reversed.get(ch):
                 command = -command
             commands[name] = self.servos[ch].step(command)
@@ -284,12 +402,43 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
         self._ticks += 1
         return commands
 
+    def _stabilise(self, s: dict[str, float], rc: list[int]) -> None:
+        """One loop of FBWA's laws: the sticks' attitude demand, the surfaces out (µs)."""
+
+        def stick(ch: int) -> float:
+            return float(np.clip((rc[ch - 1] - self.rc_trim[ch]) / RC_HALF_RANGE, -1.0, 1.0))
+
+        eas2tas = eas_to_tas(s.get("alt", 0.0))
+        sensed = Sensed(
+            phi=s["phi"],
+            theta=s["theta"],
+            p=s["p"],
+            q=s["q"],
+            r=s["r"],
+            eas=s["Vt"] / eas2tas,
+            eas2tas=eas2tas,
+            ay=s.get("ay", 0.0),
+        )
+        roll, pitch = self.fbwa.demands(stick(1), stick(2), s["theta"], s["phi"])
+        out = self.fbwa.step(
+            sensed, roll_deg=roll, pitch_deg=pitch, rudder_stick=stick(4), dt=1.0 / LOOP_HZ
+        )
+        for ch, degrees in ((1, out.aileron), (2, out.elevator), (4, out.rudder)):
+            self.outputs[ch] = round(self.servo_trim[ch] + degrees / TRAVEL_DEG * SERVO_HALF_RANGE)
+        self.surfaces = {
+            "aileron": out.aileron,
+            "elevator": out.elevator,
+            "rudder": out.rudder,
+            "roll_demand": out.roll_demand_deg,
+            "pitch_demand": out.pitch_demand_deg,
+        }
+
     def _log(self, now: float, s: dict[str, float], rc: list[int]) -> None:
         """ATT, IMU, ARSP, AOA, XKF1, RCIN and RCOU, as ArduPlane logs them (degrees, SI
         units)."""
         log, us = self.dataflash, int((now - self._boot) * 1e6)
         if self._ticks == 0:
-            log.write("MODE", TimeUS=us, Mode=MANUAL, ModeNum=MANUAL)
+            log.write("MODE", TimeUS=us, Mode=self.mode, ModeNum=self.mode)
         deg = 180.0 / np.pi
         log.write(
             "ATT",
@@ -334,8 +483,8 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
                 self.mav.heartbeat_encode(
                     mavlink.MAV_TYPE_FIXED_WING,
                     mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
-                    BASE_MODE,
-                    MANUAL,
+                    BASE_MODE | (STABILISED if self.mode == FBWA else 0),
+                    self.mode,
                     mavlink.MAV_STATE_ACTIVE,
                     3,
                 )

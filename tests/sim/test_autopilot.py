@@ -202,3 +202,95 @@ async def test_a_run_aborts_when_the_autopilot_link_is_lost(tmp_path):
     # slack of a loaded test process.
     assert windows[0].end - killed < 0.4 + 0.05 + 0.5
     assert "autopilot link" in windows[0].reason or "no autopilot link" in windows[0].reason
+
+
+def _mavlink_to(f):
+    """A ground station's own MAVLink connection to the emulated ArduPlane (pymavlink, UDP)."""
+    from pymavlink import mavutil
+
+    host, port = f.aircraft.mavlink_address
+    gcs = mavutil.mavlink_connection(f"udpout:{host}:{port}", source_system=255)
+    gcs.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+    return gcs
+
+
+async def _receive(gcs, kind: str, seconds: float, **match):
+    """The first `kind` message matching `match` within `seconds`, else None."""
+    deadline = asyncio.get_running_loop().time() + seconds
+    while asyncio.get_running_loop().time() < deadline:
+        m = gcs.recv_match(type=kind, blocking=False)
+        if m is None:
+            await asyncio.sleep(0.01)
+        elif all(getattr(m, k) == v for k, v in match.items()):
+            return m
+    return None
+
+
+async def test_fbwa_holds_the_bank_the_stick_asks_for(tmp_path):
+    # MAV_CMD_DO_SET_MODE to FBWA (custom mode 5) over UDP, acknowledged, the heartbeat
+    # saying so; then the roll stick, overridden to ask for 20° of bank, banks the JSBSim Cub
+    # there through ArduPlane's laws and its default gains, and released, levels it. Bad input
+    # tried: a mode ArduPlane has but this emulation does not fly (AUTO, 10): refused.
+    async with flight(tmp_path) as f:
+        gcs = _mavlink_to(f)
+        try:
+            for mode, result in ((10, mavlink.MAV_RESULT_FAILED), (5, mavlink.MAV_RESULT_ACCEPTED)):
+                gcs.mav.command_long_send(
+                    1, 1, mavlink.MAV_CMD_DO_SET_MODE, 0, 1, mode, 0, 0, 0, 0, 0
+                )
+                ack = await _receive(gcs, "COMMAND_ACK", 2.0, command=mavlink.MAV_CMD_DO_SET_MODE)
+                assert ack is not None, mode
+                assert ack.result == result, mode
+            beat = await _receive(gcs, "HEARTBEAT", 2.5, custom_mode=5)
+            assert beat is not None
+            assert beat.base_mode & mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
+        finally:
+            gcs.close()
+        ap = f.aircraft.autopilot
+        f.aircraft.pilot.set_switch(True)
+        stick = ap.rc_trim[1] + round(400 * 20 / 45)
+        await _override(f.link, {1: stick}, 6.0)
+        banked = np.degrees(f.aircraft.truth["phi"])
+        demand = ap.surfaces["roll_demand"]
+        await f.link.release([1])
+        await asyncio.sleep(6.0)
+        level = np.degrees(f.aircraft.truth["phi"])
+    assert demand == pytest.approx(20.0, abs=0.5)
+    assert banked == pytest.approx(20.0, abs=3.0)
+    assert abs(level) < 3.0
+
+
+async def test_parameters_are_read_and_set_by_name_over_mavlink(tmp_path):
+    # PARAM_REQUEST_READ, PARAM_SET and PARAM_REQUEST_LIST as a ground station sends them, the
+    # answers as ArduPlane gives them. Bad input tried: a PARAM_SET of a name the vehicle does
+    # not have (no answer, counted), a NaN value (refused, the old value kept).
+    from agent.sim.fbwa import DEFAULTS
+
+    async with flight(tmp_path) as f:
+        gcs = _mavlink_to(f)
+        try:
+            gcs.mav.param_request_read_send(1, 1, b"RLL_RATE_FF", -1)
+            value = await _receive(gcs, "PARAM_VALUE", 2.0, param_id="RLL_RATE_FF")
+            assert value is not None
+            assert value.param_value == pytest.approx(0.345)
+            assert value.param_type == mavlink.MAV_PARAM_TYPE_REAL32
+            assert value.param_count == len(DEFAULTS)
+            gcs.mav.param_set_send(1, 1, b"RLL_RATE_FF", 0.5, mavlink.MAV_PARAM_TYPE_REAL32)
+            value = await _receive(gcs, "PARAM_VALUE", 2.0, param_id="RLL_RATE_FF")
+            assert value is not None
+            assert value.param_value == pytest.approx(0.5)
+            assert f.aircraft.autopilot.fbwa.roll.pid.kff == pytest.approx(0.5)
+            for name, bad in ((b"RLL_RATE_XX", 1.0), (b"RLL_RATE_FF", float("nan"))):
+                gcs.mav.param_set_send(1, 1, name, bad, mavlink.MAV_PARAM_TYPE_REAL32)
+            assert await _receive(gcs, "PARAM_VALUE", 0.5) is None
+            assert f.aircraft.autopilot.counters["params_refused"] == 2
+            assert f.aircraft.autopilot.fbwa.params["RLL_RATE_FF"] == pytest.approx(0.5)
+            gcs.mav.param_request_list_send(1, 1)
+            seen = {}
+            while len(seen) < len(DEFAULTS):
+                value = await _receive(gcs, "PARAM_VALUE", 2.0)
+                assert value is not None, sorted(set(DEFAULTS) - set(seen))
+                seen[value.param_id] = value.param_index
+            assert sorted(seen.values()) == list(range(len(DEFAULTS)))
+        finally:
+            gcs.close()
