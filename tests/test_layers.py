@@ -17,12 +17,12 @@ ROOT = Path(__file__).resolve().parents[1]
 # store, which carry and keep its result document (agent/ident/document.py).
 LAYERS = (
     ("drivers",),
-    ("agent", "agent.channels", "agent.logs", "agent.outputs", "agent.splane"),
+    ("agent", "agent.channels", "agent.logs", "agent.outputs", "agent.splane", "agent.fbwa"),
     ("agent.clock", "agent.config"),
     ("agent.excitation",),
     ("agent.ident",),
     ("agent.link", "agent.recorder", "agent.models"),
-    ("agent.sizing",),
+    ("agent.sizing", "agent.tune"),
     ("agent.runtime", "agent.analysis", "agent.ground"),
     ("agent.sim",),
     ("agent.cli",),

@@ -31,6 +31,7 @@ from agent.cli import (
     report,
     sim,
     sim_aircraft,
+    tune,
 )
 from agent.cli.common import (
     EXIT_BAD_INPUT,
@@ -52,6 +53,7 @@ COMMANDS = (
     decode,
     import_log,
     export,
+    tune,
     sim_aircraft,
     onboard,
     sim,

@@ -15,12 +15,12 @@ What it does, as ArduPlane does it (docs/protocols.md, *ArduPlane through MAVSDK
   rate limit, travel limit).
 - FBWA (custom mode 5), entered by MAV_CMD_DO_SET_MODE or SET_MODE as ArduPlane takes them:
   the roll, pitch and rudder sticks (or their overrides) are the attitude demand and ArduPlane's
-  own laws (agent.sim.fbwa, run at its 50 Hz loop) move the surfaces; the throttle stays the
+  own laws (agent.fbwa, run at its 50 Hz loop) move the surfaces; the throttle stays the
   pilot's. Surfaces go out as ArduPlane's servo outputs do: ±45° of notional travel is
   SERVOn_MIN…SERVOn_MAX about SERVOn_TRIM, where the installer's trim holds the trimmed
   aircraft.
 - Parameters by name (PARAM_REQUEST_LIST, PARAM_REQUEST_READ, PARAM_SET → PARAM_VALUE as
-  MAV_PARAM_TYPE_REAL32, with their count and index): FBWA's (agent.sim.fbwa.DEFAULTS). A
+  MAV_PARAM_TYPE_REAL32, with their count and index): FBWA's (agent.fbwa.DEFAULTS). A
   PARAM_SET of a name the vehicle does not have gets no answer, as ArduPlane gives none.
 """
 
@@ -35,9 +35,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from agent.fbwa import DEFAULTS as FBWA_DEFAULTS
+from agent.fbwa import LOOP_HZ, TRAVEL_DEG, Fbwa, Sensed
 from agent.sim.dataflash import DataFlashWriter
-from agent.sim.fbwa import DEFAULTS as FBWA_DEFAULTS
-from agent.sim.fbwa import LOOP_HZ, TRAVEL_DEG, Fbwa, Sensed
 
 log = logging.getLogger(__name__)
 
@@ -56,8 +56,10 @@ STABILISED = mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
 # (pwm − RCn_TRIM) over it, within ±1. RCn_TRIM is the stick at rest when the radio was
 # calibrated, the transmitter's trim included: the emulation takes the pilot's trimmed sticks.
 RC_HALF_RANGE = 400
-# ArduPlane's SERVOn_MIN/MAX about SERVOn_TRIM: ±45° of notional surface is ±400 µs.
-SERVO_HALF_RANGE = 400
+# SERVOn_MIN/MAX about SERVOn_TRIM: ±45° of notional surface is ±500 µs, the simulated
+# installation's whole servo travel (config.toml's [excitation.surfaces] min_us/max_us 1000 and
+# 2000, where ArduPilot's defaults, 1100 and 1900, would leave a fifth of it unused).
+SERVO_HALF_RANGE = 500
 # The ISA troposphere's density ratio (1 − ISA_LAPSE h)^ISA_EXPONENT, h in metres: EAS2TAS.
 ISA_LAPSE = 2.25577e-5
 ISA_EXPONENT = 4.2559
@@ -260,7 +262,7 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
                 self._command(message, addr)
             elif kind == "SET_MODE":
                 if message.target_system == self.params.sysid:
-                    self._set_mode(int(message.custom_mode))
+                    self.set_mode(int(message.custom_mode))
             elif kind.startswith("PARAM_"):
                 self._param(message, addr)
 
@@ -306,14 +308,14 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
             result = mavlink.MAV_RESULT_ACCEPTED
         elif m.command == mavlink.MAV_CMD_DO_SET_MODE:
             custom = int(m.param1) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
-            ok = bool(custom) and self._set_mode(int(m.param2))
+            ok = bool(custom) and self.set_mode(int(m.param2))
             result = mavlink.MAV_RESULT_ACCEPTED if ok else mavlink.MAV_RESULT_FAILED
         ack = self.mav.command_ack_encode(
             m.command, result, 0, 0, m.get_srcSystem(), m.get_srcComponent()
         )
         self._send(ack, [addr])
 
-    def _set_mode(self, mode: int) -> bool:
+    def set_mode(self, mode: int) -> bool:
         """Enter `mode` (False: not one this vehicle flies). FBWA starts from its laws'
         reset state, as ArduPlane's mode change resets the controllers."""
         if mode not in MODES:

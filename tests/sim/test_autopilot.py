@@ -264,7 +264,7 @@ async def test_parameters_are_read_and_set_by_name_over_mavlink(tmp_path):
     # PARAM_REQUEST_READ, PARAM_SET and PARAM_REQUEST_LIST as a ground station sends them, the
     # answers as ArduPlane gives them. Bad input tried: a PARAM_SET of a name the vehicle does
     # not have (no answer, counted), a NaN value (refused, the old value kept).
-    from agent.sim.fbwa import DEFAULTS
+    from agent.fbwa import DEFAULTS
 
     async with flight(tmp_path) as f:
         gcs = _mavlink_to(f)

@@ -1,4 +1,4 @@
-"""ArduPlane's FBWA laws (agent.sim.fbwa) against what ArduPilot's source says they do: the
+"""ArduPlane's FBWA laws (agent.fbwa) against what ArduPilot's source says they do: the
 speed scaling of each term, the integrator's limits, the rudder mix, the scaler's filter, and
 a bank hold on a rolling aircraft. Bad input tried: a parameter ArduPlane's FBWA does not
 have (refused by name), a non-finite rate (no output, the integrator kept)."""
@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agent.sim.fbwa import DEFAULTS, LOOP_HZ, TRAVEL_DEG, Fbwa, Pid, RateLoop, Sensed
+from agent.fbwa import DEFAULTS, LOOP_HZ, TRAVEL_DEG, Fbwa, Pid, RateLoop, Sensed
 
 DT = 1.0 / LOOP_HZ
 

@@ -1,0 +1,241 @@
+"""`sysid tune`: ArduPlane's roll and pitch gains designed from an identified model."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from agent.cli import common
+
+AXES = {
+    # axis: (surface, rate, angle, the surfaces mixed in at a share of it, the axis's states)
+    "roll": ("aileron", "p", "phi", {"rudder": "KFF_RDDRMIX"}, ("beta", "p", "r", "phi")),
+    "pitch": ("elevator", "q", "theta", {}, ("airspeed", "alpha", "q", "theta")),
+}
+
+
+def add_parser(sub) -> None:
+    parser = sub.add_parser(
+        "tune",
+        help="ArduPlane roll and pitch gains designed from an identified model",
+        description="Design ArduPlane's FBWA roll and pitch gains (RLL_RATE_*, PTCH_RATE_*, "
+        "*2SRV_TCONST) from an identified model by loop shaping on it with its servo lag and "
+        "delay, print the predicted margins, crossover, disturbance rejection and step "
+        "response, and write them as an ArduPilot .param file (docs/tuning.md).",
+    )
+    parser.add_argument(
+        "model",
+        type=Path,
+        metavar="MODEL",
+        help="a `sysid identify --json` result, a model store file or a result log",
+    )
+    parser.add_argument("--model-id", metavar="ID", help="the model of a log or store to tune")
+    parser.add_argument(
+        "--config", type=Path, help="the agent's config: its surfaces' PWM mapping and channels"
+    )
+    parser.add_argument(
+        "--linkage",
+        type=_gains,
+        default={},
+        metavar="SURFACE=GAIN,…",
+        help="measured surface per commanded degree (the run's 'follows' check), default 1",
+    )
+    parser.add_argument(
+        "--servo-lag", type=float, default=0.05, metavar="S", help="servo time constant, s"
+    )
+    parser.add_argument("--delay", type=float, default=0.02, metavar="S", help="servo dead time, s")
+    parser.add_argument("--roll-tconst", type=float, metavar="S", help="target RLL2SRV_TCONST")
+    parser.add_argument("--pitch-tconst", type=float, metavar="S", help="target PTCH2SRV_TCONST")
+    parser.add_argument(
+        "--scaling-speed",
+        type=float,
+        metavar="M/S",
+        help="the aircraft's SCALING_SPEED (default: the model's trim airspeed)",
+    )
+    parser.add_argument("--out", type=Path, metavar="FILE.param", help="write the gains here")
+    parser.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from agent.analysis.export import ExportError, load_models
+    from agent.fbwa import DEFAULTS
+    from agent.tune import Actuator, TuneError, axis_plant, design_axis, notional_link, param_file
+
+    inputs = {args.model: "the model being tuned", **common.config_input(args.config)}
+    outputs = common.outputs_for(inputs)
+    if args.out is not None:
+        common.claim(outputs, args.out)
+        if args.out.suffix != ".param":
+            raise common.refused(f"{args.out}: give a .param file to write")
+    if not (0 <= args.servo_lag <= 1 and 0 <= args.delay <= 1):
+        raise common.refused("--servo-lag and --delay are seconds between 0 and 1")
+    config = common.load_optional_config(args.config)
+    try:
+        models = load_models(args.model)
+    except ExportError as exc:
+        raise common.refused(str(exc)) from None
+    if args.model_id is not None:
+        models = [m for m in models if m["id"] == args.model_id]
+        if not models:
+            raise common.refused(f"{args.model}: no model {args.model_id}")
+    if not models:
+        raise common.refused(f"{args.model}: no model in it")
+    model = models[-1]
+    if model["Ac"].size == 0:
+        raise common.refused(f"{model['id']}: no continuous-time model to design on")
+    channels = config.identification.channels
+    names = {
+        role: getattr(channels, role)
+        for role in ("airspeed", "alpha", "q", "theta", "beta", "p", "r", "phi")
+    }
+    outputs_ = list(model["outputs"])
+    trim = dict(zip(outputs_, model["y0"], strict=False)) if model["y0"].size else {}
+    airspeed = trim.get(channels.airspeed)
+    if args.scaling_speed is None and airspeed is None:
+        raise common.refused(f"{model['id']}: the model has no trim airspeed: give --scaling-speed")
+    eas = float(airspeed if airspeed is not None else args.scaling_speed)
+    scaling = float(args.scaling_speed or eas)
+    surfaces = config.excitation.surfaces
+    cont = {"A": model["Ac"], "B": model["Bc"], "C": model["Cc"]}
+    tunes, refused = [], []
+    for axis, (surface, rate, angle, mixed, states) in AXES.items():
+        channel = getattr(channels, surface)
+        setup = surfaces.get(surface)
+        if channel not in model["inputs"] or setup is None or setup.direction is None:
+            refused.append(f"{axis}: the model has no {surface} input")
+            continue
+        link = _link(setup, args.linkage.get(surface, 1.0), notional_link)
+        mix = {}
+        for other, param in mixed.items():
+            other_setup = surfaces.get(other)
+            if other_setup is None or other_setup.direction is None:
+                continue
+            if getattr(channels, other) in model["inputs"]:
+                moved = _link(other_setup, args.linkage.get(other, 1.0), notional_link)
+                mix[getattr(channels, other)] = DEFAULTS[param] * moved / link
+        try:
+            plant = axis_plant(
+                cont,
+                model["inputs"],
+                outputs_,
+                surface=channel,
+                rate=names[rate],
+                angle=names[angle],
+                axis_outputs=[names[role] for role in states],
+                slow=(names["phi"], names["theta"], names["airspeed"]),
+                mix=mix,
+            )
+            tune = design_axis(
+                axis,
+                plant,
+                Actuator(link=link, lag_s=args.servo_lag, delay_s=args.delay),
+                eas=eas,
+                scaling_speed=scaling,
+                tconst=args.roll_tconst if axis == "roll" else args.pitch_tconst,
+            )
+        except TuneError as exc:
+            refused.append(str(exc))
+            continue
+        tunes.append(tune)
+    if not tunes:
+        raise common.failed("; ".join(refused) or "nothing to tune")
+    setup_params = {"SCALING_SPEED": round(scaling, 1)}
+    if args.out is not None:
+        header = [
+            f"sysid tune {args.model.name} ({model['id']}): ArduPlane FBWA gains",
+            f"SCALING_SPEED {scaling:.1f} m/s; servo lag {args.servo_lag:g} s, "
+            f"delay {args.delay:g} s",
+        ]
+        text = param_file(tunes, header) + "".join(f"{k},{v:g}\n" for k, v in setup_params.items())
+        try:
+            outputs.write_text(args.out, text)
+        except OSError as exc:
+            raise common.failed(f"{args.out}: cannot be written ({exc.strerror or exc})") from None
+    if args.json:
+        common.print_json(
+            {
+                "model": model["id"],
+                "scaling_speed": scaling,
+                "axes": [_as_json(t, DEFAULTS) for t in tunes],
+                "refused": refused,
+                "param_file": None if args.out is None else str(args.out),
+            }
+        )
+        return common.EXIT_OK
+    print(f"{model['id']}: ArduPlane FBWA gains at {eas:.1f} m/s (SCALING_SPEED {scaling:.1f})")
+    for t in tunes:
+        print(f"\n{t.axis}:")
+        for name, value in t.params.items():
+            print(f"  {name:<16} {value:>8.4g}   (ArduPlane's default {DEFAULTS[name]:g})")
+        r, a = t.rate_loop, t.attitude_loop
+        print(
+            f"  rate loop: crossover {r.crossover_rad_s:.2f} rad/s, phase margin "
+            f"{r.phase_deg:.0f}°, gain margin {_db(r.gain_db)}"
+        )
+        print(
+            f"  whole loop: crossover {a.crossover_rad_s:.2f} rad/s, phase margin "
+            f"{a.phase_deg:.0f}°, gain margin {_db(a.gain_db)}, disturbance rejection to "
+            f"{a.rejection_rad_s:.2f} rad/s"
+            if a.rejection_rad_s is not None
+            else ""
+        )
+        print(
+            f"  a {t.step_deg:g}° step: rise (10–90 %) {t.rise_s:.2f} s, overshoot "
+            f"{t.overshoot_pct:.1f} %"
+        )
+        for note in t.notes:
+            print(f"  note: {note}")
+    for why in refused:
+        print(f"not tuned: {why}")
+    if args.out is not None:
+        print(f"\n{args.out}: written (load it in the ground station, or let the agent apply it)")
+    return common.EXIT_OK
+
+
+def _gains(text: str) -> dict[str, float]:
+    """SURFACE=GAIN,… (a gain a positive number)."""
+    gains = {}
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        name, sep, value = part.partition("=")
+        try:
+            gain = float(value)
+        except ValueError:
+            gain = float("nan")
+        if not sep or not name.strip() or not 0 < gain < 100:
+            raise argparse.ArgumentTypeError(
+                f"{part!r}: give SURFACE=GAIN with a positive gain (aileron=0.8)"
+            )
+        gains[name.strip()] = gain
+    return gains
+
+
+def _link(setup, linkage: float, notional_link) -> float:
+    half = (setup.max_us - setup.min_us) / 2
+    return notional_link(setup.direction, setup.us_per_unit, half) * linkage
+
+
+def _db(value: float) -> str:
+    return "∞ (the phase never reaches −180°)" if value == float("inf") else f"{value:.1f} dB"
+
+
+def _as_json(t, defaults) -> dict:
+    def margins(m):
+        return {
+            "crossover_rad_s": m.crossover_rad_s,
+            "phase_margin_deg": m.phase_deg,
+            "gain_margin_db": None if m.gain_db == float("inf") else m.gain_db,
+            "rejection_rad_s": m.rejection_rad_s,
+        }
+
+    return {
+        "axis": t.axis,
+        "params": t.params,
+        "defaults": {k: defaults[k] for k in t.params},
+        "rate_loop": margins(t.rate_loop),
+        "whole_loop": margins(t.attitude_loop),
+        "step_deg": t.step_deg,
+        "rise_s": t.rise_s,
+        "overshoot_pct": t.overshoot_pct,
+        "notes": list(t.notes),
+    }

@@ -1,0 +1,102 @@
+"""Attitude steps flown in FBWA: the emulated ArduPlane's laws (agent.fbwa) with given
+parameters on a JSBSim aircraft, the pilot's stick stepped, the response measured as a
+flight-test engineer reads it (rise time 10–90 %, overshoot). What `sysid tune`'s predictions
+are checked against (tests/sim/test_tune.py)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from agent.sim.ardupilot import (
+    FBWA,
+    OUTPUTS,
+    RC_HALF_RANGE,
+    EmulatedArduPlane,
+    Params,
+    normalised_to_pwm,
+    setup,
+)
+from agent.sim.plant import Plant
+
+TICK_S = 0.01  # the emulated autopilot's tick
+SETTLE_S = 2.0  # flown hands off in FBWA before the step
+# The stick's full deflection asks for ROLL_LIMIT_DEG of bank and PTCH_LIM_MAX_DEG of pitch.
+STICK_CHANNEL = {"roll": (1, "ROLL_LIMIT_DEG", "phi"), "pitch": (2, "PTCH_LIM_MAX_DEG", "theta")}
+
+
+@dataclass(frozen=True)
+class Step:
+    """A step's response: the angle's change (deg, from the step's start) every tick."""
+
+    axis: str
+    demanded_deg: float
+    angle_deg: np.ndarray
+
+    @property
+    def final_deg(self) -> float:
+        """The mean of the last half second."""
+        return float(self.angle_deg[-round(0.5 / TICK_S) :].mean())
+
+    @property
+    def rise_s(self) -> float:
+        """10–90 % of the final value."""
+        a, final = self.angle_deg, self.final_deg
+        return float((np.argmax(a >= 0.9 * final) - np.argmax(a >= 0.1 * final)) * TICK_S)
+
+    @property
+    def overshoot_pct(self) -> float:
+        return float(max(0.0, (self.angle_deg.max() - self.final_deg) / self.final_deg * 100))
+
+
+def flown_step(
+    aircraft: str,
+    airspeed_kts: float,
+    altitude_ft: float,
+    params: Mapping[str, float],
+    axis: str,
+    step_deg: float,
+    seconds: float = 8.0,
+    **plant,
+) -> Step:
+    """Trim `aircraft`, fly it in FBWA with `params` (over the pilot's setup,
+    agent.sim.ardupilot.setup) for SETTLE_S, then step the stick to ask for `step_deg` more
+    bank or pitch and record `seconds`."""
+    sim = Plant(
+        aircraft,
+        airspeed_kts=airspeed_kts,
+        altitude_ft=altitude_ft,
+        linearise=False,
+        **plant,
+    )
+    state = sim.state()
+    rc = [1500] * 18
+    for ch, name in OUTPUTS.items():
+        rc[ch - 1] = normalised_to_pwm(ch, sim.trim[name])
+    offset: dict[int, int] = {}
+
+    def pilot(_t: float) -> list[int]:
+        return [rc[i] + offset.get(i + 1, 0) for i in range(18)]
+
+    ap = EmulatedArduPlane(
+        Params(fbwa=setup(state) | dict(params)), pilot, dt=TICK_S, trim=sim.trim
+    )
+    ap.set_mode(FBWA)
+    channel, limit, angle = STICK_CHANNEL[axis]
+    per_tick = round(TICK_S / sim.dt)
+    trace = []
+    start = None
+    for k in range(round((SETTLE_S + seconds) / TICK_S)):
+        t = k * TICK_S
+        if k == round(SETTLE_S / TICK_S):
+            offset[channel] = round(RC_HALF_RANGE * step_deg / ap.fbwa.params[limit])
+            start = np.degrees(state[angle])
+        sim.set_normalised(ap.tick(t, state), per_tick)
+        for _ in range(per_tick):
+            sim.step()
+        state = sim.state()
+        if start is not None:
+            trace.append(np.degrees(state[angle]) - start)
+    return Step(axis, step_deg, np.asarray(trace))

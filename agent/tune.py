@@ -1,0 +1,575 @@
+"""ArduPlane's roll and pitch gains designed from an identified model (`sysid tune`).
+
+The controller is ArduPlane's own FBWA law (agent.fbwa: an angle loop through TCONST
+around a rate loop of feed-forward, P and I, speed-scaled), so what is designed are its
+parameters, by classical loop shaping on the identified plant with its actuator:
+
+- the plant from ArduPlane's notional surface output (±45°) to the body rate and the angle:
+  the model's continuous A, B with the surface it moves through the linkage (measured surface
+  degrees per notional degree, from the servo mapping) and the rudder's KFF_RDDRMIX share of the
+  aileron; the actuator a first-order servo lag and a pure delay (the servo's dead time, the
+  loop's 50 Hz sample and hold);
+- FF: the demanded rate is flown by the feed-forward alone in steady rolling (pitching): the
+  inverse of the model's steady rate per notional degree with the attitude's gravity terms left
+  out (the roll rate of a held aileron, not the spiral's). ArduPlane's AUTOTUNE measures the
+  same ratio from stick steps (peak surface over peak rate, AP_AutoTune.cpp); PX4's
+  fixed-wing autotune takes the inverse DC gain of its identified rate model
+  (fw_autotune_attitude_control);
+- P: the largest that leaves the rate loop, broken at the actuator, with its I, PHASE_TARGET
+  of phase margin and GAIN_MARGIN_DB of gain margin: rate damping and disturbance rejection as
+  far as the servo's lag and the delays allow (where ArduPlane's AUTOTUNE raises P until its slew
+  detector sees an oscillation, which a slow servo hides: ArduPilot issue 17900);
+- I: its zero INTEGRATOR_SEPARATION below the rate loop's crossover (or lower, within
+  ArduPlane's range), so it trims out a steady moment without eating the phase margin;
+- TCONST: the target (ArduPlane's 0.5 s unless given), lengthened until 1/TCONST sits
+  BANDWIDTH_SEPARATION below the bandwidth of the rate the aircraft flies for a demanded one
+  (feed-forward and feedback together) and the whole loop, broken at the actuator, keeps the
+  margins MIL-F-9490D asks of a flight-control loop (6 dB, 45°).
+
+Predicted: each loop's margins and crossover, the attitude's disturbance-rejection bandwidth
+(where the sensitivity |1/(1 + L)| reaches −3 dB) and a step's rise time and overshoot, from the
+model flown with agent.fbwa's laws at 50 Hz (a ±20° bank step, a ±5° pitch step).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.interpolate
+import scipy.linalg
+import scipy.signal
+
+from agent.fbwa import DEFAULTS, LOOP_HZ, TRAVEL_DEG, Fbwa, Sensed
+
+# Loop-shaping targets: the rate loop's phase margin (the attitude loop closed around it then
+# keeps 45°), every loop's gain margin, and the whole loop's phase margin (MIL-F-9490D).
+PHASE_TARGET = 60.0
+GAIN_MARGIN_DB = 6.0
+PHASE_MARGIN = 45.0
+# The integrator's zero this many times below the rate loop's crossover.
+INTEGRATOR_SEPARATION = 5.0
+# The attitude loop's crossover at least this many times below the rate loop's.
+BANDWIDTH_SEPARATION = 3.0
+# ArduPlane's own bounds on the rate gains it takes (its parameter ranges): a design outside
+# them is refused, never clipped into a different design.
+P_RANGE, I_RANGE, FF_RANGE = (0.001, 4.0), (0.0, 4.0), (0.01, 4.0)
+TCONST_RANGE = (0.2, 2.0)
+# The step each axis is predicted and checked for (the issue's flight test): degrees.
+STEPS = {"roll": 20.0, "pitch": 5.0}
+FREQUENCIES = np.logspace(-2, 3, 4000)  # rad/s
+
+
+class TuneError(ValueError):
+    """The model cannot be tuned for (a missing channel, an unstable loop): why, in words."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Actuator:
+    """Notional ArduPlane degrees to measured surface degrees: `link` per degree, through a
+    first-order lag `lag_s` and a dead time `delay_s`."""
+
+    link: float
+    lag_s: float = 0.05
+    delay_s: float = 0.02
+
+    def response(self, w: np.ndarray) -> np.ndarray:
+        s = 1j * w
+        return self.link * np.exp(-s * self.delay_s) / (1 + s * self.lag_s)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Plant:
+    """One axis: ẋ = A x + B u (u: the measured surfaces the notional output moves, as a
+    column), the rate and angle as rows of C (rad/s, rad)."""
+
+    A: np.ndarray
+    B: np.ndarray  # (n,)
+    rate: np.ndarray  # (n,)
+    angle: np.ndarray  # (n,)
+    steady: np.ndarray  # (n,) the states of the steady-rate response (attitude left out)
+
+    def response(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(rate, angle) in deg/s and deg per measured surface unit at `w`."""
+        n = self.A.shape[0]
+        X = np.array([np.linalg.solve(1j * wk * np.eye(n) - self.A, self.B) for wk in w])
+        deg = 180.0 / np.pi
+        return deg * (X @ self.rate), deg * (X @ self.angle)
+
+    def steady_rate(self) -> float:
+        """Steady rate (deg/s) per unit of input with the attitude's gravity terms left out."""
+        keep = self.steady
+        A, B = self.A[np.ix_(keep, keep)], self.B[keep]
+        try:
+            x = -np.linalg.solve(A, B)
+        except np.linalg.LinAlgError:
+            raise TuneError("the rate has no steady value (a singular model)") from None
+        return float(np.degrees(self.rate[keep] @ x))
+
+
+@dataclass(frozen=True, kw_only=True)
+class Margins:
+    gain_db: float  # inf: the phase never reaches −180°
+    phase_deg: float
+    crossover_rad_s: float
+    rejection_rad_s: float | None = None  # |1/(1 + L)| reaches −3 dB
+    delay_margin_s: float | None = None  # more delay the closed loop stays stable with
+
+
+@dataclass(frozen=True, kw_only=True)
+class AxisTune:
+    """One axis's designed gains (ArduPlane's parameter names), what they replace, and what
+    they predict."""
+
+    axis: str
+    params: dict[str, float]
+    rate_loop: Margins
+    attitude_loop: Margins
+    step_deg: float
+    rise_s: float
+    overshoot_pct: float
+    notes: tuple[str, ...] = ()
+
+
+def margins(L: np.ndarray, w: np.ndarray = FREQUENCIES) -> Margins:
+    """Gain and phase margins of a loop transfer L(jw): the phase margin at the highest gain
+    crossover, the gain margin the smallest at any −180° crossing (negative: unstable)."""
+    mag = np.abs(L)
+    phase = np.degrees(np.unwrap(np.angle(L)))
+    cross = np.flatnonzero((mag[:-1] >= 1) & (mag[1:] < 1))
+    if cross.size == 0:
+        raise TuneError("the loop never crosses unity gain: no crossover to shape")
+    k = cross[-1]
+    wc = float(np.interp(0.0, -np.log([mag[k], mag[k + 1]]), w[k : k + 2]))
+    phase_c = float(np.interp(wc, w[k : k + 2], phase[k : k + 2]))
+    pm = (180.0 + phase_c + 180.0) % 360.0 - 180.0  # 180° + the phase, within [−180°, 180°)
+    wrapped = (phase + 180.0) % 360.0 - 180.0
+    flips = np.flatnonzero(np.abs(np.diff(wrapped)) > 180.0)  # the phase passes ±180°
+    gm = min((-20 * np.log10(mag[j]) for j in flips if mag[j] > 0), default=np.inf)
+    return Margins(gain_db=float(gm), phase_deg=float(pm), crossover_rad_s=wc)
+
+
+def _bandwidth(T: np.ndarray, w: np.ndarray = FREQUENCIES) -> float:
+    """The highest frequency (rad/s) where the flown rate is within 3 dB of the demanded one:
+    |T| ≥ −3 dB. (Its low-frequency end is the bank's and the spiral's, not the loop's.)"""
+    within = np.flatnonzero(np.abs(T) >= 10 ** (-3 / 20))
+    if within.size == 0:
+        raise TuneError("the flown rate never comes within 3 dB of the demanded one")
+    return float(w[within[-1]])
+
+
+def _rejection(L: np.ndarray, w: np.ndarray = FREQUENCIES) -> float | None:
+    sensitivity = np.abs(1.0 / (1.0 + L))
+    above = np.flatnonzero(sensitivity >= 10 ** (-3 / 20))
+    return float(w[above[0]]) if above.size else None
+
+
+def design_axis(
+    axis: str,
+    plant: Plant,
+    actuator: Actuator,
+    *,
+    eas: float,
+    eas2tas: float = 1.0,
+    scaling_speed: float,
+    tconst: float | None = None,
+) -> AxisTune:
+    """Design one axis's FF, P, I and TCONST (module docstring) at equivalent airspeed `eas`."""
+    prefix, tc_name = (
+        ("RLL_RATE", "RLL2SRV_TCONST")
+        if axis == "roll"
+        else (
+            "PTCH_RATE",
+            "PTCH2SRV_TCONST",
+        )
+    )
+    S = float(np.clip(scaling_speed / eas, 0.1, 10.0))
+    w = FREQUENCIES
+    rate, angle = plant.response(w)
+    act = actuator.response(w)
+    Gr, Ga = rate * act, angle * act
+    k_ss = plant.steady_rate() * actuator.link
+    if not np.isfinite(k_ss) or k_ss <= 0:
+        raise TuneError(
+            f"{axis}: the model's steady rate per notional degree is {k_ss:.3g} (deg/s): the "
+            "surface's linkage sign or the model is wrong for this axis"
+        )
+    ff = eas2tas / (S * k_ss)
+    notes: list[str] = []
+    dt = 1.0 / LOOP_HZ
+    hold = np.exp(-1j * w * dt * 1.5)  # a sample's wait and the hold's half
+    fltt = DEFAULTS[f"{prefix}_FLTT"]
+    target = 1.0 / (1.0 + 1j * w / (2 * np.pi * fltt))
+
+    def rate_loop(kp: float, ki: float) -> np.ndarray:
+        return S * S * (kp + ki / (1j * w)) * Gr * hold
+
+    def integral(kp: float) -> float:
+        """I for this P: its zero INTEGRATOR_SEPARATION below the P loop's crossover."""
+        loop = rate_loop(kp, 0.0)
+        if np.max(np.abs(loop)) < 1.0:
+            return 0.0
+        return min(kp * margins(loop).crossover_rad_s / INTEGRATOR_SEPARATION, I_RANGE[1])
+
+    def meets(kp: float) -> bool:
+        return _meets(rate_loop(kp, integral(kp)), PHASE_TARGET)
+
+    # P: the largest whose loop, with its I, keeps PHASE_TARGET and GAIN_MARGIN_DB (bisection
+    # on log P).
+    low, high = np.log(P_RANGE[0]), np.log(P_RANGE[1])
+    if not meets(np.exp(low)):
+        raise TuneError(f"{axis}: even P = {P_RANGE[0]} leaves the rate loop below its margins")
+    if meets(np.exp(high)):
+        low = high
+        notes.append(f"P at ArduPlane's top of range {P_RANGE[1]}")
+    for _ in range(40):
+        mid = 0.5 * (low + high)
+        if meets(np.exp(mid)):
+            low = mid
+        else:
+            high = mid
+    kp = float(np.exp(low))
+    ki = integral(kp)
+    if ki >= I_RANGE[1]:  # a lower integrator zero still trims; ArduPlane takes no more
+        notes.append(f"I at ArduPlane's top of range {I_RANGE[1]}: its zero lower still")
+    rate_margins = margins(rate_loop(kp, ki))
+    # The rate the aircraft flies for a demanded one: the feed-forward's open path and the
+    # feedback's, closed; its bandwidth (−3 dB) is what the attitude loop rides on.
+    pid = S * S * (kp + ki / (1j * w))
+    flown = (ff * S / eas2tas + pid) * target * Gr * hold / (1 + pid * Gr * hold)
+    rate_bandwidth = _bandwidth(flown)
+    # TCONST: the target, lengthened for bandwidth separation and the whole loop's margins.
+    tau = DEFAULTS[tc_name] if tconst is None else float(tconst)
+    tau = max(tau, BANDWIDTH_SEPARATION / rate_bandwidth)
+
+    def whole(tc: float) -> np.ndarray:
+        """The loop broken at the actuator: u = (FF + PID) F_T r_d + PID (F_T r_d − ω)'s
+        feedback, r_d = −angle / TCONST."""
+        pid = S * S * (kp + ki / (1j * w))
+        forward = ff * S / eas2tas
+        return ((forward + pid) * target * Ga / tc + pid * Gr) * hold
+
+    def robust(tc: float) -> Margins | None:
+        """The whole loop's margins (closed-loop eigenvalues, `loop_margins`), None when
+        it misses MIL-F-9490D's."""
+        law = Law(tc=tc, ff=ff * S / eas2tas, kp=S * S * kp, ki=S * S * ki, fltt=fltt)
+        m = loop_margins(plant, actuator, law, whole(tc))
+        ok = m.gain_db >= GAIN_MARGIN_DB and m.phase_deg >= PHASE_MARGIN
+        return m if ok else None
+
+    attitude = robust(tau)
+    while attitude is None and tau < TCONST_RANGE[1]:
+        tau *= 1.1
+        attitude = robust(tau)
+    if attitude is None:
+        raise TuneError(f"{axis}: no TCONST up to {TCONST_RANGE[1]} s keeps the loop's margins")
+    if tconst is not None and tau > tconst * 1.0001:
+        notes.append(
+            f"TCONST {tau:.2f} s, not {tconst:g}: the rate the aircraft flies (bandwidth "
+            f"{rate_bandwidth:.1f} rad/s) cannot carry a faster attitude loop"
+        )
+    params = {
+        tc_name: round(tau, 3),
+        f"{prefix}_FF": round(ff, 4),
+        f"{prefix}_P": round(kp, 4),
+        f"{prefix}_I": round(ki, 4),
+        f"{prefix}_D": 0.0,
+    }
+    for name, (lo, hi) in (
+        (f"{prefix}_FF", FF_RANGE),
+        (f"{prefix}_P", P_RANGE),
+        (f"{prefix}_I", I_RANGE),
+    ):
+        if not lo <= params[name] <= hi:
+            raise TuneError(f"{axis}: {name} {params[name]:.4g} outside ArduPlane's {lo}–{hi}")
+    step = STEPS[axis]
+    rise, overshoot = predicted_step(axis, plant, actuator, params, eas, eas2tas, scaling_speed)
+    return AxisTune(
+        axis=axis,
+        params=params,
+        rate_loop=rate_margins,
+        attitude_loop=attitude,
+        step_deg=step,
+        rise_s=rise,
+        overshoot_pct=overshoot,
+        notes=tuple(notes),
+    )
+
+
+@dataclass(frozen=True)
+class Law:
+    """FBWA's law about the trim, linear (its clipping aside), in degrees: u = ff·r_f +
+    kp (r_f − ω) + I, İ = ki (r_f − ω), ṙ_f = 2π fltt (r_d − r_f), r_d = −angle / tc (the
+    speed scaler folded into ff, kp, ki)."""
+
+    tc: float
+    ff: float
+    kp: float
+    ki: float
+    fltt: float
+
+
+def _pade(delay: float, order: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """A delay as a state-space Padé approximant (A, B, C, D)."""
+    if delay <= 0:
+        return np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), 1.0
+    num, den = scipy.interpolate.pade(
+        [(-delay) ** k / math.factorial(k) for k in range(2 * order + 1)], order
+    )
+    A, B, C, D = scipy.signal.tf2ss(num.coeffs, den.coeffs)
+    return A, B, C, float(np.squeeze(D))
+
+
+def closed_loop(
+    plant: Plant, actuator: Actuator, law: Law, gain: float = 1.0, extra_delay: float = 0.0
+) -> np.ndarray:
+    """The closed loop's state matrix: plant, servo lag, the dead time and the 50 Hz loop's
+    wait and hold (1.5 samples, Padé), the law's target filter and integrator; the loop's gain
+    times `gain` and `extra_delay` s more delay at the actuator (its margins)."""
+    deg = 180.0 / np.pi
+    n = plant.A.shape[0]
+    Ap, Bp, Cp, Dp = _pade(actuator.delay_s + 1.5 / LOOP_HZ + extra_delay)
+    d = Ap.shape[0]
+    # states: plant x (n), surface δ (1), delay z (d), r_f (1), I (1)
+    size = n + 1 + d + 2
+    M = np.zeros((size, size))
+    ix, iδ, iz, ir, iI = slice(0, n), n, slice(n + 1, n + 1 + d), n + 1 + d, n + 2 + d
+    rate = deg * plant.rate
+    angle = deg * plant.angle
+    # u = ff r_f + kp (r_f − rate·x) + I  (a row over the states)
+    u = np.zeros(size)
+    u[ir] = law.ff + law.kp
+    u[ix] = -law.kp * rate
+    u[iI] = 1.0
+    u *= gain
+    M[ix, ix] = plant.A
+    M[ix, iδ] = plant.B
+    # the delay's input is u; its output y_d = Cp z + Dp u drives the servo
+    if d:
+        M[iz, :] += np.outer(Bp[:, 0], u)
+        M[iz, iz] += Ap
+    delayed = Dp * u
+    if d:
+        delayed = delayed.copy()
+        delayed[iz] += Cp[0]
+    lag = max(actuator.lag_s, 1e-3)
+    M[iδ, :] += actuator.link * delayed / lag
+    M[iδ, iδ] -= 1.0 / lag
+    wt = 2 * np.pi * law.fltt
+    M[ir, ix] = -wt * angle / law.tc
+    M[ir, ir] = -wt
+    M[iI, ir] = law.ki
+    M[iI, ix] = -law.ki * rate
+    return M
+
+
+def _untouched(plant: Plant) -> np.ndarray:
+    """The plant's eigenvalues whose modes the axis's surface does not move (the other axis's
+    in a decoupled model, an engine's): the loop cannot move them either, so its stability is
+    judged without them."""
+    values, vectors = np.linalg.eig(plant.A)
+    try:
+        left = np.linalg.inv(vectors)
+    except np.linalg.LinAlgError:
+        return np.zeros(0, dtype=complex)
+    reach = np.abs(left @ plant.B) * np.linalg.norm(vectors, axis=0)
+    return values[reach < 1e-9 * max(np.linalg.norm(plant.B), 1e-300)]
+
+
+def _stable(M: np.ndarray, untouched: np.ndarray | None = None) -> bool:
+    """Every eigenvalue of M in the left half plane, but those of `untouched` modes."""
+    if not np.all(np.isfinite(M)):
+        return False
+    values = list(np.linalg.eigvals(M))
+    for fixed in () if untouched is None else untouched:
+        if not values:
+            break
+        k = int(np.argmin([abs(v - fixed) for v in values]))
+        if abs(values[k] - fixed) <= 1e-6 * (1 + abs(fixed)):
+            values.pop(k)
+    return bool(max((v.real for v in values), default=-1.0) < 0)
+
+
+def loop_margins(plant: Plant, actuator: Actuator, law: Law, L: np.ndarray) -> Margins:
+    """The whole loop's margins from the closed loop's eigenvalues: the gain factor either way
+    (dB, the smaller) and the extra delay it takes before it goes unstable, the delay given as
+    the phase it is at the loop's crossover (the highest of L's, FREQUENCIES); closed-loop
+    eigenvalues rather than a Bode reading, because the loop crosses unity more than once
+    and its plant can be unstable (a divergent spiral), where a Bode plot's margins mislead."""
+    fixed = _untouched(plant)
+    if not _stable(closed_loop(plant, actuator, law), fixed):
+        return Margins(gain_db=-np.inf, phase_deg=-np.inf, crossover_rad_s=np.nan)
+    gains = []
+    for direction in (1.0, -1.0):
+        low, high = 0.0, 40.0  # dB
+        if _stable(closed_loop(plant, actuator, law, 10 ** (direction * high / 20)), fixed):
+            gains.append(high)
+            continue
+        for _ in range(30):
+            mid = 0.5 * (low + high)
+            if _stable(closed_loop(plant, actuator, law, 10 ** (direction * mid / 20)), fixed):
+                low = mid
+            else:
+                high = mid
+        gains.append(low)
+    mag = np.abs(L)
+    crossings = np.flatnonzero((mag[:-1] >= 1) & (mag[1:] < 1))
+    wc = float(FREQUENCIES[crossings[-1]]) if crossings.size else np.nan
+    low, high = 0.0, 2.0  # s
+    if _stable(closed_loop(plant, actuator, law, extra_delay=high), fixed):
+        low = high
+    else:
+        for _ in range(30):
+            mid = 0.5 * (low + high)
+            if _stable(closed_loop(plant, actuator, law, extra_delay=mid), fixed):
+                low = mid
+            else:
+                high = mid
+    phase = float(np.degrees(low * wc)) if np.isfinite(wc) else np.inf
+    return Margins(
+        gain_db=float(min(gains)),
+        phase_deg=phase,
+        crossover_rad_s=wc,
+        rejection_rad_s=_rejection(L),
+        delay_margin_s=float(low),
+    )
+
+
+def _meets(L: np.ndarray, phase: float) -> bool:
+    """L keeps `phase` of phase margin and GAIN_MARGIN_DB (a loop below unity gain everywhere
+    does: it never crosses)."""
+    if np.max(np.abs(L)) < 1.0:
+        return True
+    try:
+        m = margins(L)
+    except TuneError:
+        return False
+    return m.phase_deg >= phase and m.gain_db >= GAIN_MARGIN_DB
+
+
+def predicted_step(
+    axis: str,
+    plant: Plant,
+    actuator: Actuator,
+    params: Mapping[str, float],
+    eas: float,
+    eas2tas: float,
+    scaling_speed: float,
+    seconds: float = 6.0,
+) -> tuple[float, float]:
+    """(10–90 % rise time s, overshoot %) of STEPS[axis] flown by agent.fbwa's laws with
+    these parameters on the linear plant and actuator, 1 kHz inside the 50 Hz loop."""
+    fbwa = Fbwa({**dict(params), "SCALING_SPEED": scaling_speed})
+    fbwa.scaler = float(np.clip(scaling_speed / eas, *(_scaler_limits(fbwa.params, scaling_speed))))
+    h = 1e-3
+    per_loop = round(1.0 / (LOOP_HZ * h))
+    n = plant.A.shape[0]
+    Ad = scipy.linalg.expm(plant.A * h)
+    Bd = (
+        np.linalg.solve(plant.A, (Ad - np.eye(n)) @ plant.B)
+        if _invertible(plant.A)
+        else (h * plant.B)
+    )
+    x = np.zeros(n)
+    surface = 0.0
+    queue = [0.0] * max(1, round(actuator.delay_s / h))
+    step = STEPS[axis]
+    angles = []
+    command = 0.0
+    for k in range(round(seconds / h)):
+        if k % per_loop == 0:
+            rate = float(plant.rate @ x)
+            ang = float(plant.angle @ x)
+            if axis == "roll":
+                s = Sensed(phi=ang, theta=0.0, p=rate, q=0.0, r=0.0, eas=eas, eas2tas=eas2tas)
+                out = fbwa.step(s, roll_deg=step, pitch_deg=0.0)
+                command = out.aileron
+            else:
+                s = Sensed(phi=0.0, theta=ang, p=0.0, q=rate, r=0.0, eas=eas, eas2tas=eas2tas)
+                out = fbwa.step(s, roll_deg=0.0, pitch_deg=step)
+                command = out.elevator
+        queue.append(command)
+        delayed = queue.pop(0)
+        surface += (
+            h / actuator.lag_s * (delayed - surface) if actuator.lag_s > 0 else (delayed - surface)
+        )
+        x = Ad @ x + Bd * (actuator.link * surface)
+        angles.append(np.degrees(float(plant.angle @ x)))
+    angles = np.asarray(angles)
+    t = np.arange(angles.size) * h
+    final = angles[-round(0.5 / h) :].mean()
+    if not np.isfinite(final) or abs(final) < 0.5 * step:
+        raise TuneError(f"{axis}: the predicted step does not settle near {step:g}°")
+    rise = float(t[np.argmax(angles >= 0.9 * final)] - t[np.argmax(angles >= 0.1 * final)])
+    overshoot = float(max(0.0, (angles.max() - final) / final * 100.0))
+    return rise, overshoot
+
+
+def _scaler_limits(params: Mapping[str, float], scaling_speed: float) -> tuple[float, float]:
+    as_min = max(params["AIRSPEED_MIN"], 5.0)
+    low = min(0.5, scaling_speed / (2 * params["AIRSPEED_MAX"]))
+    return low, max(2.0, scaling_speed / (0.7 * as_min))
+
+
+def _invertible(A: np.ndarray) -> bool:
+    return bool(np.linalg.cond(A) < 1e12)
+
+
+def axis_plant(
+    model: Mapping[str, Sequence],
+    inputs: Sequence[str],
+    outputs: Sequence[str],
+    *,
+    surface: str,
+    rate: str,
+    angle: str,
+    axis_outputs: Sequence[str],
+    slow: Sequence[str] = (),
+    mix: Mapping[str, float] | None = None,
+) -> Plant:
+    """The plant of one axis from a continuous model ({"A", "B", "C"} in output coordinates:
+    a state per output, then any engine lags): the states of `axis_outputs` (the axis's own:
+    the other axis and the engine, at fixed throttle, left out, as the whole-aircraft method
+    decouples them), `surface` driven, plus each input of `mix` at that share of it (measured
+    units per unit of the surface: the rudder's KFF_RDDRMIX share of the aileron, through both
+    linkages); `slow`: the states left out of the steady rate (the attitude angle; the
+    airspeed, whose change belongs to the phugoid: the pitch rate of the short period, the
+    roll rate of the roll mode with the sideslip and yaw settled)."""
+    missing = [c for c in (surface, rate, angle) if c not in (*inputs, *outputs)]
+    missing += [c for c in axis_outputs if c not in outputs and c not in missing]
+    if missing:
+        raise TuneError(f"the model has no {', '.join(missing)}: it cannot tune this axis")
+    A, B, C = (np.asarray(model[k], dtype=float) for k in ("A", "B", "C"))
+    b = B[:, list(inputs).index(surface)].copy()
+    for other, share in (mix or {}).items():
+        if other in inputs:
+            b = b + share * B[:, list(inputs).index(other)]
+    state = {name: int(np.argmax(np.abs(C[list(outputs).index(name)]))) for name in outputs}
+    keep = [state[name] for name in axis_outputs]
+    rows = np.eye(len(keep))
+    names = list(axis_outputs)
+    return Plant(
+        A=A[np.ix_(keep, keep)],
+        B=b[keep],
+        rate=rows[names.index(rate)],
+        angle=rows[names.index(angle)],
+        steady=np.array([i for i, name in enumerate(names) if name not in slow]),
+    )
+
+
+def notional_link(direction: int, us_per_unit: float, servo_half_range_us: float) -> float:
+    """Measured surface units per ArduPlane notional degree: ±45° of output is
+    ±`servo_half_range_us` (SERVOn_MIN/MAX about TRIM: 400 µs at ArduPilot's defaults, the
+    installation's [excitation.surfaces] min_us/max_us where set up to use the servo's whole
+    travel), and the surface moves a unit per `direction` × `us_per_unit` µs."""
+    return servo_half_range_us / TRAVEL_DEG / (direction * us_per_unit)
+
+
+def param_file(tunes: Sequence[AxisTune], header: Sequence[str] = ()) -> str:
+    """ArduPilot's .param format: NAME,VALUE per line, comments after #."""
+    lines = [f"# {line}" for line in header]
+    for tune in tunes:
+        lines += [f"{name},{value:g}" for name, value in tune.params.items()]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,230 @@
+"""`sysid tune`'s design (agent.tune) on known linear aircraft, and the command.
+
+Bad input tried: a linkage whose sign turns the aileron against the roll (refused by name), a
+model without the axis's surface (that axis refused, the other tuned), an output file that is
+the model itself, an output that is not .param, a --linkage without a gain, a servo lag of
+5 s, a model file that is not JSON."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from agent.cli import main
+from agent.fbwa import DEFAULTS
+from agent.tune import (
+    GAIN_MARGIN_DB,
+    PHASE_MARGIN,
+    Actuator,
+    TuneError,
+    axis_plant,
+    design_axis,
+    notional_link,
+    param_file,
+)
+
+# A roll axis: ṗ = L_p p + L_δa δa, φ̇ = p (δa in measured degrees, L_δa per degree).
+OUTPUTS = ("p", "phi")
+INPUTS = ("aileron",)
+
+
+def roll_model(L_p: float = -5.0, L_da: float = 0.3):
+    return {"A": [[L_p, 0.0], [1.0, 0.0]], "B": [[L_da], [0.0]], "C": np.eye(2)}
+
+
+def roll_plant(**kw):
+    return axis_plant(
+        roll_model(**kw),
+        INPUTS,
+        OUTPUTS,
+        surface="aileron",
+        rate="p",
+        angle="phi",
+        axis_outputs=OUTPUTS,
+        slow=("phi",),
+    )
+
+
+def design(lag_s=0.05, link=0.5, **kw):
+    return design_axis(
+        "roll", roll_plant(**kw), Actuator(link=link, lag_s=lag_s), eas=20.0, scaling_speed=20.0
+    )
+
+
+def test_the_feed_forward_flies_the_demanded_rate_and_the_loops_keep_their_margins():
+    tune = design()
+    # Steady roll rate per notional degree: L_δa / |L_p| · link = 0.3/5 rad/s per degree …
+    per_degree = np.degrees(0.3 / 5.0) * 0.5
+    assert tune.params["RLL_RATE_FF"] == pytest.approx(1 / per_degree, rel=1e-3)
+    assert tune.rate_loop.phase_deg >= PHASE_MARGIN
+    assert tune.attitude_loop.phase_deg >= PHASE_MARGIN
+    assert tune.attitude_loop.gain_db >= GAIN_MARGIN_DB
+    assert tune.attitude_loop.rejection_rad_s > 0
+    assert 0 < tune.overshoot_pct < 10
+    assert 0.2 < tune.rise_s < 3.0
+
+
+def test_a_slower_servo_gets_less_rate_gain_and_a_lower_crossover():
+    # ArduPlane's AUTOTUNE limit-cycles on slow servos (ArduPilot issue 17900): the design sees
+    # the servo's lag in its margins.
+    fast, slow = design(lag_s=0.02), design(lag_s=0.15)
+    assert slow.params["RLL_RATE_P"] < fast.params["RLL_RATE_P"]
+    assert slow.rate_loop.crossover_rad_s < fast.rate_loop.crossover_rad_s
+    assert slow.attitude_loop.phase_deg >= PHASE_MARGIN
+
+
+def test_a_demanded_time_constant_the_rate_loop_cannot_carry_is_lengthened_and_said():
+    tune = design_axis(
+        "roll",
+        roll_plant(L_p=-1.0),
+        Actuator(link=0.5, lag_s=0.1),
+        eas=20.0,
+        scaling_speed=20.0,
+        tconst=0.1,
+    )
+    assert tune.params["RLL2SRV_TCONST"] > 0.1
+    assert any("TCONST" in note and "not 0.1" in note for note in tune.notes)
+
+
+def test_a_reversed_linkage_or_a_missing_surface_is_refused_by_name():
+    with pytest.raises(TuneError, match="linkage sign"):
+        design(link=-0.5)
+    with pytest.raises(TuneError, match="no elevator"):
+        axis_plant(
+            roll_model(),
+            INPUTS,
+            OUTPUTS,
+            surface="elevator",
+            rate="p",
+            angle="phi",
+            axis_outputs=OUTPUTS,
+            slow=("phi",),
+        )
+
+
+def test_the_param_file_is_arduplanes_name_comma_value():
+    text = param_file([design()], ["a header"])
+    lines = [line for line in text.splitlines() if not line.startswith("#")]
+    parsed = dict(line.split(",") for line in lines)
+    assert set(parsed) == {
+        "RLL2SRV_TCONST",
+        "RLL_RATE_FF",
+        "RLL_RATE_P",
+        "RLL_RATE_I",
+        "RLL_RATE_D",
+    }
+    assert all(name in DEFAULTS for name in parsed)
+    assert float(parsed["RLL_RATE_D"]) == 0.0
+
+
+def test_notional_degrees_reach_the_surface_through_the_installation():
+    # ±45° of ArduPlane output is ±500 µs; 20 µs per degree, the direction reversed.
+    assert notional_link(-1, 20.0, 500.0) == pytest.approx(-500 / 45 / 20)
+
+
+def _model_file(tmp_path):
+    """A `sysid identify --json`-shaped model of both axes at 25 m/s: V, α, q, θ, β, p, r, φ."""
+    A = np.zeros((8, 8))
+    A[0, 0], A[0, 3] = -0.05, -9.81  # V̇: drag, gravity
+    A[1, 1], A[1, 2] = -2.0, 1.0  # α̇ = q − Z_α α
+    A[2, 1], A[2, 2] = -20.0, -3.0  # q̇: α stiffness, damping
+    A[3, 2] = 1.0  # θ̇ = q
+    A[4, 4], A[4, 6] = -0.5, -1.0  # β̇ = −Y_β β − r
+    A[5, 4], A[5, 5] = -2.0, -5.0  # ṗ: dihedral, damping
+    A[6, 4], A[6, 6] = 4.0, -0.5  # ṙ: weathercock, damping
+    A[7, 5] = 1.0  # φ̇ = p
+    B = np.zeros((8, 2))
+    B[5, 0] = -0.3  # aileron: measured positive rolls left (eq. 3.1, trailing edge down)
+    B[2, 1] = -0.4  # elevator: trailing edge down pitches down
+    outputs = ["Vt", "alpha", "q", "theta", "beta", "p", "r", "phi"]
+    doc = {
+        "dt": 0.02,
+        "order": 8,
+        "inputs": ["aileron", "elevator"],
+        "outputs": outputs,
+        "A": np.eye(8).tolist(),
+        "B": np.zeros((8, 2)).tolist(),
+        "C": np.eye(8).tolist(),
+        "D": np.zeros((8, 2)).tolist(),
+        "Ac": A.tolist(),
+        "Bc": B.tolist(),
+        "stable": True,
+        "tic": dict.fromkeys(outputs, 0.05),
+        "tic_avg": 0.05,
+        "modes": [],
+        "method": "aircraft",
+        "coordinates": "outputs",
+        "continuous": {
+            "A": A.tolist(),
+            "B": B.tolist(),
+            "C": np.eye(8).tolist(),
+            "D": np.zeros((8, 2)).tolist(),
+        },
+        "trim": [],
+        "preprocessing": {
+            "record_dt": 0.02,
+            "decimation": 1,
+            "band_hz": 3.0,
+            "held_inputs_shifted": False,
+            "smoothing_s": None,
+            "dropped_samples_per_end": 0,
+        },
+    }
+    path = tmp_path / "model.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def test_sysid_tune_prints_writes_a_param_file_and_one_json_object(tmp_path, capsys):
+    model = _model_file(tmp_path)
+    out = tmp_path / "gains.param"
+    code = main(["tune", str(model), "--scaling-speed", "25", "--out", str(out)])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    for says in ("roll:", "pitch:", "phase margin", "a 20° step", "a 5° step"):
+        assert says in text
+    written = dict(
+        line.split(",") for line in out.read_text().splitlines() if not line.startswith("#")
+    )
+    assert float(written["SCALING_SPEED"]) == 25.0
+    assert float(written["RLL_RATE_FF"]) > 0
+    assert float(written["PTCH_RATE_FF"]) > 0
+    code = main(["tune", str(model), "--scaling-speed", "25", "--json"])
+    document = json.loads(capsys.readouterr().out)  # exactly one object
+    assert code == 0
+    assert [a["axis"] for a in document["axes"]] == ["roll", "pitch"]
+    for axis in document["axes"]:
+        assert axis["whole_loop"]["phase_margin_deg"] >= PHASE_MARGIN
+        assert axis["defaults"]["RLL_RATE_FF" if axis["axis"] == "roll" else "PTCH_RATE_FF"]
+
+
+@pytest.mark.parametrize(
+    ("extra", "says"),
+    [
+        (["--out", "MODEL"], "the model being tuned"),
+        (["--out", "gains.txt"], "give a .param file"),
+        (["--linkage", "aileron"], "SURFACE=GAIN"),
+        (["--servo-lag", "5"], "seconds between 0 and 1"),
+    ],
+)
+def test_sysid_tune_refuses_bad_input_with_one_json_error(tmp_path, capsys, extra, says):
+    model = _model_file(tmp_path)
+    extra = [
+        str(model) if e == "MODEL" else str(tmp_path / e) if e.endswith(".txt") else e
+        for e in extra
+    ]
+    code = main(["tune", str(model), "--scaling-speed", "25", "--json", *extra])
+    out, err = capsys.readouterr()
+    assert code == 2
+    document = json.loads(out)
+    assert says in document["error"]["message"] or says in err
+    assert model.exists()
+
+
+def test_a_model_file_that_is_not_json_is_refused(tmp_path, capsys):
+    bad = tmp_path / "model.json"
+    bad.write_text("{not json")
+    assert main(["tune", str(bad)]) == 2
+    assert "not JSON" in capsys.readouterr().err
