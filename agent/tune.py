@@ -19,8 +19,9 @@ parameters, by classical loop shaping on the identified plant with its actuator:
   of phase margin and GAIN_MARGIN_DB of gain margin: rate damping and disturbance rejection as
   far as the servo's lag and the delays allow (where ArduPlane's AUTOTUNE raises P until its slew
   detector sees an oscillation, which a slow servo hides: ArduPilot issue 17900);
-- I: its zero INTEGRATOR_SEPARATION below the rate loop's crossover (or lower, within
-  ArduPlane's range), so it trims out a steady moment without eating the phase margin;
+- I: its zero INTEGRATOR_SEPARATION below the rate loop's crossover, or below the aircraft's
+  own rate bandwidth where that is higher (a weak surface's P loop hovers near unity gain),
+  within ArduPlane's range: it trims out a steady moment without eating the phase margin;
 - TCONST: the target (ArduPlane's 0.5 s unless given), lengthened until 1/TCONST sits
   BANDWIDTH_SEPARATION below the bandwidth of the rate the aircraft flies for a demanded one
   (feed-forward and feedback together) and the whole loop, broken at the actuator, keeps the
@@ -53,6 +54,9 @@ PHASE_MARGIN = 45.0
 INTEGRATOR_SEPARATION = 5.0
 # The attitude loop's crossover at least this many times below the rate loop's.
 BANDWIDTH_SEPARATION = 3.0
+# Where no TCONST keeps the whole loop's margins, P is multiplied by BACKOFF, at most
+# BACKOFFS times.
+BACKOFF, BACKOFFS = 0.8, 12
 # ArduPlane's own bounds on the rate gains it takes (its parameter ranges): a design outside
 # them is refused, never clipped into a different design.
 P_RANGE, I_RANGE, FF_RANGE = (0.001, 4.0), (0.0, 4.0), (0.01, 4.0)
@@ -197,6 +201,15 @@ def design_axis(
             "surface's linkage sign or the model is wrong for this axis"
         )
     ff = eas2tas / (S * k_ss)
+    if ff > FF_RANGE[1]:
+        # FF·S is what flies: a larger SCALING_SPEED takes the same surface with less FF.
+        needed = scaling_speed * ff / FF_RANGE[1] * 1.1
+        raise TuneError(
+            f"{axis}: {prefix}_FF {ff:.3g} is beyond ArduPlane's {FF_RANGE[1]:g} at "
+            f"SCALING_SPEED {scaling_speed:.1f}: the surface moves the aircraft too little for "
+            f"that scaling; give SCALING_SPEED {needed:.0f} (FF scales with its inverse) or "
+            "more of the servo's travel to the surface"
+        )
     notes: list[str] = []
     dt = 1.0 / LOOP_HZ
     hold = np.exp(-1j * w * dt * 1.5)  # a sample's wait and the hold's half
@@ -206,12 +219,17 @@ def design_axis(
     def rate_loop(kp: float, ki: float) -> np.ndarray:
         return S * S * (kp + ki / (1j * w)) * Gr * hold
 
+    # The aircraft's own rate response to the feed-forward (the roll mode's, the short
+    # period's): its bandwidth places the integrator's zero where the feedback has none.
+    own = _bandwidth(ff * S / eas2tas * target * Gr * hold)
+
     def integral(kp: float) -> float:
-        """I for this P: its zero INTEGRATOR_SEPARATION below the P loop's crossover."""
+        """I for this P: its zero INTEGRATOR_SEPARATION below the P loop's crossover, or below
+        the aircraft's own rate bandwidth where the P loop does not cross above it (a weak
+        surface: P alone is near unity gain over the whole band)."""
         loop = rate_loop(kp, 0.0)
-        if np.max(np.abs(loop)) < 1.0:
-            return 0.0
-        return min(kp * margins(loop).crossover_rad_s / INTEGRATOR_SEPARATION, I_RANGE[1])
+        crossing = margins(loop).crossover_rad_s if np.max(np.abs(loop)) >= 1.0 else 0.0
+        return min(kp * max(crossing, own) / INTEGRATOR_SEPARATION, I_RANGE[1])
 
     def meets(kp: float) -> bool:
         return _meets(rate_loop(kp, integral(kp)), PHASE_TARGET)
@@ -231,40 +249,53 @@ def design_axis(
         else:
             high = mid
     kp = float(np.exp(low))
-    ki = integral(kp)
-    if ki >= I_RANGE[1]:  # a lower integrator zero still trims; ArduPlane takes no more
-        notes.append(f"I at ArduPlane's top of range {I_RANGE[1]}: its zero lower still")
-    rate_margins = margins(rate_loop(kp, ki))
-    # The rate the aircraft flies for a demanded one: the feed-forward's open path and the
-    # feedback's, closed; its bandwidth (−3 dB) is what the attitude loop rides on.
-    pid = S * S * (kp + ki / (1j * w))
-    flown = (ff * S / eas2tas + pid) * target * Gr * hold / (1 + pid * Gr * hold)
-    rate_bandwidth = _bandwidth(flown)
-    # TCONST: the target, lengthened for bandwidth separation and the whole loop's margins.
-    tau = DEFAULTS[tc_name] if tconst is None else float(tconst)
-    tau = max(tau, BANDWIDTH_SEPARATION / rate_bandwidth)
 
-    def whole(tc: float) -> np.ndarray:
+    def whole(tc: float, kp: float, ki: float) -> np.ndarray:
         """The loop broken at the actuator: u = (FF + PID) F_T r_d + PID (F_T r_d − ω)'s
         feedback, r_d = −angle / TCONST."""
         pid = S * S * (kp + ki / (1j * w))
         forward = ff * S / eas2tas
         return ((forward + pid) * target * Ga / tc + pid * Gr) * hold
 
-    def robust(tc: float) -> Margins | None:
+    def robust(tc: float, kp: float, ki: float) -> Margins | None:
         """The whole loop's margins (closed-loop eigenvalues, `loop_margins`), None when
         it misses MIL-F-9490D's."""
         law = Law(tc=tc, ff=ff * S / eas2tas, kp=S * S * kp, ki=S * S * ki, fltt=fltt)
-        m = loop_margins(plant, actuator, law, whole(tc))
+        m = loop_margins(plant, actuator, law, whole(tc, kp, ki))
         ok = m.gain_db >= GAIN_MARGIN_DB and m.phase_deg >= PHASE_MARGIN
         return m if ok else None
 
-    attitude = robust(tau)
-    while attitude is None and tau < TCONST_RANGE[1]:
-        tau *= 1.1
-        attitude = robust(tau)
+    # TCONST: the target, lengthened for bandwidth separation and the whole loop's margins;
+    # where no TCONST in range keeps them, P (and its I) backs off: the rate loop's own
+    # margins do not guarantee the whole loop's.
+    attitude = None
+    for _ in range(BACKOFFS):
+        ki = integral(kp)
+        pid = S * S * (kp + ki / (1j * w))
+        # The rate the aircraft flies for a demanded one: the feed-forward's open path and the
+        # feedback's, closed; its bandwidth (−3 dB) is what the attitude loop rides on.
+        flown = (ff * S / eas2tas + pid) * target * Gr * hold / (1 + pid * Gr * hold)
+        rate_bandwidth = _bandwidth(flown)
+        tau = DEFAULTS[tc_name] if tconst is None else float(tconst)
+        tau = max(tau, BANDWIDTH_SEPARATION / rate_bandwidth)
+        attitude = robust(tau, kp, ki)
+        while attitude is None and tau < TCONST_RANGE[1]:
+            tau *= 1.1
+            attitude = robust(tau, kp, ki)
+        if attitude is not None:
+            break
+        kp *= BACKOFF
     if attitude is None:
         raise TuneError(f"{axis}: no TCONST up to {TCONST_RANGE[1]} s keeps the loop's margins")
+    if kp < float(np.exp(low)) * 0.999:
+        notes.append(f"P backed off to {kp:.3g} for the whole loop's margins")
+    if ki >= I_RANGE[1]:  # a lower integrator zero still trims; ArduPlane takes no more
+        notes.append(f"I at ArduPlane's top of range {I_RANGE[1]}: its zero lower still")
+    final = rate_loop(kp, ki)
+    if np.max(np.abs(final)) < 1.0:  # P alone never reaches unity: no crossover to report
+        rate_margins = Margins(gain_db=np.inf, phase_deg=np.inf, crossover_rad_s=np.nan)
+    else:
+        rate_margins = margins(final)
     if tconst is not None and tau > tconst * 1.0001:
         notes.append(
             f"TCONST {tau:.2f} s, not {tconst:g}: the rate the aircraft flies (bandwidth "
@@ -435,6 +466,16 @@ def loop_margins(plant: Plant, actuator: Actuator, law: Law, L: np.ndarray) -> M
         rejection_rad_s=_rejection(L),
         delay_margin_s=float(low),
     )
+
+
+def scaling_for(plant: Plant, actuator: Actuator, eas: float, eas2tas: float = 1.0) -> float:
+    """The SCALING_SPEED (m/s) at which this axis's FF is a tenth inside ArduPlane's range:
+    FF = EAS2TAS / (S · steady rate), S = SCALING_SPEED / EAS, so a weak surface (a glider's
+    aileron) takes a larger SCALING_SPEED rather than an FF beyond the range."""
+    k_ss = plant.steady_rate() * actuator.link
+    if not np.isfinite(k_ss) or k_ss <= 0:
+        return eas
+    return float(eas * eas2tas * 1.1 / (FF_RANGE[1] * k_ss))
 
 
 def _meets(L: np.ndarray, phase: float) -> bool:

@@ -1,9 +1,9 @@
 """`sysid tune`'s design (agent.tune) on known linear aircraft, and the command.
 
 Bad input tried: a linkage whose sign turns the aileron against the roll (refused by name), a
-model without the axis's surface (that axis refused, the other tuned), an output file that is
-the model itself, an output that is not .param, a --linkage without a gain, a servo lag of
-5 s, a model file that is not JSON."""
+model without the axis's surface (refused by name), an output file that is the model itself,
+an output that is not .param, a --linkage without a gain, a servo lag of 5 s, a negative time
+constant, a scaling speed of 0, a model file that is not JSON."""
 
 from __future__ import annotations
 
@@ -207,6 +207,8 @@ def test_sysid_tune_prints_writes_a_param_file_and_one_json_object(tmp_path, cap
         (["--out", "gains.txt"], "give a .param file"),
         (["--linkage", "aileron"], "SURFACE=GAIN"),
         (["--servo-lag", "5"], "seconds between 0 and 1"),
+        (["--roll-tconst", "-1"], "time constants here are"),
+        (["--scaling-speed", "0"], "m/s between 1 and 200"),
     ],
 )
 def test_sysid_tune_refuses_bad_input_with_one_json_error(tmp_path, capsys, extra, says):

@@ -41,9 +41,11 @@ def add_parser(sub) -> None:
         help="measured surface per commanded degree (the run's 'follows' check), default 1",
     )
     parser.add_argument(
-        "--servo-lag", type=float, default=0.05, metavar="S", help="servo time constant, s"
+        "--servo-lag", type=float, default=0.05, metavar="S", help="servo time constant, s (0.05)"
     )
-    parser.add_argument("--delay", type=float, default=0.02, metavar="S", help="servo dead time, s")
+    parser.add_argument(
+        "--delay", type=float, default=0.02, metavar="S", help="servo dead time, s (0.02)"
+    )
     parser.add_argument("--roll-tconst", type=float, metavar="S", help="target RLL2SRV_TCONST")
     parser.add_argument("--pitch-tconst", type=float, metavar="S", help="target PTCH2SRV_TCONST")
     parser.add_argument(
@@ -60,7 +62,16 @@ def add_parser(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from agent.analysis.export import ExportError, load_models
     from agent.fbwa import DEFAULTS
-    from agent.tune import Actuator, TuneError, axis_plant, design_axis, notional_link, param_file
+    from agent.tune import (
+        TCONST_RANGE,
+        Actuator,
+        TuneError,
+        axis_plant,
+        design_axis,
+        notional_link,
+        param_file,
+        scaling_for,
+    )
 
     inputs = {args.model: "the model being tuned", **common.config_input(args.config)}
     outputs = common.outputs_for(inputs)
@@ -70,6 +81,17 @@ def run(args: argparse.Namespace) -> int:
             raise common.refused(f"{args.out}: give a .param file to write")
     if not (0 <= args.servo_lag <= 1 and 0 <= args.delay <= 1):
         raise common.refused("--servo-lag and --delay are seconds between 0 and 1")
+    for option, value in (
+        ("--roll-tconst", args.roll_tconst),
+        ("--pitch-tconst", args.pitch_tconst),
+    ):
+        if value is not None and not TCONST_RANGE[0] <= value <= TCONST_RANGE[1]:
+            raise common.refused(
+                f"{option} {value:g}: ArduPlane's time constants here are "
+                f"{TCONST_RANGE[0]:g}–{TCONST_RANGE[1]:g} s"
+            )
+    if args.scaling_speed is not None and not 1.0 <= args.scaling_speed <= 200.0:
+        raise common.refused(f"--scaling-speed {args.scaling_speed:g}: m/s between 1 and 200")
     config = common.load_optional_config(args.config)
     try:
         models = load_models(args.model)
@@ -95,10 +117,9 @@ def run(args: argparse.Namespace) -> int:
     if args.scaling_speed is None and airspeed is None:
         raise common.refused(f"{model['id']}: the model has no trim airspeed: give --scaling-speed")
     eas = float(airspeed if airspeed is not None else args.scaling_speed)
-    scaling = float(args.scaling_speed or eas)
     surfaces = config.excitation.surfaces
     cont = {"A": model["Ac"], "B": model["Bc"], "C": model["Cc"]}
-    tunes, refused = [], []
+    tunes, refused, axes = [], [], []
     for axis, (surface, rate, angle, mixed, states) in AXES.items():
         channel = getattr(channels, surface)
         setup = surfaces.get(surface)
@@ -114,6 +135,7 @@ def run(args: argparse.Namespace) -> int:
             if getattr(channels, other) in model["inputs"]:
                 moved = _link(other_setup, args.linkage.get(other, 1.0), notional_link)
                 mix[getattr(channels, other)] = DEFAULTS[param] * moved / link
+        actuator = Actuator(link=link, lag_s=args.servo_lag, delay_s=args.delay)
         try:
             plant = axis_plant(
                 cont,
@@ -126,10 +148,26 @@ def run(args: argparse.Namespace) -> int:
                 slow=(names["phi"], names["theta"], names["airspeed"]),
                 mix=mix,
             )
+        except TuneError as exc:
+            refused.append(str(exc))
+            continue
+        axes.append((axis, plant, actuator))
+    # SCALING_SPEED: given, else the trim airspeed, raised where an axis's FF would not fit
+    # ArduPlane's range at it (one value for both axes: ArduPlane has one).
+    scaling, notes = args.scaling_speed, []
+    if scaling is None:
+        scaling = max([eas, *(scaling_for(p, a, eas) for _, p, a in axes)])
+        if scaling > eas * 1.0001:
+            notes.append(
+                f"SCALING_SPEED {scaling:.1f} m/s, above the trim's {eas:.1f}: a surface too "
+                "weak for ArduPlane's FF range at the trim's"
+            )
+    for axis, plant, actuator in axes:
+        try:
             tune = design_axis(
                 axis,
                 plant,
-                Actuator(link=link, lag_s=args.servo_lag, delay_s=args.delay),
+                actuator,
                 eas=eas,
                 scaling_speed=scaling,
                 tconst=args.roll_tconst if axis == "roll" else args.pitch_tconst,
@@ -159,11 +197,14 @@ def run(args: argparse.Namespace) -> int:
                 "scaling_speed": scaling,
                 "axes": [_as_json(t, DEFAULTS) for t in tunes],
                 "refused": refused,
+                "notes": notes,
                 "param_file": None if args.out is None else str(args.out),
             }
         )
         return common.EXIT_OK
     print(f"{model['id']}: ArduPlane FBWA gains at {eas:.1f} m/s (SCALING_SPEED {scaling:.1f})")
+    for note in notes:
+        print(f"note: {note}")
     for t in tunes:
         print(f"\n{t.axis}:")
         for name, value in t.params.items():

@@ -23,8 +23,12 @@ from agent.sim.plant import Plant
 
 TICK_S = 0.01  # the emulated autopilot's tick
 SETTLE_S = 2.0  # flown hands off in FBWA before the step
-# The stick's full deflection asks for ROLL_LIMIT_DEG of bank and PTCH_LIM_MAX_DEG of pitch.
-STICK_CHANNEL = {"roll": (1, "ROLL_LIMIT_DEG", "phi"), "pitch": (2, "PTCH_LIM_MAX_DEG", "theta")}
+# The stick's full deflection asks for ROLL_LIMIT_DEG of bank either way, PTCH_LIM_MAX_DEG of
+# pitch up and −PTCH_LIM_MIN_DEG down (mode_fbwa.cpp).
+STICK_CHANNEL = {
+    "roll": (1, ("ROLL_LIMIT_DEG", "ROLL_LIMIT_DEG"), "phi"),
+    "pitch": (2, ("PTCH_LIM_MAX_DEG", "PTCH_LIM_MIN_DEG"), "theta"),
+}
 
 
 @dataclass(frozen=True)
@@ -51,6 +55,53 @@ class Step:
         return float(max(0.0, (self.angle_deg.max() - self.final_deg) / self.final_deg * 100))
 
 
+def _aircraft(aircraft, airspeed_kts, altitude_ft, params, plant):
+    """The trimmed plant, the emulated ArduPlane in FBWA with `params` over the pilot's setup,
+    the pilot's trimmed sticks and the offsets a test adds to them."""
+    sim = Plant(
+        aircraft, airspeed_kts=airspeed_kts, altitude_ft=altitude_ft, linearise=False, **plant
+    )
+    rc = [1500] * 18
+    for ch, name in OUTPUTS.items():
+        rc[ch - 1] = normalised_to_pwm(ch, sim.trim[name])
+    offset: dict[int, int] = {}
+
+    def pilot(_t: float) -> list[int]:
+        return [rc[i] + offset.get(i + 1, 0) for i in range(18)]
+
+    ap = EmulatedArduPlane(
+        Params(fbwa=setup(sim.state()) | dict(params)), pilot, dt=TICK_S, trim=sim.trim
+    )
+    ap.set_mode(FBWA)
+    return sim, ap, offset
+
+
+def held(
+    aircraft: str,
+    airspeed_kts: float,
+    altitude_ft: float,
+    params: Mapping[str, float],
+    seconds: float = 30.0,
+    **plant,
+) -> tuple[float, float]:
+    """The rms bank and pitch error (deg) while FBWA holds the trimmed attitude hands off for
+    `seconds` after SETTLE_S (in turbulence: `plant`'s turbulence and seed)."""
+    sim, ap, _ = _aircraft(aircraft, airspeed_kts, altitude_ft, params, plant)
+    state = sim.state()
+    theta0 = ap.fbwa.params["PTCH_TRIM_DEG"]
+    per_tick = round(TICK_S / sim.dt)
+    bank, pitch = [], []
+    for k in range(round((SETTLE_S + seconds) / TICK_S)):
+        sim.set_normalised(ap.tick(k * TICK_S, state), per_tick)
+        for _ in range(per_tick):
+            sim.step()
+        state = sim.state()
+        if k >= round(SETTLE_S / TICK_S):
+            bank.append(np.degrees(state["phi"]))
+            pitch.append(np.degrees(state["theta"]) - theta0)
+    return float(np.sqrt(np.mean(np.square(bank)))), float(np.sqrt(np.mean(np.square(pitch))))
+
+
 def flown_step(
     aircraft: str,
     airspeed_kts: float,
@@ -63,40 +114,24 @@ def flown_step(
 ) -> Step:
     """Trim `aircraft`, fly it in FBWA with `params` (over the pilot's setup,
     agent.sim.ardupilot.setup) for SETTLE_S, then step the stick to ask for `step_deg` more
-    bank or pitch and record `seconds`."""
-    sim = Plant(
-        aircraft,
-        airspeed_kts=airspeed_kts,
-        altitude_ft=altitude_ft,
-        linearise=False,
-        **plant,
-    )
+    bank or pitch (negative: the other way) and record `seconds`; the response is taken in
+    the step's sense."""
+    sim, ap, offset = _aircraft(aircraft, airspeed_kts, altitude_ft, params, plant)
     state = sim.state()
-    rc = [1500] * 18
-    for ch, name in OUTPUTS.items():
-        rc[ch - 1] = normalised_to_pwm(ch, sim.trim[name])
-    offset: dict[int, int] = {}
-
-    def pilot(_t: float) -> list[int]:
-        return [rc[i] + offset.get(i + 1, 0) for i in range(18)]
-
-    ap = EmulatedArduPlane(
-        Params(fbwa=setup(state) | dict(params)), pilot, dt=TICK_S, trim=sim.trim
-    )
-    ap.set_mode(FBWA)
-    channel, limit, angle = STICK_CHANNEL[axis]
+    channel, (up, down), angle = STICK_CHANNEL[axis]
+    limit = abs(ap.fbwa.params[up if step_deg >= 0 else down])
     per_tick = round(TICK_S / sim.dt)
     trace = []
     start = None
     for k in range(round((SETTLE_S + seconds) / TICK_S)):
         t = k * TICK_S
         if k == round(SETTLE_S / TICK_S):
-            offset[channel] = round(RC_HALF_RANGE * step_deg / ap.fbwa.params[limit])
+            offset[channel] = round(RC_HALF_RANGE * step_deg / limit)
             start = np.degrees(state[angle])
         sim.set_normalised(ap.tick(t, state), per_tick)
         for _ in range(per_tick):
             sim.step()
         state = sim.state()
         if start is not None:
-            trace.append(np.degrees(state[angle]) - start)
-    return Step(axis, step_deg, np.asarray(trace))
+            trace.append((np.degrees(state[angle]) - start) * np.sign(step_deg))
+    return Step(axis, abs(step_deg), np.asarray(trace))

@@ -1,0 +1,142 @@
+"""`sysid tune`'s gains against the flight, on each benchmark aircraft: designed on JSBSim's
+validated linear model (agent.sim.truth) with the installation's linkage, flown in FBWA by the
+emulated ArduPlane on the nonlinear aircraft (agent.sim.steps), beside ArduPlane's defaults.
+
+    .venv/bin/python benchmarks/tune_check.py                   # six aircraft, a few minutes
+    .venv/bin/python benchmarks/tune_check.py --aircraft J3Cub  # one
+
+Per aircraft and axis: the designed gains, the whole loop's margins, the ±20° bank and ±5°
+pitch steps' rise time and overshoot predicted and flown (calm, and in light turbulence, W20 =
+5 ft/s), and the rms bank and pitch error FBWA holds hands off for 30 s in light turbulence
+with the tuned gains and with ArduPlane's defaults (`SCALING_SPEED` and the airspeed limits
+set for the aircraft in both, as its pilot would).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np
+
+from agent.fbwa import DEFAULTS, TRAVEL_DEG
+from agent.sim.aircraft import FLOWN
+from agent.sim.ardupilot import LINKAGE, OUTPUTS
+from agent.sim.plant import Plant
+from agent.sim.steps import flown_step, held
+from agent.sim.truth import INPUTS, linear_truth
+from agent.tune import Actuator, TuneError, axis_plant, design_axis, scaling_for
+
+CHANNEL = {name: ch for ch, name in OUTPUTS.items()}
+AXES = {
+    "roll": ("aileron", "p", "phi", ("beta", "p", "r", "phi")),
+    "pitch": ("elevator", "q", "theta", ("Vt", "alpha", "q", "theta")),
+}
+LIGHT = 1.0  # turbulence: W20 = 5 ft/s
+
+
+def links(aircraft: str, speed: float, altitude: float) -> dict[str, float]:
+    """Measured surface degrees per ArduPlane notional degree, probed on the aircraft: ±45° is
+    the servo's whole travel, JSBSim's ±1 (the emulated installation)."""
+    plant = Plant(aircraft, airspeed_kts=speed, altitude_ft=altitude, linearise=False)
+    before = plant.state()
+    nudged = dict(plant.trim)
+    for name in ("aileron", "elevator", "rudder"):
+        nudged[name] += 0.1
+    plant.set_normalised(nudged, 40)
+    for _ in range(40):
+        plant.step()
+    after = plant.state()
+    return {
+        name: LINKAGE[CHANNEL[name]] * (after[name] - before[name]) / 0.1 / TRAVEL_DEG
+        for name in ("aileron", "elevator", "rudder")
+    }
+
+
+def plants(aircraft: str, speed: float, altitude: float):
+    """Each axis's plant and actuator from the validated truth, and the trim's airspeed."""
+    truth = linear_truth(aircraft, speed, altitude_ft=altitude)
+    names = list(truth.states)
+    model = {"A": truth.A, "B": truth.B, "C": np.eye(len(names))[:8]}
+    linkage = links(aircraft, speed, altitude)
+    result = {}
+    for axis, (surface, rate, angle, states) in AXES.items():
+        mix = (
+            {"rudder": DEFAULTS["KFF_RDDRMIX"] * linkage["rudder"] / linkage["aileron"]}
+            if axis == "roll"
+            else None
+        )
+        plant = axis_plant(
+            model,
+            INPUTS,
+            names[:8],
+            surface=surface,
+            rate=rate,
+            angle=angle,
+            axis_outputs=states,
+            slow=("phi", "theta", "Vt"),
+            mix=mix,
+        )
+        result[axis] = (plant, Actuator(link=linkage[surface]))
+    return result, float(truth.trim_state[names.index("Vt")])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--aircraft", nargs="+", default=list(FLOWN), choices=list(FLOWN))
+    parser.add_argument("--seed", type=int, default=1)
+    args = parser.parse_args()
+    for aircraft in args.aircraft:
+        speed, altitude = FLOWN[aircraft][:2]
+        tuned: dict[str, float] = {}
+        axes, eas = plants(aircraft, speed, altitude)
+        # As `sysid tune`: SCALING_SPEED the trim's, raised where an FF would not fit.
+        scaling = max([eas, *(scaling_for(p, a, eas) for p, a in axes.values())])
+        print(f"{aircraft}: trim {eas:.1f} m/s, SCALING_SPEED {scaling:.1f}")
+        for axis, (plant, actuator) in axes.items():
+            try:
+                tune = design_axis(axis, plant, actuator, eas=eas, scaling_speed=scaling)
+            except TuneError as exc:
+                print(f"{aircraft} {axis}: not tuned: {exc}")
+                continue
+            tuned.update(tune.params)
+            gains = ", ".join(f"{k} {v:g}" for k, v in tune.params.items())
+            m = tune.attitude_loop
+            print(
+                f"{aircraft} {axis}: {gains}; whole loop {m.gain_db:.1f} dB, "
+                f"{m.phase_deg:.0f}° at {m.crossover_rad_s:.2f} rad/s; predicted rise "
+                f"{tune.rise_s:.2f} s, overshoot {tune.overshoot_pct:.1f} %"
+            )
+            for turbulence in (0.0, LIGHT):
+                for sign in (1, -1):
+                    step = flown_step(
+                        aircraft,
+                        speed,
+                        altitude,
+                        {**tune.params, "SCALING_SPEED": scaling},
+                        axis,
+                        sign * tune.step_deg,
+                        turbulence=turbulence,
+                        seed=args.seed,
+                    )
+                    rise_error = step.rise_s / tune.rise_s - 1
+                    print(
+                        f"    {'calm ' if not turbulence else 'light'} {sign * tune.step_deg:+g}°:"
+                        f" flown rise {step.rise_s:.2f} s ({rise_error:+.0%}), overshoot "
+                        f"{step.overshoot_pct:.1f} %, final {step.final_deg:.2f}°"
+                    )
+        for label, params in (
+            ("tuned", {**tuned, "SCALING_SPEED": scaling}),
+            ("ArduPlane defaults", {"SCALING_SPEED": eas}),
+        ):
+            bank, pitch = held(aircraft, speed, altitude, params, turbulence=LIGHT, seed=args.seed)
+            print(
+                f"  light turbulence, held hands off, {label}: bank rms {bank:.2f}°, "
+                f"pitch rms {pitch:.2f}°"
+            )
+
+
+if __name__ == "__main__":
+    main()
