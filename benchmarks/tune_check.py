@@ -19,68 +19,11 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np
-
-from agent.fbwa import DEFAULTS, TRAVEL_DEG
 from agent.sim.aircraft import FLOWN
-from agent.sim.ardupilot import LINKAGE, OUTPUTS
-from agent.sim.plant import Plant
-from agent.sim.steps import flown_step, held
-from agent.sim.truth import INPUTS, linear_truth
-from agent.tune import Actuator, TuneError, axis_plant, design_axis, scaling_for
+from agent.sim.steps import flown_step, held, truth_plants
+from agent.tune import TuneError, design_axis, scaling_for
 
-CHANNEL = {name: ch for ch, name in OUTPUTS.items()}
-AXES = {
-    "roll": ("aileron", "p", "phi", ("beta", "p", "r", "phi")),
-    "pitch": ("elevator", "q", "theta", ("Vt", "alpha", "q", "theta")),
-}
 LIGHT = 1.0  # turbulence: W20 = 5 ft/s
-
-
-def links(aircraft: str, speed: float, altitude: float) -> dict[str, float]:
-    """Measured surface degrees per ArduPlane notional degree, probed on the aircraft: ±45° is
-    the servo's whole travel, JSBSim's ±1 (the emulated installation)."""
-    plant = Plant(aircraft, airspeed_kts=speed, altitude_ft=altitude, linearise=False)
-    before = plant.state()
-    nudged = dict(plant.trim)
-    for name in ("aileron", "elevator", "rudder"):
-        nudged[name] += 0.1
-    plant.set_normalised(nudged, 40)
-    for _ in range(40):
-        plant.step()
-    after = plant.state()
-    return {
-        name: LINKAGE[CHANNEL[name]] * (after[name] - before[name]) / 0.1 / TRAVEL_DEG
-        for name in ("aileron", "elevator", "rudder")
-    }
-
-
-def plants(aircraft: str, speed: float, altitude: float):
-    """Each axis's plant and actuator from the validated truth, and the trim's airspeed."""
-    truth = linear_truth(aircraft, speed, altitude_ft=altitude)
-    names = list(truth.states)
-    model = {"A": truth.A, "B": truth.B, "C": np.eye(len(names))[:8]}
-    linkage = links(aircraft, speed, altitude)
-    result = {}
-    for axis, (surface, rate, angle, states) in AXES.items():
-        mix = (
-            {"rudder": DEFAULTS["KFF_RDDRMIX"] * linkage["rudder"] / linkage["aileron"]}
-            if axis == "roll"
-            else None
-        )
-        plant = axis_plant(
-            model,
-            INPUTS,
-            names[:8],
-            surface=surface,
-            rate=rate,
-            angle=angle,
-            axis_outputs=states,
-            slow=("phi", "theta", "Vt"),
-            mix=mix,
-        )
-        result[axis] = (plant, Actuator(link=linkage[surface]))
-    return result, float(truth.trim_state[names.index("Vt")])
 
 
 def main() -> None:
@@ -91,7 +34,7 @@ def main() -> None:
     for aircraft in args.aircraft:
         speed, altitude = FLOWN[aircraft][:2]
         tuned: dict[str, float] = {}
-        axes, eas = plants(aircraft, speed, altitude)
+        axes, eas = truth_plants(aircraft, speed, altitude)
         # As `sysid tune`: SCALING_SPEED the trim's, raised where an FF would not fit.
         scaling = max([eas, *(scaling_for(p, a, eas) for p, a in axes.values())])
         print(f"{aircraft}: trim {eas:.1f} m/s, SCALING_SPEED {scaling:.1f}")

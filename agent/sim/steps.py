@@ -1,7 +1,9 @@
 """Attitude steps flown in FBWA: the emulated ArduPlane's laws (agent.fbwa) with given
 parameters on a JSBSim aircraft, the pilot's stick stepped, the response measured as a
-flight-test engineer reads it (rise time 10–90 %, overshoot). What `sysid tune`'s predictions
-are checked against (tests/sim/test_tune.py)."""
+flight-test engineer reads it (rise time 10–90 %, overshoot); and the plants `sysid tune`
+designs on for a simulated aircraft (its validated truth, the emulated installation's
+linkage). What `sysid tune`'s predictions are checked against (tests/sim/test_tune.py,
+benchmarks/tune_check.py)."""
 
 from __future__ import annotations
 
@@ -10,8 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from agent.fbwa import DEFAULTS, TRAVEL_DEG
 from agent.sim.ardupilot import (
     FBWA,
+    LINKAGE,
     OUTPUTS,
     RC_HALF_RANGE,
     EmulatedArduPlane,
@@ -20,8 +24,16 @@ from agent.sim.ardupilot import (
     setup,
 )
 from agent.sim.plant import Plant
+from agent.sim.truth import INPUTS, linear_truth
+from agent.tune import Actuator, axis_plant
+from agent.tune import Plant as AxisPlant
 
 TICK_S = 0.01  # the emulated autopilot's tick
+# Each axis: its surface, rate, angle and states, as `sysid tune` takes them.
+AXES = {
+    "roll": ("aileron", "p", "phi", ("beta", "p", "r", "phi")),
+    "pitch": ("elevator", "q", "theta", ("Vt", "alpha", "q", "theta")),
+}
 SETTLE_S = 2.0  # flown hands off in FBWA before the step
 # The stick's full deflection asks for ROLL_LIMIT_DEG of bank either way, PTCH_LIM_MAX_DEG of
 # pitch up and −PTCH_LIM_MIN_DEG down (mode_fbwa.cpp).
@@ -135,3 +147,52 @@ def flown_step(
         if start is not None:
             trace.append((np.degrees(state[angle]) - start) * np.sign(step_deg))
     return Step(axis, abs(step_deg), np.asarray(trace))
+
+
+def links(aircraft: str, airspeed_kts: float, altitude_ft: float) -> dict[str, float]:
+    """Measured surface degrees per ArduPlane notional degree, probed on the aircraft: ±45° is
+    the servo's whole travel, JSBSim's ±1 (the emulated installation)."""
+    plant = Plant(aircraft, airspeed_kts=airspeed_kts, altitude_ft=altitude_ft, linearise=False)
+    before = plant.state()
+    nudged = dict(plant.trim)
+    for name in ("aileron", "elevator", "rudder"):
+        nudged[name] += 0.1
+    plant.set_normalised(nudged, 40)
+    for _ in range(40):
+        plant.step()
+    after = plant.state()
+    channel = {name: ch for ch, name in OUTPUTS.items()}
+    return {
+        name: LINKAGE[channel[name]] * (after[name] - before[name]) / 0.1 / TRAVEL_DEG
+        for name in ("aileron", "elevator", "rudder")
+    }
+
+
+def truth_plants(
+    aircraft: str, airspeed_kts: float, altitude_ft: float
+) -> tuple[dict[str, tuple[AxisPlant, Actuator]], float]:
+    """Each axis's plant and actuator as `sysid tune` takes them, from the aircraft's validated
+    linear model (agent.sim.truth) and the installation's linkage (`links`); and the trim's
+    airspeed (m/s)."""
+    truth = linear_truth(aircraft, airspeed_kts, altitude_ft=altitude_ft)
+    names = list(truth.states)
+    model = {"A": truth.A, "B": truth.B, "C": np.eye(len(names))[:8]}
+    linkage = links(aircraft, airspeed_kts, altitude_ft)
+    result = {}
+    for axis, (surface, rate, angle, states) in AXES.items():
+        mix = None
+        if axis == "roll":
+            mix = {"rudder": DEFAULTS["KFF_RDDRMIX"] * linkage["rudder"] / linkage["aileron"]}
+        plant = axis_plant(
+            model,
+            INPUTS,
+            names[:8],
+            surface=surface,
+            rate=rate,
+            angle=angle,
+            axis_outputs=states,
+            slow=("phi", "theta", "Vt"),
+            mix=mix,
+        )
+        result[axis] = (plant, Actuator(link=linkage[surface]))
+    return result, float(truth.trim_state[names.index("Vt")])
