@@ -212,6 +212,8 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
         self.mode = MANUAL
         self.fbwa = Fbwa(dict(params.fbwa))
         self._fbwa_every = max(1, round(1.0 / (LOOP_HZ * dt)))
+        self.drop_param_sets = False
+        """True: every PARAM_SET is lost on the way (the link otherwise up), for the tests."""
         self.surfaces: dict[str, float] = {}
         """FBWA's last surface outputs and attitude demand (notional degrees)."""
 
@@ -349,6 +351,9 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
                 self._param_value(name, names, addr)
             return
         if kind == "PARAM_SET":
+            if self.drop_param_sets:
+                self.counters["params_dropped"] += 1
+                return
             name = m.param_id
             if name not in FBWA_DEFAULTS or not np.isfinite(m.param_value):
                 self.counters["params_refused"] += 1

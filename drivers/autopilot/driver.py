@@ -23,6 +23,7 @@ from concurrent.futures import ThreadPoolExecutor
 from mavsdk import LogLevel, log_subscribe
 from mavsdk.asyncio import Configuration, Mavsdk
 from mavsdk.plugins.mavlink_direct import MavlinkDirect, MavlinkMessage
+from mavsdk.plugins.param import Param, ParamError
 
 from drivers.config import Autopilot as AutopilotConfig
 from drivers.sensor import Sample
@@ -135,6 +136,8 @@ class AutopilotLink:
         self._on_switch, self._on_state, self._on_servos = on_switch, on_state, on_servos
         self._on_sample, self._on_link = on_sample, on_link
         self._direct = None
+        self._param = None
+        self._executor: ThreadPoolExecutor | None = None
         self._seam: MessageSeam | None = None
         self._boot_clock = DeviceClock()
         self._last_message: float | None = None
@@ -185,6 +188,8 @@ class AutopilotLink:
                         False, f"no autopilot on {cfg.url} after {cfg.connect_timeout_s:g} s"
                     )
             self._direct = MavlinkDirect(system._system)
+            self._param = Param(system._system)
+            self._executor = executor
             self._seam = MessageSeam(loop, self._deliver)
             handles = [self._direct.subscribe_message(n, self._seam.callback) for n in MESSAGES]
             self._last_message = self._clock.now()
@@ -196,6 +201,10 @@ class AutopilotLink:
             await _drained(loop, executor)
             for handle in handles:
                 self._direct.unsubscribe_message(handle)
+            self._executor = None
+            if self._param is not None:
+                self._param.destroy()
+                self._param = None
             if self._direct is not None:
                 self._direct.destroy()
                 self._direct = None
@@ -319,6 +328,52 @@ class AutopilotLink:
                 )
             )
 
+    # -- parameters -----------------------------------------------------------------------
+
+    async def parameters(self, names: Sequence[str]) -> dict[str, float]:
+        """Each parameter's value as the autopilot holds it (PARAM_REQUEST_READ, MAVSDK's
+        param plugin on the command thread). AutopilotError names those it did not give."""
+        values, missing = {}, []
+        for name in names:
+            try:
+                values[name] = await self._param_call("get_param_float", name)
+            except ParamError as exc:
+                missing.append(f"{name} ({_why(exc)})")
+        if missing:
+            raise AutopilotError(f"the autopilot did not give {', '.join(missing)}")
+        return values
+
+    async def set_parameters(self, values: Mapping[str, float]) -> dict[str, float]:
+        """Set each parameter (PARAM_SET, answered by the autopilot's PARAM_VALUE), then read
+        every one back; the values read back. AutopilotError names each one refused, lost or
+        read back different (the set may have half happened: the caller reads and reverts)."""
+        failed = []
+        for name, value in values.items():
+            try:
+                await self._param_call("set_param_float", name, float(value))
+                self.counters["params_set"] += 1
+            except ParamError as exc:
+                self.counters["params_refused"] += 1
+                failed.append(f"{name} ({_why(exc)})")
+        read = {}
+        for name in values:
+            try:
+                read[name] = await self._param_call("get_param_float", name)
+            except ParamError as exc:
+                failed.append(f"{name} not read back ({_why(exc)})")
+        for name, value in read.items():
+            if not math.isclose(value, float(values[name]), rel_tol=1e-5, abs_tol=1e-6):
+                failed.append(f"{name} reads {value:g}, not {float(values[name]):g}")
+        if failed:
+            raise AutopilotError(f"parameters not set: {'; '.join(dict.fromkeys(failed))}")
+        return read
+
+    async def _param_call(self, method: str, *args):
+        if self._param is None or self._executor is None or not self.connected:
+            raise AutopilotError(f"no autopilot link ({self.status})")
+        call = getattr(self._param, method)
+        return await asyncio.get_running_loop().run_in_executor(self._executor, call, *args)
+
     # -- the surface sink -----------------------------------------------------------------
 
     async def command(self, pwm: Mapping[int, int]) -> None:
@@ -359,6 +414,11 @@ class AutopilotLink:
                 {"target_system": cfg.target_system, "target_component": 1, **fields}
             ),
         )
+
+
+def _why(exc: ParamError) -> str:
+    """A param request's failure in words: "timeout", "does not exist"…"""
+    return exc.result.name.lower().replace("_", " ")
 
 
 def _nothing() -> None:

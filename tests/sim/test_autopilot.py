@@ -294,3 +294,34 @@ async def test_parameters_are_read_and_set_by_name_over_mavlink(tmp_path):
             assert sorted(seen.values()) == list(range(len(DEFAULTS)))
         finally:
             gcs.close()
+
+
+async def test_the_driver_sets_reads_back_and_reverts_parameters_over_mavsdk(tmp_path):
+    # The agent's way (MAVSDK's param plugin): set two of ArduPlane's rate gains, read them
+    # back, then put the old ones back (a revert). Bad input tried: a name the autopilot does
+    # not have (refused by name, the others still set), every PARAM_SET lost on the way with
+    # the link up (refused: timeout), and a cut link (refused, nothing claimed).
+    async with flight(tmp_path) as f:
+        ap = f.aircraft.autopilot
+        old = await f.link.parameters(["RLL_RATE_FF", "RLL_RATE_P"])
+        assert old == {"RLL_RATE_FF": pytest.approx(0.345), "RLL_RATE_P": pytest.approx(0.08)}
+        new = {"RLL_RATE_FF": 0.5, "RLL_RATE_P": 0.2}
+        read = await f.link.set_parameters(new)
+        assert read == {k: pytest.approx(v) for k, v in new.items()}
+        assert ap.fbwa.params["RLL_RATE_FF"] == pytest.approx(0.5)
+        assert ap.fbwa.roll.pid.kp == pytest.approx(0.2)
+        await f.link.set_parameters(old)
+        assert ap.fbwa.params["RLL_RATE_P"] == pytest.approx(0.08)
+        with pytest.raises(AutopilotError, match="RLL_RATE_XX"):
+            await f.link.set_parameters({"RLL_RATE_XX": 1.0, "RLL_RATE_I": 0.2})
+        assert ap.fbwa.params["RLL_RATE_I"] == pytest.approx(0.2)
+        ap.drop_param_sets = True  # every PARAM_SET lost on the way, telemetry still flowing
+        with pytest.raises(AutopilotError, match=r"PTCH_RATE_FF \(timeout\)"):
+            await f.link.set_parameters({"PTCH_RATE_FF": 0.9})
+        ap.drop_param_sets = False
+        assert ap.counters["params_dropped"] >= 1
+        ap.link_up = False  # the telemetry radio lost: refused, nothing claimed
+        with pytest.raises(AutopilotError, match=r"PTCH_RATE_FF|no autopilot link"):
+            await f.link.set_parameters({"PTCH_RATE_FF": 0.9})
+        ap.link_up = True
+    assert ap.fbwa.params["PTCH_RATE_FF"] == pytest.approx(0.345)
