@@ -463,6 +463,24 @@ class Logbook:
         formatted here, on the caller's thread (see format_row)."""
         self._writer.write(self.flight, format_row(row))
 
+    def linkage(self, plan_id: str, follows) -> None:
+        """Each surface's linkage on a finished run (agent.excitation.follow: measured per
+        commanded deflection, and the lag of the best correlation) as one execution-log line
+        `sysid tune --exec-log` reads."""
+        event = {
+            "utc": dt.datetime.now(dt.UTC).isoformat(),
+            "t": time.monotonic(),
+            "level": "INFO",
+            "logger": "agent.linkage",
+            "message": f"{plan_id}: the surfaces' linkage",
+            "plan": plan_id,
+            "linkage": {
+                f.control: {"gain": f.gain, "lag_s": f.lag_s, "correlation": f.correlation}
+                for f in follows
+            },
+        }
+        self._writer.write(self.execution, (json.dumps(event) + "\n").encode())
+
     def excitation(self, window, rows: np.ndarray, batch: bool = False) -> Path:
         """Write one excitation's input/output log; returns its path."""
         number = self._writer.next_number()

@@ -206,7 +206,7 @@ def test_sysid_tune_prints_writes_a_param_file_and_one_json_object(tmp_path, cap
         (["--out", "MODEL"], "the model being tuned"),
         (["--out", "gains.txt"], "give a .param file"),
         (["--linkage", "aileron"], "SURFACE=GAIN"),
-        (["--servo-lag", "5"], "seconds between 0 and 1"),
+        (["--servo-lag", "5"], "--servo-lag 5: seconds between 0 and 1"),
         (["--roll-tconst", "-1"], "time constants here are"),
         (["--scaling-speed", "0"], "m/s between 1 and 200"),
     ],
@@ -230,3 +230,32 @@ def test_a_model_file_that_is_not_json_is_refused(tmp_path, capsys):
     bad.write_text("{not json")
     assert main(["tune", str(bad)]) == 2
     assert "not JSON" in capsys.readouterr().err
+
+
+def test_the_linkage_and_lag_a_run_measured_are_read_from_the_execution_log(tmp_path, capsys):
+    # The agent logs each surface's linkage on a finished run (agent.logs.Logbook.linkage):
+    # `sysid tune --exec-log` designs with it. Bad input tried: a line cut by a crash before it
+    # (skipped), and a log with no linkage line (refused by name).
+    model = _model_file(tmp_path)
+    log = tmp_path / "0001_exec_20261128.jsonl"
+    lines = [
+        '{"utc": "x", "level": "INFO", "message": "agent started"}',
+        '{"utc": "x", "level": "INFO", "linkage": {"aileron": {"gain": 0.5, "lag_s": 0.04',
+        json.dumps({"linkage": {"aileron": {"gain": 0.5, "lag_s": 0.04, "correlation": 0.99}}}),
+    ]
+    log.write_text("\n".join(lines) + "\n")
+    args = ["tune", str(model), "--scaling-speed", "25", "--json"]
+    assert main([*args, "--exec-log", str(log)]) == 0
+    measured = json.loads(capsys.readouterr().out)
+    assert measured["measured_linkage"] == {"aileron": {"gain": 0.5, "lag_s": 0.04}}
+    assert main(args) == 0
+    given = json.loads(capsys.readouterr().out)
+    roll = {a["axis"]: a for a in measured["axes"]}["roll"]
+    roll_given = {a["axis"]: a for a in given["axes"]}["roll"]
+    # Half the linkage: twice the feed-forward for the same roll rate.
+    ff = roll["params"]["RLL_RATE_FF"] / roll_given["params"]["RLL_RATE_FF"]
+    assert ff == pytest.approx(2.0, rel=1e-3)
+    empty = tmp_path / "0002_exec_20261128.jsonl"
+    empty.write_text(lines[0] + "\n")
+    assert main([*args, "--exec-log", str(empty)]) == 2
+    assert "no run's linkage" in json.loads(capsys.readouterr().out)["error"]["message"]

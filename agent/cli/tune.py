@@ -41,10 +41,23 @@ def add_parser(sub) -> None:
         help="measured surface per commanded degree (the run's 'follows' check), default 1",
     )
     parser.add_argument(
-        "--servo-lag", type=float, default=0.05, metavar="S", help="servo time constant, s (0.05)"
+        "--exec-log",
+        type=Path,
+        metavar="FILE",
+        help="an agent's execution log: each surface's linkage and lag as its last run measured "
+        "them (--linkage, --servo-lag and --delay given win)",
     )
     parser.add_argument(
-        "--delay", type=float, default=0.02, metavar="S", help="servo dead time, s (0.02)"
+        "--servo-lag",
+        type=float,
+        metavar="S",
+        help="servo time constant, s (0.05; 0 with --exec-log)",
+    )
+    parser.add_argument(
+        "--delay",
+        type=float,
+        metavar="S",
+        help="servo dead time, s (0.02; with --exec-log, the lag the run measured)",
     )
     parser.add_argument("--roll-tconst", type=float, metavar="S", help="target RLL2SRV_TCONST")
     parser.add_argument("--pitch-tconst", type=float, metavar="S", help="target PTCH2SRV_TCONST")
@@ -74,13 +87,17 @@ def run(args: argparse.Namespace) -> int:
     )
 
     inputs = {args.model: "the model being tuned", **common.config_input(args.config)}
+    if args.exec_log is not None:
+        inputs[args.exec_log] = "the execution log"
     outputs = common.outputs_for(inputs)
     if args.out is not None:
         common.claim(outputs, args.out)
         if args.out.suffix != ".param":
             raise common.refused(f"{args.out}: give a .param file to write")
-    if not (0 <= args.servo_lag <= 1 and 0 <= args.delay <= 1):
-        raise common.refused("--servo-lag and --delay are seconds between 0 and 1")
+    for option, value in (("--servo-lag", args.servo_lag), ("--delay", args.delay)):
+        if value is not None and not 0 <= value <= 1:
+            raise common.refused(f"{option} {value:g}: seconds between 0 and 1")
+    measured = {} if args.exec_log is None else _measured_linkage(args.exec_log)
     for option, value in (
         ("--roll-tconst", args.roll_tconst),
         ("--pitch-tconst", args.pitch_tconst),
@@ -126,16 +143,23 @@ def run(args: argparse.Namespace) -> int:
         if channel not in model["inputs"] or setup is None or setup.direction is None:
             refused.append(f"{axis}: the model has no {surface} input")
             continue
-        link = _link(setup, args.linkage.get(surface, 1.0), notional_link)
+        gain = args.linkage.get(surface, measured.get(surface, {}).get("gain", 1.0))
+        link = _link(setup, gain, notional_link)
         mix = {}
         for other, param in mixed.items():
             other_setup = surfaces.get(other)
             if other_setup is None or other_setup.direction is None:
                 continue
             if getattr(channels, other) in model["inputs"]:
-                moved = _link(other_setup, args.linkage.get(other, 1.0), notional_link)
+                other_gain = measured.get(other, {}).get("gain", 1.0)
+                moved = _link(other_setup, args.linkage.get(other, other_gain), notional_link)
                 mix[getattr(channels, other)] = DEFAULTS[param] * moved / link
-        actuator = Actuator(link=link, lag_s=args.servo_lag, delay_s=args.delay)
+        lag = measured.get(surface, {}).get("lag_s")
+        actuator = Actuator(
+            link=link,
+            lag_s=args.servo_lag if args.servo_lag is not None else 0.05 if lag is None else 0.0,
+            delay_s=args.delay if args.delay is not None else 0.02 if lag is None else lag,
+        )
         try:
             plant = axis_plant(
                 cont,
@@ -182,8 +206,8 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:
         header = [
             f"sysid tune {args.model.name} ({model['id']}): ArduPlane FBWA gains",
-            f"SCALING_SPEED {scaling:.1f} m/s; servo lag {args.servo_lag:g} s, "
-            f"delay {args.delay:g} s",
+            f"SCALING_SPEED {scaling:.1f} m/s; linkage and servo from "
+            f"{args.exec_log.name if args.exec_log else 'the options'}",
         ]
         text = param_file(tunes, header) + "".join(f"{k},{v:g}\n" for k, v in setup_params.items())
         try:
@@ -198,6 +222,7 @@ def run(args: argparse.Namespace) -> int:
                 "axes": [_as_json(t, DEFAULTS) for t in tunes],
                 "refused": refused,
                 "notes": notes,
+                "measured_linkage": measured,
                 "param_file": None if args.out is None else str(args.out),
             }
         )
@@ -205,6 +230,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"{model['id']}: ArduPlane FBWA gains at {eas:.1f} m/s (SCALING_SPEED {scaling:.1f})")
     for note in notes:
         print(f"note: {note}")
+    for surface, m in measured.items():
+        print(
+            f"{surface}: linkage {m['gain']:.3g} and lag {m['lag_s']:.3f} s as the run measured "
+            f"them ({args.exec_log.name})"
+        )
     for t in tunes:
         print(f"\n{t.axis}:")
         for name, value in t.params.items():
@@ -232,6 +262,36 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:
         print(f"\n{args.out}: written (load it in the ground station, or let the agent apply it)")
     return common.EXIT_OK
+
+
+def _measured_linkage(path: Path) -> dict[str, dict[str, float]]:
+    """Each surface's linkage gain and lag from the last linkage line of an execution log
+    (agent.logs.Logbook.linkage); refused when it has none."""
+    import json
+
+    found = None
+    try:
+        with path.open("rb") as handle:
+            for raw in handle:
+                try:
+                    event = json.loads(raw)
+                except ValueError:
+                    continue  # a line cut by a crash: the log is crash-safe line by line
+                if isinstance(event, dict) and isinstance(event.get("linkage"), dict):
+                    found = event["linkage"]
+    except OSError as exc:
+        raise common.refused(f"{path}: cannot be read ({exc.strerror or exc})") from None
+    if not found:
+        raise common.refused(f"{path}: no run's linkage in it (a finished excitation logs one)")
+    measured = {}
+    for surface, values in found.items():
+        try:
+            gain, lag = float(values["gain"]), float(values["lag_s"])
+        except (KeyError, TypeError, ValueError):
+            continue
+        if gain > 0 and 0 <= lag <= 1:
+            measured[surface] = {"gain": gain, "lag_s": lag}
+    return measured
 
 
 def _gains(text: str) -> dict[str, float]:

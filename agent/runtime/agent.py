@@ -294,7 +294,10 @@ class Agent:
         if played is None or played.plan.id != window.plan_id or len(rows) == 0:
             return
         frames = self.recorder.frames(rows)
-        for f in following(played.timeline, played.start, frames.time, frames.values):
+        followed = following(played.timeline, played.start, frames.time, frames.values)
+        # Logged for `sysid tune` (the linkage and the servo's lag the gains are designed with).
+        self.logbook.linkage(window.plan_id, [f for f in followed if f.verdict == "follows"])
+        for f in followed:
             if f.verdict == "follows":
                 # Its linkage sizes the next plans (agent/runtime/sizer.py).
                 self.sizer.linkage[f.control] = (f.gain, f.even)

@@ -155,3 +155,21 @@ def post_flight(directory, report) -> None:
     assert page.count('<svg class="splane"') == runs + 1  # every excitation's, then one each
     assert page.count('<g class="mode nominal"') >= 3  # the nominal's modes on each plane
     assert (directory / "report" / "excitation_2_bode.png").stat().st_size > 10_000
+    # The nominal lateral model tuned for ArduPlane with the linkage and lag the aircraft
+    # measured on its runs (the execution log): the roll axis designed, the pitch axis refused
+    # by name (a lateral model has no elevator).
+    tuned = json.loads(
+        sysid(
+            "tune",
+            directory / "models" / "lateral_nominal.json",
+            "--exec-log",
+            next(logs.glob("*_exec_*.jsonl")),
+            "--scaling-speed",
+            "31",
+            "--json",
+        )
+    )
+    assert {"aileron", "rudder"} <= set(tuned["measured_linkage"])
+    assert [axis["axis"] for axis in tuned["axes"]] == ["roll"]
+    assert tuned["axes"][0]["whole_loop"]["phase_margin_deg"] >= 45
+    assert any("elevator" in why for why in tuned["refused"])
