@@ -234,14 +234,16 @@ def test_a_model_file_that_is_not_json_is_refused(tmp_path, capsys):
 
 def test_the_linkage_and_lag_a_run_measured_are_read_from_the_execution_log(tmp_path, capsys):
     # The agent logs each surface's linkage on a finished run (agent.logs.Logbook.linkage):
-    # `sysid tune --exec-log` designs with it. Bad input tried: a line cut by a crash before it
-    # (skipped), and a log with no linkage line (refused by name).
+    # `sysid tune --exec-log` designs with the last run's that has one. Bad input tried: a line
+    # cut by a crash (skipped), a later run's empty linkage (not taken), and a log with no
+    # linkage line (refused by name).
     model = _model_file(tmp_path)
     log = tmp_path / "0001_exec_20261128.jsonl"
     lines = [
         '{"utc": "x", "level": "INFO", "message": "agent started"}',
         '{"utc": "x", "level": "INFO", "linkage": {"aileron": {"gain": 0.5, "lag_s": 0.04',
         json.dumps({"linkage": {"aileron": {"gain": 0.5, "lag_s": 0.04, "correlation": 0.99}}}),
+        json.dumps({"linkage": {}}),  # a later run where no surface followed: not taken
     ]
     log.write_text("\n".join(lines) + "\n")
     args = ["tune", str(model), "--scaling-speed", "25", "--json"]

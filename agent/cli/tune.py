@@ -277,8 +277,9 @@ def _measured_linkage(path: Path) -> dict[str, dict[str, float]]:
                     event = json.loads(raw)
                 except ValueError:
                     continue  # a line cut by a crash: the log is crash-safe line by line
-                if isinstance(event, dict) and isinstance(event.get("linkage"), dict):
-                    found = event["linkage"]
+                linkage = event.get("linkage") if isinstance(event, dict) else None
+                if isinstance(linkage, dict) and linkage:  # a run where nothing followed: none
+                    found = linkage
     except OSError as exc:
         raise common.refused(f"{path}: cannot be read ({exc.strerror or exc})") from None
     if not found:
