@@ -136,6 +136,13 @@ def _pole(mode: ModeDocument) -> str:
     )
 
 
+def has_its_modes(candidate: Candidate) -> bool:
+    """Whether the candidate passes step 2b: every mode its axes must have is there (a spiral
+    aside) and no pole is beyond its record (what sizes plans needs it: agent.runtime)."""
+    span = np.inf if candidate.record_s is None else candidate.record_s
+    return _modes_step(candidate, span)[0]
+
+
 def _modes_step(candidate: Candidate, span: float) -> tuple[bool, str]:
     """Step 2b: the modes the axes must have are there, and no pole is beyond the record."""
     have, named, missing = _expected(candidate, span)

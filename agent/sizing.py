@@ -90,6 +90,9 @@ DRIFT_S = 10.0
 # is one the model does not know: it is predicted from the data instead, its measured peak
 # grown as its controls grow (`Predictor.extrapolated`).
 UNKNOWN_SHARE = 0.5
+# Another record of the same axes tells the gusts' excursion from a drift the model misses when
+# its controls played at least this many times larger or smaller (`_air`).
+AIR_GROWTH = 1.5
 # Each checked quantity's axis: its controls are the ones grown from the data's peak.
 AXIS_OF = {
     "bank_deg": "lateral",
@@ -957,8 +960,11 @@ def predictor_from(
     source: str,
     flight: Mapping[str, float] | None = None,
     linkage: Mapping[str, tuple[float, float]] | None = None,
+    others: Sequence[Candidate] = (),
 ) -> Predictor | None:
-    """A stored model as a predictor of the plans' response (None: see `predictor`)."""
+    """A stored model as a predictor of the plans' response (None: see `predictor`);
+    `others`: other candidates of its axes, whose records tell the gusts from what the model
+    misses (`checked`)."""
     return predictor(
         candidate.result,
         trim=(candidate.trim or {}).get("outputs", {}),
@@ -968,6 +974,14 @@ def predictor_from(
         source=source,
         flight=flight,
         linkage=linkage,
+        others=[
+            e
+            for c in others
+            if c.model_id != candidate.model_id
+            and (c.result.inputs, c.result.outputs)
+            == (candidate.result.inputs, candidate.result.outputs)
+            for e in c.experiments
+        ],
     )
 
 
@@ -981,10 +995,13 @@ def predictor(
     source: str,
     flight: Mapping[str, float] | None = None,
     linkage: Mapping[str, tuple[float, float]] | None = None,
+    others: Sequence[tuple[np.ndarray, np.ndarray]] = (),
 ) -> Predictor | None:
     """An identified model as a predictor of the plans' response: `trim` is its record's trim
     outputs by channel, `experiments` its data (u, y), trim removed, `flight` the flight
-    state now by output role (the trim of what the model does not hold). None when it
+    state now by output role (the trim of what the model does not hold), `others` other
+    records of its axes in the same form (`checked`: the gusts told from what the model
+    misses). None when it
     predicts nothing a sizing uses: no configured control among its inputs or no output of a
     quantity. Without a known airspeed (a lateral model, flown with no flight state yet) the
     airspeed, load factor and height are not predicted."""
@@ -1021,7 +1038,7 @@ def predictor(
         per_unit=scale,
         airspeed=airspeed,
     )
-    correction, unexplained, extrapolated = checked(unchecked, experiments)
+    correction, unexplained, extrapolated = checked(unchecked, experiments, others)
     return Predictor(
         model=model,
         dt=result.dt,
@@ -1064,7 +1081,9 @@ def deflections(
 
 
 def checked(
-    predictor: Predictor, experiments
+    predictor: Predictor,
+    experiments,
+    others=(),
 ) -> tuple[dict[str, float], dict[str, float], dict[str, float]]:
     """The model checked on its own data, quantity by quantity (CORRECTED; both sides
     smoothed over SMOOTH_S): the correction, the least-squares gain of the measured excursion
@@ -1076,37 +1095,14 @@ def checked(
     the model's predictions of the response to the inputs. The unexplained excursion is added
     to the peaks the envelope is checked against, not to those the targets size (a plan sized
     smaller in turbulence would only stand less above it), unless it is most of what the data
-    moved: the model does not know that quantity, and its data predict it instead."""
+    moved: the model does not know that quantity, and its data predict it instead — unless
+    `others`, other records of the same axes, show that what it leaves does not follow the
+    inputs (`_air`)."""
     gains: dict[str, float] = {}
     unexplained: dict[str, float] = {}
     measured_peak: dict[str, float] = {}
-    window = max(1, round(SMOOTH_S / predictor.dt))
-    drift = max(1, round(DRIFT_S / predictor.dt))
     for u, y in experiments:
-        if len(u) <= window:
-            continue
-        with np.errstate(all="ignore"):
-            model = simulate(predictor.model, np.asarray(u, dtype=float))
-        if not np.all(np.isfinite(model)):
-            continue
-        measured = _smoothed(predictor._quantities(np.asarray(y, dtype=float)), window)
-        predicted = _smoothed(predictor._quantities(model), window)
-        for q in CORRECTED:
-            if q not in measured or q not in predicted:
-                continue
-            m, p = measured[q] - measured[q][0], predicted[q] - predicted[q][0]
-            fm, fp = (_drift_free(m, drift), _drift_free(p, drift)) if q in INTEGRATED else (m, p)
-            power = float(fp @ fp)
-            if power <= 0:
-                continue
-            gain = float(np.clip((fm @ fp) / power, 1.0, MAX_CORRECTION))
-            peak = float(np.max(np.abs(m)))
-            left = float(np.max(np.abs(m - gain * p)))
-            fast = float(np.max(np.abs(fm - gain * fp)))
-            if q in INTEGRATED and fast > UNKNOWN_SHARE * float(np.max(np.abs(fm))):
-                # Not explained without the drift either (INTEGRATED): the larger gain.
-                gain = max(gain, float(np.clip((m @ p) / (p @ p), 1.0, MAX_CORRECTION)))
-                left = float(np.max(np.abs(m - gain * p)))
+        for q, (gain, peak, left) in _left(predictor, u, y).items():
             gains[q] = max(gains.get(q, 1.0), gain)
             unexplained[q] = max(unexplained.get(q, 0.0), left)
             measured_peak[q] = max(measured_peak.get(q, 0.0), peak)
@@ -1115,7 +1111,80 @@ def checked(
         for q, peak in measured_peak.items()
         if unexplained.get(q, 0.0) > UNKNOWN_SHARE * peak
     }
+    if others and unknown:
+        air = _air(predictor, list(experiments), list(others), set(unknown))
+        unknown = {q: v for q, v in unknown.items() if q not in air}
     return {q: g for q, g in gains.items() if g > 1.0}, unexplained, unknown
+
+
+def _left(predictor: Predictor, u, y) -> dict[str, tuple[float, float, float]]:
+    """One record against the model (`checked`): per quantity, the correction, the measured
+    peak excursion and what the corrected prediction leaves of it (empty: the record is
+    shorter than the smoothing, or the model does not settle on it)."""
+    window = max(1, round(SMOOTH_S / predictor.dt))
+    drift = max(1, round(DRIFT_S / predictor.dt))
+    if len(u) <= window:
+        return {}
+    with np.errstate(all="ignore"):
+        model = simulate(predictor.model, np.asarray(u, dtype=float))
+    if not np.all(np.isfinite(model)):
+        return {}
+    measured = _smoothed(predictor._quantities(np.asarray(y, dtype=float)), window)
+    predicted = _smoothed(predictor._quantities(model), window)
+    out = {}
+    for q in CORRECTED:
+        if q not in measured or q not in predicted:
+            continue
+        m, p = measured[q] - measured[q][0], predicted[q] - predicted[q][0]
+        fm, fp = (_drift_free(m, drift), _drift_free(p, drift)) if q in INTEGRATED else (m, p)
+        power = float(fp @ fp)
+        if power <= 0:
+            continue
+        gain = float(np.clip((fm @ fp) / power, 1.0, MAX_CORRECTION))
+        left = float(np.max(np.abs(m - gain * p)))
+        fast = float(np.max(np.abs(fm - gain * fp)))
+        if q in INTEGRATED and fast > UNKNOWN_SHARE * float(np.max(np.abs(fm))):
+            # Not explained without the drift either (INTEGRATED): the larger gain.
+            gain = max(gain, float(np.clip((m @ p) / (p @ p), 1.0, MAX_CORRECTION)))
+            left = float(np.max(np.abs(m - gain * p)))
+        out[q] = (gain, float(np.max(np.abs(m))), left)
+    return out
+
+
+def _air(predictor: Predictor, own: list, others: list, quantities: set[str]) -> set[str]:
+    """The quantities among `quantities` whose unexplained excursion does not follow the
+    inputs: a drift the model misses that the inputs cause grows with them (JSBSim's T-6:
+    faster), the gusts' response does not. Over each pair of the model's own record and
+    another of the same axes whose controls of the quantity's axis all played at least
+    AIR_GROWTH times larger in one of the two (`_levels`), the excursion is the air's when it
+    grew less than the square root of the smallest growth (√1.5 where the inputs grew 1.5×):
+    half-way, on a log scale, between no growth and the inputs' own. It is taken as the air's
+    only where some pair qualifies and every qualifying pair agrees (a gust's peak is random:
+    where one pair shows growth, the quantity stays one the model does not know)."""
+    mine = [(_levels(predictor, u), _left(predictor, u, y)) for u, y in own]
+    theirs = [(_levels(predictor, u), _left(predictor, u, y)) for u, y in others]
+    out = set()
+    for q in quantities:
+        controls = [c for c in _axis_controls(q, predictor.inputs)]
+        verdicts = []
+        for (la, ra), (lb, rb) in ((a, b) for a in mine for b in theirs):
+            if q not in ra or q not in rb or not controls:
+                continue
+            for (hi, hi_left), (lo, lo_left) in (((la, ra), (lb, rb)), ((lb, rb), (la, ra))):
+                if all(lo[c] > 0 and hi[c] >= AIR_GROWTH * lo[c] for c in controls):
+                    growth = min(hi[c] / lo[c] for c in controls)
+                    verdicts.append(hi_left[q][2] < math.sqrt(growth) * lo_left[q][2])
+        if verdicts and all(verdicts):
+            out.add(q)
+    return out
+
+
+def _levels(predictor: Predictor, u) -> dict[str, float]:
+    """Control → its largest recorded deflection in a record (record units)."""
+    u = np.asarray(u, dtype=float)
+    return {
+        c: float(np.max(np.abs(u[:, j]))) if len(u) else 0.0 for c, j in predictor.inputs.items()
+    }
 
 
 def _drift_free(signal: np.ndarray, window: int) -> np.ndarray:

@@ -109,7 +109,7 @@ from agent.ident.aircraft.model import fitted_axes
 from agent.ident.convert import StateSpace
 from agent.ident.errors import DataError, IdentificationFailed
 from agent.ident.fit import simulate
-from agent.models import DIVERGENCE_LIMIT
+from agent.models import DIVERGENCE_LIMIT, Candidate, has_its_modes
 from agent.runtime.identification import SIZING_TIC
 from agent.sim.flight import ENVELOPE_HEIGHT_S
 from agent.sim.offline import INPUT_CHANNELS, Record, fly
@@ -331,9 +331,10 @@ def _linkage(setup: Setup, rec: Record, played: Plan) -> dict:
     return {f.control: (f.gain, f.even) for f in following(timeline, 2.0, times, measured)}
 
 
-def predictor_of(setup: Setup, result, rec: Record, exp: Experiment, played: Plan):
+def predictor_of(setup: Setup, result, rec: Record, exp: Experiment, played: Plan, others=()):
     """The identified model as the agent's sizing sees it: its surfaces' linkage measured
-    against what `played` commanded, its trim the record's."""
+    against what `played` commanded, its trim the record's, checked against `others` (the
+    earlier calibration runs' records, as the agent's `Identifier.recent`)."""
     linkage = _linkage(setup, rec, played)
     trim = dict(zip(Record.outputs, rec.y[:TRIM_SAMPLES].mean(0), strict=True))
     return sizing.predictor(
@@ -344,6 +345,7 @@ def predictor_of(setup: Setup, result, rec: Record, exp: Experiment, played: Pla
         surfaces=setup.surfaces,
         source="the previous run's model",
         linkage=linkage,
+        others=others,
     )
 
 
@@ -353,7 +355,7 @@ def calibrate(setup: Setup, plan: Plan):
     no model what the last run flew (the build-up grows from it)."""
     timeline = render(plan, CONFIG.rate_hz)
     sized = sizing.size(plan, timeline, None, CONFIG.sizing, setup.surfaces, setup.envelope)
-    predictor, runs, flown = None, [], None
+    predictor, runs, flown, records = None, [], None, []
     for step in range(CALIBRATION_RUNS):
         rec = setup.fly(sized.plan, CALIBRATION_SEED + step)
         runs.append((sized, excursions(rec)))
@@ -364,8 +366,23 @@ def calibrate(setup: Setup, plan: Plan):
             print(f"  calibration run {step + 1} not identified: {exc}")
             break
         fastest = max(m.eigenvalue.real for m in result.modes)
-        usable = fastest < DIVERGENCE_LIMIT and result.fit.tic_avg < SIZING_TIC  # the agent's
-        predictor = predictor_of(setup, result, rec, exp, sized.plan) if usable else None
+        candidate = Candidate(
+            model_id=f"calibration-{step + 1}",
+            axes="full",
+            record_dt=rec.dt,
+            result=result.document(),
+            experiments=((exp.u, exp.y),),
+            record_s=len(exp.u) * rec.dt,
+        )
+        usable = (  # the agent's (agent.runtime.identification: `newest`)
+            fastest < DIVERGENCE_LIMIT
+            and result.fit.tic_avg < SIZING_TIC
+            and has_its_modes(candidate)
+        )
+        predictor = (
+            predictor_of(setup, result, rec, exp, sized.plan, others=records) if usable else None
+        )
+        records.append((exp.u, exp.y))
         flown = None
         if predictor is None:  # the build-up grows from what this run flew, as the agent's
             linkage = _linkage(setup, rec, sized.plan)

@@ -165,3 +165,26 @@ async def test_an_arm_the_prediction_takes_out_of_the_envelope_is_refused(tmp_pa
         assert ack.ok, ack.reason
     finally:
         agent.close()
+
+
+async def test_a_model_missing_a_mode_sizes_nothing(agent):
+    """Bad input tried: a model of too low an order for the record (3 states for the lateral
+    axes: stable, fitting its data, but no roll, Dutch roll nor spiral named). It predicts the
+    response from what stands in for the modes: the plan is sized as a build-up from what the
+    last run flew. The next run's model, with its modes, sizes the plan, checked against the
+    flight's other records of the axes (both kept)."""
+    plan = preset("lateral")
+    await command(agent, messages.IdentSettings(axes="lateral", order=3), 1)
+    lacking = await identify_a2(agent)
+    assert lacking.checks["stability"] and lacking.checks["fit"]
+    assert not lacking.checks["modes"]
+    await command(agent, messages.SizeRequest(plan=plan), 2)
+    assert sizings(agent)[-1].source.startswith("build-up from the last run")
+
+    await command(agent, messages.IdentSettings(axes="lateral"), 3)
+    whole = await identify_a2(agent)
+    assert whole.checks["modes"]
+    await command(agent, messages.SizeRequest(plan=plan), 4)
+    assert whole.model_id in sizings(agent)[-1].source
+    kept = [c.model_id for c in agent.identification.recent["lateral"]]
+    assert kept == [lacking.model_id, whole.model_id]

@@ -50,6 +50,9 @@ RESULTS_KEPT = 100
 # sizes too: in turbulence no sensor measures, the whole record's TIC is the gust's, not the
 # model's (agent.models: the fit step).
 SIZING_TIC = 0.5
+# Each axes' latest candidates kept for the sizing: their records, flown at other amplitudes,
+# tell the gusts' excursion from a response the model misses (agent.sizing.checked).
+RECORDS_KEPT = 4
 # With no update period set, how often the periodic task looks again (s).
 PERIODIC_IDLE_S = 1.0
 
@@ -98,6 +101,8 @@ class Identifier:
         self.newest: dict[str, Candidate] = {}
         # By axes: the latest candidate, good or not (what its run flew grows the build-up).
         self.latest: dict[str, Candidate] = {}
+        # By axes: the RECORDS_KEPT latest candidates, good or not, newest last.
+        self.recent: dict[str, deque[Candidate]] = {}
 
     # -- windows in ----------------------------------------------------------------------
 
@@ -213,8 +218,8 @@ class Identifier:
     async def sizing_model(self, axes: str) -> tuple[Candidate, str] | None:
         """The model a plan of `axes` is sized by, and how to name it: the nominal of those
         axes, else the full model's, else the newest candidate of this flight that is stable
-        and fits its own data below SIZING_TIC or passed the suggestion's fit step
-        (`newest`), those axes' first. None: no model yet."""
+        and has every mode it must have, and fits its own data below SIZING_TIC or passed the
+        suggestion's fit step (`newest`), those axes' first. None: no model yet."""
         for wanted in dict.fromkeys((axes, "full")):
             nominal = await self._in_store(self.models.nominal, wanted)
             if nominal is not None:
@@ -224,6 +229,17 @@ class Identifier:
                 c = self.newest[wanted]
                 return c, f"model {c.model_id} (identified this flight, not yet accepted)"
         return None
+
+    async def tuning_model(self, model_id: str | None) -> Candidate:
+        """The model gains are designed from (agent/runtime/gains.py): `model_id`'s, else the
+        full nominal, else the lateral or longitudinal one. LookupError: none."""
+        if model_id is not None:
+            return await self._in_store(self.models.find, model_id)
+        for axes in ("full", "lateral", "longitudinal"):
+            nominal = await self._in_store(self.models.nominal, axes)
+            if nominal is not None:
+                return nominal
+        raise LookupError("no nominal model to design gains from: accept one first")
 
     async def _in_store(self, function, *args):
         return await asyncio.get_running_loop().run_in_executor(self._store, function, *args)
@@ -408,8 +424,15 @@ class Identifier:
         suggestion = await self._compare(candidate, len(rows), earlier)
         await self._in_store(self.models.add, candidate)
         self.latest[axes] = candidate
-        if suggestion.checks.get("stability") and (
-            candidate.tic_jj < SIZING_TIC or suggestion.checks.get("fit")
+        self.recent.setdefault(axes, deque(maxlen=RECORDS_KEPT)).append(candidate)
+        # A model that misses a mode the aircraft has (step 2b) predicts that axis's response
+        # from what stands in for it: it sizes nothing, and the last one that had them all
+        # still does.
+        checks = suggestion.checks
+        if (
+            checks.get("stability")
+            and checks.get("modes", True)
+            and (candidate.tic_jj < SIZING_TIC or checks.get("fit"))
         ):
             self.newest[axes] = candidate
         record = ResultRecord(

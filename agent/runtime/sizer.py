@@ -3,9 +3,10 @@ answers with each control's amplitude and why, the predicted response and the en
 refusals; an armed plan whose predicted response leaves the envelope is refused.
 
 The model is the one `Identifier.sizing_model` names (the nominal, else this flight's newest
-good candidate); each surface's linkage (its measured position per commanded degree, and per
-|commanded degree|) is the last finished run's, measured where the agent checks that the
-surfaces followed their commands. Rendering and prediction take seconds for the full preset:
+good candidate), checked against this flight's other records of its axes (`Identifier.recent`);
+each surface's linkage (its measured position per commanded degree, and per |commanded
+degree|) is the last finished run's, measured where the agent checks that the surfaces
+followed their commands. Rendering and prediction take seconds for the full preset:
 they run on a thread, never on the event loop.
 """
 
@@ -59,6 +60,7 @@ class Sizer:
             source,
             flight=self.flight(),
             linkage=self.linkage,
+            others=tuple(self.identification.recent.get(candidate.axes, ())),
         )
 
     def flown(self, plan: Plan) -> dict[str, float] | None:
