@@ -537,6 +537,31 @@ class Live(Section):
     ground's commands share the same air, and an abort waits for whatever is on it."""
 
 
+class Tuning(Section):
+    """ArduPlane's FBWA gains proposed from the nominal model and applied from the ground
+    (agent/runtime/gains.py, docs/tuning.md)."""
+
+    max_step: float = Field(2.0, gt=1.0, le=10.0)
+    """No gain changes by more than this factor (either way) in one apply: a design further
+    away is proposed as a step toward it, every gain moving the same share of the way."""
+    track_window_s: float = Field(20.0, ge=5.0, le=300.0)
+    """The attitude tracking is judged over this much stabilised flight (FBWA, no plan
+    playing) before an apply and after it."""
+    track_checks: int = Field(3, ge=1, le=100)
+    """How many windows after an apply are judged (each on its own samples): a limit cycle
+    can take a while to build."""
+    track_degrade: float = Field(2.0, gt=1.0, le=10.0)
+    """Applied gains are reverted when the roll or pitch tracking error's rms, or the roll or
+    pitch rate's, after the apply is more than this many times the one before it (and above
+    its floor)."""
+    track_floor_deg: float = Field(1.0, gt=0.0, le=20.0)
+    """Attitude tracking errors below this rms (degrees) are never a degradation: sensor noise
+    and a light gust."""
+    track_rate_floor_dps: float = Field(1.0, gt=0.0, le=100.0)
+    """Roll and pitch rates below this rms (degrees per second) are never a degradation; above
+    it and `track_degrade` times the rms before, they are a limit cycle the attitude hides."""
+
+
 class Config(Section):
     """The whole configuration file."""
 
@@ -556,6 +581,8 @@ class Config(Section):
     """The agent process's scheduling."""
     live: Live = Live()
     """The live view downlinked during a run."""
+    tuning: Tuning = Tuning()
+    """Autopilot gains from the model, applied and reverted from the ground."""
 
 
 def reference(model: type[BaseModel], file: str) -> str:

@@ -481,6 +481,29 @@ class Logbook:
         }
         self._writer.write(self.execution, (json.dumps(event) + "\n").encode())
 
+    def gains(self, action: str, proposal: str | None, values: dict, reason: str) -> None:
+        """An autopilot gain change (agent/runtime/gains.py: applied, reverted, failed) as one
+        execution-log line: the values read back and why."""
+        self.event(
+            "agent.gains",
+            f"gains {action} {proposal or ''}: {reason}".strip(),
+            action=action,
+            proposal=proposal,
+            gains=values,
+        )
+
+    def event(self, logger: str, message: str, **fields) -> None:
+        """One execution-log line with fields of its own beside the message."""
+        event = {
+            "utc": dt.datetime.now(dt.UTC).isoformat(),
+            "t": time.monotonic(),
+            "level": "INFO",
+            "logger": logger,
+            "message": message,
+            **fields,
+        }
+        self._writer.write(self.execution, (json.dumps(event) + "\n").encode())
+
     def excitation(self, window, rows: np.ndarray, batch: bool = False) -> Path:
         """Write one excitation's input/output log; returns its path."""
         number = self._writer.next_number()

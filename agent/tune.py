@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.interpolate
@@ -329,6 +329,74 @@ def design_axis(
     )
 
 
+@dataclass(frozen=True, kw_only=True)
+class Assessed:
+    """A given set of one axis's gains on the model: its loops' margins and a step's
+    response (None where the step does not settle: the set does not fly that axis)."""
+
+    rate_loop: Margins
+    attitude_loop: Margins
+    rise_s: float | None
+    overshoot_pct: float | None
+
+    def sound(self) -> bool:
+        """Whether the whole loop keeps MIL-F-9490D's margins (GAIN_MARGIN_DB, PHASE_MARGIN)."""
+        m = self.attitude_loop
+        return bool(m.gain_db >= GAIN_MARGIN_DB and m.phase_deg >= PHASE_MARGIN)
+
+
+def assess(
+    axis: str,
+    plant: Plant,
+    actuator: Actuator,
+    params: Mapping[str, float],
+    *,
+    eas: float,
+    scaling_speed: float,
+    eas2tas: float = 1.0,
+) -> Assessed:
+    """Any set of one axis's FBWA gains (ArduPlane's names; those missing at its defaults)
+    on the plant: the gains a design would replace, or a step on the way to it."""
+    prefix, tc_name = (
+        ("RLL_RATE", "RLL2SRV_TCONST")
+        if axis == "roll"
+        else (
+            "PTCH_RATE",
+            "PTCH2SRV_TCONST",
+        )
+    )
+    value = {**DEFAULTS, **dict(params)}
+    S = float(np.clip(scaling_speed / eas, 0.1, 10.0))
+    w = FREQUENCIES
+    rate, angle = plant.response(w)
+    act = actuator.response(w)
+    Gr, Ga = rate * act, angle * act
+    hold = np.exp(-1j * w * (1.0 / LOOP_HZ) * 1.5)
+    fltt = value[f"{prefix}_FLTT"]
+    target = 1.0 / (1.0 + 1j * w / (2 * np.pi * fltt))
+    ff, kp, ki = (float(value[f"{prefix}_{k}"]) for k in ("FF", "P", "I"))
+    tc = float(value[tc_name])
+    pid = S * S * (kp + ki / (1j * w))
+    rate_loop = pid * Gr * hold
+    whole = ((ff * S / eas2tas + pid) * target * Ga / tc + pid * Gr) * hold
+    law = Law(tc=tc, ff=ff * S / eas2tas, kp=S * S * kp, ki=S * S * ki, fltt=fltt)
+    if np.max(np.abs(rate_loop)) < 1.0:
+        rate_margins = Margins(gain_db=np.inf, phase_deg=np.inf, crossover_rad_s=np.nan)
+    else:
+        try:
+            rate_margins = margins(rate_loop)
+        except TuneError:
+            rate_margins = Margins(gain_db=-np.inf, phase_deg=-np.inf, crossover_rad_s=np.nan)
+    attitude = loop_margins(plant, actuator, law, whole)
+    try:
+        rise, overshoot = predicted_step(axis, plant, actuator, value, eas, eas2tas, scaling_speed)
+    except TuneError:
+        rise = overshoot = None
+    return Assessed(
+        rate_loop=rate_margins, attitude_loop=attitude, rise_s=rise, overshoot_pct=overshoot
+    )
+
+
 @dataclass(frozen=True)
 class Law:
     """FBWA's law about the trim, linear (its clipping aside), in degrees: u = ff·r_f +
@@ -614,3 +682,237 @@ def param_file(tunes: Sequence[AxisTune], header: Sequence[str] = ()) -> str:
     for tune in tunes:
         lines += [f"{name},{value:g}" for name, value in tune.params.items()]
     return "\n".join(lines) + "\n"
+
+
+# The axes designed: (surface, rate, angle, the surfaces mixed in at a share of it by the
+# parameter named, the axis's own states).
+AXES = {
+    "roll": ("aileron", "p", "phi", {"rudder": "KFF_RDDRMIX"}, ("beta", "p", "r", "phi")),
+    "pitch": ("elevator", "q", "theta", {}, ("airspeed", "alpha", "q", "theta")),
+}
+# The servo's lag and dead time where nothing measured them (s): a small hobby servo.
+SERVO_LAG_S, SERVO_DELAY_S = 0.05, 0.02
+
+
+@dataclass(frozen=True, kw_only=True)
+class Model:
+    """An identified model as the design takes it: continuous A, B, C in output coordinates
+    (a state per output, then any engine lags) and its trim outputs by channel."""
+
+    id: str
+    inputs: Sequence[str]
+    outputs: Sequence[str]
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    trim: Mapping[str, float]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Options:
+    """What the design takes beside the model: each surface's linkage given (measured surface
+    per commanded degree; wins over `measured`), each surface's linkage and lag a run measured
+    ({"gain", "lag_s"}: the execution log's), the servo's lag and dead time given, the target
+    time constants, and SCALING_SPEED (default: the trim airspeed, raised where FF needs)."""
+
+    linkage: Mapping[str, float] = field(default_factory=dict)
+    measured: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+    servo_lag_s: float | None = None
+    delay_s: float | None = None
+    roll_tconst: float | None = None
+    pitch_tconst: float | None = None
+    scaling_speed: float | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class Design:
+    """The gains of every axis that could be designed, why the others could not, and notes."""
+
+    model_id: str
+    eas: float  # the trim airspeed designed at (m/s)
+    scaling_speed: float
+    tunes: tuple[AxisTune, ...]
+    refused: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+    loops: Mapping[str, tuple[Plant, Actuator]] = field(default_factory=dict)
+    """Each designed axis's plant and actuator (to assess other gains on: `assess`, `toward`)."""
+
+    def params(self) -> dict[str, float]:
+        """Every designed parameter by ArduPlane's name, SCALING_SPEED too."""
+        out = {name: value for t in self.tunes for name, value in t.params.items()}
+        out["SCALING_SPEED"] = round(self.scaling_speed, 1)
+        return out
+
+
+def design(model: Model, channels, surfaces: Mapping, options: Options | None = None) -> Design:
+    """Each axis of `AXES` designed from `model` (`design_axis`), with the channels' names
+    (agent.config.Channels) and the surfaces' PWM mapping (agent.config.Surface by role);
+    TuneError where nothing could be designed, or the trim airspeed is unknown and no
+    SCALING_SPEED given."""
+    options = options or Options()
+    names = {
+        role: getattr(channels, role)
+        for role in ("airspeed", "alpha", "q", "theta", "beta", "p", "r", "phi")
+    }
+    airspeed = model.trim.get(channels.airspeed)
+    if options.scaling_speed is None and airspeed is None:
+        raise TuneError(f"{model.id}: the model has no trim airspeed: give SCALING_SPEED")
+    eas = float(airspeed if airspeed is not None else options.scaling_speed)
+    cont = {"A": model.A, "B": model.B, "C": model.C}
+    measured = options.measured
+    refused, axes = [], []
+    for axis, (surface, rate, angle, mixed, states) in AXES.items():
+        channel = getattr(channels, surface)
+        setup = surfaces.get(surface)
+        if channel not in model.inputs or setup is None or setup.direction is None:
+            refused.append(f"{axis}: the model has no {surface} input")
+            continue
+        link = _link(setup, options.linkage.get(surface, measured.get(surface, {}).get("gain")))
+        mix = {}
+        for other, param in mixed.items():
+            other_setup = surfaces.get(other)
+            if other_setup is None or other_setup.direction is None:
+                continue
+            if getattr(channels, other) in model.inputs:
+                given = options.linkage.get(other, measured.get(other, {}).get("gain"))
+                mix[getattr(channels, other)] = DEFAULTS[param] * _link(other_setup, given) / link
+        lag = measured.get(surface, {}).get("lag_s")
+        servo = options.servo_lag_s
+        delay = options.delay_s
+        actuator = Actuator(
+            link=link,
+            lag_s=servo if servo is not None else SERVO_LAG_S if lag is None else 0.0,
+            delay_s=delay if delay is not None else SERVO_DELAY_S if lag is None else lag,
+        )
+        try:
+            plant = axis_plant(
+                cont,
+                model.inputs,
+                model.outputs,
+                surface=channel,
+                rate=names[rate],
+                angle=names[angle],
+                axis_outputs=[names[role] for role in states],
+                slow=(names["phi"], names["theta"], names["airspeed"]),
+                mix=mix,
+            )
+        except TuneError as exc:
+            refused.append(str(exc))
+            continue
+        axes.append((axis, plant, actuator))
+    # SCALING_SPEED: given, else the trim airspeed, raised where an axis's FF would not fit
+    # ArduPlane's range at it (one value for both axes: ArduPlane has one).
+    scaling, notes = options.scaling_speed, []
+    if scaling is None:
+        scaling = max([eas, *(scaling_for(p, a, eas) for _, p, a in axes)])
+        if scaling > eas * 1.0001:
+            notes.append(
+                f"SCALING_SPEED {scaling:.1f} m/s, above the trim's {eas:.1f}: a surface too "
+                "weak for ArduPlane's FF range at the trim's"
+            )
+    tunes = []
+    for axis, plant, actuator in axes:
+        try:
+            tconst = options.roll_tconst if axis == "roll" else options.pitch_tconst
+            tunes.append(
+                design_axis(axis, plant, actuator, eas=eas, scaling_speed=scaling, tconst=tconst)
+            )
+        except TuneError as exc:
+            refused.append(str(exc))
+    if not tunes:
+        raise TuneError("; ".join(refused) or "nothing to tune")
+    return Design(
+        model_id=model.id,
+        eas=eas,
+        scaling_speed=scaling,
+        tunes=tuple(tunes),
+        refused=tuple(refused),
+        notes=tuple(notes),
+        loops={axis: (plant, actuator) for axis, plant, actuator in axes},
+    )
+
+
+def _link(setup, linkage: float | None) -> float:
+    """Measured surface units per notional degree through a surface's servo mapping and its
+    linkage (1 where none is known)."""
+    half = (setup.max_us - setup.min_us) / 2
+    return notional_link(setup.direction, setup.us_per_unit, half) * (
+        1.0 if linkage is None else linkage
+    )
+
+
+# The steps tried toward a design when the largest the step limit allows misses the margins,
+# as shares of that largest.
+STEP_TRIES = (1.0, 0.75, 0.5, 0.25)
+# Each axis's gains a proposal moves, by ArduPlane's names.
+AXIS_GAINS = {
+    "roll": ("RLL2SRV_TCONST", "RLL_RATE_FF", "RLL_RATE_P", "RLL_RATE_I", "RLL_RATE_D"),
+    "pitch": ("PTCH2SRV_TCONST", "PTCH_RATE_FF", "PTCH_RATE_P", "PTCH_RATE_I", "PTCH_RATE_D"),
+}
+RANGES = {"TCONST": TCONST_RANGE, "FF": FF_RANGE, "P": P_RANGE, "I": I_RANGE, "D": (0.0, 1.0)}
+
+
+@dataclass(frozen=True, kw_only=True)
+class Step:
+    """One axis's gains as a proposal sets them: the design, or the largest step toward it
+    that the step limit allows and that keeps the margins; the share of the way (1: the
+    design), and its assessment. `params` empty: no step keeps the margins."""
+
+    axis: str
+    params: dict[str, float]
+    share: float
+    assessed: Assessed | None
+    why: str = ""
+
+
+def toward(
+    axis: str,
+    plant: Plant,
+    actuator: Actuator,
+    current: Mapping[str, float],
+    designed: Mapping[str, float],
+    *,
+    eas: float,
+    scaling_speed: float,
+    max_step: float,
+) -> Step:
+    """The designed gains of `axis`, or a step toward them from `current` where one gain would
+    change by more than `max_step` times (either way): every gain moves the same share of the
+    way on a log scale (a gain from or to zero, linearly), the share the largest the limit
+    allows; a set of gains half-way between two sound ones need not be sound, so it is
+    assessed and, where it misses the margins, shorter steps are tried (STEP_TRIES). Each gain
+    within ArduPlane's range (RANGES)."""
+    names = [n for n in AXIS_GAINS[axis] if n in designed]
+    limit = 1.0
+    for n in names:
+        c, d = float(current.get(n, DEFAULTS[n])), float(designed[n])
+        if c > 0 and d > 0 and not math.isclose(c, d):
+            limit = min(limit, math.log(max_step) / abs(math.log(d / c)))
+        elif c > 0 and d <= 0:
+            limit = min(limit, 1.0 - 1.0 / max_step)
+
+    def at(share: float) -> dict[str, float]:
+        out = {}
+        for n in names:
+            c, d = float(current.get(n, DEFAULTS[n])), float(designed[n])
+            v = c * (d / c) ** share if c > 0 and d > 0 else c + share * (d - c)
+            lo, hi = RANGES[n.rsplit("_", 1)[-1]]
+            out[n] = round(float(np.clip(v, lo, hi)), 4)
+        return out
+
+    for k in STEP_TRIES:
+        share = limit * k
+        params = at(share)
+        checked = assess(axis, plant, actuator, params, eas=eas, scaling_speed=scaling_speed)
+        if checked.sound():
+            return Step(axis=axis, params=params, share=share, assessed=checked)
+    return Step(
+        axis=axis,
+        params={},
+        share=0.0,
+        assessed=None,
+        why=(
+            f"{axis}: no step within ×{max_step:g} of the current gains keeps the whole loop's "
+            f"{GAIN_MARGIN_DB:g} dB and {PHASE_MARGIN:g}°"
+        ),
+    )

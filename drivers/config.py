@@ -173,3 +173,6 @@ class Autopilot(Section):
     """RC_CHANNELS rate (the pilot's excitation switch)."""
     servo_output_hz: float = Field(50.0, gt=0.0, le=200.0)
     """SERVO_OUTPUT_RAW rate (trim capture, commanded surfaces in the log)."""
+    nav_controller_hz: float = Field(10.0, gt=0.0, le=200.0)
+    """NAV_CONTROLLER_OUTPUT rate (the roll and pitch the autopilot demands: the tracking the
+    applied gains are judged by)."""

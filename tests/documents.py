@@ -42,3 +42,27 @@ def lateral_document(**changes) -> ResultDocument:
         ),
     }
     return ResultDocument(**(fields | changes))
+
+
+def continuous_document(A, B, inputs, outputs) -> ResultDocument:
+    """A whole-aircraft-shaped document of a continuous model ẋ = A x + B u in output
+    coordinates (a state per output first, then any others: engine lags), as `sysid tune` and
+    the onboard gains design take it."""
+    A, B = np.asarray(A, dtype=float), np.asarray(B, dtype=float)
+    n, m, p = A.shape[0], B.shape[1], len(outputs)
+    C, D = np.eye(n)[:p].tolist(), np.zeros((p, m)).tolist()
+    return lateral_document(
+        order=n,
+        inputs=list(inputs),
+        outputs=list(outputs),
+        A=np.eye(n).tolist(),
+        B=np.zeros((n, m)).tolist(),
+        C=C,
+        D=D,
+        Ac=A.tolist(),
+        Bc=B.tolist(),
+        tic=dict.fromkeys(outputs, 0.05),
+        tic_avg=0.05,
+        method="aircraft",
+        continuous={"A": A.tolist(), "B": B.tolist(), "C": C, "D": D},
+    )

@@ -176,7 +176,8 @@ async def test_a_model_missing_a_mode_sizes_nothing(agent):
     plan = preset("lateral")
     await command(agent, messages.IdentSettings(axes="lateral", order=3), 1)
     lacking = await identify_a2(agent)
-    assert lacking.checks["stability"] and lacking.checks["fit"]
+    assert lacking.checks["stability"]
+    assert lacking.checks["fit"]
     assert not lacking.checks["modes"]
     await command(agent, messages.SizeRequest(plan=plan), 2)
     assert sizings(agent)[-1].source.startswith("build-up from the last run")

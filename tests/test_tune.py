@@ -19,11 +19,14 @@ from agent.tune import (
     PHASE_MARGIN,
     Actuator,
     TuneError,
+    assess,
     axis_plant,
     design_axis,
     notional_link,
     param_file,
+    toward,
 )
+from tests.documents import continuous_document
 
 # A roll axis: ṗ = L_p p + L_δa δa, φ̇ = p (δa in measured degrees, L_δa per degree).
 OUTPUTS = ("p", "phi")
@@ -88,6 +91,55 @@ def test_a_demanded_time_constant_the_rate_loop_cannot_carry_is_lengthened_and_s
     assert any("TCONST" in note and "not 0.1" in note for note in tune.notes)
 
 
+def test_a_set_of_gains_is_assessed_as_the_design_predicts_its_own():
+    """The design's gains assessed again give its margins and step; a set whose P is ten
+    times the design's (a limit cycle on a real aircraft) is not sound."""
+    plant, actuator = roll_plant(), Actuator(link=0.5, lag_s=0.05)
+    tune = design_axis("roll", plant, actuator, eas=20.0, scaling_speed=20.0)
+    again = assess("roll", plant, actuator, tune.params, eas=20.0, scaling_speed=20.0)
+    assert again.sound()
+    # (the parameters are rounded as ArduPlane takes them)
+    assert again.attitude_loop.phase_deg == pytest.approx(tune.attitude_loop.phase_deg, rel=1e-3)
+    assert again.rise_s == pytest.approx(tune.rise_s, rel=1e-3)
+    hot = {**tune.params, "RLL_RATE_P": 10 * tune.params["RLL_RATE_P"]}
+    assert not assess("roll", plant, actuator, hot, eas=20.0, scaling_speed=20.0).sound()
+
+
+def test_a_step_toward_the_design_changes_no_gain_by_more_than_the_limit():
+    """From ArduPlane's defaults to a design whose FF is several times theirs: with the limit
+    ×2 every gain moves the same share of the way, none by more than ×2, and the set it
+    stops at keeps the margins; with a limit the change fits in, the design itself."""
+    plant, actuator = roll_plant(L_da=0.05), Actuator(link=0.5, lag_s=0.05)
+    tune = design_axis("roll", plant, actuator, eas=20.0, scaling_speed=20.0)
+    current = {n: DEFAULTS[n] for n in tune.params}
+    ratio = max(
+        max(tune.params[n], current[n]) / min(tune.params[n], current[n])
+        for n in tune.params
+        if tune.params[n] > 0 and current[n] > 0
+    )
+    assert ratio > 2.5
+    step = toward(
+        "roll", plant, actuator, current, tune.params, eas=20.0, scaling_speed=20.0, max_step=2.0
+    )
+    assert 0 < step.share < 1
+    assert step.assessed.sound()
+    for n, v in step.params.items():
+        if current[n] > 0 and v > 0:
+            assert 1 / 2.0001 <= v / current[n] <= 2.0001, n
+    whole = toward(
+        "roll",
+        plant,
+        actuator,
+        current,
+        tune.params,
+        eas=20.0,
+        scaling_speed=20.0,
+        max_step=ratio * 1.01,
+    )
+    assert whole.share == pytest.approx(1.0)
+    assert whole.params == pytest.approx(tune.params, rel=1e-3)
+
+
 def test_a_reversed_linkage_or_a_missing_surface_is_refused_by_name():
     with pytest.raises(TuneError, match="linkage sign"):
         design(link=-0.5)
@@ -139,39 +191,7 @@ def _model_file(tmp_path):
     B[5, 0] = -0.3  # aileron: measured positive rolls left (eq. 3.1, trailing edge down)
     B[2, 1] = -0.4  # elevator: trailing edge down pitches down
     outputs = ["Vt", "alpha", "q", "theta", "beta", "p", "r", "phi"]
-    doc = {
-        "dt": 0.02,
-        "order": 8,
-        "inputs": ["aileron", "elevator"],
-        "outputs": outputs,
-        "A": np.eye(8).tolist(),
-        "B": np.zeros((8, 2)).tolist(),
-        "C": np.eye(8).tolist(),
-        "D": np.zeros((8, 2)).tolist(),
-        "Ac": A.tolist(),
-        "Bc": B.tolist(),
-        "stable": True,
-        "tic": dict.fromkeys(outputs, 0.05),
-        "tic_avg": 0.05,
-        "modes": [],
-        "method": "aircraft",
-        "coordinates": "outputs",
-        "continuous": {
-            "A": A.tolist(),
-            "B": B.tolist(),
-            "C": np.eye(8).tolist(),
-            "D": np.zeros((8, 2)).tolist(),
-        },
-        "trim": [],
-        "preprocessing": {
-            "record_dt": 0.02,
-            "decimation": 1,
-            "band_hz": 3.0,
-            "held_inputs_shifted": False,
-            "smoothing_s": None,
-            "dropped_samples_per_end": 0,
-        },
-    }
+    doc = continuous_document(A, B, ["aileron", "elevator"], outputs).model_dump(mode="json")
     path = tmp_path / "model.json"
     path.write_text(json.dumps(doc))
     return path

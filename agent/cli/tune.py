@@ -7,12 +7,6 @@ from pathlib import Path
 
 from agent.cli import common
 
-AXES = {
-    # axis: (surface, rate, angle, the surfaces mixed in at a share of it, the axis's states)
-    "roll": ("aileron", "p", "phi", {"rudder": "KFF_RDDRMIX"}, ("beta", "p", "r", "phi")),
-    "pitch": ("elevator", "q", "theta", {}, ("airspeed", "alpha", "q", "theta")),
-}
-
 
 def add_parser(sub) -> None:
     parser = sub.add_parser(
@@ -75,16 +69,7 @@ def add_parser(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from agent.analysis.export import ExportError, load_models
     from agent.fbwa import DEFAULTS
-    from agent.tune import (
-        TCONST_RANGE,
-        Actuator,
-        TuneError,
-        axis_plant,
-        design_axis,
-        notional_link,
-        param_file,
-        scaling_for,
-    )
+    from agent.tune import TCONST_RANGE, Model, Options, TuneError, design, param_file
 
     inputs = {args.model: "the model being tuned", **common.config_input(args.config)}
     if args.exec_log is not None:
@@ -123,85 +108,35 @@ def run(args: argparse.Namespace) -> int:
     model = models[-1]
     if model["Ac"].size == 0:
         raise common.refused(f"{model['id']}: no continuous-time model to design on")
-    channels = config.identification.channels
-    names = {
-        role: getattr(channels, role)
-        for role in ("airspeed", "alpha", "q", "theta", "beta", "p", "r", "phi")
-    }
-    outputs_ = list(model["outputs"])
-    trim = dict(zip(outputs_, model["y0"], strict=False)) if model["y0"].size else {}
-    airspeed = trim.get(channels.airspeed)
-    if args.scaling_speed is None and airspeed is None:
+    trim = dict(zip(model["outputs"], model["y0"], strict=False)) if model["y0"].size else {}
+    if args.scaling_speed is None and config.identification.channels.airspeed not in trim:
         raise common.refused(f"{model['id']}: the model has no trim airspeed: give --scaling-speed")
-    eas = float(airspeed if airspeed is not None else args.scaling_speed)
-    surfaces = config.excitation.surfaces
-    cont = {"A": model["Ac"], "B": model["Bc"], "C": model["Cc"]}
-    tunes, refused, axes = [], [], []
-    for axis, (surface, rate, angle, mixed, states) in AXES.items():
-        channel = getattr(channels, surface)
-        setup = surfaces.get(surface)
-        if channel not in model["inputs"] or setup is None or setup.direction is None:
-            refused.append(f"{axis}: the model has no {surface} input")
-            continue
-        gain = args.linkage.get(surface, measured.get(surface, {}).get("gain", 1.0))
-        link = _link(setup, gain, notional_link)
-        mix = {}
-        for other, param in mixed.items():
-            other_setup = surfaces.get(other)
-            if other_setup is None or other_setup.direction is None:
-                continue
-            if getattr(channels, other) in model["inputs"]:
-                other_gain = measured.get(other, {}).get("gain", 1.0)
-                moved = _link(other_setup, args.linkage.get(other, other_gain), notional_link)
-                mix[getattr(channels, other)] = DEFAULTS[param] * moved / link
-        lag = measured.get(surface, {}).get("lag_s")
-        actuator = Actuator(
-            link=link,
-            lag_s=args.servo_lag if args.servo_lag is not None else 0.05 if lag is None else 0.0,
-            delay_s=args.delay if args.delay is not None else 0.02 if lag is None else lag,
+    options = Options(
+        linkage=args.linkage,
+        measured=measured,
+        servo_lag_s=args.servo_lag,
+        delay_s=args.delay,
+        roll_tconst=args.roll_tconst,
+        pitch_tconst=args.pitch_tconst,
+        scaling_speed=args.scaling_speed,
+    )
+    subject = Model(
+        id=model["id"],
+        inputs=list(model["inputs"]),
+        outputs=list(model["outputs"]),
+        A=model["Ac"],
+        B=model["Bc"],
+        C=model["Cc"],
+        trim=trim,
+    )
+    try:
+        designed = design(
+            subject, config.identification.channels, config.excitation.surfaces, options
         )
-        try:
-            plant = axis_plant(
-                cont,
-                model["inputs"],
-                outputs_,
-                surface=channel,
-                rate=names[rate],
-                angle=names[angle],
-                axis_outputs=[names[role] for role in states],
-                slow=(names["phi"], names["theta"], names["airspeed"]),
-                mix=mix,
-            )
-        except TuneError as exc:
-            refused.append(str(exc))
-            continue
-        axes.append((axis, plant, actuator))
-    # SCALING_SPEED: given, else the trim airspeed, raised where an axis's FF would not fit
-    # ArduPlane's range at it (one value for both axes: ArduPlane has one).
-    scaling, notes = args.scaling_speed, []
-    if scaling is None:
-        scaling = max([eas, *(scaling_for(p, a, eas) for _, p, a in axes)])
-        if scaling > eas * 1.0001:
-            notes.append(
-                f"SCALING_SPEED {scaling:.1f} m/s, above the trim's {eas:.1f}: a surface too "
-                "weak for ArduPlane's FF range at the trim's"
-            )
-    for axis, plant, actuator in axes:
-        try:
-            tune = design_axis(
-                axis,
-                plant,
-                actuator,
-                eas=eas,
-                scaling_speed=scaling,
-                tconst=args.roll_tconst if axis == "roll" else args.pitch_tconst,
-            )
-        except TuneError as exc:
-            refused.append(str(exc))
-            continue
-        tunes.append(tune)
-    if not tunes:
-        raise common.failed("; ".join(refused) or "nothing to tune")
+    except TuneError as exc:
+        raise common.failed(str(exc)) from None
+    tunes, refused, notes = designed.tunes, designed.refused, designed.notes
+    eas, scaling = designed.eas, designed.scaling_speed
     setup_params = {"SCALING_SPEED": round(scaling, 1)}
     if args.out is not None:
         header = [
@@ -310,11 +245,6 @@ def _gains(text: str) -> dict[str, float]:
             )
         gains[name.strip()] = gain
     return gains
-
-
-def _link(setup, linkage: float, notional_link) -> float:
-    half = (setup.max_us - setup.min_us) / 2
-    return notional_link(setup.direction, setup.us_per_unit, half) * linkage
 
 
 def _db(value: float) -> str:

@@ -1,6 +1,6 @@
 """`sysid console`: the operator's terminal app (Textual) on the XBee link.
 
-Tabs: Status (1), Excite (2), Identify (3), Results (4), Live (5), one widget each
+Tabs: Status (1), Excite (2), Identify (3), Results (4), Live (5), Gains (6), one widget each
 (`agent/ground/tabs/`);
 an event log along the bottom; the link state, flight mode, excitation state and nominal model
 in the top line. F5 aborts a run from anywhere (x too, outside a text field). Every decision
@@ -32,6 +32,7 @@ from agent.ground import events, posted
 from agent.ground.events import Line
 from agent.ground.station import GroundStation
 from agent.ground.tabs.excite import ExciteTab
+from agent.ground.tabs.gains import GainsTab
 from agent.ground.tabs.identify import IdentifyTab
 from agent.ground.tabs.live import LiveTab
 from agent.ground.tabs.results import ResultsTab
@@ -69,12 +70,16 @@ class Console(App):
         Binding("3", "tab('identify')", "identify"),
         Binding("4", "tab('results')", "results"),
         Binding("5", "tab('live')", "live"),
+        Binding("6", "tab('gains')", "gains"),
         Binding("f3", "size", "size plan", priority=True),
         Binding("f2", "arm", "arm plan", priority=True),
         Binding("y", "decide(True)", "accept", show=False),
         Binding("n", "decide(False)", "reject", show=False),
         Binding("r", "revert", "revert", show=False),
         Binding("f", "frf", "frequency response", show=False),
+        Binding("g", "gains('propose')", "propose gains", show=False),
+        Binding("a", "gains('apply')", "apply gains", show=False),
+        Binding("v", "gains('revert')", "revert gains", show=False),
         Binding("q", "quit", "quit"),
     ]
 
@@ -93,6 +98,7 @@ class Console(App):
         self.identify_tab = IdentifyTab(station, self.send, id="settings")
         self.results_tab = ResultsTab(station, self.send)
         self.live_tab = LiveTab(station)
+        self.gains_tab = GainsTab(station, self.send)
 
     @property
     def selected(self) -> str | None:
@@ -114,6 +120,8 @@ class Console(App):
                 yield self.results_tab
             with TabPane("Live 5", id="live"):
                 yield self.live_tab
+            with TabPane("Gains 6", id="gains"):
+                yield self.gains_tab
         yield self.log_pane
         yield Footer()
 
@@ -160,6 +168,13 @@ class Console(App):
 
     def on_sizing_heard(self, message: posted.SizingHeard) -> None:
         self.excite_tab.sized(message.heard.sizing)
+
+    def on_gains_heard(self, message: posted.GainsHeard) -> None:
+        heard = message.heard
+        if heard.gains is not None:
+            self.gains_tab.gains = heard.gains
+        if heard.report is not None:
+            self.gains_tab.report = heard.report
 
     def on_ack_heard(self, message: posted.AckHeard) -> None:
         command = message.heard.command
@@ -243,6 +258,10 @@ class Console(App):
     def action_frf(self) -> None:
         if self._tabs().active == "results-tab":
             self.results_tab.ask_frf()
+
+    def action_gains(self, what: str) -> None:
+        if self._tabs().active == "gains":
+            getattr(self.gains_tab, what)()
 
     def _tabs(self) -> TabbedContent:
         """The tabs (the app's own query looks at the top screen, which is the confirmation

@@ -69,6 +69,14 @@ class SizingHeard:
 
 
 @dataclass(frozen=True)
+class GainsHeard:
+    """A gain proposal (`gains`) or what became of the autopilot's gains (`report`)."""
+
+    gains: messages.Gains | None = None
+    report: messages.GainsReport | None = None
+
+
+@dataclass(frozen=True)
 class AckHeard:
     """The aircraft answered a command (`command.ack`: done, or refused with the reason)."""
 
@@ -82,4 +90,6 @@ class Noted:
     line: Line
 
 
-Event = StatusHeard | LiveFrame | ResultHeard | FrfHeard | SizingHeard | AckHeard | Noted
+Event = (
+    StatusHeard | LiveFrame | ResultHeard | FrfHeard | SizingHeard | GainsHeard | AckHeard | Noted
+)

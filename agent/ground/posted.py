@@ -47,6 +47,11 @@ class SizingHeard(Message, bubble=False):
 
 
 @dataclass
+class GainsHeard(Message, bubble=False):
+    heard: events.GainsHeard
+
+
+@dataclass
 class AckHeard(Message, bubble=False):
     heard: events.AckHeard
 
@@ -62,6 +67,7 @@ _MESSAGES: dict[type, type[Message]] = {
     events.ResultHeard: ResultHeard,
     events.FrfHeard: FrfHeard,
     events.SizingHeard: SizingHeard,
+    events.GainsHeard: GainsHeard,
     events.AckHeard: AckHeard,
     events.Noted: Noted,
 }

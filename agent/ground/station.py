@@ -57,6 +57,10 @@ class Heard:
     excitation: messages.ExcitationEvent | None = None
     sizing: messages.Sizing | None = None
     """The aircraft's latest sizing of a plan (agent/sizing.py)."""
+    gains: messages.Gains | None = None
+    """The aircraft's latest gain proposal (agent/runtime/gains.py)."""
+    gains_report: messages.GainsReport | None = None
+    """What became of the autopilot's gains last (applied, reverted, failed)."""
 
 
 class GroundStation:
@@ -193,6 +197,25 @@ class GroundStation:
             refused = f"; REFUSED: {'; '.join(message.refusals)}" if message.refusals else ""
             self.note(level, f"sizing {message.plan.id} by {message.source}: {amplitudes}{refused}")
             self._tell(events.SizingHeard(message))
+        elif isinstance(message, messages.Gains):
+            h.gains = message
+            steps = ", ".join(
+                f"{axis} {share:.0%} of the way" for axis, share in message.share.items()
+            )
+            refused = f"; not proposed: {'; '.join(message.refused)}" if message.refused else ""
+            self.note("info", f"gains {message.proposal} from {message.model_id}: {steps}{refused}")
+            self._tell(events.GainsHeard(gains=message))
+        elif isinstance(message, messages.GainsReport):
+            h.gains_report = message
+            level = (
+                "error"
+                if message.action == "failed"
+                else "warning"
+                if message.action == "reverted"
+                else "info"
+            )
+            self.note(level, f"gains {message.action} {message.proposal or ''}: {message.reason}")
+            self._tell(events.GainsHeard(report=message))
         elif isinstance(message, messages.Notice):
             self.note("warning", message.text)
 
@@ -268,6 +291,17 @@ class GroundStation:
 
     def revert(self) -> Command:
         return self.send(messages.Revert(), "revert to the previous nominal")
+
+    def propose_gains(self, model_id: str | None = None) -> Command:
+        """Ask for autopilot gains designed from a model (the nominal by default); the answer
+        is a Gains (`heard.gains`)."""
+        return self.send(messages.GainsRequest(model_id=model_id), "propose gains")
+
+    def apply_gains(self, proposal: str) -> Command:
+        return self.send(messages.GainsApply(proposal=proposal), f"apply gains {proposal}")
+
+    def revert_gains(self) -> Command:
+        return self.send(messages.GainsRevert(), "revert the gains")
 
     def frequency_response(self, model_id: str, input_: str, output: str) -> Command:
         request = messages.FrfRequest(model_id=model_id, input=input_, output=output)

@@ -1,8 +1,9 @@
 """What the aircraft and the ground say to each other (pydantic), version 1.
 
 Uplink (ground → air): size a plan, arm a plan, start, abort, identification settings, a
-model decision, revert to the previous nominal model, ping. Downlink (air → ground): status
-(≈ 1 Hz, best effort), excitation events, identification results, a plan's sizing,
+model decision, revert to the previous nominal model, propose, apply and revert autopilot
+gains, ping. Downlink (air → ground): status (≈ 1 Hz, best effort), excitation events,
+identification results, a plan's sizing, a gain proposal and what became of it,
 acknowledgements of commands (with the reason for a refusal), warnings. Every message carries
 the protocol version; a receiver refuses other versions with a clear error.
 """
@@ -94,6 +95,28 @@ class FrfRequest(Message):
     model_id: str = Field(max_length=32)
     input: str = Field(max_length=32)
     output: str = Field(max_length=32)
+
+
+class GainsRequest(Message):
+    """Propose ArduPlane's FBWA roll and pitch gains designed from a model (agent.tune):
+    answered with an Ack, then a Gains. Nothing is set."""
+
+    kind: Literal["gains-request"] = "gains-request"
+    model_id: str | None = Field(None, max_length=32)
+    """None: the nominal model (the full one's, else the lateral and longitudinal ones')."""
+
+
+class GainsApply(Message):
+    """Set a proposal's gains on the autopilot (refused while a plan is armed or playing)."""
+
+    kind: Literal["gains-apply"] = "gains-apply"
+    proposal: str = Field(max_length=48)
+
+
+class GainsRevert(Message):
+    """Set the gains the last apply replaced back on the autopilot."""
+
+    kind: Literal["gains-revert"] = "gains-revert"
 
 
 class Ping(Message):
@@ -273,6 +296,66 @@ class Sizing(Message):
     refusals: list[Annotated[str, Field(max_length=200)]] = Field(default_factory=list)
 
 
+class GainRow(BaseModel):
+    """One parameter of a proposal: what the autopilot holds now, what the design asks, and
+    what the proposal sets (a step toward the design where the change per step is limited)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    name: str = Field(max_length=16)
+    current: float | None = None
+    """None: the autopilot did not give it."""
+    designed: float
+    proposed: float | None = None
+    """None: this axis is not proposed (`Gains.refused` says why)."""
+
+
+class LoopPrediction(BaseModel):
+    """One axis's predicted loop with a set of gains (agent.tune.assess)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    axis: Literal["roll", "pitch"]
+    gains: Literal["current", "proposed"]
+    crossover_rad_s: float | None = None
+    phase_margin_deg: float | None = None
+    gain_margin_db: float | None = None
+    """None: infinite (the loop never loses stability with more gain)."""
+    delay_margin_s: float | None = None
+    rejection_rad_s: float | None = None
+    rise_s: float | None = None
+    overshoot_pct: float | None = None
+    sound: bool = False
+    """Whether the whole loop keeps 6 dB and 45° (MIL-F-9490D)."""
+    stable: bool = True
+    """False: these gains do not hold the axis at all (the margins are then left out)."""
+
+
+class Gains(Message):
+    """A proposal: the gains designed from a model beside the autopilot's, with each set's
+    predicted loops; apply it by its id (GainsApply)."""
+
+    kind: Literal["gains"] = "gains"
+    proposal: str = Field(max_length=48)
+    model_id: str = Field(max_length=32)
+    rows: list[GainRow]
+    loops: list[LoopPrediction]
+    share: dict[str, float] = Field(default_factory=dict)
+    """Axis → the share of the way to the design the proposal goes (1: the design)."""
+    refused: list[Annotated[str, Field(max_length=200)]] = Field(default_factory=list)
+    notes: list[Annotated[str, Field(max_length=200)]] = Field(default_factory=list)
+
+
+class GainsReport(Message):
+    """What became of the autopilot's gains: applied, reverted (on command or by the
+    tracking self-check), or failed (and what the autopilot holds after it)."""
+
+    kind: Literal["gains-report"] = "gains-report"
+    action: Literal["applied", "reverted", "failed"]
+    proposal: str | None = Field(None, max_length=48)
+    values: dict[str, float] = Field(default_factory=dict)
+    """The gains as read back from the autopilot."""
+    reason: str = Field("", max_length=200)
+
+
 class Notice(Message):
     """A warning for the operator."""
 
@@ -280,9 +363,33 @@ class Notice(Message):
     text: str = Field(max_length=200)
 
 
-Uplink = Arm | SizeRequest | Start | Abort | IdentSettings | Decision | Revert | FrfRequest | Ping
+Uplink = (
+    Arm
+    | SizeRequest
+    | Start
+    | Abort
+    | IdentSettings
+    | Decision
+    | Revert
+    | FrfRequest
+    | GainsRequest
+    | GainsApply
+    | GainsRevert
+    | Ping
+)
 Downlink = (
-    Status | Live | ExcitationEvent | Result | Sizing | FrfReport | Failure | Ack | Notice | Ping
+    Status
+    | Live
+    | ExcitationEvent
+    | Result
+    | Sizing
+    | FrfReport
+    | Gains
+    | GainsReport
+    | Failure
+    | Ack
+    | Notice
+    | Ping
 )
 Message = Annotated[
     Arm
@@ -293,6 +400,9 @@ Message = Annotated[
     | Decision
     | Revert
     | FrfRequest
+    | GainsRequest
+    | GainsApply
+    | GainsRevert
     | Ping
     | Status
     | Live
@@ -300,6 +410,8 @@ Message = Annotated[
     | Result
     | Sizing
     | FrfReport
+    | Gains
+    | GainsReport
     | Failure
     | Ack
     | Notice,

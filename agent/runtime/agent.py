@@ -30,6 +30,7 @@ from agent.models import ModelStore
 from agent.recorder import Recorder
 from agent.runtime.commands import Commands
 from agent.runtime.downlink import Downlink
+from agent.runtime.gains import GainTuner
 from agent.runtime.health import Health
 from agent.runtime.identification import Identifier
 from agent.runtime.live import Live
@@ -106,10 +107,20 @@ class Agent:
         self.sizer = Sizer(
             config=config, identification=self.identification, flight=lambda: self.scheduler.state
         )
+        self.gains = GainTuner(
+            config=config,
+            identification=self.identification,
+            autopilot=self.autopilot,
+            status=lambda: self.scheduler.status,
+            downlink=self.downlink,
+            logbook=self.logbook,
+            counters=self.counters,
+        )
         self.commands = Commands(
             scheduler=self.scheduler,
             identification=self.identification,
             sizer=self.sizer,
+            gains=self.gains,
             downlink=self.downlink,
             counters=self.counters,
         )
@@ -195,6 +206,7 @@ class Agent:
                     "periodic": self.identification.periodic,
                     "identification": self.identification.run,
                     "commands": self.commands.run,
+                    "gains": self.gains.run,
                 }
                 if self.session is not None:
                     named["link"] = self.session.run
@@ -299,8 +311,10 @@ class Agent:
         self.logbook.linkage(window.plan_id, [f for f in followed if f.verdict == "follows"])
         for f in followed:
             if f.verdict == "follows":
-                # Its linkage sizes the next plans (agent/runtime/sizer.py).
+                # Its linkage sizes the next plans (agent/runtime/sizer.py) and, with its lag,
+                # the gains designed onboard (agent/runtime/gains.py).
                 self.sizer.linkage[f.control] = (f.gain, f.even)
+                self.gains.linkage[f.control] = {"gain": f.gain, "lag_s": f.lag_s}
                 continue
             self.counters[f"surface_{f.verdict.replace(' ', '_')}"] += 1
             log.warning("%s: %s", window.plan_id, f.text())

@@ -11,7 +11,8 @@ refusal the handler raises (`PlanRefused`, no such model, no previous nominal) i
 too. A plan whose run cannot be identified on its axes (an input of them it does not move)
 is armed all the same, and the ground told why in a notice. A size request is answered with
 the plan's sizing (agent/runtime/sizer.py); an arm whose predicted response leaves the
-envelope is refused with what the prediction says.
+envelope is refused with what the prediction says. Gain proposals, applies and reverts go to
+agent/runtime/gains.py.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from agent.excitation.plan import Plan, PlanRefused
 from agent.excitation.scheduler import Scheduler
 from agent.link import messages
 from agent.runtime.downlink import Downlink
+from agent.runtime.gains import GainTuner
 from agent.runtime.identification import Identifier
 from agent.runtime.sizer import Sizer, sizing_message
 
@@ -44,10 +46,12 @@ class Commands:
         scheduler: Scheduler,
         identification: Identifier,
         sizer: Sizer,
+        gains: GainTuner,
         downlink: Downlink,
         counters: Counter[str],
     ):
         self.scheduler, self.identification, self.sizer = scheduler, identification, sizer
+        self.gains = gains
         self.downlink, self.counters = downlink, counters
         self._queue: asyncio.Queue[tuple[messages.Message, int | None]] = asyncio.Queue(
             COMMAND_QUEUE
@@ -61,6 +65,9 @@ class Commands:
             messages.Decision: self._decision,
             messages.Revert: self._revert,
             messages.FrfRequest: self._frf,
+            messages.GainsRequest: self.gains.propose,
+            messages.GainsApply: self.gains.apply,
+            messages.GainsRevert: self._gains_revert,
         }
 
     def receive(self, message: messages.Message, seq: int | None) -> None:
@@ -179,6 +186,9 @@ class Commands:
 
     async def _frf(self, message: messages.FrfRequest) -> str:
         return await self.identification.request_frf(message)
+
+    async def _gains_revert(self, message: messages.GainsRevert) -> str:
+        return await self.gains.revert()
 
 
 def _unmoved_inputs(plan: Plan, chosen: str | None, controls) -> str:

@@ -3,7 +3,8 @@
 What it does, as ArduPlane does it (docs/protocols.md, *ArduPlane through MAVSDK*):
 - HEARTBEAT at 1 Hz as a fixed-wing ArduPilot (custom mode 0 = MANUAL, armed).
 - Telemetry at per-message intervals, changed by MAV_CMD_SET_MESSAGE_INTERVAL (511) with a
-  COMMAND_ACK: ATTITUDE, VFR_HUD, AOA_SSA, RC_CHANNELS, SERVO_OUTPUT_RAW, GLOBAL_POSITION_INT.
+  COMMAND_ACK: ATTITUDE, VFR_HUD, AOA_SSA, RC_CHANNELS, SERVO_OUTPUT_RAW, GLOBAL_POSITION_INT,
+  NAV_CONTROLLER_OUTPUT (in FBWA the roll and pitch its laws demand).
   Other commands are acknowledged as unsupported (MAVSDK asks a few things on connect).
 - RC_CHANNELS_OVERRIDE accepted only from SYSID_MYGCS (255) addressed to this system; channels
   1–8: 0 releases, 65535 leaves alone; 9–18: 65534 releases, 0 and 65535 leave alone. An
@@ -72,6 +73,7 @@ DEFAULT_INTERVAL = {
     mavlink.MAVLINK_MSG_ID_RC_CHANNELS: 0.25,
     mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 0.25,
     mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 0.25,
+    mavlink.MAVLINK_MSG_ID_NAV_CONTROLLER_OUTPUT: 0.25,
 }
 # The onboard log at 50 Hz (ArduPilot's LOG_BITMASK default rates are 25–50 Hz) of the 100 Hz
 # autopilot ticks.
@@ -524,6 +526,14 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
         if msg_id == mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW:
             servos = [self.outputs.get(ch, 0) for ch in range(1, 17)]
             return m.servo_output_raw_encode((boot_ms * 1000) & 0xFFFFFFFF, 0, *servos)
+        if msg_id == mavlink.MAVLINK_MSG_ID_NAV_CONTROLLER_OUTPUT:
+            # The attitude its laws demand (ArduPlane's nav_roll_cd, nav_pitch_cd); outside
+            # FBWA nothing is demanded, and the attitude flown is sent.
+            fbwa = self.mode == FBWA and "roll_demand" in self.surfaces
+            roll = self.surfaces["roll_demand"] if fbwa else np.degrees(s["phi"])
+            pitch = self.surfaces["pitch_demand"] if fbwa else np.degrees(s["theta"])
+            heading = int(np.degrees(s["psi"]) % 360)
+            return m.nav_controller_output_encode(roll, pitch, heading, heading, 0, 0.0, 0.0, 0.0)
         if msg_id == mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
             return m.global_position_int_encode(
                 boot_ms,

@@ -23,7 +23,7 @@ from concurrent.futures import ThreadPoolExecutor
 from mavsdk import LogLevel, log_subscribe
 from mavsdk.asyncio import Configuration, Mavsdk
 from mavsdk.plugins.mavlink_direct import MavlinkDirect, MavlinkMessage
-from mavsdk.plugins.param import Param, ParamError
+from mavsdk.plugins.param import Param, ParamError, ParamResult
 
 from drivers.config import Autopilot as AutopilotConfig
 from drivers.sensor import Sample
@@ -38,6 +38,7 @@ MESSAGES = {  # name → MAVLink id, for SET_MESSAGE_INTERVAL
     "AOA_SSA": 11020,
     "RC_CHANNELS": 65,
     "SERVO_OUTPUT_RAW": 36,
+    "NAV_CONTROLLER_OUTPUT": 62,
     "HEARTBEAT": 0,
 }
 SET_MESSAGE_INTERVAL = 511
@@ -237,6 +238,7 @@ class AutopilotLink:
             "AOA_SSA": cfg.aoa_hz,
             "RC_CHANNELS": cfg.rc_channels_hz,
             "SERVO_OUTPUT_RAW": cfg.servo_output_hz,
+            "NAV_CONTROLLER_OUTPUT": cfg.nav_controller_hz,
         }
         for name, hz in rates.items():
             fields = {
@@ -346,7 +348,8 @@ class AutopilotLink:
     async def set_parameters(self, values: Mapping[str, float]) -> dict[str, float]:
         """Set each parameter (PARAM_SET, answered by the autopilot's PARAM_VALUE), then read
         every one back; the values read back. AutopilotError names each one refused, lost or
-        read back different (the set may have half happened: the caller reads and reverts)."""
+        read back different (the set may have half happened: the caller reads and reverts).
+        After one lost (no answer through MAVSDK's retries) the rest are not sent."""
         failed = []
         for name, value in values.items():
             try:
@@ -355,6 +358,13 @@ class AutopilotLink:
             except ParamError as exc:
                 self.counters["params_refused"] += 1
                 failed.append(f"{name} ({_why(exc)})")
+                if exc.result in (ParamResult.TIMEOUT, ParamResult.CONNECTION_ERROR):
+                    # Unanswered after MAVSDK's retries: the link is not carrying them, and
+                    # each further one would wait as long. The rest are not sent.
+                    rest = list(values)[list(values).index(name) + 1 :]
+                    if rest:
+                        failed.append(f"{', '.join(rest)} not sent")
+                    break
         read = {}
         for name in values:
             try:

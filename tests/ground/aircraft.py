@@ -116,6 +116,40 @@ def sized(plan) -> messages.Sizing:
     return sizing_message(done, ex.surfaces)
 
 
+def proposal(model_id: str, count: int) -> messages.Gains:
+    """A gain proposal as the agent sends it (agent/runtime/gains.py): the roll axis a step
+    toward its design, the pitch axis refused."""
+    rows = [
+        messages.GainRow(name="RLL2SRV_TCONST", current=0.5, designed=0.6, proposed=0.6),
+        messages.GainRow(name="RLL_RATE_FF", current=0.345, designed=1.2, proposed=0.69),
+        messages.GainRow(name="RLL_RATE_P", current=0.08, designed=0.12, proposed=0.12),
+        messages.GainRow(name="SCALING_SPEED", current=15.0, designed=22.0, proposed=22.0),
+    ]
+    loops = [
+        messages.LoopPrediction(axis="roll", gains="current", stable=False),
+        messages.LoopPrediction(
+            axis="roll",
+            gains="proposed",
+            crossover_rad_s=3.1,
+            phase_margin_deg=58.0,
+            gain_margin_db=None,
+            delay_margin_s=0.33,
+            rejection_rad_s=1.4,
+            rise_s=0.9,
+            overshoot_pct=1.2,
+            sound=True,
+        ),
+    ]
+    return messages.Gains(
+        proposal=f"{model_id}-g{count}",
+        model_id=model_id,
+        rows=rows,
+        loops=loops,
+        share={"roll": 0.55},
+        refused=["pitch: the model has no elevator input"],
+    )
+
+
 @dataclass
 class ScriptedAircraft:
     session: LinkSession | None = None
@@ -124,6 +158,7 @@ class ScriptedAircraft:
     nominal: list[str] = field(default_factory=list)  # the nominal history, latest last
     excitation: str = "idle"
     airspeed: float = 22.0
+    proposals: int = 0  # gain proposals sent
     settings: messages.IdentSettings | None = field(default_factory=messages.IdentSettings)
     """The settings in effect its status reports (None: an older agent, which does not)."""
 
@@ -151,6 +186,27 @@ class ScriptedAircraft:
             self.session.send_reliable(frequency_response(message))
         if isinstance(message, messages.SizeRequest) and not reason:
             self.session.send_reliable(sized(message.plan))
+        if isinstance(message, messages.GainsRequest) and not reason:
+            self.proposals += 1
+            model = message.model_id or (self.nominal[-1] if self.nominal else "lat-1")
+            self.session.send_reliable(proposal(model, self.proposals))
+        if isinstance(message, messages.GainsApply) and not reason:
+            self.session.send_reliable(
+                messages.GainsReport(
+                    action="applied",
+                    proposal=message.proposal,
+                    values={"RLL_RATE_FF": 0.69, "RLL_RATE_P": 0.12},
+                    reason="replacing RLL_RATE_FF 0.345, RLL_RATE_P 0.08",
+                )
+            )
+        if isinstance(message, messages.GainsRevert) and not reason:
+            self.session.send_reliable(
+                messages.GainsReport(
+                    action="reverted",
+                    values={"RLL_RATE_FF": 0.345, "RLL_RATE_P": 0.08},
+                    reason="operator's command",
+                )
+            )
 
     def status(self, t: float) -> messages.Status:
         return messages.Status(

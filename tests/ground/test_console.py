@@ -10,6 +10,7 @@ settings with a non-numeric p (not sent), the radio link going silent (shown as 
 from __future__ import annotations
 
 import asyncio
+import io
 import json
 import math
 import re
@@ -35,6 +36,15 @@ async def until(pilot, predicate, what: str) -> None:
 
 def text_of(app, selector: str) -> str:
     return str(app.query_one(selector).render())
+
+
+def drawn(app, selector: str) -> str:
+    """What a widget draws, rich tables included, as plain text."""
+    from rich.console import Console as RichConsole
+
+    out = RichConsole(width=200, record=True, file=io.StringIO())
+    out.print(app.query_one(selector).content)
+    return out.export_text()
 
 
 def log_text(app) -> str:
@@ -477,3 +487,47 @@ async def test_the_live_view_shows_the_run_its_identification_and_strip_charts(c
     assert app.query_one("#ident-progress").progress == 99.0  # an expectation: never 100 %
     r.aircraft.session.send_reliable(result("lat-1"))
     await until(pilot, lambda: "idle" in text_of(app, "#ident-text"), "the run over")
+
+
+async def test_gains_are_proposed_shown_beside_the_autopilots_applied_and_reverted(console):
+    """The Gains tab: G asks, the proposal's rows (autopilot, designed, proposed) and each
+    set's loops are drawn, an axis not proposed says why; A applies after a confirmation, V
+    reverts; the aircraft's reports shown with the values read back. Bad input tried: an
+    apply with no proposal yet (not sent), an apply the aircraft refuses (its reason shown),
+    a current set that does not hold the axis (shown as unstable)."""
+    app, pilot, r, _ = console
+    await pilot.press("6")
+    await pilot.pause(0.1)
+    assert "no proposal" in drawn(app, "#gains-table")
+    sent = len(r.aircraft.inbox)
+    await pilot.press("a")
+    await pilot.pause(0.2)
+    assert len(r.aircraft.inbox) == sent
+    assert "no gain proposal to apply" in log_text(app)
+    await pilot.press("g")
+    await until(pilot, lambda: "lat-1-g1" in drawn(app, "#gains-table"), "proposal")
+    table = drawn(app, "#gains-table")
+    assert "RLL_RATE_FF" in table
+    assert "0.345" in table
+    assert "0.69" in table
+    loops = drawn(app, "#gains-loops")
+    assert "UNSTABLE" in loops
+    assert "58°" in loops
+    assert "55% of the way" in loops
+    assert "pitch: the model has no elevator input" in loops
+    r.aircraft.refuse["gains-apply"] = "a plan is armed: gains are never changed while one is"
+    await pilot.press("a")
+    await pilot.press("y")
+    await until(pilot, lambda: "REFUSED" in log_text(app), "refusal")
+    assert "a plan is armed" in log_text(app)
+    del r.aircraft.refuse["gains-apply"]
+    await pilot.press("a")
+    await pilot.press("y")
+    await until(pilot, lambda: "APPLIED" in drawn(app, "#gains-report"), "applied")
+    assert "RLL_RATE_FF 0.69" in drawn(app, "#gains-report")
+    applied = [m for m in r.aircraft.inbox if isinstance(m, messages.GainsApply)]
+    assert [m.proposal for m in applied] == ["lat-1-g1", "lat-1-g1"]
+    await pilot.press("v")
+    await pilot.press("y")
+    await until(pilot, lambda: "REVERTED" in drawn(app, "#gains-report"), "reverted")
+    assert any(isinstance(m, messages.GainsRevert) for m in r.aircraft.inbox)

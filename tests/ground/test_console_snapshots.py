@@ -147,3 +147,21 @@ def drawn(app, samples: int) -> bool:
     surface on one chart)."""
     strips = app.query(".strip")
     return len(strips) == 3 and all(len(trace) == samples for s in strips for trace, _ in s.traces)
+
+
+async def test_gains_view(tmp_path):
+    """The Gains tab with a proposal beside the autopilot's gains and an apply reported."""
+    async with rig(tmp_path) as r:
+        r.aircraft.nominal = ["lat-1"]
+        station = GroundStation(r.config, VirtualClock(1000.0), base=tmp_path)
+        app = Console(station)
+        async with app.run_test(size=(120, 40)) as pilot:
+            await until(pilot, lambda: station.heard.status is not None, "status")
+            await pilot.press("6")
+            await pilot.press("g")
+            await until(pilot, lambda: station.heard.gains is not None, "the proposal")
+            await pilot.press("a")
+            await pilot.press("y")
+            await until(pilot, lambda: station.heard.gains_report is not None, "the report")
+            shot = await settled(pilot, app)
+            matches("console-gains-120x40", shot)
