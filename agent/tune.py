@@ -43,7 +43,7 @@ import scipy.interpolate
 import scipy.linalg
 import scipy.signal
 
-from agent.fbwa import DEFAULTS, LOOP_HZ, TRAVEL_DEG, Fbwa, Sensed
+from agent.fbwa import DEFAULTS, LOOP_HZ, TRAVEL_DEG, Fbwa, G, Sensed
 
 # Loop-shaping targets: the rate loop's phase margin (the attitude loop closed around it then
 # keeps 45°), every loop's gain margin, and the whole loop's phase margin (MIL-F-9490D).
@@ -61,6 +61,14 @@ BACKOFF, BACKOFFS = 0.8, 12
 # them is refused, never clipped into a different design.
 P_RANGE, I_RANGE, FF_RANGE = (0.001, 4.0), (0.0, 4.0), (0.01, 4.0)
 TCONST_RANGE = (0.2, 2.0)
+# The yaw damper (`design_yaw`): the Dutch roll damping ratio it aims at (a common
+# yaw-damper goal, well above MIL-F-8785C's Level 1 minimum of 0.19 for flight phase A), the
+# least it must add to be turned on, and ArduPlane's range of YAW2SRV_DAMP; its high-pass
+# (AP_YawController's 0.9960080 per 50 Hz sample).
+DUTCH_ROLL_TARGET = 0.4
+DUTCH_ROLL_GAIN = 0.05
+DAMP_RANGE = (0.0, 2.0)
+YAW_HIGH_PASS_RAD_S = 0.2
 # The step each axis is predicted and checked for (the issue's flight test): degrees.
 STEPS = {"roll": 20.0, "pitch": 5.0}
 FREQUENCIES = np.logspace(-2, 3, 4000)  # rad/s
@@ -345,6 +353,35 @@ class Assessed:
         return bool(m.gain_db >= GAIN_MARGIN_DB and m.phase_deg >= PHASE_MARGIN)
 
 
+def loops(
+    axis: str,
+    plant: Plant,
+    actuator: Actuator,
+    params: Mapping[str, float],
+    *,
+    eas: float,
+    scaling_speed: float,
+    eas2tas: float = 1.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The rate loop and the whole loop, each broken at the actuator, over FREQUENCIES, for a
+    set of one axis's gains (those missing at ArduPlane's defaults)."""
+    prefix, tc_name = (
+        ("RLL_RATE", "RLL2SRV_TCONST") if axis == "roll" else ("PTCH_RATE", "PTCH2SRV_TCONST")
+    )
+    value = {**DEFAULTS, **dict(params)}
+    S = float(np.clip(scaling_speed / eas, 0.1, 10.0))
+    w = FREQUENCIES
+    rate, angle = plant.response(w)
+    act = actuator.response(w)
+    Gr, Ga = rate * act, angle * act
+    hold = np.exp(-1j * w * (1.0 / LOOP_HZ) * 1.5)
+    target = 1.0 / (1.0 + 1j * w / (2 * np.pi * value[f"{prefix}_FLTT"]))
+    ff, kp, ki = (float(value[f"{prefix}_{k}"]) for k in ("FF", "P", "I"))
+    pid = S * S * (kp + ki / (1j * w))
+    whole = ((ff * S / eas2tas + pid) * target * Ga / float(value[tc_name]) + pid * Gr) * hold
+    return pid * Gr * hold, whole
+
+
 def assess(
     axis: str,
     plant: Plant,
@@ -367,18 +404,10 @@ def assess(
     )
     value = {**DEFAULTS, **dict(params)}
     S = float(np.clip(scaling_speed / eas, 0.1, 10.0))
-    w = FREQUENCIES
-    rate, angle = plant.response(w)
-    act = actuator.response(w)
-    Gr, Ga = rate * act, angle * act
-    hold = np.exp(-1j * w * (1.0 / LOOP_HZ) * 1.5)
+    rate_loop, whole = loops(axis, plant, actuator, value, eas=eas, scaling_speed=scaling_speed)
     fltt = value[f"{prefix}_FLTT"]
-    target = 1.0 / (1.0 + 1j * w / (2 * np.pi * fltt))
     ff, kp, ki = (float(value[f"{prefix}_{k}"]) for k in ("FF", "P", "I"))
     tc = float(value[tc_name])
-    pid = S * S * (kp + ki / (1j * w))
-    rate_loop = pid * Gr * hold
-    whole = ((ff * S / eas2tas + pid) * target * Ga / tc + pid * Gr) * hold
     law = Law(tc=tc, ff=ff * S / eas2tas, kp=S * S * kp, ki=S * S * ki, fltt=fltt)
     if np.max(np.abs(rate_loop)) < 1.0:
         rate_margins = Margins(gain_db=np.inf, phase_deg=np.inf, crossover_rad_s=np.nan)
@@ -445,23 +474,186 @@ def closed_loop(
     u *= gain
     M[ix, ix] = plant.A
     M[ix, iδ] = plant.B
-    # the delay's input is u; its output y_d = Cp z + Dp u drives the servo
-    if d:
-        M[iz, :] += np.outer(Bp[:, 0], u)
-        M[iz, iz] += Ap
-    delayed = Dp * u
-    if d:
-        delayed = delayed.copy()
-        delayed[iz] += Cp[0]
-    lag = max(actuator.lag_s, 1e-3)
-    M[iδ, :] += actuator.link * delayed / lag
-    M[iδ, iδ] -= 1.0 / lag
+    _servo(M, u, (Ap, Bp, Cp, Dp), iz, iδ, actuator)
     wt = 2 * np.pi * law.fltt
     M[ir, ix] = -wt * angle / law.tc
     M[ir, ir] = -wt
     M[iI, ir] = law.ki
     M[iI, ix] = -law.ki * rate
     return M
+
+
+def damper_loop(
+    roll: Plant,
+    roll_actuator: Actuator,
+    law: Law,
+    rudder: Plant,
+    rudder_actuator: Actuator,
+    *,
+    damp: float,
+    scaler: float,
+    eas: float,
+    turn: float = 1.0,
+    gain: float = 1.0,
+    extra_delay: float = 0.0,
+) -> np.ndarray:
+    """The lateral closed loop with the yaw damper: the roll loop (`closed_loop`, the rudder's
+    KFF_RDDRMIX share of the aileron folded into `roll`'s B) and, on the rudder's own servo
+    (lag, dead time and the loop's 1.5 samples, Padé), AP_YawController's damper linearised:
+    rudder = −DAMP·S²·HP(deg(r − g/EAS·φ·YAW2SRV_RLL)), HP = s/(s + YAW_HIGH_PASS_RAD_S).
+    `rudder`: the same states, the rudder's B and the yaw rate as its rate row. `gain` and
+    `extra_delay` as `closed_loop`'s, on the damper's path only (its margins)."""
+    base = closed_loop(roll, roll_actuator, law)
+    n, N = roll.A.shape[0], base.shape[0]
+    Ap, Bp, Cp, Dp = _pade(rudder_actuator.delay_s + 1.5 / LOOP_HZ + extra_delay)
+    d = Ap.shape[0]
+    size = N + 1 + 1 + d  # + the high-pass state, the rudder δ, its delay
+    ih, iδ, iz = N, N + 1, slice(N + 2, N + 2 + d)
+    M = np.zeros((size, size))
+    M[:N, :N] = base
+    deg = 180.0 / np.pi
+    signal = np.zeros(size)  # the damper's input, deg/s, as a row over the states
+    signal[:n] = deg * (rudder.rate - G / eas * turn * roll.angle)
+    a = YAW_HIGH_PASS_RAD_S
+    M[ih, :] += a * signal
+    M[ih, ih] -= a
+    command = -damp * scaler * scaler * gain * signal  # on y = signal − x_h
+    command[ih] += damp * scaler * scaler * gain
+    _servo(M, command, (Ap, Bp, Cp, Dp), iz, iδ, rudder_actuator)
+    M[:n, iδ] += rudder.B
+    return M
+
+
+def _servo(M: np.ndarray, command: np.ndarray, pade, iz: slice, iδ: int, actuator: Actuator):
+    """Into M: `command` (a row over the states) through the delay's Padé states `iz` (its
+    output y_d = C z + D u) and the servo's first-order lag onto the surface state `iδ`."""
+    Ap, Bp, Cp, Dp = pade
+    d = Ap.shape[0]
+    if d:
+        M[iz, :] += np.outer(Bp[:, 0], command)
+        M[iz, iz] += Ap
+    delayed = Dp * command
+    if d:
+        delayed = delayed.copy()
+        delayed[iz] += Cp[0]
+    lag = max(actuator.lag_s, 1e-3)
+    M[iδ, :] += actuator.link * delayed / lag
+    M[iδ, iδ] -= 1.0 / lag
+
+
+def dutch_roll(values: np.ndarray, near: complex) -> complex:
+    """The eigenvalue of `values` (upper half plane) nearest the Dutch roll `near`."""
+    upper = [v for v in values if v.imag > 0]
+    if not upper:
+        return complex(np.nan, np.nan)
+    return complex(min(upper, key=lambda v: abs(v - near)))
+
+
+@dataclass(frozen=True, kw_only=True)
+class YawTune:
+    """The yaw damper's gain and what it predicts: the Dutch roll without and with it, and
+    the factor on the damper's gain the loop stands before it goes unstable (dB)."""
+
+    params: dict[str, float]
+    before: complex
+    after: complex
+    gain_margin_db: float
+    notes: tuple[str, ...] = ()
+
+    @staticmethod
+    def zeta(value: complex) -> float:
+        return float(-value.real / abs(value)) if abs(value) > 0 else float("nan")
+
+
+def design_yaw(
+    roll: Plant,
+    roll_actuator: Actuator,
+    law: Law,
+    rudder: Plant,
+    rudder_actuator: Actuator,
+    *,
+    scaler: float,
+    eas: float,
+) -> YawTune:
+    """YAW2SRV_DAMP: the smallest that brings the Dutch roll's damping ratio, with the roll
+    loop closed, to DUTCH_ROLL_TARGET while the damper's path keeps GAIN_MARGIN_DB (twice the
+    gain still stable), within ArduPlane's DAMP_RANGE; where none reaches it, the one of most
+    damping that keeps the margin, if it adds DUTCH_ROLL_GAIN at least; 0 (ArduPlane's
+    default: off) where the aircraft's own damping already reaches the target or the damper
+    adds too little."""
+    kw = {"scaler": scaler, "eas": eas}
+    base = closed_loop(roll, roll_actuator, law)
+    fixed = _untouched(roll)
+    pairs = [v for v in np.linalg.eigvals(roll.A) if v.imag > 1e-6]
+    if not pairs:
+        raise TuneError("yaw: the model has no Dutch roll (no oscillatory lateral mode)")
+    # The Dutch roll is the lateral plant's oscillatory mode; with the roll loop closed, the
+    # closed loop's nearest to it.
+    near = complex(max(pairs, key=lambda v: v.imag))
+    before = dutch_roll(np.linalg.eigvals(base), near)
+
+    def loop(damp: float, gain: float = 1.0) -> np.ndarray:
+        return damper_loop(
+            roll, roll_actuator, law, rudder, rudder_actuator, damp=damp, gain=gain, **kw
+        )
+
+    def margin(damp: float) -> float:
+        """dB of gain on the damper's path before instability (at most 40)."""
+        low, high = 0.0, 40.0
+        if _stable(loop(damp, 10 ** (high / 20)), fixed):
+            return high
+        for _ in range(30):
+            mid = 0.5 * (low + high)
+            if _stable(loop(damp, 10 ** (mid / 20)), fixed):
+                low = mid
+            else:
+                high = mid
+        return low
+
+    zeta0 = YawTune.zeta(before)
+    name = "YAW2SRV_DAMP"
+    if zeta0 >= DUTCH_ROLL_TARGET:
+        note = (
+            f"the Dutch roll's own damping ratio {zeta0:.2f} reaches {DUTCH_ROLL_TARGET}: no damper"
+        )
+        return YawTune(
+            params={name: 0.0}, before=before, after=before, gain_margin_db=np.inf, notes=(note,)
+        )
+    best = None
+    for damp in np.geomspace(0.01, DAMP_RANGE[1], 80):
+        M = loop(float(damp))
+        if not _stable(M, fixed):
+            break
+        after = dutch_roll(np.linalg.eigvals(M), before)
+        if not np.isfinite(after.real) or margin(float(damp)) < GAIN_MARGIN_DB:
+            break
+        z = YawTune.zeta(after)
+        if best is None or z > best[1] + 1e-9:
+            best = (float(damp), z, after)
+        if z >= DUTCH_ROLL_TARGET:
+            break
+    if best is None or best[1] < zeta0 + DUTCH_ROLL_GAIN:
+        note = (
+            f"the damper adds too little to the Dutch roll's damping ratio {zeta0:.2f} within "
+            f"{GAIN_MARGIN_DB:g} dB: left off"
+        )
+        return YawTune(
+            params={name: 0.0}, before=before, after=before, gain_margin_db=np.inf, notes=(note,)
+        )
+    damp, z, after = best
+    notes = ()
+    if z < DUTCH_ROLL_TARGET:
+        notes = (
+            f"Dutch roll damping ratio {z:.2f}, short of {DUTCH_ROLL_TARGET}: the most "
+            "the margin allows",
+        )
+    return YawTune(
+        params={name: round(damp, 4)},
+        before=before,
+        after=after,
+        gain_margin_db=margin(damp),
+        notes=notes,
+    )
 
 
 def _untouched(plant: Plant) -> np.ndarray:
@@ -558,7 +750,7 @@ def _meets(L: np.ndarray, phase: float) -> bool:
     return m.phase_deg >= phase and m.gain_db >= GAIN_MARGIN_DB
 
 
-def predicted_step(
+def step_trace(
     axis: str,
     plant: Plant,
     actuator: Actuator,
@@ -567,9 +759,9 @@ def predicted_step(
     eas2tas: float,
     scaling_speed: float,
     seconds: float = 6.0,
-) -> tuple[float, float]:
-    """(10–90 % rise time s, overshoot %) of STEPS[axis] flown by agent.fbwa's laws with
-    these parameters on the linear plant and actuator, 1 kHz inside the 50 Hz loop."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """STEPS[axis] flown by agent.fbwa's laws with these parameters on the linear plant and
+    actuator, 1 kHz inside the 50 Hz loop: (time s, angle deg)."""
     fbwa = Fbwa({**dict(params), "SCALING_SPEED": scaling_speed})
     fbwa.scaler = float(np.clip(scaling_speed / eas, *(_scaler_limits(fbwa.params, scaling_speed))))
     h = 1e-3
@@ -608,6 +800,24 @@ def predicted_step(
         angles.append(np.degrees(float(plant.angle @ x)))
     angles = np.asarray(angles)
     t = np.arange(angles.size) * h
+    return t, angles
+
+
+def predicted_step(
+    axis: str,
+    plant: Plant,
+    actuator: Actuator,
+    params: Mapping[str, float],
+    eas: float,
+    eas2tas: float,
+    scaling_speed: float,
+    seconds: float = 6.0,
+) -> tuple[float, float]:
+    """(10–90 % rise time s, overshoot %) of STEPS[axis] flown by agent.fbwa's laws with
+    these parameters on the linear plant and actuator (`step_trace`)."""
+    t, angles = step_trace(axis, plant, actuator, params, eas, eas2tas, scaling_speed, seconds)
+    h = float(t[1] - t[0])
+    step = STEPS[axis]
     final = angles[-round(0.5 / h) :].mean()
     if not np.isfinite(final) or abs(final) < 0.5 * step:
         raise TuneError(f"{axis}: the predicted step does not settle near {step:g}°")
@@ -736,10 +946,14 @@ class Design:
     notes: tuple[str, ...] = ()
     loops: Mapping[str, tuple[Plant, Actuator]] = field(default_factory=dict)
     """Each designed axis's plant and actuator (to assess other gains on: `assess`, `toward`)."""
+    yaw: YawTune | None = None
+    """The yaw damper, designed with the roll loop closed (None: no rudder, or no roll)."""
 
     def params(self) -> dict[str, float]:
         """Every designed parameter by ArduPlane's name, SCALING_SPEED too."""
         out = {name: value for t in self.tunes for name, value in t.params.items()}
+        if self.yaw is not None:
+            out.update(self.yaw.params)
         out["SCALING_SPEED"] = round(self.scaling_speed, 1)
         return out
 
@@ -767,7 +981,9 @@ def design(model: Model, channels, surfaces: Mapping, options: Options | None = 
         if channel not in model.inputs or setup is None or setup.direction is None:
             refused.append(f"{axis}: the model has no {surface} input")
             continue
-        link = _link(setup, options.linkage.get(surface, measured.get(surface, {}).get("gain")))
+        link = surface_link(
+            setup, options.linkage.get(surface, measured.get(surface, {}).get("gain"))
+        )
         mix = {}
         for other, param in mixed.items():
             other_setup = surfaces.get(other)
@@ -775,7 +991,9 @@ def design(model: Model, channels, surfaces: Mapping, options: Options | None = 
                 continue
             if getattr(channels, other) in model.inputs:
                 given = options.linkage.get(other, measured.get(other, {}).get("gain"))
-                mix[getattr(channels, other)] = DEFAULTS[param] * _link(other_setup, given) / link
+                mix[getattr(channels, other)] = (
+                    DEFAULTS[param] * surface_link(other_setup, given) / link
+                )
         lag = measured.get(surface, {}).get("lag_s")
         servo = options.servo_lag_s
         delay = options.delay_s
@@ -821,6 +1039,14 @@ def design(model: Model, channels, surfaces: Mapping, options: Options | None = 
             refused.append(str(exc))
     if not tunes:
         raise TuneError("; ".join(refused) or "nothing to tune")
+    yaw = None
+    roll = next((t for t in tunes if t.axis == "roll"), None)
+    loops = {axis: (plant, actuator) for axis, plant, actuator in axes}
+    if roll is not None:
+        try:
+            yaw = _yaw(model, channels, surfaces, options, roll, loops["roll"], eas, scaling)
+        except TuneError as exc:
+            refused.append(str(exc))
     return Design(
         model_id=model.id,
         eas=eas,
@@ -828,11 +1054,58 @@ def design(model: Model, channels, surfaces: Mapping, options: Options | None = 
         tunes=tuple(tunes),
         refused=tuple(refused),
         notes=tuple(notes),
-        loops={axis: (plant, actuator) for axis, plant, actuator in axes},
+        loops=loops,
+        yaw=yaw,
     )
 
 
-def _link(setup, linkage: float | None) -> float:
+def _yaw(model, channels, surfaces, options, roll, loop, eas, scaling) -> YawTune | None:
+    """The yaw damper (`design_yaw`) around the designed roll loop; None without a rudder."""
+    setup = surfaces.get("rudder")
+    channel = channels.rudder
+    if channel not in model.inputs or setup is None or setup.direction is None:
+        return None
+    names = {
+        role: getattr(channels, role) for role in ("beta", "p", "r", "phi", "theta", "airspeed")
+    }
+    measured = options.measured.get("rudder", {})
+    rudder = axis_plant(
+        {"A": model.A, "B": model.B, "C": model.C},
+        model.inputs,
+        model.outputs,
+        surface=channel,
+        rate=names["r"],
+        angle=names["phi"],
+        axis_outputs=[names[r] for r in AXES["roll"][4]],
+    )
+    lag = measured.get("lag_s")
+    actuator = Actuator(
+        link=surface_link(setup, options.linkage.get("rudder", measured.get("gain"))),
+        lag_s=options.servo_lag_s
+        if options.servo_lag_s is not None
+        else SERVO_LAG_S
+        if lag is None
+        else 0.0,
+        delay_s=options.delay_s
+        if options.delay_s is not None
+        else SERVO_DELAY_S
+        if lag is None
+        else lag,
+    )
+    S = float(np.clip(scaling / eas, 0.1, 10.0))
+    p = roll.params
+    law = Law(
+        tc=p["RLL2SRV_TCONST"],
+        ff=p["RLL_RATE_FF"] * S,
+        kp=S * S * p["RLL_RATE_P"],
+        ki=S * S * p["RLL_RATE_I"],
+        fltt=DEFAULTS["RLL_RATE_FLTT"],
+    )
+    plant, roll_actuator = loop
+    return design_yaw(plant, roll_actuator, law, rudder, actuator, scaler=S, eas=eas)
+
+
+def surface_link(setup, linkage: float | None) -> float:
     """Measured surface units per notional degree through a surface's servo mapping and its
     linkage (1 where none is known)."""
     half = (setup.max_us - setup.min_us) / 2

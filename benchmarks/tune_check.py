@@ -9,7 +9,8 @@ Per aircraft and axis: the designed gains, the whole loop's margins, the ±20° 
 pitch steps' rise time and overshoot predicted and flown (calm, and in light turbulence, W20 =
 5 ft/s), and the rms bank and pitch error FBWA holds hands off for 30 s in light turbulence
 with the tuned gains and with ArduPlane's defaults (`SCALING_SPEED` and the airspeed limits
-set for the aircraft in both, as its pilot would).
+set for the aircraft in both, as its pilot would); and the yaw damper (YAW2SRV_DAMP) as the
+agent designs it, a rudder pulse's Dutch roll in FBWA with and without it, predicted and flown.
 """
 
 from __future__ import annotations
@@ -19,9 +20,18 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+from agent.config import Channels, Excitation
 from agent.sim.aircraft import FLOWN
-from agent.sim.steps import flown_step, held, truth_plants
-from agent.tune import TuneError, design_axis, scaling_for
+from agent.sim.steps import (
+    TICK_S,
+    flown_rudder_pulse,
+    flown_step,
+    held,
+    oscillation,
+    truth_design_inputs,
+    truth_plants,
+)
+from agent.tune import TuneError, design, design_axis, scaling_for
 
 LIGHT = 1.0  # turbulence: W20 = 5 ft/s
 
@@ -79,6 +89,37 @@ def main() -> None:
                 f"  light turbulence, held hands off, {label}: bank rms {bank:.2f}°, "
                 f"pitch rms {pitch:.2f}°"
             )
+        yaw_damper(aircraft, speed, altitude)
+
+
+def yaw_damper(aircraft: str, speed: float, altitude: float) -> None:
+    """The yaw damper as the agent designs it (agent.tune.design on the truth, with the
+    installation's linkage), then a rudder pulse flown in FBWA calm with and without it: the
+    Dutch roll fitted to the yaw rate's free response beside the prediction."""
+    model, options = truth_design_inputs(aircraft, speed, altitude)
+    try:
+        designed = design(model, Channels(), Excitation().surfaces, options)
+    except TuneError as exc:
+        print(f"{aircraft} yaw: not designed: {exc}")
+        return
+    yaw = designed.yaw
+    if yaw is None:
+        print(f"{aircraft} yaw: no rudder in the model")
+        return
+    damp = yaw.params["YAW2SRV_DAMP"]
+    notes = "; ".join(yaw.notes)
+    print(f"{aircraft} yaw: YAW2SRV_DAMP {damp:g}{'; ' + notes if notes else ''}")
+    params = designed.params()
+    for value, predicted in ((damp, yaw.after), (0.0, yaw.before)):
+        if value == 0.0 and damp == 0.0 and predicted is yaw.after:
+            continue
+        rate = flown_rudder_pulse(aircraft, speed, altitude, {**params, "YAW2SRV_DAMP": value})
+        flown = oscillation(rate, TICK_S, predicted)
+        print(
+            f"    YAW2SRV_DAMP {value:g}: Dutch roll predicted ζ {yaw.zeta(predicted):.3f} at "
+            f"{abs(predicted):.2f} rad/s, flown ζ {-flown.real / abs(flown):.3f} at "
+            f"{abs(flown):.2f} rad/s"
+        )
 
 
 if __name__ == "__main__":

@@ -13,11 +13,14 @@ import numpy as np
 import pytest
 
 from agent.cli import main
+from agent.config import Config
 from agent.fbwa import DEFAULTS
 from agent.tune import (
+    DUTCH_ROLL_TARGET,
     GAIN_MARGIN_DB,
     PHASE_MARGIN,
     Actuator,
+    Model,
     TuneError,
     assess,
     axis_plant,
@@ -26,6 +29,7 @@ from agent.tune import (
     param_file,
     toward,
 )
+from agent.tune import design as design_from
 from tests.documents import continuous_document
 
 # A roll axis: ṗ = L_p p + L_δa δa, φ̇ = p (δa in measured degrees, L_δa per degree).
@@ -281,3 +285,53 @@ def test_the_linkage_and_lag_a_run_measured_are_read_from_the_execution_log(tmp_
     empty.write_text(lines[0] + "\n")
     assert main([*args, "--exec-log", str(empty)]) == 2
     assert "no run's linkage" in json.loads(capsys.readouterr().out)["error"]["message"]
+
+
+def _lateral_with_rudder(N_beta=4.0, N_r=-0.5, rudder=-0.3):
+    """The `_model_file` aircraft with a rudder (measured positive yaws left, as the aileron's
+    rolls left) and the Dutch roll set by N_β and N_r."""
+    A = np.zeros((8, 8))
+    A[0, 0], A[0, 3] = -0.05, -9.81
+    A[1, 1], A[1, 2] = -2.0, 1.0
+    A[2, 1], A[2, 2] = -20.0, -3.0
+    A[3, 2] = 1.0
+    A[4, 4], A[4, 6] = -0.5, -1.0
+    A[5, 4], A[5, 5] = -2.0, -5.0
+    A[6, 4], A[6, 6] = N_beta, N_r
+    A[7, 5] = 1.0
+    B = np.zeros((8, 3))
+    B[5, 0], B[2, 1], B[6, 2] = -0.3, -0.4, rudder
+    return Model(
+        id="lateral",
+        inputs=["aileron", "elevator", "rudder"],
+        outputs=["Vt", "alpha", "q", "theta", "beta", "p", "r", "phi"],
+        A=A,
+        B=B,
+        C=np.eye(8),
+        trim={"Vt": 25.0},
+    )
+
+
+def test_the_yaw_damper_brings_a_light_dutch_roll_to_its_target_within_the_margin():
+    cfg = Config()
+    designed = design_from(
+        _lateral_with_rudder(), cfg.identification.channels, cfg.excitation.surfaces
+    )
+    yaw = designed.yaw
+    assert yaw.zeta(yaw.before) < DUTCH_ROLL_TARGET
+    assert yaw.params["YAW2SRV_DAMP"] > 0
+    assert yaw.zeta(yaw.after) >= DUTCH_ROLL_TARGET
+    assert yaw.gain_margin_db >= GAIN_MARGIN_DB
+    assert designed.params()["YAW2SRV_DAMP"] == yaw.params["YAW2SRV_DAMP"]
+
+
+def test_a_damped_dutch_roll_or_a_rudder_the_damper_cannot_use_leaves_it_off():
+    # Bad input tried: a rudder whose sign turns the damper against the yaw rate.
+    cfg = Config()
+    channels, surfaces = cfg.identification.channels, cfg.excitation.surfaces
+    damped = design_from(_lateral_with_rudder(N_r=-4.0), channels, surfaces).yaw
+    assert damped.params["YAW2SRV_DAMP"] == 0.0
+    assert "no damper" in damped.notes[0]
+    reversed_ = design_from(_lateral_with_rudder(rudder=0.3), channels, surfaces).yaw
+    assert reversed_.params["YAW2SRV_DAMP"] == 0.0
+    assert "left off" in reversed_.notes[0]

@@ -33,8 +33,10 @@ import matplotlib.pyplot as plt
 import numpy as np
 import scipy.signal
 
+from agent import tune
 from agent.analysis import derivatives, splane
 from agent.analysis.analyze import Case
+from agent.config import Channels, Config
 from agent.excitation.signals import relative_peak_factor
 from agent.ident import Experiment, frf
 from agent.ident.document import ResultDocument
@@ -374,12 +376,138 @@ margin:0.5em 0}h2{border-bottom:2px solid #ccc;margin-top:2em}.fail{color:#b00}.
 svg.splane{display:block;margin:0.5em 0}svg.splane a:hover{opacity:0.7}"""
 
 
+def gains(
+    case: Case, outcome: Outcome, config: Config, directory: Path, tag: str, outputs: Outputs
+) -> str:
+    """ArduPlane's FBWA gains designed from the model (agent.tune, as `sysid tune` with the
+    config's surfaces and the nominal servo), their predicted loops as a table, and each
+    axis's whole loop (Bode, broken at the actuator) and predicted step as a PNG."""
+    result = outcome.result
+    head = "<h3>ArduPlane gains from this model</h3>"
+    cont = result.continuous
+    if cont is None or result.coordinates != "outputs":
+        return f"{head}<p>None: no continuous model in output coordinates.</p>"
+    trim = _trim(case, result, config.identification.channels)
+    model = tune.Model(
+        id=case.label,
+        inputs=list(result.inputs),
+        outputs=list(result.outputs),
+        A=np.asarray(cont.A, dtype=float),
+        B=np.asarray(cont.B, dtype=float),
+        C=np.asarray(cont.C, dtype=float),
+        trim={k: float(v) for k, v in trim.items()},
+    )
+    try:
+        designed = tune.design(model, config.identification.channels, config.excitation.surfaces)
+    except tune.TuneError as exc:
+        return f"{head}<p>None: {html.escape(str(exc))}</p>"
+    rows = []
+    for t in designed.tunes:
+        m = t.attitude_loop
+        values = ", ".join(f"{k} {v:g}" for k, v in t.params.items())
+        rows.append(
+            f"<tr><td>{t.axis}</td><td>{values}</td><td>{_fmt(m.crossover_rad_s)}</td>"
+            f"<td>{_fmt(m.phase_deg, '{:.0f}')}°</td><td>{_fmt(m.gain_db, '{:.1f}')} dB</td>"
+            f"<td>{_fmt(m.rejection_rad_s)}</td><td>{t.rise_s:.2f} s</td>"
+            f"<td>{t.overshoot_pct:.1f} %</td></tr>"
+        )
+    yaw = designed.yaw
+    if yaw is not None:
+        rows.append(
+            f"<tr><td>yaw damper</td><td>YAW2SRV_DAMP {yaw.params['YAW2SRV_DAMP']:g}</td>"
+            f"<td colspan=6>Dutch roll ζ {yaw.zeta(yaw.before):.2f} → {yaw.zeta(yaw.after):.2f} "
+            f"with the roll loop closed</td></tr>"
+        )
+    name = f"{tag}_gains.png"
+    with outputs.open(directory / name) as handle:
+        loop_figure(designed, handle)
+    notes = [*designed.notes, *designed.refused, *(n for t in designed.tunes for n in t.notes)]
+    return (
+        f"{head}<p>As <code>sysid tune</code> designs them (docs/tuning.md), at "
+        f"{designed.eas:.1f} m/s, SCALING_SPEED {designed.scaling_speed:.1f}; the servo's lag "
+        "and delay nominal (the run's measured ones: <code>sysid tune --exec-log</code>).</p>"
+        "<table><tr><th>axis</th><th>gains</th><th>crossover rad/s</th><th>phase margin</th>"
+        "<th>gain margin</th><th>rejection rad/s</th><th>rise</th><th>overshoot</th></tr>"
+        + "".join(rows)
+        + "</table>"
+        + "".join(f"<p>{html.escape(n)}</p>" for n in notes)
+        + f'<img src="{name}" alt="designed loops {tag}">'
+    )
+
+
+def _trim(case: Case, result: ResultDocument, channels: Channels) -> dict[str, float]:
+    """The model's trim outputs by channel: the result's own (one record), else the first
+    experiment's operating point; the states it does not output (a lateral model's airspeed)
+    from that record's flight, their mean."""
+    if len(result.trim) == 1:
+        return {k: float(v) for k, v in result.trim[0].items()}
+    contexts = case.job.contexts
+    if not contexts or contexts[0][0] is None:
+        return {}
+    trim = dict(zip(case.job.outputs, (float(v) for v in contexts[0][0]), strict=True))
+    flight = (*contexts[0], None, None)[3] or {}
+    roles = {role: getattr(channels, role) for role in ("airspeed", "theta", "phi")}
+    for role, values in dict(flight).items():
+        name = roles.get(role)
+        if name is not None and name not in trim and len(values):
+            trim[name] = float(np.mean(values))
+    return trim
+
+
+def loop_figure(designed: tune.Design, path: BinaryIO) -> None:
+    """Per designed axis: the whole loop's magnitude and phase (broken at the actuator) and
+    its predicted step."""
+    # Up to the 50 Hz loop's Nyquist frequency: beyond it the delays' phase only winds on.
+    frequencies = tune.FREQUENCIES
+    shown = frequencies <= np.pi * tune.LOOP_HZ
+    w = frequencies[shown]
+    fig, axes = plt.subplots(len(designed.tunes), 3, figsize=(12, 3.2 * len(designed.tunes)))
+    axes = np.atleast_2d(axes)
+    for row, t in zip(axes, designed.tunes, strict=True):
+        plant, actuator = designed.loops[t.axis]
+        kw = {"eas": designed.eas, "scaling_speed": designed.scaling_speed}
+        whole = tune.loops(t.axis, plant, actuator, t.params, **kw)[1][shown]
+        m = t.attitude_loop
+        row[0].semilogx(w, 20 * np.log10(np.abs(whole)), color=COLOURS[0])
+        row[0].axhline(0.0, color="0.5", lw=0.8)
+        row[0].set_ylabel("|L| (dB)")
+        row[0].set_title(f"{t.axis}: whole loop, crossover {m.crossover_rad_s:.2f} rad/s")
+        phase = np.degrees(np.unwrap(np.angle(whole)))
+        if np.isfinite(m.crossover_rad_s):  # the branch where the crossover's lies in (−360°, 0°]
+            at = float(np.interp(np.log(m.crossover_rad_s), np.log(w), phase))
+            phase -= 360.0 * np.ceil(at / 360.0)
+        row[1].semilogx(w, phase, color=COLOURS[0])
+        row[1].axhline(-180.0, color="0.5", lw=0.8)
+        row[1].set_ylabel("∠L (deg)")
+        row[1].set_title(f"phase margin {m.phase_deg:.0f}°, gain margin {m.gain_db:.1f} dB")
+        for ax in row[:2]:
+            ax.set_xlabel("ω (rad/s)")
+            ax.set_ylim(auto=True)
+            ax.grid(alpha=0.3, which="both")
+            if np.isfinite(m.crossover_rad_s):
+                ax.axvline(m.crossover_rad_s, color=COLOURS[1], lw=0.8, ls="--")
+        time, angle = tune.step_trace(
+            t.axis, plant, actuator, t.params, designed.eas, 1.0, designed.scaling_speed
+        )
+        row[2].plot(time, angle, color=COLOURS[0])
+        row[2].axhline(t.step_deg, color="0.5", lw=0.8)
+        row[2].set_xlabel("time (s)")
+        row[2].set_ylabel("angle (deg)")
+        row[2].set_title(
+            f"{t.step_deg:g}° step: rise {t.rise_s:.2f} s, overshoot {t.overshoot_pct:.1f} %"
+        )
+        row[2].grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=DPI, format="png")
+    plt.close(fig)
+
+
 def files(directory: Path, cases: Sequence[Case]) -> list[Path]:
     """Every file `write` may write for `cases` in `directory`."""
     names = ["index.html", "hankel.png"]
     for case in cases:
         tag = _tag(case)
-        names += [f"{tag}_{part}" for part in ("time.png", "bode.png", "inputs.png")]
+        names += [f"{tag}_{part}" for part in ("time.png", "bode.png", "inputs.png", "gains.png")]
         names.append(f"{tag}_derivatives.csv")
     return [directory / name for name in names]
 
@@ -395,11 +523,13 @@ def write(
     outcomes: Sequence[Outcome],
     nominal: StoredModel | None = None,
     outputs: Outputs | None = None,
+    config: Config | None = None,
 ) -> Path:
     """The report in `directory` (index.html and its PNGs); returns the page's path. Every
     file is written through `outputs` (the command's, which checked them against its inputs),
     each whole or not at all."""
     outputs = Outputs({}) if outputs is None else outputs
+    config = Config() if config is None else config
     for path in files(directory, cases):  # all checked before any is written
         outputs.claimed(path)
     directory.mkdir(parents=True, exist_ok=True)
@@ -440,6 +570,7 @@ def write(
             f"<p>Relative peak factors: {rpf_text}</p>"
             f'<img src="{tag}_inputs.png" alt="input spectra {tag}">'
         )
+        parts.append(gains(case, outcome, config, directory, tag, outputs))
     page = directory / "index.html"
     outputs.write_text(
         page,

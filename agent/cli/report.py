@@ -15,7 +15,8 @@ def add_parser(sub) -> None:
         help="an HTML report with figures for excitation logs",
         description="Time histories against the identified models with TIC, eigenvalues in "
         "the s-plane, Hankel singular values, Bode plots against the data, input spectra "
-        "and RPF, mode tables.",
+        "and RPF, mode tables, and ArduPlane gains designed from each model with their "
+        "loops' Bode plots and predicted steps.",
     )
     common.replay_options(parser)
     parser.add_argument("--out", type=Path, required=True, metavar="DIR")
@@ -42,11 +43,12 @@ def run(args: argparse.Namespace) -> int:
     inputs = {path: "a log being reported" for path in paths}
     inputs |= {args.nominal: "the nominal model", **common.config_input(args.config)}
     outputs = common.outputs_for(inputs)
+    config = common.load_optional_config(args.config)
     for path in files(args.out, cases):  # refused before the identifications run
         common.claim(outputs, path)
     outcomes = common.run_cases(cases, args, quiet=False)
     try:
-        page = write(args.out, paths, cases, outcomes, nominal, outputs)
+        page = write(args.out, paths, cases, outcomes, nominal, outputs, config)
     except OSError as exc:
         raise common.failed(f"{args.out}: cannot be written ({exc.strerror or exc})") from None
     identified = sum(o.ok for o in outcomes)

@@ -137,7 +137,8 @@ def run(args: argparse.Namespace) -> int:
         raise common.failed(str(exc)) from None
     tunes, refused, notes = designed.tunes, designed.refused, designed.notes
     eas, scaling = designed.eas, designed.scaling_speed
-    setup_params = {"SCALING_SPEED": round(scaling, 1)}
+    yaw = designed.yaw
+    setup_params = {**(yaw.params if yaw is not None else {}), "SCALING_SPEED": round(scaling, 1)}
     if args.out is not None:
         header = [
             f"sysid tune {args.model.name} ({model['id']}): ArduPlane FBWA gains",
@@ -155,6 +156,7 @@ def run(args: argparse.Namespace) -> int:
                 "model": model["id"],
                 "scaling_speed": scaling,
                 "axes": [_as_json(t, DEFAULTS) for t in tunes],
+                "yaw": None if yaw is None else _yaw_json(yaw),
                 "refused": refused,
                 "notes": notes,
                 "measured_linkage": measured,
@@ -191,6 +193,18 @@ def run(args: argparse.Namespace) -> int:
             f"{t.overshoot_pct:.1f} %"
         )
         for note in t.notes:
+            print(f"  note: {note}")
+    if yaw is not None:
+        before, after = yaw.before, yaw.after
+        print("\nyaw damper:")
+        for name, value in yaw.params.items():
+            print(f"  {name:<16} {value:>8.4g}   (ArduPlane's default {DEFAULTS[name]:g}: off)")
+        print(
+            f"  Dutch roll with the roll loop closed: ζ {yaw.zeta(before):.2f} at "
+            f"{abs(before):.2f} rad/s without, ζ {yaw.zeta(after):.2f} at {abs(after):.2f} rad/s "
+            f"with; the damper's gain margin {_db(yaw.gain_margin_db)}"
+        )
+        for note in yaw.notes:
             print(f"  note: {note}")
     for why in refused:
         print(f"not tuned: {why}")
@@ -249,6 +263,19 @@ def _gains(text: str) -> dict[str, float]:
 
 def _db(value: float) -> str:
     return "∞ (the phase never reaches −180°)" if value == float("inf") else f"{value:.1f} dB"
+
+
+def _yaw_json(yaw) -> dict:
+    def mode(value: complex) -> dict:
+        return {"eigenvalue": [value.real, value.imag], "damping": yaw.zeta(value)}
+
+    return {
+        "params": yaw.params,
+        "dutch_roll_without": mode(yaw.before),
+        "dutch_roll_with": mode(yaw.after),
+        "gain_margin_db": None if yaw.gain_margin_db == float("inf") else yaw.gain_margin_db,
+        "notes": list(yaw.notes),
+    }
 
 
 def _as_json(t, defaults) -> dict:

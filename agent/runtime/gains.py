@@ -140,7 +140,7 @@ class GainTuner:
             designed = await asyncio.to_thread(work)
         except tune.TuneError as exc:
             return f"no gains from {candidate.model_id}: {exc}"[:200]
-        names = [n for t in designed.tunes for n in t.params] + ["SCALING_SPEED"]
+        names = list(designed.params())
         try:
             current = await self.autopilot.parameters(names)
         except AutopilotError as exc:
@@ -157,7 +157,7 @@ class GainTuner:
                 loops=proposal[2],
                 share=proposal[3],
                 refused=[r[:200] for r in (*designed.refused, *refused)],
-                notes=[n[:200] for n in designed.notes],
+                notes=[n[:200] for n in (*designed.notes, *_yaw_notes(designed.yaw))],
             )
         )
         return ""
@@ -286,6 +286,16 @@ class GainTuner:
                         proposed=step.params.get(name),
                     )
                 )
+        if designed.yaw is not None:
+            name = "YAW2SRV_DAMP"
+            d, c = designed.yaw.params[name], current.get(name)
+            # From off (0) the damper is switched on at its design; else a step of at most
+            # max_step either way, as the other gains.
+            step = (
+                d if not c or not d else c * float(np.clip(d / c, 1 / cfg.max_step, cfg.max_step))
+            )
+            values[name] = round(step, 4)
+            rows.append(messages.GainRow(name=name, current=c, designed=d, proposed=values[name]))
         if values:  # one speed scaler for both axes: set with the gains designed at it
             values["SCALING_SPEED"] = round(scaling, 1)
         rows.append(
@@ -358,6 +368,19 @@ def _loop(axis: str, which: str, a: tune.Assessed) -> messages.LoopPrediction:
         overshoot_pct=finite(a.overshoot_pct),
         sound=a.sound(),
     )
+
+
+def _yaw_notes(yaw: tune.YawTune | None) -> list[str]:
+    """The yaw damper's prediction for the operator."""
+    if yaw is None:
+        return []
+    before, after = yaw.before, yaw.after
+    margin = "∞" if math.isinf(yaw.gain_margin_db) else f"{yaw.gain_margin_db:.1f} dB"
+    line = (
+        f"yaw damper (designed): Dutch roll ζ {yaw.zeta(before):.2f} → {yaw.zeta(after):.2f} at "
+        f"{abs(after):.2f} rad/s with the roll loop closed, the damper's gain margin {margin}"
+    )
+    return [line, *yaw.notes]
 
 
 def _listed(values: Mapping[str, float]) -> str:

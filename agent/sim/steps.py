@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from agent.config import Excitation
 from agent.fbwa import DEFAULTS, TRAVEL_DEG
 from agent.sim.ardupilot import (
     FBWA,
@@ -25,7 +26,9 @@ from agent.sim.ardupilot import (
 )
 from agent.sim.plant import Plant
 from agent.sim.truth import INPUTS, linear_truth
-from agent.tune import Actuator, axis_plant
+from agent.tune import Actuator, axis_plant, surface_link
+from agent.tune import Model as TuneModel
+from agent.tune import Options as TuneOptions
 from agent.tune import Plant as AxisPlant
 
 TICK_S = 0.01  # the emulated autopilot's tick
@@ -196,3 +199,75 @@ def truth_plants(
         )
         result[axis] = (plant, Actuator(link=linkage[surface]))
     return result, float(truth.trim_state[names.index("Vt")])
+
+
+def flown_rudder_pulse(
+    aircraft: str,
+    airspeed_kts: float,
+    altitude_ft: float,
+    params: Mapping[str, float],
+    stick: float = 0.3,
+    pulse_s: float = 0.5,
+    seconds: float = 10.0,
+    **plant,
+) -> np.ndarray:
+    """Trim `aircraft`, fly it in FBWA with `params` for SETTLE_S, pulse the pilot's rudder
+    stick by `stick` of its travel for `pulse_s`, and record the yaw rate (deg/s, every tick)
+    for `seconds` after the pulse: the Dutch roll's free response with the laws engaged."""
+    sim, ap, offset = _aircraft(aircraft, airspeed_kts, altitude_ft, params, plant)
+    state = sim.state()
+    per_tick = round(TICK_S / sim.dt)
+    start, end = round(SETTLE_S / TICK_S), round((SETTLE_S + pulse_s) / TICK_S)
+    trace = []
+    for k in range(end + round(seconds / TICK_S)):
+        offset[4] = round(RC_HALF_RANGE * stick) if start <= k < end else 0
+        sim.set_normalised(ap.tick(k * TICK_S, state), per_tick)
+        for _ in range(per_tick):
+            sim.step()
+        state = sim.state()
+        if k >= end:
+            trace.append(np.degrees(state["r"]))
+    return np.asarray(trace)
+
+
+def oscillation(trace: np.ndarray, dt: float, near: complex) -> complex:
+    """The damped oscillation that fits a free response best, started from `near` (its
+    eigenvalue, 1/s): r(t) = a e^{σt} cos(ωt + φ) + b e^{-t/τ} + c, least squares."""
+    import scipy.optimize
+
+    t = np.arange(trace.size) * dt
+
+    def model(t, a, sigma, omega, phase, b, tau, c):
+        return a * np.exp(sigma * t) * np.cos(omega * t + phase) + b * np.exp(-t / tau) + c
+
+    guess = [np.ptp(trace) / 2, near.real, near.imag, 0.0, 0.0, 2.0, float(trace[-1])]
+    bounds = (
+        [0, -20, 0.1, -2 * np.pi, -np.inf, 0.05, -np.inf],
+        [np.inf, 5, 30, 2 * np.pi, np.inf, 100, np.inf],
+    )
+    fitted, _ = scipy.optimize.curve_fit(model, t, trace, p0=guess, bounds=bounds, maxfev=20000)
+    return complex(fitted[1], fitted[2])
+
+
+def truth_design_inputs(
+    aircraft: str, airspeed_kts: float, altitude_ft: float
+) -> tuple[TuneModel, TuneOptions]:
+    """The aircraft's validated linear model (agent.sim.truth) as `agent.tune.design` takes an
+    identified one, and the installation's linkage (`links`) as the gains a finished run's
+    "follows" check measures over the default config's surfaces: the design the agent would
+    make from a perfect model."""
+    truth = linear_truth(aircraft, airspeed_kts, altitude_ft=altitude_ft)
+    names = list(truth.states)
+    surfaces = Excitation().surfaces
+    probed = links(aircraft, airspeed_kts, altitude_ft)
+    model = TuneModel(
+        id=aircraft,
+        inputs=list(INPUTS),
+        outputs=names[:8],
+        A=truth.A,
+        B=truth.B,
+        C=np.eye(len(names))[:8],
+        trim={n: float(v) for n, v in zip(names, truth.trim_state, strict=True)},
+    )
+    linkage = {c: probed[c] / surface_link(surfaces[c], None) for c in probed}
+    return model, TuneOptions(linkage=linkage)

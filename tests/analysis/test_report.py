@@ -70,6 +70,9 @@ def test_the_report_renders_in_headless_chromium(tmp_path):
         assert f'src="{name}"' in page
     assert "Dutch roll" in page
     assert "Relative peak factors: aileron" in page
+    # The thesis's lateral record has no airspeed: no gains designed (their speed scaling
+    # needs it), and said.
+    assert page.count("gains from this model</h3><p>None: 1: the model has no trim airspeed") == 1
     # The s-planes: one of every excitation, then one per excitation; each mode a group with
     # its row as a tooltip and a link to that row, which exists.
     assert page.count('<svg class="splane"') == 3

@@ -28,10 +28,7 @@ from agent.models import Candidate
 from agent.runtime import Agent
 from agent.sim.aircraft import FLOWN, AircraftOptions, SimAircraft
 from agent.sim.ardupilot import FBWA, Params
-from agent.sim.plant import INPUTS
-from agent.sim.steps import links
-from agent.sim.truth import OUTPUTS, linear_truth
-from agent.tune import _link
+from agent.sim.steps import truth_design_inputs
 from tests.documents import continuous_document
 
 pytestmark = pytest.mark.usefixtures("no_leaked_tasks")
@@ -40,27 +37,27 @@ AIRCRAFT = "J3Cub"
 SWITCH = 7
 
 
-def truth_candidate(model_id: str = "ful-9-truth") -> Candidate:
-    """JSBSim's validated linear Cub as a whole-aircraft model in output coordinates."""
+def truth_candidate(model_id: str = "ful-9-truth") -> tuple[Candidate, dict[str, float]]:
+    """JSBSim's validated linear Cub as a whole-aircraft model in output coordinates, and the
+    linkage a finished run measures on it (agent.sim.steps.truth_design_inputs)."""
     speed, altitude = FLOWN[AIRCRAFT][:2]
-    truth = linear_truth(AIRCRAFT, speed, altitude_ft=altitude)
-    trim = dict(zip(truth.states, truth.trim_state, strict=False))
-    return Candidate(
+    model, options = truth_design_inputs(AIRCRAFT, speed, altitude)
+    candidate = Candidate(
         model_id=model_id,
         axes="full",
         record_dt=0.02,
-        result=continuous_document(truth.A, truth.B, INPUTS, OUTPUTS),
+        result=continuous_document(model.A, model.B, model.inputs, model.outputs),
         experiments=(),
         record_s=60.0,
-        trim={"inputs": {}, "outputs": {o: float(trim[o]) for o in OUTPUTS}},
+        trim={"inputs": {}, "outputs": {o: model.trim[o] for o in model.outputs}},
     )
+    return candidate, dict(options.linkage)
 
 
 @contextlib.asynccontextmanager
 async def tuned_flight(tmp_path, **tuning):
     """The Cub flying with the emulated ArduPlane, and an agent whose autopilot driver and
     gain tuner run against it, the truth model nominal; yields (agent, aircraft)."""
-    speed, altitude = FLOWN[AIRCRAFT][:2]
     aircraft = SimAircraft(
         AircraftOptions(aircraft=AIRCRAFT, params=Params(switch_channel=SWITCH), noise=True),
         LoopClock(),
@@ -85,16 +82,11 @@ async def tuned_flight(tmp_path, **tuning):
         )
         agent.sent = []
         agent.downlink.subscribe(agent.sent.append)
-        candidate = await asyncio.to_thread(truth_candidate)
+        candidate, linkage = await asyncio.to_thread(truth_candidate)
         agent.models.add(candidate)
         agent.models.accept(candidate.model_id)
-        # The linkage a finished run measures (agent.excitation.follow): measured surface per
-        # commanded degree, the installation's (agent.sim.steps.links) over the config's.
-        probed = await asyncio.to_thread(links, AIRCRAFT, speed, altitude)
-        surfaces = config.excitation.surfaces
-        agent.gains.linkage.update(
-            {c: {"gain": probed[c] / _link(surfaces[c], None)} for c in probed}
-        )
+        # The linkage a finished run measures (agent.excitation.follow), as its gains hold it.
+        agent.gains.linkage.update({c: {"gain": g} for c, g in linkage.items()})
         tasks.append(asyncio.create_task(agent.autopilot.run(), name="autopilot"))
         tasks.append(asyncio.create_task(agent.gains.run(), name="gains"))
         while not agent.autopilot.connected:
@@ -145,6 +137,11 @@ async def test_gains_are_proposed_applied_read_back_and_reverted_over_mavlink(tm
         proposed = {r.name: r.proposed for r in gains.rows if r.proposed is not None}
         held = {r.name: r.current for r in gains.rows}  # the autopilot's before any apply
         assert {"RLL_RATE_P", "PTCH_RATE_P", "SCALING_SPEED"} <= set(proposed)
+        # The Cub's Dutch roll (ζ 0.28 open loop) gets the yaw damper, off at ArduPlane's
+        # default: switched on at its design, its prediction in the notes.
+        assert rows["YAW2SRV_DAMP"].current == 0.0
+        assert proposed["YAW2SRV_DAMP"] == rows["YAW2SRV_DAMP"].designed > 0
+        assert any(n.startswith("yaw damper (designed): Dutch roll") for n in gains.notes)
         loops = {(p.axis, p.gains): p for p in gains.loops}
         assert loops[("roll", "proposed")].sound
         assert loops[("pitch", "proposed")].sound

@@ -155,6 +155,12 @@ def post_flight(directory, report) -> None:
     assert page.count('<svg class="splane"') == runs + 1  # every excitation's, then one each
     assert page.count('<g class="mode nominal"') >= 3  # the nominal's modes on each plane
     assert (directory / "report" / "excitation_2_bode.png").stat().st_size > 10_000
+    # ArduPlane gains from each lateral model: the roll loop's Bode and step drawn, the pitch
+    # refused by name (the trim airspeed from the record's flight states).
+    assert page.count("<h3>ArduPlane gains from this model</h3><p>As ") == runs
+    assert "RLL_RATE_FF" in page
+    assert "pitch: the model has no elevator input" in page
+    assert (directory / "report" / "excitation_2_gains.png").stat().st_size > 10_000
     # The nominal lateral model tuned for ArduPlane with the linkage and lag the aircraft
     # measured on its runs (the execution log): the roll axis designed, the pitch axis refused
     # by name (a lateral model has no elevator).
