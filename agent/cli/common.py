@@ -338,12 +338,19 @@ def aircraft_arguments(parser: argparse.ArgumentParser) -> None:
         help="air data with the airspeed only (no α, β vanes): the agent synthesises α and β "
         "from the INS",
     )
+    parser.add_argument(
+        "--fbwa",
+        action="store_true",
+        help="the emulated ArduPlane flies in FBWA (its stabilised mode): plans play on the "
+        "sticks, its laws fly the surfaces (closed-loop excitation)",
+    )
 
 
 def aircraft_options(args: argparse.Namespace, **more):
     """The simulated aircraft's options (agent.sim.aircraft) from `aircraft_arguments`, and
     `more`; an aircraft whose trim speed is not known and not given is refused."""
     from agent.sim.aircraft import AircraftOptions, flown_at
+    from agent.sim.ardupilot import FBWA, MANUAL
 
     try:
         speed, altitude = flown_at(args.aircraft, args.speed_kts, args.altitude_ft)
@@ -356,6 +363,7 @@ def aircraft_options(args: argparse.Namespace, **more):
         turbulence=args.turbulence,
         seed=args.seed,
         vanes=not args.no_vanes,
+        mode=FBWA if getattr(args, "fbwa", False) else MANUAL,
         **more,
     )
 

@@ -1,9 +1,11 @@
 """The excitation player: arms a plan, starts it on the pilot's switch, plays it on the
 controls against absolute deadlines, and ends every run with trim and then release.
 
-Safety (DESIGN.md): the pilot's switch always wins; trim is captured before a run; every end —
-finished, pilot, operator, envelope, stale data, internal error, shutdown — commands trim and
-then releases the override; the envelope is enforced onboard whatever the ground asks. The
+Safety (DESIGN.md): the pilot's switch always wins; trim is captured before a run — the servo
+outputs in MANUAL, the pilot's sticks in FBWA (an override stands in for the stick there), no
+run in any other mode, and a run aborted if the mode changes; every end — finished, pilot,
+operator, envelope, stale data, mode change, internal error, shutdown — commands trim and then
+releases the override; the envelope is enforced onboard whatever the ground asks. The
 scheduler talks to the autopilot only through `SurfaceSink`, so tests drive it with a fake sink
 and the agent drives it with the MAVSDK driver unchanged.
 """
@@ -29,6 +31,12 @@ log = logging.getLogger(__name__)
 
 # Progress events per second of run: enough for a console, few enough for the radio.
 PROGRESS_HZ = 1.0
+# The flight modes a plan plays in: MANUAL, its overrides the surfaces; and the stabilised modes
+# (ON_STICKS), its overrides the pilot's sticks, the autopilot's laws flying the surfaces
+# (ArduPlane's FBWA: the roll and pitch sticks an attitude demand, the rudder's added to its
+# yaw damper). A mode the sink does not report (None) is taken as MANUAL.
+ON_STICKS = ("FBWA",)
+PLAYS_IN = ("MANUAL", *ON_STICKS)
 # Servo-output history kept for trim capture (samples); 10 s at 50 Hz telemetry.
 SERVO_HISTORY = 500
 
@@ -115,6 +123,8 @@ class Scheduler:
         self._switch: tuple[float, bool] | None = None
         self._state: FlightState | None = None
         self._servos: deque[tuple[float, Mapping[int, int]]] = deque(maxlen=SERVO_HISTORY)
+        self._sticks: deque[tuple[float, Mapping[int, int]]] = deque(maxlen=SERVO_HISTORY)
+        self._mode: str | None = None  # the flight mode the running plan started in
         self._abort_request: str | None = None
         self._start = asyncio.Event()
         self.counters: Counter[str] = Counter()
@@ -219,6 +229,15 @@ class Scheduler:
         """Servo outputs (SERVO_OUTPUT_RAW) by channel, for trim capture."""
         self._servos.append((time, dict(pwm)))
 
+    def update_sticks(self, time: float, pwm: Mapping[int, int]) -> None:
+        """The pilot's RC inputs (RC_CHANNELS) by channel, for trim capture in a stabilised
+        mode, where an override stands in for the stick, not the servo."""
+        self._sticks.append((time, dict(pwm)))
+
+    def flight_mode(self) -> str | None:
+        """The autopilot's flight mode as the sink reports it (None: unknown)."""
+        return getattr(self._sink, "flight_mode", None)
+
     # -- the player ---------------------------------------------------------------------------
 
     async def run(self) -> None:
@@ -242,10 +261,20 @@ class Scheduler:
     def _preflight(self, plan: Plan, timeline: Timeline) -> dict[str, float]:
         """Checks before the first command; the captured trim (µs) per control."""
         now = self._clock.now()
+        self._mode = None
         reason = self._violation(now, altitude_ref=None)
         if reason:
             raise _Abort(f"not started: {reason}")
-        trim = self._capture_trim(now, plan.controls())
+        mode = self.flight_mode()
+        if mode is not None and mode not in PLAYS_IN:
+            raise _Abort(
+                f"not started: the autopilot is in {mode}; plans play in MANUAL (on the "
+                f"surfaces) or {', '.join(m for m in PLAYS_IN if m != 'MANUAL')} (on the "
+                "sticks, the autopilot's laws engaged)"
+            )
+        sticks = mode in ON_STICKS
+        trim = self._capture_trim(now, plan.controls(), sticks)
+        self._mode = mode
         for name in plan.controls():
             surface = self._config.surfaces[name]
             clamped = servo.pwm_clamped(timeline.values[name], trim[name], surface)
@@ -262,15 +291,23 @@ class Scheduler:
                 )
         return trim
 
-    def _capture_trim(self, now: float, controls: Sequence[str]) -> dict[str, float]:
-        recent = [pwm for t, pwm in self._servos if now - t <= self._config.trim_window_s]
+    def _capture_trim(
+        self, now: float, controls: Sequence[str], sticks: bool = False
+    ) -> dict[str, float]:
+        """Each control's trim (µs): the median of its servo output (MANUAL: an override
+        stands in for the surface) or, `sticks`, of the pilot's RC input (a stabilised mode:
+        an override stands in for the stick, and a servo's trim there would be an attitude
+        demand) over the trim window."""
+        history = self._sticks if sticks else self._servos
+        recent = [pwm for t, pwm in history if now - t <= self._config.trim_window_s]
+        what = "RC input" if sticks else "servo output"
         trim = {}
         for name in controls:
             channel = self._config.surfaces[name].channel
             values = [pwm[channel] for pwm in recent if channel in pwm]
             if not values:
                 raise _Abort(
-                    f"not started: no servo output on channel {channel} ({name}) in the last "
+                    f"not started: no {what} on channel {channel} ({name}) in the last "
                     f"{self._config.trim_window_s:g} s to capture trim"
                 )
             trim[name] = float(np.median(values))
@@ -287,6 +324,8 @@ class Scheduler:
         altitude_ref = self._state.altitude_m if self._state else None
         self.counters["runs"] += 1
         detail = ", ".join(f"{n} {trim[n]:.0f} µs" for n in plan.controls())
+        if self._mode in ON_STICKS:
+            detail += f" (the sticks': {self._mode})"
         self._emit(Event("started", plan.id, start, f"trim {detail}"))
         outcome, reason = "finished", ""
         cancelled: asyncio.CancelledError | None = None
@@ -345,6 +384,10 @@ class Scheduler:
             return f"stale RC switch data ({age})"
         if not self._switch[1]:
             return "pilot switch low"
+        if self._mode is not None and self.flight_mode() != self._mode:
+            # An override is a surface in MANUAL and a stick in FBWA: the plan's commands
+            # mean another thing in the new mode.
+            return f"flight mode changed from {self._mode} to {self.flight_mode()}"
         s = self._state
         if s is None or now - s.time > cfg.stale_s:
             age = "never received" if s is None else f"{now - s.time:.2f} s old"

@@ -88,6 +88,7 @@ class Agent:
             on_switch=lambda pwm, t: self.scheduler.update_switch(pwm, t),
             on_state=lambda s: self.scheduler.update_state(s),
             on_servos=lambda t, p: self.scheduler.update_servos(t, p),
+            on_sticks=lambda t, p: self.scheduler.update_sticks(t, p),
             on_sample=self.recorder.push,
             on_link=self._on_autopilot_link,
         )

@@ -107,6 +107,7 @@ class AircraftOptions:
     seed: int = 0
     noise: bool = True
     vanes: bool = True  # the air data measure α and β (false: airspeed only)
+    mode: int = 0  # the emulated ArduPlane's flight mode at the start (0 MANUAL, 5 FBWA)
     mavlink_host: str = "127.0.0.1"
     mavlink_port: int = 0
     """UDP port the emulated autopilot listens on (0: any free port)."""
@@ -176,6 +177,8 @@ class SimAircraft:
             clock=clock.now,
             dataflash=DataFlashWriter(options.dataflash) if options.dataflash else None,
         )
+        if options.mode and not self.autopilot.set_mode(options.mode):
+            raise ValueError(f"the emulated ArduPlane does not fly mode {options.mode}")
         self.truth = self.plant.state()
         self.ports = {
             n: devices.PtyPort(self.directory / n) for n in ("vn200", "airdata", "surfaces")

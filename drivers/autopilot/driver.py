@@ -130,11 +130,13 @@ class AutopilotLink:
         on_switch: Callable[[int, float], None] | None = None,
         on_state: Callable[[FlightState], None] | None = None,
         on_servos: Callable[[float, dict[int, int]], None] | None = None,
+        on_sticks: Callable[[float, dict[int, int]], None] | None = None,
         on_sample: Callable[[Sample], None] | None = None,
         on_link: Callable[[bool, str], None] | None = None,
     ):
         self._cfg, self._clock, self._switch = config, clock, switch_channel
         self._on_switch, self._on_state, self._on_servos = on_switch, on_state, on_servos
+        self._on_sticks = on_sticks
         self._on_sample, self._on_link = on_sample, on_link
         self._direct = None
         self._param = None
@@ -297,6 +299,13 @@ class AutopilotLink:
             pwm = fields.get(f"chan{self._switch}_raw")
             if pwm is not None and self._on_switch is not None:
                 self._on_switch(int(pwm), t)
+            if self._on_sticks is not None:
+                sticks = {
+                    ch: int(fields[f"chan{ch}_raw"])
+                    for ch in range(1, 19)
+                    if f"chan{ch}_raw" in fields
+                }
+                self._on_sticks(t, sticks)
         elif name == "SERVO_OUTPUT_RAW":
             servos = {
                 ch: int(fields[f"servo{ch}_raw"])

@@ -372,3 +372,49 @@ async def test_a_refused_start_waits_for_the_pilot_to_cycle_the_switch():
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
         s.abort("test over")
+
+
+async def test_in_fbwa_the_plan_plays_on_the_sticks_trimmed_at_the_pilots():
+    """In a stabilised mode an override is the pilot's stick, not the surface: trim is the RC
+    inputs' median (the servos', an attitude demand there, would bank the aircraft), and a
+    mode change mid-run aborts it. Bad input tried: a start in AUTO (refused: plans play in
+    MANUAL or FBWA), no RC input in FBWA to take trim from (refused), the pilot switching to
+    FBWA mid-run (aborted, trim and release commanded)."""
+    clock = VirtualClock(0.0)
+    s, sink, events = make(clock)
+    sticks = {AIL: 1500, RUD: 1500, 2: 1500, 3: 1300}
+    for i in range(25):
+        s.update_sticks(clock.now() - 0.5 + i * 0.02, sticks)
+    sink.flight_mode = "FBWA"
+    await fly(s, sink, preset("lateral"))
+    commands = sink.commands()
+    ail = np.array([p[AIL] for _, p in commands])
+    values = CONFIG.surfaces["aileron"].us_per_unit * 4.0
+    assert set(np.unique(ail)) == {1500, round(1500 + values), round(1500 - values)}
+    started = next(e for e in events if isinstance(e, Event) and e.kind == "started")
+    assert "the sticks': FBWA" in started.detail
+    assert events[-1].outcome == "finished"
+
+    s2, sink2, events2 = make(VirtualClock(100.0))
+    sink2.flight_mode = "AUTO"
+    await fly(s2, sink2, preset("lateral"))
+    assert not sink2.calls
+    assert "the autopilot is in AUTO; plans play in MANUAL" in events2[-1].detail
+    s3, sink3, events3 = make(VirtualClock(200.0))  # servo outputs, but no RC input
+    sink3.flight_mode = "FBWA"
+    await fly(s3, sink3, preset("lateral"))
+    assert not sink3.calls
+    assert "no RC input on channel 1 (aileron)" in events3[-1].detail
+
+    def to_fbwa(sink, now):
+        if now > 1.0:
+            sink.flight_mode = "FBWA"
+
+    clock4 = VirtualClock(300.0)
+    s4, sink4, events4 = make(clock4, script=lambda k, now: to_fbwa(k, now - 300.0))
+    sink4.flight_mode = "MANUAL"
+    await fly(s4, sink4, long_plan(5.0))
+    assert events4[-1].outcome == "aborted"
+    assert "flight mode changed from MANUAL to FBWA" in events4[-1].reason
+    assert sink4.commands()[-1][1] == {AIL: TRIM[AIL]}
+    assert sink4.calls[-1][1:] == ("release", [AIL])

@@ -32,6 +32,7 @@ class Flight:
     on_switch: Callable[[int, float], None] | None = None
     on_state: Callable[[FlightState], None] | None = None
     on_servos: Callable[[float, dict[int, int]], None] | None = None
+    on_sticks: Callable[[float, dict[int, int]], None] | None = None
     on_link: Callable[[bool, str], None] | None = None
 
     def switched(self, pwm: int, t: float) -> None:
@@ -47,6 +48,10 @@ class Flight:
     def servos(self, t: float, pwm: dict[int, int]) -> None:
         if self.on_servos is not None:
             self.on_servos(t, pwm)
+
+    def sticks(self, t: float, pwm: dict[int, int]) -> None:
+        if self.on_sticks is not None:
+            self.on_sticks(t, pwm)
 
     def linked(self, up: bool, why: str) -> None:
         self.links.append((up, why, self.clock.now()))
@@ -82,6 +87,7 @@ async def flight(
         on_switch=lambda pwm, t: holder[0].switched(pwm, t),
         on_state=lambda s: holder[0].state(s),
         on_servos=lambda t, pwm: holder[0].servos(t, pwm),
+        on_sticks=lambda t, pwm: holder[0].sticks(t, pwm),
         on_link=lambda up, why: holder[0].linked(up, why),
     )
     f = Flight(aircraft, link, clock, [sim_task])

@@ -329,3 +329,48 @@ async def test_the_driver_sets_reads_back_and_reverts_parameters_over_mavsdk(tmp
             await f.link.set_parameters({"PTCH_RATE_FF": 0.9})
         ap.link_up = True
     assert ap.fbwa.params["PTCH_RATE_FF"] == pytest.approx(0.345)
+
+
+async def test_in_fbwa_a_plan_plays_on_the_sticks_and_the_laws_fly_the_surfaces(tmp_path):
+    """The scheduler with the real driver against the emulated ArduPlane in FBWA: trim is the
+    pilot's stick (RC_CHANNELS), the aileron doublet's overrides are bank demands about it,
+    ArduPlane's laws move the surface and bank the JSBSim Cub, and after the run the stick is
+    the pilot's again: the demand back at wings level."""
+    from agent.config import Config
+    from agent.excitation.plan import preset
+    from agent.excitation.scheduler import Event, Scheduler, Window
+
+    async with flight(tmp_path) as f:
+        ap = f.aircraft.autopilot
+        assert ap.set_mode(5)
+        scheduler = Scheduler(Config().excitation, f.link, f.clock)
+        f.on_switch, f.on_state = scheduler.update_switch, scheduler.update_state
+        f.on_servos, f.on_sticks = scheduler.update_servos, scheduler.update_sticks
+        events: list = []
+        scheduler.subscribe(events.append)
+        f.tasks.append(asyncio.create_task(scheduler.run(), name="scheduler"))
+        while f.link.flight_mode != "FBWA":
+            await asyncio.sleep(0.05)
+        await asyncio.sleep(1.0)  # a trim window of sticks
+        plan = preset("lateral")
+        scheduler.arm(plan)
+        f.aircraft.pilot.set_switch(True)
+        demands, banks = [], []
+        while not any(isinstance(e, Window) for e in events):
+            demands.append(ap.surfaces.get("roll_demand", 0.0))
+            banks.append(np.degrees(f.aircraft.truth["phi"]))
+            await asyncio.sleep(0.02)
+        f.aircraft.pilot.set_switch(False)
+        await asyncio.sleep(1.0)
+        after = ap.surfaces["roll_demand"]
+    started = next(e for e in events if isinstance(e, Event) and e.kind == "started")
+    assert "the sticks': FBWA" in started.detail
+    window = next(e for e in events if isinstance(e, Window))
+    assert window.outcome == "finished"
+    # The 4° aileron doublet at 20 µs per degree is ±80 µs of stick: ±9° of bank demanded
+    # (the stick's ±400 µs, RCn_MIN…MAX about its trim, for ROLL_LIMIT_DEG 45°), about wings
+    # level.
+    assert max(demands) == pytest.approx(9.0, abs=0.5)
+    assert min(demands) == pytest.approx(-9.0, abs=0.5)
+    assert np.max(np.abs(banks)) > 3.0  # the laws flew it
+    assert abs(after) < 0.5
