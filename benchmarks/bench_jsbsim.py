@@ -237,7 +237,9 @@ class Setup:
             max_altitude_loss_m=max(40.0, ENVELOPE_HEIGHT_S * self.airspeed),
         )
 
-    def fly(self, plan: Plan | Timeline, seed: int, noise: bool = True) -> Record:
+    def fly(
+        self, plan: Plan | Timeline, seed: int, noise: bool = True, fbwa: bool = False
+    ) -> Record:
         return fly(
             plan,
             aircraft=self.name,
@@ -246,6 +248,7 @@ class Setup:
             turbulence=self.turbulence,
             seed=seed,
             noise=noise,
+            fbwa=fbwa,
         )
 
     def truth(self) -> Truth:

@@ -20,7 +20,16 @@ import numpy as np
 from agent.config import Excitation
 from agent.excitation.plan import Plan, Timeline, render
 from agent.sim.aircraft import NOISE, TICK_HZ
-from agent.sim.ardupilot import Params, ServoModel, normalised_to_pwm, pwm_to_normalised
+from agent.sim.ardupilot import (
+    FBWA,
+    EmulatedArduPlane,
+    Params,
+    ServoModel,
+    normalised_to_pwm,
+    pwm_to_normalised,
+    setup,
+)
+from agent.sim.ardupilot import OUTPUTS as AP_OUTPUTS
 from agent.sim.plant import OUTPUTS, Plant
 
 INPUT_CHANNELS = ("throttle", "elevator", "aileron", "rudder")
@@ -66,9 +75,13 @@ def fly(
     settle_s: float = 1.0,
     rate_hz: float = 50.0,
     plant: Plant | None = None,
+    fbwa: bool = False,
 ) -> Record:
     """Fly `plan` (or a timeline already rendered) once from trim at `altitude_ft` above the
-    ground; `settle_s` of trimmed flight precede the recorded margin."""
+    ground; `settle_s` of trimmed flight precede the recorded margin. `fbwa`: the plan plays
+    on the pilot's sticks about their trim, the emulated ArduPlane in FBWA flying the
+    surfaces with its laws at ArduPlane's defaults (the agent's closed-loop excitation,
+    agent.excitation.scheduler)."""
     plant = plant or Plant(
         aircraft,
         airspeed_kts=speed_kts,
@@ -89,6 +102,19 @@ def fly(
         )
         for c in INPUT_CHANNELS
     }
+    autopilot, sticks = None, {}
+    if fbwa:
+        rc = [1500] * 18
+        for ch, name in AP_OUTPUTS.items():
+            rc[ch - 1] = normalised_to_pwm(ch, plant.trim[name])
+        autopilot = EmulatedArduPlane(
+            Params(fbwa=setup(plant.state())),
+            lambda _t: [rc[i] + sticks.get(i + 1, 0) for i in range(18)],
+            dt=tick,
+            trim=plant.trim,
+        )
+        autopilot.set_mode(FBWA)
+    state = plant.state()
     lead = round((settle_s + margin_s) / tick)
     played = round(timeline.duration / tick)
     total = lead + played + round(margin_s / tick)
@@ -105,13 +131,18 @@ def fly(
             delta = timeline.values[c][j] if 0 <= j < timeline.count and c in timeline.values else 0
             value = trim_pwm[c] + surfaces[c].direction * surfaces[c].us_per_unit * delta
             pwm[c] = round(float(np.clip(value, surfaces[c].min_us, surfaces[c].max_us)))
-        plant.set_normalised(
-            {c: servos[c].step(pwm_to_normalised(CHANNEL[c], pwm[c])) for c in INPUT_CHANNELS},
-            steps,
-        )
+        if autopilot is None:
+            commands = {
+                c: servos[c].step(pwm_to_normalised(CHANNEL[c], pwm[c])) for c in INPUT_CHANNELS
+            }
+        else:  # the overrides are the sticks: offsets about the pilot's trimmed ones
+            sticks.update({CHANNEL[c]: pwm[c] - trim_pwm[c] for c in INPUT_CHANNELS})
+            commands = autopilot.tick(k * tick, state)
+            pwm["throttle"] = autopilot.outputs.get(CHANNEL["throttle"], pwm["throttle"])
+        plant.set_normalised(commands, steps)
         for _ in range(steps):
             plant.step()
-        s = plant.state()
+        s = state = plant.state()
         u[k] = [pwm["throttle"], s["elevator"], s["aileron"], s["rudder"]]
         y[k] = [s[name] for name in OUTPUTS]
         ins[k] = [s[name] for name in INS_CHANNELS]

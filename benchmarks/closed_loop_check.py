@@ -1,0 +1,76 @@
+"""The bare airframe identified from a closed-loop excitation (the plan on the sticks, FBWA's
+laws flying the surfaces: agent.excitation.scheduler) against the open-loop one (the same plan
+on the surfaces, MANUAL), on each benchmark aircraft.
+
+    .venv/bin/python benchmarks/closed_loop_check.py              # six aircraft, calm and light
+    .venv/bin/python benchmarks/closed_loop_check.py --aircraft J3Cub --turbulence 0
+
+Per aircraft, condition and seed: the full preset at SCALE of its amplitudes flown offline
+(agent.sim.offline.fly, with and without the emulated ArduPlane in FBWA at ArduPlane's default
+gains), each record identified as the agent does (benchmarks/bench_jsbsim.py `ours`: the
+whole-aircraft method with the INS's wind), and per named mode the closed-loop model's
+difference from the open-loop one (bench_jsbsim.mode_errors: pole by pole, an overdamped short
+period by its ωn and ζ) and each one's error against the validated truth.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+from bench_jsbsim import AIRCRAFT, MODES, experiment, mode_errors, ours, setup_for
+
+from agent.excitation.plan import preset
+from agent.ident.errors import DataError, IdentificationFailed
+from agent.sizing import scaled
+
+SCALE = 0.5  # of the full preset's amplitudes: linear on every aircraft, open loop too
+WITHIN = 0.10  # the closed-loop model's modes within this of the open-loop one's
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--aircraft", nargs="+", default=list(AIRCRAFT), choices=list(AIRCRAFT))
+    parser.add_argument("--turbulence", nargs="+", type=float, default=[0.0, 1.0])
+    parser.add_argument("--seeds", type=int, default=3)
+    args = parser.parse_args()
+    print(f"closed loop (FBWA) against open loop (MANUAL), full preset at {SCALE:g}; modes {MODES}")
+    for name in args.aircraft:
+        for turbulence in args.turbulence:
+            setup = setup_for(name, turbulence)
+            plan = preset("full", controls=setup.controls)
+            plan = scaled(plan, dict.fromkeys(setup.controls, SCALE))
+            truth = setup.truth().modes()
+            worst, seeds_within = [0.0] * len(MODES), 0
+            for seed in range(1, args.seeds + 1):
+                found = {}
+                for loop in ("open", "closed"):
+                    rec = setup.fly(plan, seed, fbwa=loop == "closed")
+                    try:
+                        found[loop], _, _, _ = ours(experiment(rec, setup), rec.dt, setup)
+                    except (IdentificationFailed, DataError) as exc:
+                        found[loop] = {}
+                        print(f"  {name} {turbulence:g} seed {seed} {loop}: not identified: {exc}")
+                apart = mode_errors(found["closed"], found["open"])
+                to_truth = {loop: mode_errors(found[loop], truth) for loop in found}
+                worst = [max(w, a) for w, a in zip(worst, apart, strict=True)]
+                seeds_within += all(a <= WITHIN for a in apart)
+                cells = ", ".join(
+                    f"{m} {100 * a:.1f} % (truth: open {100 * o:.1f}, closed {100 * c:.1f})"
+                    for m, a, o, c in zip(
+                        MODES, apart, to_truth["open"], to_truth["closed"], strict=True
+                    )
+                )
+                print(f"{name:8} {turbulence:3g} seed {seed}: closed vs open: {cells}", flush=True)
+            summary = ", ".join(f"{m} {100 * w:.1f} %" for m, w in zip(MODES, worst, strict=True))
+            print(
+                f"{name:8} {turbulence:3g}: every mode within {WITHIN:.0%} of the open loop in "
+                f"{seeds_within} of {args.seeds} seeds; worst: {summary}",
+                flush=True,
+            )
+
+
+if __name__ == "__main__":
+    main()
