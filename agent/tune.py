@@ -353,6 +353,11 @@ class Assessed:
         return bool(m.gain_db >= GAIN_MARGIN_DB and m.phase_deg >= PHASE_MARGIN)
 
 
+def _names(axis: str) -> tuple[str, str]:
+    """The rate loop's parameter prefix and the time constant's name of an axis."""
+    return ("RLL_RATE", "RLL2SRV_TCONST") if axis == "roll" else ("PTCH_RATE", "PTCH2SRV_TCONST")
+
+
 def loops(
     axis: str,
     plant: Plant,
@@ -365,9 +370,7 @@ def loops(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The rate loop and the whole loop, each broken at the actuator, over FREQUENCIES, for a
     set of one axis's gains (those missing at ArduPlane's defaults)."""
-    prefix, tc_name = (
-        ("RLL_RATE", "RLL2SRV_TCONST") if axis == "roll" else ("PTCH_RATE", "PTCH2SRV_TCONST")
-    )
+    prefix, tc_name = _names(axis)
     value = {**DEFAULTS, **dict(params)}
     S = float(np.clip(scaling_speed / eas, 0.1, 10.0))
     w = FREQUENCIES
@@ -394,17 +397,12 @@ def assess(
 ) -> Assessed:
     """Any set of one axis's FBWA gains (ArduPlane's names; those missing at its defaults)
     on the plant: the gains a design would replace, or a step on the way to it."""
-    prefix, tc_name = (
-        ("RLL_RATE", "RLL2SRV_TCONST")
-        if axis == "roll"
-        else (
-            "PTCH_RATE",
-            "PTCH2SRV_TCONST",
-        )
-    )
+    prefix, tc_name = _names(axis)
     value = {**DEFAULTS, **dict(params)}
     S = float(np.clip(scaling_speed / eas, 0.1, 10.0))
-    rate_loop, whole = loops(axis, plant, actuator, value, eas=eas, scaling_speed=scaling_speed)
+    rate_loop, whole = loops(
+        axis, plant, actuator, value, eas=eas, scaling_speed=scaling_speed, eas2tas=eas2tas
+    )
     fltt = value[f"{prefix}_FLTT"]
     ff, kp, ki = (float(value[f"{prefix}_{k}"]) for k in ("FF", "P", "I"))
     tc = float(value[tc_name])
