@@ -250,12 +250,21 @@ def _fit_step(
 
 
 def repeats(candidate: Candidate, earlier: Candidate, names: Sequence[str]) -> tuple[bool, str]:
-    """Whether `earlier` (another record's model) gives the modes `names` of `candidate` again:
-    each determined there too (`_weak`: a weak estimate repeats anything within its wide
+    """Whether `earlier` (another record's model) gives the modes `names` of `candidate` again,
+    and no mode the candidate lacks (the spiral aside: NOT_JUDGED_WHEN_MISSING): each
+    determined there too (`_weak`: a weak estimate repeats anything within its wide
     bounds), each pole's real and imaginary parts within REPEAT_Z combined standard errors
     (both models' Cramér–Rao bounds). Poles of one name pair by their real parts (a short
     period of two real poles)."""
     worst, where = 0.0, ""
+    mine_named = {m.name for m in candidate.result.modes if m.name}
+    lacking = [
+        name
+        for name in dict.fromkeys(m.name for m in earlier.result.modes if m.name)
+        if name not in mine_named and name not in NOT_JUDGED_WHEN_MISSING
+    ]
+    if lacking:  # the manoeuvre flown again shows the same modes, not fewer
+        return False, f"{earlier.model_id} has a {', '.join(lacking)} this record lacks"
     for name in names:
         mine, theirs = _poles(candidate.result, name), _poles(earlier.result, name)
         if not theirs:

@@ -471,10 +471,10 @@ def test_in_unmeasured_turbulence_the_fit_is_judged_at_the_excited_bins_and_by_a
     """A record whose turbulence nothing measures fails the whole record's TIC whatever the
     model (the truth's own reaches 0.41-0.48 on JSBSim's glider): the fit step then takes the
     excited bins' TIC and an independent record's model giving the same modes. Bad input
-    tried: no earlier record; an earlier roll 5 σ away; an earlier roll too weak to repeat
-    anything (σ 50 %); an excited-bin TIC of 0.35; a diverged simulation (TIC 1); a weak mode
-    of its own; an OKID model (no excited-bin TIC). The spiral, undetermined (σ 100 %), is
-    reported and not judged, as a missing one is not."""
+    tried: no earlier record; an earlier roll 5 σ away; a record without the roll mode; an
+    earlier roll too weak to repeat anything (σ 50 %); an excited-bin TIC of 0.35; a diverged
+    simulation (TIC 1); a weak mode of its own; an OKID model (no excited-bin TIC). The
+    spiral, undetermined (σ 100 %), is reported and not judged, as a missing one is not."""
     c = turbulent("b")
     alone = suggest(c, None, None, None)
     assert alone.checks["fit"] is False
@@ -488,6 +488,16 @@ def test_in_unmeasured_turbulence_the_fit_is_judged_at_the_excited_bins_and_by_a
     differ = suggest(c, None, None, None, earlier=turbulent("a", roll=-6.5, roll_std=0.3))
     assert not differ.checks["fit"]
     assert "a's modes DIFFER (largest difference 5.0 σ > 3, roll)" in differ.steps[3]
+    # A record missing a mode the other shows (the gust took the roll mode): not a repeat,
+    # whichever record misses it; a missing spiral is not a difference.
+    other = turbulent("b")
+    rollless = _with(other, modes=[m for m in other.result.modes if m.name != "roll"])
+    lacking = suggest(rollless, None, None, None, earlier=turbulent("a"))
+    assert not lacking.checks["fit"]
+    assert "a has a roll this record lacks" in lacking.steps[3]
+    other = turbulent("a")
+    spiralless = _with(other, modes=[m for m in other.result.modes if m.name != "spiral"])
+    assert suggest(c, None, None, None, earlier=spiralless).checks["fit"]
     vague = suggest(c, None, None, None, earlier=turbulent("a", roll=-9.0, roll_std=4.5))
     assert not vague.checks["fit"]
     assert "a's roll is weak: nothing to repeat" in vague.steps[3]
