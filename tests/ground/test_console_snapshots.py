@@ -126,10 +126,14 @@ async def test_live_view(tmp_path):
     from tests.ground.test_console import live
 
     async with rig(tmp_path) as r:
-        station = GroundStation(r.config, VirtualClock(1000.0), base=tmp_path)
+        # The radio's signal strength asked often and waited for, as in `test_screen`: it
+        # reached the header before the picture on a loaded machine only.
+        config = r.config.model_copy(update={"rssi_s": 0.1})
+        station = GroundStation(config, VirtualClock(1000.0), base=tmp_path)
         app = Console(station)
         async with app.run_test(size=(100, 30)) as pilot:
             await until(pilot, lambda: station.heard.status is not None, "status")
+            await until(pilot, lambda: station.rssi_dbm is not None, "RSSI")
             await pilot.press("5")
             for k in range(3):
                 r.aircraft.session.send_live(live(k))
@@ -153,10 +157,14 @@ async def test_gains_view(tmp_path):
     """The Gains tab with a proposal beside the autopilot's gains and an apply reported."""
     async with rig(tmp_path) as r:
         r.aircraft.nominal = ["lat-1"]
-        station = GroundStation(r.config, VirtualClock(1000.0), base=tmp_path)
+        # The radio's signal strength asked often and waited for, as in `test_screen`: it
+        # reached the header before the picture on a loaded machine only.
+        config = r.config.model_copy(update={"rssi_s": 0.1})
+        station = GroundStation(config, VirtualClock(1000.0), base=tmp_path)
         app = Console(station)
         async with app.run_test(size=(120, 40)) as pilot:
             await until(pilot, lambda: station.heard.status is not None, "status")
+            await until(pilot, lambda: station.rssi_dbm is not None, "RSSI")
             await pilot.press("6")
             await pilot.press("g")
             await until(pilot, lambda: station.heard.gains is not None, "the proposal")
