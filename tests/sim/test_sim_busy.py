@@ -75,10 +75,19 @@ def one_cpu():
                 os.sched_setaffinity(tid, before)
 
 
+# A hog spins until its parent is gone, too: pytest-timeout's thread method ends a stuck test's
+# process with os._exit, past the `finally` that kills them, and hogs left spinning slowed
+# every later test of that run.
+HOG = (
+    "import os\nparent = os.getppid()\n"
+    "while os.getppid() == parent:\n    for _ in range(100_000):\n        pass\n"
+)
+
+
 @contextlib.contextmanager
 def hogs(cpu: set[int]):
-    """HOGS processes spinning on `cpu` until the block ends."""
-    spinning = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(HOGS)]
+    """HOGS processes spinning on `cpu` until the block ends (or this process does)."""
+    spinning = [subprocess.Popen([sys.executable, "-c", HOG]) for _ in range(HOGS)]
     try:
         for hog in spinning:
             os.sched_setaffinity(hog.pid, cpu)
