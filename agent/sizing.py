@@ -93,9 +93,8 @@ UNKNOWN_SHARE = 0.5
 # Another record of the same axes tells the gusts' excursion from a drift the model misses when
 # its controls played at least this many times larger or smaller (`_air`): a gust response's
 # peak over one record varies from record to record by tens of percent, so the square root of
-# the inputs' growth must stand above that (√2 ≈ 1.41). At 1.5 the T-6's bank drift in light
-# turbulence, which grows with its aileron (×1.9 for ×1.8), passed as the air's, and its full
-# preset flew 29° of bank where it had flown 18° (make bench-jsbsim).
+# the inputs' growth must stand above that (√2 ≈ 1.41); nearer 1, a drift that grows with the
+# inputs passes as the air's and the plan is sized past the envelope (benchmarks/README.md).
 AIR_GROWTH = 2.0
 # Each checked quantity's axis: its controls are the ones grown from the data's peak.
 AXIS_OF = {

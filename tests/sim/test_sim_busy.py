@@ -76,8 +76,8 @@ def one_cpu():
 
 
 # A hog spins until its parent is gone, too: pytest-timeout's thread method ends a stuck test's
-# process with os._exit, past the `finally` that kills them, and hogs left spinning slowed
-# every later test of that run.
+# process with os._exit, past the `finally` that kills them, and hogs left spinning would slow
+# every later test of the run.
 HOG = (
     "import os\nparent = os.getppid()\n"
     "while os.getppid() == parent:\n    for _ in range(100_000):\n        pass\n"
