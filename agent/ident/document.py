@@ -169,6 +169,9 @@ class AirAngles(Document):
 class Wind(Document):
     measured: bool  # the gusts were measured (INS velocities) and were known inputs
     gust_rms: dict[str, float]  # by the output each gust corrects
+    # Gusts the INS measured no larger than the sensors' noise (calm air): not inputs; their
+    # outputs are still the inertial ones.
+    undetected: list[str] = []
     # "vanes": α and β as recorded; "synthesised": from the INS and an estimated wind (no
     # vanes), one entry per record in `synthesised`, and then only the airspeed's gust measured.
     air_angles: Literal["vanes", "synthesised"] = "vanes"

@@ -136,6 +136,11 @@ def _method_lines(result: Identification) -> list[str]:
         *([f"engine: {engines}"] if engines else []),
         ("kinematics known; " if aircraft.kinematics else "kinematics not known (no trim); ")
         + (f"wind measured (gust rms {gusts})" if wind.measured else "wind not measured")
+        + (
+            f"; {', '.join(wind.undetected)} gust within the sensors' noise (left out)"
+            if wind.undetected
+            else ""
+        )
         + _air_angles(wind),
     ]
 

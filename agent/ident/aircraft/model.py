@@ -159,7 +159,10 @@ def fitted_axes(
     # with the vanes, the air-relative V and α feel the gust's rate row by row; with α
     # synthesised from the INS (no vanes) the state feels it too and the output, the inertial
     # α, does not see it (the noise's direct path). With the wind measured the residual is
-    # the sensors' and output error holds.
+    # the sensors' and output error holds. A measured α gust within its sensors' noise (calm
+    # air; prepare) is no input: the axis is fitted as if nothing measured it, the filter error
+    # used where the residual shows process noise (the nonlinearity's and the engine's, which
+    # the gust's free gains had fitted instead).
     filtered = settings.process_noise and "alpha" not in ready.gusts
     synthesised = (LONGITUDINAL[0].index("alpha"),) if ready.air_angles else ()
     fits, engine = _fit_axes(
@@ -595,6 +598,7 @@ def _report(
         wind=Wind(
             measured=bool(ready.gusts),
             gust_rms=ready.gust_rms,
+            undetected=list(ready.undetected),
             air_angles="synthesised" if ready.air_angles else "vanes",
             synthesised=[_air_angles(a) for a in ready.air_angles],
         ),

@@ -16,9 +16,12 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.ndimage
+import scipy.stats
 
 FLOOR_FROM = 0.5
 SMOOTH_BINS = 8
+# `detected`: the chance that white noise alone passes, over a whole record.
+FALSE_ALARM = 1e-3
 
 
 def floor(power: np.ndarray) -> float:
@@ -37,3 +40,22 @@ def conditional_mean(g: np.ndarray) -> np.ndarray:
     mean = float(g.mean())
     G = np.fft.rfft(g - mean)
     return np.fft.irfft(wiener_gain(np.abs(G) ** 2) * G, n=g.size) + mean
+
+
+def detected(g: np.ndarray) -> bool:
+    """Whether a sampled signal holds more than its white measurement noise: its periodogram,
+    smoothed over SMOOTH_BINS bins a side, stands above the floor somewhere below FLOOR_FROM
+    by more than white noise reaches with probability FALSE_ALARM over the record. White
+    noise's smoothed periodogram over its floor is a Gamma variable of shape 2·SMOOTH_BINS + 1
+    and mean 1 at each bin; the blocks of that width are counted as independent trials."""
+    power = np.abs(np.fft.rfft(g - g.mean())) ** 2
+    level = floor(power)
+    width = 2 * SMOOTH_BINS + 1
+    below = scipy.ndimage.uniform_filter1d(power, width, mode="nearest")[
+        1 : int(FLOOR_FROM * power.size)
+    ]
+    if level <= 0 or below.size == 0:
+        return bool(np.any(below > 0))
+    trials = max(1, below.size // width)
+    threshold = scipy.stats.gamma.isf(FALSE_ALARM / trials, a=width, scale=1.0 / width)
+    return bool(np.any(below > threshold * level))

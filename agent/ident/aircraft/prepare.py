@@ -22,7 +22,13 @@ gusts' rates, through GUST_RATE_LAGS fitted lags each, are known inputs of their
 Dryden's pitch-rate and yaw-rate gusts (MIL-F-8785C;
 `agent.ident.aircraft.wind.GUST_RATES`), the gusts' gradients along the airframe, which
 otherwise bias the short period's damping and, where the span is large against the speed (a
-glider), the Dutch roll's frequency.
+glider), the Dutch roll's frequency. A gust that stands nowhere above its sensors' white noise
+(`noise.detected`: calm air) is no input: the outputs stay the inertial ones, less noisy than
+the vanes, but the "gust" is the difference of two sensors' noise, and its free gains on every
+row fitted the phugoid's few bins (JSBSim's Cessna 182 in calm air: the phugoid's damping
+16–20 % high on every seed, within 3 % without; benchmarks/README.md). With α's gust left
+out, the longitudinal axis is fitted as where nothing measures it (the filter-error method
+where the residual shows process noise; agent.ident.aircraft.model).
 
 Sideslip drag (`sideslip_drag`): where β is measured, β² (the vane's air-relative β, from
 trim) is a known input of V̇'s equation alone, with a fitted gain: drag due to sideslip,
@@ -69,7 +75,7 @@ from agent.ident.aircraft.kinematics import (
     kinematic_jacobian,
     kinematic_remainder,
 )
-from agent.ident.aircraft.noise import conditional_mean
+from agent.ident.aircraft.noise import conditional_mean, detected
 from agent.ident.aircraft.wind import GUST_RATES, GUSTS, inertial_air_data, steady_wind
 from agent.ident.okid import Experiment
 
@@ -88,6 +94,9 @@ class Prepared:
     batch: list[Experiment]  # u: the controls, then the known inputs
     known: list[np.ndarray] | None = None  # kinematic remainder per experiment, or None
     gusts: tuple[str, ...] = ()  # the gust columns' outputs ("airspeed", "alpha", "beta")
+    # Gusts measured but no larger than the sensors' noise: not inputs, their outputs still
+    # the inertial ones.
+    undetected: tuple[str, ...] = ()
     extra_names: tuple[str, ...] = ()  # the known inputs' names ("gust alpha", "beta²", ...)
     extra_axes: dict[int, str] = field(default_factory=dict)  # known input → its axis
     gust_rms: dict[str, float] = field(default_factory=dict)
@@ -104,8 +113,9 @@ class Prepared:
 class _Terms:
     """Which known inputs a batch gets, in their column order after the controls."""
 
-    gusts: tuple[str, ...]  # measured gusts, by the output they correct
+    gusts: tuple[str, ...]  # measured gusts, by the output they correct: known inputs
     rated: tuple[str, ...]  # gusts whose rate is an input too
+    inertial: tuple[str, ...]  # outputs put on their inertial footing (the wind measured)
     drag: bool  # β², sideslip drag
     bilinear: bool  # α·β, α·p, α·r
 
@@ -145,18 +155,24 @@ def prepare(
     terms = _Terms(
         gusts=gusts,
         rated=tuple(role for role in GUST_RATES if role in gusts),
+        inertial=gusts,
         drag=sideslip_drag and "beta" in index and "airspeed" in index,
         bilinear=alpha_products and all(role in index for role in ("alpha", *BILINEAR)),
     )
-    out, known, jacobians, squares, motion, count = _assemble(batch, index, terms, trim_samples, dt)
+    out, known, jacobians, squares, motion, count, heard = _assemble(
+        batch, index, terms, trim_samples, dt
+    )
     # A gust the air data and the INS agree on to the last digits (calm air without sensor
     # noise: a simulation) holds nothing to fit a gain to; left in, its free gains grew
-    # without bound and the time-domain prediction overflowed (TIC 1 on every output).
-    calm = {role for role in gusts if squares[role] <= NO_GUST**2 * motion[role]}
+    # without bound and the time-domain prediction overflowed (TIC 1 on every output). One
+    # no larger than the sensors' noise (calm air) is left out too (module docstring).
+    calm = {
+        role for role in gusts if squares[role] <= NO_GUST**2 * motion[role] or role not in heard
+    }
     if calm:
         gusts = tuple(role for role in gusts if role not in calm)
         terms = replace(terms, gusts=gusts, rated=tuple(g for g in terms.rated if g in gusts))
-        out, known, jacobians, squares, motion, count = _assemble(
+        out, known, jacobians, squares, motion, count, _ = _assemble(
             batch, index, terms, trim_samples, dt
         )
     r, m = batch[0].u.shape[1], batch[0].y.shape[1]
@@ -165,6 +181,7 @@ def prepare(
         batch=out,
         known=known,
         gusts=gusts,
+        undetected=tuple(role for role in terms.inertial if role not in gusts),
         extra_names=names,
         extra_axes=axes,
         gust_rms={role: float(np.sqrt(v / count)) for role, v in squares.items()},
@@ -179,22 +196,25 @@ def prepare(
 
 def _assemble(batch, index: dict[str, int], terms: _Terms, trim_samples: int, dt: float):
     """Each experiment's inputs with the known ones, outputs and kinematic forcing; the
-    kinematics' Jacobians; and per gust its sum of squares about its mean and its air-data
-    channel's, over the batch, and the samples counted."""
+    kinematics' Jacobians; per gust its sum of squares about its mean and its air-data
+    channel's, over the batch, and the samples counted; and the measured gusts that stand
+    above their sensors' noise in some experiment (`noise.detected`)."""
     out, known, jacobians = [], [], []
     squares, motion, count = dict.fromkeys(terms.gusts, 0.0), dict.fromkeys(terms.gusts, 0.0), 0
+    heard: set[str] = set()
     for e in batch:
-        u, y, x, air, gust_columns = _known_inputs(e, index, terms, trim_samples, dt)
+        u, y, x, air, gust_columns, raw = _known_inputs(e, index, terms, trim_samples, dt)
         for role, gust in zip(terms.gusts, gust_columns, strict=False):
             channel = air[:, KINEMATIC_STATES.index(role)]
             squares[role] += float(np.sum((gust - gust.mean()) ** 2))
             motion[role] += float(np.sum((channel - channel.mean()) ** 2))
+        heard |= {role for role, gust in raw.items() if detected(gust)}
         count += y.shape[0]
         trim = x[:trim_samples].mean(axis=0)
         jacobians.append(kinematic_jacobian(trim))
         out.append(Experiment(u, y))
         known.append(_attitude_forcing(x, trim, index, y.shape))
-    return out, known, jacobians, squares, motion, count
+    return out, known, jacobians, squares, motion, count, heard
 
 
 def _columns(terms: _Terms, index: dict[str, int], r: int):
@@ -244,17 +264,19 @@ def _known_inputs(e: Experiment, index: dict[str, int], terms: _Terms, trim_samp
     beta = x[:, KINEMATIC_STATES.index("beta")]
     beta = beta - beta[:trim_samples].mean()
     air = x.copy()  # the air-relative states: what the forces depend on
-    gusts = []
-    if terms.gusts:
+    gusts, raw = [], {}
+    if terms.inertial:
         navigation = e.navigation.copy()
         navigation[:, 1:] -= steady_wind(x, navigation)  # relative to the mean air mass
         still = inertial_air_data(x, navigation)
-        for role in terms.gusts:
+        for role in terms.inertial:
             k = KINEMATIC_STATES.index(role)
             inertial = still[:, ("airspeed", "alpha", "beta").index(role)]
-            gusts.append(conditional_mean(inertial - x[:, k]))
+            raw[role] = inertial - x[:, k]
             x[:, k] = inertial
             y[:, index[role]] = inertial - e.operating_point[index[role]]
+    if terms.gusts:
+        gusts = [conditional_mean(raw[role]) for role in terms.gusts]
         rates = [np.gradient(gusts[terms.gusts.index(role)], dt) for role in terms.rated]
         u = np.hstack([u, np.column_stack([*gusts, *rates])])
     if terms.drag:
@@ -264,7 +286,7 @@ def _known_inputs(e: Experiment, index: dict[str, int], terms: _Terms, trim_samp
         alpha = deviation[:, KINEMATIC_STATES.index("alpha")]
         lateral = [KINEMATIC_STATES.index(role) for role in BILINEAR]
         u = np.hstack([u, alpha[:, None] * deviation[:, lateral]])
-    return u, y, x, air, gusts
+    return u, y, x, air, gusts, raw
 
 
 def _attitude_forcing(x: np.ndarray, trim: np.ndarray, index: dict[str, int], shape):
