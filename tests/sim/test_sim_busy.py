@@ -29,6 +29,7 @@ from agent.sim.flight import SimError, SimFlight, SimOptions, one_run, simulated
 from agent.sim.pace import Overdue, Slowness, Span, schedstat
 
 pytestmark = [
+    pytest.mark.alone,  # its hogs starve whatever else runs beside it (Makefile: test)
     pytest.mark.usefixtures("no_leaked_tasks"),
     pytest.mark.timeout(180),
     pytest.mark.skipif(
