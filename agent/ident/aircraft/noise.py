@@ -29,10 +29,14 @@ def floor(power: np.ndarray) -> float:
     return float(np.mean(power[int(FLOOR_FROM * power.size) :]))
 
 
+def smoothed(power: np.ndarray) -> np.ndarray:
+    """A periodogram averaged over SMOOTH_BINS bins on either side."""
+    return scipy.ndimage.uniform_filter1d(power, 2 * SMOOTH_BINS + 1, mode="nearest")
+
+
 def wiener_gain(power: np.ndarray) -> np.ndarray:
     """Per bin of a periodogram, the gain that takes the signal to its conditional mean."""
-    smooth = scipy.ndimage.uniform_filter1d(power, 2 * SMOOTH_BINS + 1, mode="nearest")
-    return np.clip(1.0 - floor(power) / np.maximum(smooth, 1e-300), 0.0, 1.0)
+    return np.clip(1.0 - floor(power) / np.maximum(smoothed(power), 1e-300), 0.0, 1.0)
 
 
 def conditional_mean(g: np.ndarray) -> np.ndarray:
@@ -51,9 +55,7 @@ def detected(g: np.ndarray) -> bool:
     power = np.abs(np.fft.rfft(g - g.mean())) ** 2
     level = floor(power)
     width = 2 * SMOOTH_BINS + 1
-    below = scipy.ndimage.uniform_filter1d(power, width, mode="nearest")[
-        1 : int(FLOOR_FROM * power.size)
-    ]
+    below = smoothed(power)[1 : int(FLOOR_FROM * power.size)]
     if level <= 0 or below.size == 0:
         return bool(np.any(below > 0))
     trials = max(1, below.size // width)
