@@ -25,7 +25,10 @@ parameters, by classical loop shaping on the identified plant with its actuator:
 - TCONST: the target (ArduPlane's 0.5 s unless given), lengthened until 1/TCONST sits
   BANDWIDTH_SEPARATION below the bandwidth of the rate the aircraft flies for a demanded one
   (feed-forward and feedback together) and the whole loop, broken at the actuator, keeps the
-  margins MIL-F-9490D asks of a flight-control loop (6 dB, 45°).
+  margins MIL-F-9490D asks of a flight-control loop (6 dB, 45°);
+- RMAX: the rate the model flies with RATE_SHARE of the servo's travel, so that a step's rate
+  demand does not saturate the surface (its flown response would then rest on the surface's
+  authority each way, beyond any linear model); ArduPlane's AUTOTUNE sets it with TCONST.
 
 Predicted: each loop's margins and crossover, the attitude's disturbance-rejection bandwidth
 (where the sensitivity |1/(1 + L)| reaches −3 dB) and a step's rise time and overshoot, from the
@@ -61,6 +64,17 @@ BACKOFF, BACKOFFS = 0.8, 12
 # them is refused, never clipped into a different design.
 P_RANGE, I_RANGE, FF_RANGE = (0.001, 4.0), (0.0, 4.0), (0.01, 4.0)
 TCONST_RANGE = (0.2, 2.0)
+# The rate limit (RLL2SRV_RMAX, PTCH2SRV_RMAX_UP/DN, deg/s): the rate the aircraft flies with
+# RATE_SHARE of the servo's travel, so that the feed-forward of the largest rate the loop asks
+# for leaves the other half to the feedback, the trim and the air. Without it an attitude step
+# asks 20°/TCONST and the surface saturates: the response then rests on the surface's
+# authority each way, which no linear model holds (JSBSim's C172R, ailerons 15° up and 20°
+# down: a −20° step 23 % slower than +20°; at about this share, within 7 % of the prediction
+# both ways, benchmarks/tune_check.py). ArduPlane's own AUTOTUNE sets RMAX with TCONST
+# (AP_AutoTune.cpp's tuning_table); its ranges here are ArduPlane's.
+RATE_SHARE = 0.45
+RMAX_RANGE = {"roll": (0.0, 180.0), "pitch": (0.0, 100.0)}
+RMAX_NAMES = {"roll": ("RLL2SRV_RMAX",), "pitch": ("PTCH2SRV_RMAX_UP", "PTCH2SRV_RMAX_DN")}
 # The yaw damper (`design_yaw`): the Dutch roll damping ratio it aims at (a common
 # yaw-damper goal, well above MIL-F-8785C's Level 1 minimum of 0.19 for flight phase A), the
 # least it must add to be turned on, and ArduPlane's range of YAW2SRV_DAMP; its high-pass
@@ -323,6 +337,9 @@ def design_axis(
     ):
         if not lo <= params[name] <= hi:
             raise TuneError(f"{axis}: {name} {params[name]:.4g} outside ArduPlane's {lo}–{hi}")
+    # Whole degrees per second: ArduPlane's RMAX parameters are integers.
+    rmax = float(np.clip(math.floor(RATE_SHARE * k_ss * TRAVEL_DEG), *RMAX_RANGE[axis]))
+    params |= dict.fromkeys(RMAX_NAMES[axis], rmax)
     step = STEPS[axis]
     rise, overshoot = predicted_step(axis, plant, actuator, params, eas, eas2tas, scaling_speed)
     return AxisTune(
@@ -1154,6 +1171,9 @@ def toward(
     assessed and, where it misses the margins, shorter steps are tried (STEP_TRIES). Each gain
     within ArduPlane's range (RANGES)."""
     names = [n for n in AXIS_GAINS[axis] if n in designed]
+    # The rate limit is not a gain scaled toward its design: the designed one is what keeps
+    # the steps' surface within its authority, whatever share of the way the gains go.
+    limits = {n: float(designed[n]) for n in RMAX_NAMES[axis] if n in designed}
     limit = 1.0
     for n in names:
         c, d = float(current.get(n, DEFAULTS[n])), float(designed[n])
@@ -1169,7 +1189,7 @@ def toward(
             v = c * (d / c) ** share if c > 0 and d > 0 else c + share * (d - c)
             lo, hi = RANGES[n.rsplit("_", 1)[-1]]
             out[n] = round(float(np.clip(v, lo, hi)), 4)
-        return out
+        return out | limits
 
     for k in STEP_TRIES:
         share = limit * k

@@ -19,6 +19,7 @@ from agent.tune import (
     DUTCH_ROLL_TARGET,
     GAIN_MARGIN_DB,
     PHASE_MARGIN,
+    RATE_SHARE,
     Actuator,
     Model,
     TuneError,
@@ -71,6 +72,17 @@ def test_the_feed_forward_flies_the_demanded_rate_and_the_loops_keep_their_margi
     assert tune.attitude_loop.rejection_rad_s > 0
     assert 0 < tune.overshoot_pct < 10
     assert 0.2 < tune.rise_s < 3.0
+
+
+def test_the_rate_limit_is_the_rate_flown_with_part_of_the_servos_travel():
+    """RMAX: the steady rate at RATE_SHARE of the ±45° travel, whole degrees per second; a
+    surface twice as strong flies twice the rate before it saturates."""
+    per_degree = np.degrees(0.3 / 5.0) * 0.5  # deg/s per notional degree (above)
+    tune = design()
+    assert tune.params["RLL2SRV_RMAX"] == np.floor(RATE_SHARE * per_degree * 45.0)
+    assert 0 < tune.params["RLL2SRV_RMAX"] < 20.0 / tune.params["RLL2SRV_TCONST"]
+    strong = design(L_da=0.6)
+    assert strong.params["RLL2SRV_RMAX"] == pytest.approx(2 * tune.params["RLL2SRV_RMAX"], abs=1)
 
 
 def test_a_slower_servo_gets_less_rate_gain_and_a_lower_crossover():
@@ -130,6 +142,10 @@ def test_a_step_toward_the_design_changes_no_gain_by_more_than_the_limit():
     for n, v in step.params.items():
         if current[n] > 0 and v > 0:
             assert 1 / 2.0001 <= v / current[n] <= 2.0001, n
+    # The rate limit is set as designed at once (from ArduPlane's 0, no limit): a share of
+    # it would limit harder than the design.
+    assert current["RLL2SRV_RMAX"] == 0
+    assert step.params["RLL2SRV_RMAX"] == tune.params["RLL2SRV_RMAX"] > 0
     whole = toward(
         "roll",
         plant,
@@ -170,6 +186,7 @@ def test_the_param_file_is_arduplanes_name_comma_value():
         "RLL_RATE_P",
         "RLL_RATE_I",
         "RLL_RATE_D",
+        "RLL2SRV_RMAX",
     }
     assert all(name in DEFAULTS for name in parsed)
     assert float(parsed["RLL_RATE_D"]) == 0.0
