@@ -492,6 +492,11 @@ def _still(plan: Plan) -> Timeline:
     return dataclasses.replace(timeline, values=values)
 
 
+# A complex pair this damped (ζ) sits near its double root, where a pole moves much farther
+# than ωn and ζ do: at ζ 0.9 a change of 0.01 in ζ moves the pole 2 % of ωn, at 0.997 13 %.
+NEAR_DOUBLE = 0.9
+
+
 def mode_errors(found: dict[str, list[complex]], truth: dict[str, list[complex]]) -> list[float]:
     """Each named mode's worst relative error (inf when it is not found): pole by pole, but a
     mode that is two real poles on either side (an overdamped short period) by its
@@ -499,12 +504,18 @@ def mode_errors(found: dict[str, list[complex]], truth: dict[str, list[complex]]
     ζ_sp and ω_sp), the larger of their relative errors. Near a double root the poles
     themselves are ill-conditioned: the J-3 Cub's −9.7 and −6.4 1/s (ωn 7.88, ζ 1.02) and an
     identified −7.5 ± 1.9j (ωn 7.73, ζ 0.97) are 34 % apart pole by pole though ωn and ζ are
-    within 5 %."""
+    within 5 %. A pair near its double root (ζ of the reference's at least NEAR_DOUBLE) is
+    ill-conditioned the same way and judged the same: a closed-loop model's short period
+    against the open-loop one's on the J-3 Cub in light turbulence (ωn 7.70 and 7.92 rad/s, ζ
+    0.912 and 0.997) is 34 % apart pole by pole, 2.8 % in ωn and 8.6 % in ζ
+    (closed_loop_check.py). The validated truths' complex pairs are all below it (the
+    C182's short period, ζ 0.786, the most damped)."""
     out = []
     for name in MODES:
         true, mine = truth.get(name, []), found.get(name, [])
         polynomial = _second_order(true), _second_order(mine)
-        if None not in polynomial and (len(true) == 2 or len(mine) == 2):
+        near_double = polynomial[0] is not None and polynomial[0][1] >= NEAR_DOUBLE
+        if None not in polynomial and (len(true) == 2 or len(mine) == 2 or near_double):
             (wn, zeta), (wn_found, zeta_found) = polynomial
             out.append(max(abs(wn_found - wn) / wn, abs(zeta_found - zeta) / zeta))
             continue

@@ -4,13 +4,18 @@ on the surfaces, MANUAL), on each benchmark aircraft.
 
     .venv/bin/python benchmarks/closed_loop_check.py              # six aircraft, calm and light
     .venv/bin/python benchmarks/closed_loop_check.py --aircraft J3Cub --turbulence 0
+    .venv/bin/python benchmarks/closed_loop_check.py --bound  # and what each record allows
 
 Per aircraft, condition and seed: the full preset at SCALE of its amplitudes flown offline
 (agent.sim.offline.fly, with and without the emulated ArduPlane in FBWA at ArduPlane's default
 gains), each record identified as the agent does (benchmarks/bench_jsbsim.py `ours`: the
 whole-aircraft method with the INS's wind), and per named mode the closed-loop model's
 difference from the open-loop one (bench_jsbsim.mode_errors: pole by pole, an overdamped short
-period by its ωn and ζ) and each one's error against the validated truth.
+period by its ωn and ζ) and each one's error against the validated truth. `--bound`: each
+record's Cramér–Rao bound for the validated truth (bench_jsbsim.truth_bound: each mode's
+median error an efficient estimator of the method's structure would have on it, the surfaces
+as measured taken as known inputs), open and closed loop: where the closed loop's is wide, the
+loop has held the mode down and the record cannot give it, whatever the estimator.
 """
 
 from __future__ import annotations
@@ -20,7 +25,7 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from bench_jsbsim import AIRCRAFT, MODES, experiment, mode_errors, ours, setup_for
+from bench_jsbsim import AIRCRAFT, MODES, experiment, mode_errors, ours, setup_for, truth_bound
 
 from agent.excitation.plan import preset
 from agent.ident.errors import DataError, IdentificationFailed
@@ -35,6 +40,7 @@ def main() -> None:
     parser.add_argument("--aircraft", nargs="+", default=list(AIRCRAFT), choices=list(AIRCRAFT))
     parser.add_argument("--turbulence", nargs="+", type=float, default=[0.0, 1.0])
     parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--bound", action="store_true", help="each record's Cramér–Rao bound")
     args = parser.parse_args()
     print(f"closed loop (FBWA) against open loop (MANUAL), full preset at {SCALE:g}; modes {MODES}")
     for name in args.aircraft:
@@ -42,14 +48,18 @@ def main() -> None:
             setup = setup_for(name, turbulence)
             plan = preset("full", controls=setup.controls)
             plan = scaled(plan, dict.fromkeys(setup.controls, SCALE))
-            truth = setup.truth().modes()
+            reference = setup.truth()
+            truth = reference.modes()
             worst, seeds_within = [0.0] * len(MODES), 0
             for seed in range(1, args.seeds + 1):
-                found = {}
+                found, bounds = {}, {}
                 for loop in ("open", "closed"):
                     rec = setup.fly(plan, seed, fbwa=loop == "closed")
+                    exp = experiment(rec, setup)
                     try:
-                        found[loop], _, _, _ = ours(experiment(rec, setup), rec.dt, setup)
+                        found[loop], _, _, _ = ours(exp, rec.dt, setup)
+                        if args.bound:
+                            bounds[loop] = truth_bound(exp, rec.dt, setup, reference)[1]
                     except (IdentificationFailed, DataError) as exc:
                         found[loop] = {}
                         print(f"  {name} {turbulence:g} seed {seed} {loop}: not identified: {exc}")
@@ -64,6 +74,11 @@ def main() -> None:
                     )
                 )
                 print(f"{name:8} {turbulence:3g} seed {seed}: closed vs open: {cells}", flush=True)
+                for loop, medians in bounds.items():
+                    allowed = ", ".join(
+                        f"{m} {100 * b:.1f} %" for m, b in zip(MODES, medians, strict=True)
+                    )
+                    print(f"{'':8} {'':3} {loop:6} loop's bound, median error: {allowed}")
             summary = ", ".join(f"{m} {100 * w:.1f} %" for m, w in zip(MODES, worst, strict=True))
             print(
                 f"{name:8} {turbulence:3g}: every mode within {WITHIN:.0%} of the open loop in "

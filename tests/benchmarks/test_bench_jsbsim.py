@@ -84,6 +84,24 @@ def test_a_mode_of_two_real_poles_is_judged_by_its_wn_and_zeta():
     )
 
 
+def test_a_pair_near_its_double_root_is_judged_by_its_wn_and_zeta():
+    """Two identified models' short periods on the J-3 Cub (closed against open loop): ωn
+    7.699 and 7.921 rad/s, ζ 0.912 and 0.997, 34 % apart pole by pole, within 10 % in ωn and ζ
+    (8.6 % in ζ); a lightly damped pair is still judged pole by pole."""
+    bench = _bench()
+    open_loop = {"short period": [-7.898 + 0.598j]}
+    closed = {"short period": [-7.019 + 3.164j]}
+    error = bench.mode_errors(closed, open_loop)[0]
+    assert abs(-7.019 + 3.164j - (-7.898 + 0.598j)) / abs(-7.898 + 0.598j) > 0.3
+    wn, zeta = abs(-7.898 + 0.598j), 7.898 / abs(-7.898 + 0.598j)
+    wn_c, zeta_c = abs(-7.019 + 3.164j), 7.019 / abs(-7.019 + 3.164j)
+    assert error == pytest.approx(max(abs(wn_c - wn) / wn, abs(zeta_c - zeta) / zeta), rel=1e-6)
+    assert error < 0.10
+    light = {"phugoid": [-0.036 + 0.344j]}
+    moved = {"phugoid": [-0.046 + 0.344j]}
+    assert bench.mode_errors(moved, light)[1] == pytest.approx(0.010 / abs(-0.036 + 0.344j))
+
+
 def test_each_modes_error_is_scored_in_its_reported_standard_errors():
     """mode_z: a pair's ωn and ζ errors over their reported σ, a real pole's real part's, a
     mode of two real poles by its second-order ωn and ζ; a mode without σ or without a truth
