@@ -20,9 +20,12 @@ What it does, as ArduPlane does it (docs/protocols.md, *ArduPlane through MAVSDK
   pilot's. Surfaces go out as ArduPlane's servo outputs do: ±45° of notional travel is
   SERVOn_MIN…SERVOn_MAX about SERVOn_TRIM, where the installer's trim holds the trimmed
   aircraft.
-- Parameters by name (PARAM_REQUEST_LIST, PARAM_REQUEST_READ, PARAM_SET → PARAM_VALUE as
-  MAV_PARAM_TYPE_REAL32, with their count and index): FBWA's (agent.fbwa.DEFAULTS). A
-  PARAM_SET of a name the vehicle does not have gets no answer, as ArduPlane gives none.
+- Parameters by name (PARAM_REQUEST_LIST, PARAM_REQUEST_READ, PARAM_SET → PARAM_VALUE with
+  their count and index): FBWA's (agent.fbwa.DEFAULTS), each of ArduPlane's type
+  (`PARAM_TYPES`: the rate limits and airspeed limits AP_Int16, TRIM_THROTTLE AP_Int8, the
+  rest AP_Float), an integer's value sent as a float as ArduPilot does and a PARAM_SET of one
+  stored as its integer (C's conversion: toward zero). A PARAM_SET of a name the vehicle does
+  not have gets no answer, as ArduPlane gives none.
 """
 
 from __future__ import annotations
@@ -39,6 +42,20 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from agent.fbwa import DEFAULTS as FBWA_DEFAULTS
 from agent.fbwa import LOOP_HZ, TRAVEL_DEG, Fbwa, Sensed
 from agent.sim.dataflash import DataFlashWriter
+
+# The FBWA parameters ArduPlane holds as integers (the rest are AP_Float): the rate limits
+# (AP_AutoTune.h's ATGains rmax_pos/rmax_neg, AP_PitchController's RMAX_UP/DN), the yaw
+# controller's IMAX, and AP_FixedWing's airspeed_min/max (AP_Int16) and throttle_cruise
+# (TRIM_THROTTLE, AP_Int8). MAVSDK's param plugin refuses a float request for them.
+PARAM_TYPES = {
+    "RLL2SRV_RMAX": mavlink.MAV_PARAM_TYPE_INT16,
+    "PTCH2SRV_RMAX_UP": mavlink.MAV_PARAM_TYPE_INT16,
+    "PTCH2SRV_RMAX_DN": mavlink.MAV_PARAM_TYPE_INT16,
+    "YAW2SRV_IMAX": mavlink.MAV_PARAM_TYPE_INT16,
+    "AIRSPEED_MIN": mavlink.MAV_PARAM_TYPE_INT16,
+    "AIRSPEED_MAX": mavlink.MAV_PARAM_TYPE_INT16,
+    "TRIM_THROTTLE": mavlink.MAV_PARAM_TYPE_INT8,
+}
 
 log = logging.getLogger(__name__)
 
@@ -360,7 +377,10 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
             if name not in FBWA_DEFAULTS or not np.isfinite(m.param_value):
                 self.counters["params_refused"] += 1
                 return
-            self.fbwa.set(name, float(m.param_value))
+            value = float(m.param_value)
+            if name in PARAM_TYPES:  # an AP_Int*: ArduPilot's set_float converts as C does
+                value = float(int(value))
+            self.fbwa.set(name, value)
             self.counters["params_set"] += 1
             self._param_value(name, names, None)  # ArduPlane announces a change to every GCS
 
@@ -368,7 +388,7 @@ class EmulatedArduPlane(asyncio.DatagramProtocol):
         message = self.mav.param_value_encode(
             name.encode(),
             float(self.fbwa.params[name]),
-            mavlink.MAV_PARAM_TYPE_REAL32,
+            PARAM_TYPES.get(name, mavlink.MAV_PARAM_TYPE_REAL32),
             len(names),
             names.index(name),
         )

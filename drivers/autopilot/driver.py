@@ -140,6 +140,7 @@ class AutopilotLink:
         self._on_sample, self._on_link = on_sample, on_link
         self._direct = None
         self._param = None
+        self._integer_params: set[str] = set()  # ArduPilot's AP_Int* ones (_get_param)
         self._executor: ThreadPoolExecutor | None = None
         self._seam: MessageSeam | None = None
         self._boot_clock = DeviceClock()
@@ -347,7 +348,7 @@ class AutopilotLink:
         values, missing = {}, []
         for name in names:
             try:
-                values[name] = await self._param_call("get_param_float", name)
+                values[name] = await self._get_param(name)
             except ParamError as exc:
                 missing.append(f"{name} ({_why(exc)})")
         if missing:
@@ -362,7 +363,7 @@ class AutopilotLink:
         failed = []
         for name, value in values.items():
             try:
-                await self._param_call("set_param_float", name, float(value))
+                await self._set_param(name, value)
                 self.counters["params_set"] += 1
             except ParamError as exc:
                 self.counters["params_refused"] += 1
@@ -377,15 +378,46 @@ class AutopilotLink:
         read = {}
         for name in values:
             try:
-                read[name] = await self._param_call("get_param_float", name)
+                read[name] = await self._get_param(name)
             except ParamError as exc:
                 failed.append(f"{name} not read back ({_why(exc)})")
         for name, value in read.items():
-            if not math.isclose(value, float(values[name]), rel_tol=1e-5, abs_tol=1e-6):
-                failed.append(f"{name} reads {value:g}, not {float(values[name]):g}")
+            wanted = float(values[name])
+            if name in self._integer_params:
+                wanted = float(round(wanted))
+            if not math.isclose(value, wanted, rel_tol=1e-5, abs_tol=1e-6):
+                failed.append(f"{name} reads {value:g}, not {wanted:g}")
         if failed:
             raise AutopilotError(f"parameters not set: {'; '.join(dict.fromkeys(failed))}")
         return read
+
+    # ArduPilot's parameters are typed (AP_Float, AP_Int16, AP_Int8…: RLL2SRV_RMAX is an
+    # AP_Int16) and its PARAM_VALUE says so; MAVSDK's param plugin answers a float request for
+    # an integer one with WRONG_TYPE. So a parameter is asked as a float first and, refused for
+    # its type, as an integer, and the integer ones are remembered and set as integers (a
+    # design's value rounded: ArduPilot would truncate a float).
+    _TYPE_REFUSED = (ParamResult.WRONG_TYPE, ParamResult.TYPE_MISMATCH)
+
+    async def _get_param(self, name: str) -> float:
+        if name not in self._integer_params:
+            try:
+                return float(await self._param_call("get_param_float", name))
+            except ParamError as exc:
+                if exc.result not in self._TYPE_REFUSED:
+                    raise
+            self._integer_params.add(name)
+        return float(await self._param_call("get_param_int", name))
+
+    async def _set_param(self, name: str, value: float) -> None:
+        if name not in self._integer_params:
+            try:
+                await self._param_call("set_param_float", name, float(value))
+                return
+            except ParamError as exc:
+                if exc.result not in self._TYPE_REFUSED:
+                    raise
+            self._integer_params.add(name)
+        await self._param_call("set_param_int", name, round(float(value)))
 
     async def _param_call(self, method: str, *args):
         if self._param is None or self._executor is None or not self.connected:

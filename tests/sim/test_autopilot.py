@@ -275,6 +275,10 @@ async def test_parameters_are_read_and_set_by_name_over_mavlink(tmp_path):
             assert value.param_value == pytest.approx(0.345)
             assert value.param_type == mavlink.MAV_PARAM_TYPE_REAL32
             assert value.param_count == len(DEFAULTS)
+            gcs.mav.param_request_read_send(1, 1, b"RLL2SRV_RMAX", -1)
+            value = await _receive(gcs, "PARAM_VALUE", 2.0, param_id="RLL2SRV_RMAX")
+            assert value is not None
+            assert value.param_type == mavlink.MAV_PARAM_TYPE_INT16
             gcs.mav.param_set_send(1, 1, b"RLL_RATE_FF", 0.5, mavlink.MAV_PARAM_TYPE_REAL32)
             value = await _receive(gcs, "PARAM_VALUE", 2.0, param_id="RLL_RATE_FF")
             assert value is not None
@@ -319,6 +323,12 @@ async def test_the_driver_sets_reads_back_and_reverts_parameters_over_mavsdk(tmp
         assert ap.fbwa.params["RLL_RATE_I"] == pytest.approx(0.15)
         await f.link.set_parameters({"RLL_RATE_I": 0.2})
         assert ap.fbwa.params["RLL_RATE_I"] == pytest.approx(0.2)
+        # ArduPlane's integer parameters (AP_Int16: the rate limits), which MAVSDK refuses to
+        # read or set as floats: read and set as integers, a value rounded, not truncated.
+        assert await f.link.parameters(["RLL2SRV_RMAX"]) == {"RLL2SRV_RMAX": 0.0}
+        read = await f.link.set_parameters({"RLL2SRV_RMAX": 30.0, "PTCH2SRV_RMAX_UP": 12.7})
+        assert read == {"RLL2SRV_RMAX": 30.0, "PTCH2SRV_RMAX_UP": 13.0}
+        assert ap.fbwa.params["PTCH2SRV_RMAX_UP"] == 13.0
         ap.drop_param_sets = True  # every PARAM_SET lost on the way, telemetry still flowing
         with pytest.raises(AutopilotError, match=r"PTCH_RATE_FF \(timeout\)"):
             await f.link.set_parameters({"PTCH_RATE_FF": 0.9})
