@@ -69,7 +69,7 @@ TCONST_RANGE = (0.2, 2.0)
 # for leaves the other half to the feedback, the trim and the air. Without it an attitude step
 # asks 20°/TCONST and the surface saturates: the response then rests on the surface's
 # authority each way, which no linear model holds (JSBSim's C172R, ailerons 15° up and 20°
-# down: a −20° step 23 % slower than +20°; at about this share, within 7 % of the prediction
+# down: a −20° step 23 % slower than +20°; at about this share, within 9 % of the prediction
 # both ways, benchmarks/tune_check.py). ArduPlane's own AUTOTUNE sets RMAX with TCONST
 # (AP_AutoTune.cpp's tuning_table); its ranges here are ArduPlane's.
 RATE_SHARE = 0.45
