@@ -465,7 +465,8 @@ class Logbook:
 
     def linkage(self, plan_id: str, follows) -> None:
         """Each surface's linkage on a finished run (agent.excitation.follow: measured per
-        commanded deflection, and the lag of the best correlation) as one execution-log line
+        commanded deflection, its even part per |commanded| deflection, and the lag of the best
+        correlation) as one execution-log line
         `sysid tune --exec-log` reads."""
         event = {
             "utc": dt.datetime.now(dt.UTC).isoformat(),
@@ -475,7 +476,13 @@ class Logbook:
             "message": f"{plan_id}: the surfaces' linkage",
             "plan": plan_id,
             "linkage": {
-                f.control: {"gain": f.gain, "lag_s": f.lag_s, "correlation": f.correlation}
+                f.control: {
+                    "gain": f.gain,
+                    "even": f.even,
+                    "knee": f.knee,
+                    "lag_s": f.lag_s,
+                    "correlation": f.correlation,
+                }
                 for f in follows
             },
         }

@@ -208,10 +208,11 @@ class Predictor:
     what the data flew (`flown`), when that is more than the model predicts: a response the
     model does not hold (a drift that grows with the inputs) must not be sized by the model
     alone (docs/excitation.md, *Sizing*)."""
-    linkage: Mapping[str, tuple[float, float]] = field(default_factory=dict)
-    """Control → (gain, even): its recorded position per commanded deflection and per
-    |commanded| deflection, measured on the last run (agent.excitation.follow); without it
-    the record follows the command at `per_unit`."""
+    linkage: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
+    """Control → (gain, even, knee): its recorded position per commanded deflection, per
+    |commanded − knee| deflection, and the knee, measured on the last run
+    (agent.excitation.follow; `moved`); without it the record follows the command at
+    `per_unit`."""
 
     def commands(self, timeline: Timeline, factors: Mapping[str, float]) -> np.ndarray:
         """The model's inputs (record units, at dt) for the timeline's controls, each times its
@@ -222,8 +223,8 @@ class Predictor:
         for control, factor in factors.items():
             if control in self.inputs and control in timeline.values:
                 values = np.append(timeline.values[control], 0.0)[index]
-                gain, even = self.linkage.get(control, (self.per_unit[control], 0.0))
-                u[:, self.inputs[control]] += factor * (gain * values + even * np.abs(values))
+                link = self.linkage.get(control, (self.per_unit[control], 0.0))
+                u[:, self.inputs[control]] += factor * moved(link, values)
         return u
 
     def response(self, timeline: Timeline, control: str) -> dict[str, np.ndarray]:
@@ -255,7 +256,7 @@ class Predictor:
             return {}
         A, B, C, D = self.model.A, self.model.B, self.model.C, self.model.D
         j = self.inputs[control]
-        gain, even = self.linkage.get(control, (self.per_unit[control], 0.0))
+        gain, even, *_ = self.linkage.get(control, (self.per_unit[control], 0.0))
         hz = np.asarray(hz, dtype=float)
         eye = np.eye(A.shape[0])
         with np.errstate(all="ignore"):
@@ -962,7 +963,7 @@ def predictor_from(
     surfaces: Mapping[str, Surface],
     source: str,
     flight: Mapping[str, float] | None = None,
-    linkage: Mapping[str, tuple[float, float]] | None = None,
+    linkage: Mapping[str, tuple[float, ...]] | None = None,
     others: Sequence[Candidate] = (),
 ) -> Predictor | None:
     """A stored model as a predictor of the plans' response (None: see `predictor`);
@@ -997,7 +998,7 @@ def predictor(
     surfaces: Mapping[str, Surface],
     source: str,
     flight: Mapping[str, float] | None = None,
-    linkage: Mapping[str, tuple[float, float]] | None = None,
+    linkage: Mapping[str, tuple[float, ...]] | None = None,
     others: Sequence[tuple[np.ndarray, np.ndarray]] = (),
 ) -> Predictor | None:
     """An identified model as a predictor of the plans' response: `trim` is its record's trim
@@ -1059,12 +1060,21 @@ def predictor(
     )
 
 
+def moved(link: Sequence[float], values: np.ndarray) -> np.ndarray:
+    """A control's recorded change from trim for commanded `values` through its linkage
+    (gain, even[, knee]): gain·u + even·(|u − knee| − |knee|) (agent.excitation.follow's
+    `Following.moved`; a knee at trim where none is given)."""
+    gain, even, *knee = link
+    k = knee[0] if knee else 0.0
+    return gain * values + even * (np.abs(values - k) - abs(k))
+
+
 def deflections(
     result: ResultDocument,
     experiments: Sequence[tuple[np.ndarray, np.ndarray]],
     channels: Channels,
     surfaces: Mapping[str, Surface],
-    linkage: Mapping[str, tuple[float, float]] | None = None,
+    linkage: Mapping[str, tuple[float, ...]] | None = None,
 ) -> dict[str, float]:
     """Control → the largest deflection its data saw, in plan units: through the measured
     linkage when known (a surface that moves a third of its command saw three times its

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.interpolate
@@ -95,11 +95,32 @@ class TuneError(ValueError):
 @dataclass(frozen=True, kw_only=True)
 class Actuator:
     """Notional ArduPlane degrees to measured surface degrees: `link` per degree, through a
-    first-order lag `lag_s` and a dead time `delay_s`."""
+    first-order lag `lag_s` and a dead time `delay_s`; `even` per |degree − knee| beside it
+    (the linkage's even part, agent.excitation.follow): a surface with more travel one way than
+    the other (differential ailerons, an elevator with more up than down) moves link + even
+    per degree above the `knee` (notional degrees from trim) and link − even below it."""
 
     link: float
     lag_s: float = 0.05
     delay_s: float = 0.02
+    even: float = 0.0
+    knee: float = 0.0
+
+    def way(self, sign: float) -> float:
+        """Measured surface units per notional degree on this side of the knee."""
+        return self.link + (self.even if sign >= 0 else -self.even)
+
+    def moved(self, output: float) -> float:
+        """The measured surface's change from trim for a notional output (degrees from trim)."""
+        return self.link * output + self.even * (abs(output - self.knee) - abs(self.knee))
+
+    @property
+    def strongest(self) -> Actuator:
+        """The same servo through the linkage's stronger direction: the loop's gain is the
+        largest there, so the loop is shaped and its margins kept on it (the weaker direction
+        then has more margin, and flies slower: `predicted_step` each way)."""
+        up, down = self.way(1), self.way(-1)
+        return replace(self, link=up if abs(up) >= abs(down) else down, even=0.0)
 
     def response(self, w: np.ndarray) -> np.ndarray:
         s = 1j * w
@@ -156,7 +177,15 @@ class AxisTune:
     step_deg: float
     rise_s: float
     overshoot_pct: float
+    down: tuple[float, float] | None = None
+    """(rise s, overshoot %) of the step the other way where the linkage's travel differs each
+    way (Actuator.even); None: the same as the positive step's."""
     notes: tuple[str, ...] = ()
+
+    def each_way(self) -> dict[str, tuple[float, float]]:
+        """The predicted step's (rise s, overshoot %) by its sign, "+" and "−"."""
+        up = (self.rise_s, self.overshoot_pct)
+        return {"+": up, "−": self.down or up}
 
 
 def margins(L: np.ndarray, w: np.ndarray = FREQUENCIES) -> Margins:
@@ -214,13 +243,21 @@ def design_axis(
     S = float(np.clip(scaling_speed / eas, 0.1, 10.0))
     w = FREQUENCIES
     rate, angle = plant.response(w)
-    act = actuator.response(w)
+    # The loop shaped on the linkage's stronger direction (its margins hold both ways), the
+    # feed-forward on its mean (what the steady rate takes on average over both).
+    strong = actuator.strongest
+    act = strong.response(w)
     Gr, Ga = rate * act, angle * act
     k_ss = plant.steady_rate() * actuator.link
     if not np.isfinite(k_ss) or k_ss <= 0:
         raise TuneError(
             f"{axis}: the model's steady rate per notional degree is {k_ss:.3g} (deg/s): the "
             "surface's linkage sign or the model is wrong for this axis"
+        )
+    if actuator.way(1) * actuator.way(-1) <= 0:
+        raise TuneError(
+            f"{axis}: the linkage's even part ({actuator.even:.3g} per degree) is as large as "
+            f"its gain ({actuator.link:.3g}): the surface would not move one way"
         )
     ff = eas2tas / (S * k_ss)
     if ff > FF_RANGE[1]:
@@ -283,7 +320,7 @@ def design_axis(
         """The whole loop's margins (closed-loop eigenvalues, `loop_margins`), None when
         it misses MIL-F-9490D's."""
         law = Law(tc=tc, ff=ff * S / eas2tas, kp=S * S * kp, ki=S * S * ki, fltt=fltt)
-        m = loop_margins(plant, actuator, law, whole(tc, kp, ki))
+        m = loop_margins(plant, strong, law, whole(tc, kp, ki))
         ok = m.gain_db >= GAIN_MARGIN_DB and m.phase_deg >= PHASE_MARGIN
         return m if ok else None
 
@@ -337,11 +374,12 @@ def design_axis(
     ):
         if not lo <= params[name] <= hi:
             raise TuneError(f"{axis}: {name} {params[name]:.4g} outside ArduPlane's {lo}–{hi}")
-    # Whole degrees per second: ArduPlane's RMAX parameters are integers.
-    rmax = float(np.clip(math.floor(RATE_SHARE * k_ss * TRAVEL_DEG), *RMAX_RANGE[axis]))
-    params |= dict.fromkeys(RMAX_NAMES[axis], rmax)
+    params |= rate_limits(axis, plant, actuator)
     step = STEPS[axis]
     rise, overshoot = predicted_step(axis, plant, actuator, params, eas, eas2tas, scaling_speed)
+    down = None
+    if actuator.even:
+        down = predicted_step(axis, plant, actuator, params, eas, eas2tas, scaling_speed, sign=-1)
     return AxisTune(
         axis=axis,
         params=params,
@@ -350,8 +388,26 @@ def design_axis(
         step_deg=step,
         rise_s=rise,
         overshoot_pct=overshoot,
+        down=down,
         notes=tuple(notes),
     )
+
+
+def rate_limits(axis: str, plant: Plant, actuator: Actuator) -> dict[str, float]:
+    """RMAX (deg/s, whole: ArduPlane's are integers): the rate the model flies with RATE_SHARE
+    of the servo's travel, through the linkage each way (a positive output rolls right and
+    pitches up where the steady rate is positive): the roll's one limit from the weaker
+    direction, the pitch's UP and DN each from its own."""
+    steady = plant.steady_rate()
+    output = RATE_SHARE * TRAVEL_DEG
+
+    def limit(sign: int) -> float:
+        rate = steady * sign * actuator.moved(sign * output)
+        return float(np.clip(math.floor(rate), *RMAX_RANGE[axis]))
+
+    if axis == "roll":
+        return {"RLL2SRV_RMAX": min(limit(1), limit(-1))}
+    return {"PTCH2SRV_RMAX_UP": limit(1), "PTCH2SRV_RMAX_DN": limit(-1)}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -363,6 +419,8 @@ class Assessed:
     attitude_loop: Margins
     rise_s: float | None
     overshoot_pct: float | None
+    down: tuple[float, float] | None = None
+    """The step the other way where the linkage's travel differs (AxisTune.down)."""
 
     def sound(self) -> bool:
         """Whether the whole loop keeps MIL-F-9490D's margins (GAIN_MARGIN_DB, PHASE_MARGIN)."""
@@ -385,14 +443,15 @@ def loops(
     scaling_speed: float,
     eas2tas: float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The rate loop and the whole loop, each broken at the actuator, over FREQUENCIES, for a
-    set of one axis's gains (those missing at ArduPlane's defaults)."""
+    """The rate loop and the whole loop, each broken at the actuator (through its linkage's
+    stronger direction), over FREQUENCIES, for a set of one axis's gains (those missing at
+    ArduPlane's defaults)."""
     prefix, tc_name = _names(axis)
     value = {**DEFAULTS, **dict(params)}
     S = float(np.clip(scaling_speed / eas, 0.1, 10.0))
     w = FREQUENCIES
     rate, angle = plant.response(w)
-    act = actuator.response(w)
+    act = actuator.strongest.response(w)
     Gr, Ga = rate * act, angle * act
     hold = np.exp(-1j * w * (1.0 / LOOP_HZ) * 1.5)
     target = 1.0 / (1.0 + 1j * w / (2 * np.pi * value[f"{prefix}_FLTT"]))
@@ -431,13 +490,25 @@ def assess(
             rate_margins = margins(rate_loop)
         except TuneError:
             rate_margins = Margins(gain_db=-np.inf, phase_deg=-np.inf, crossover_rad_s=np.nan)
-    attitude = loop_margins(plant, actuator, law, whole)
+    attitude = loop_margins(plant, actuator.strongest, law, whole)
     try:
         rise, overshoot = predicted_step(axis, plant, actuator, value, eas, eas2tas, scaling_speed)
     except TuneError:
         rise = overshoot = None
+    down = None
+    if actuator.even and rise is not None:
+        try:
+            down = predicted_step(
+                axis, plant, actuator, value, eas, eas2tas, scaling_speed, sign=-1
+            )
+        except TuneError:  # one way does not settle: the set does not fly the axis
+            rise = overshoot = None
     return Assessed(
-        rate_loop=rate_margins, attitude_loop=attitude, rise_s=rise, overshoot_pct=overshoot
+        rate_loop=rate_margins,
+        attitude_loop=attitude,
+        rise_s=rise,
+        overshoot_pct=overshoot,
+        down=down,
     )
 
 
@@ -552,7 +623,8 @@ def _servo(M: np.ndarray, command: np.ndarray, pade, iz: slice, iδ: int, actuat
         delayed = delayed.copy()
         delayed[iz] += Cp[0]
     lag = max(actuator.lag_s, 1e-3)
-    M[iδ, :] += actuator.link * delayed / lag
+    # A linear loop through the linkage's stronger direction: its margins hold both ways.
+    M[iδ, :] += actuator.strongest.link * delayed / lag
     M[iδ, iδ] -= 1.0 / lag
 
 
@@ -774,9 +846,11 @@ def step_trace(
     eas2tas: float,
     scaling_speed: float,
     seconds: float = 6.0,
+    sign: int = 1,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """STEPS[axis] flown by agent.fbwa's laws with these parameters on the linear plant and
-    actuator, 1 kHz inside the 50 Hz loop: (time s, angle deg)."""
+    """STEPS[axis] (`sign`: that way) flown by agent.fbwa's laws with these parameters on the
+    linear plant and the actuator (its linkage each way), 1 kHz inside the 50 Hz loop: (time
+    s, the angle's change in the step's direction, deg)."""
     fbwa = Fbwa({**dict(params), "SCALING_SPEED": scaling_speed})
     fbwa.scaler = float(np.clip(scaling_speed / eas, *(_scaler_limits(fbwa.params, scaling_speed))))
     h = 1e-3
@@ -791,7 +865,7 @@ def step_trace(
     x = np.zeros(n)
     surface = 0.0
     queue = [0.0] * max(1, round(actuator.delay_s / h))
-    step = STEPS[axis]
+    step = sign * STEPS[axis]
     angles = []
     command = 0.0
     for k in range(round(seconds / h)):
@@ -811,8 +885,8 @@ def step_trace(
         surface += (
             h / actuator.lag_s * (delayed - surface) if actuator.lag_s > 0 else (delayed - surface)
         )
-        x = Ad @ x + Bd * (actuator.link * surface)
-        angles.append(np.degrees(float(plant.angle @ x)))
+        x = Ad @ x + Bd * actuator.moved(surface)
+        angles.append(sign * np.degrees(float(plant.angle @ x)))
     angles = np.asarray(angles)
     t = np.arange(angles.size) * h
     return t, angles
@@ -827,10 +901,13 @@ def predicted_step(
     eas2tas: float,
     scaling_speed: float,
     seconds: float = 6.0,
+    sign: int = 1,
 ) -> tuple[float, float]:
-    """(10–90 % rise time s, overshoot %) of STEPS[axis] flown by agent.fbwa's laws with
-    these parameters on the linear plant and actuator (`step_trace`)."""
-    t, angles = step_trace(axis, plant, actuator, params, eas, eas2tas, scaling_speed, seconds)
+    """(10–90 % rise time s, overshoot %) of STEPS[axis] (`sign`: that way) flown by
+    agent.fbwa's laws with these parameters on the linear plant and actuator (`step_trace`)."""
+    t, angles = step_trace(
+        axis, plant, actuator, params, eas, eas2tas, scaling_speed, seconds, sign
+    )
     h = float(t[1] - t[0])
     step = STEPS[axis]
     final = angles[-round(0.5 / h) :].mean()
@@ -937,8 +1014,11 @@ class Model:
 class Options:
     """What the design takes beside the model: each surface's linkage given (measured surface
     per commanded degree; wins over `measured`), each surface's linkage and lag a run measured
-    ({"gain", "lag_s"}: the execution log's), the servo's lag and dead time given, the target
-    time constants, and SCALING_SPEED (default: the trim airspeed, raised where FF needs)."""
+    ({"gain", "lag_s", "even", "knee"}: the execution log's, agent.excitation.follow; "even"
+    the linkage's travel per |commanded degree − knee| beside "gain", more one way of the
+    knee than the other), the
+    servo's lag and dead time given, the target time constants, and SCALING_SPEED (default: the
+    trim airspeed, raised where FF needs)."""
 
     linkage: Mapping[str, float] = field(default_factory=dict)
     measured: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
@@ -988,7 +1068,6 @@ def design(model: Model, channels, surfaces: Mapping, options: Options | None = 
         raise TuneError(f"{model.id}: the model has no trim airspeed: give SCALING_SPEED")
     eas = float(airspeed if airspeed is not None else options.scaling_speed)
     cont = {"A": model.A, "B": model.B, "C": model.C}
-    measured = options.measured
     refused, axes = [], []
     for axis, (surface, rate, angle, mixed, states) in AXES.items():
         channel = getattr(channels, surface)
@@ -996,27 +1075,17 @@ def design(model: Model, channels, surfaces: Mapping, options: Options | None = 
         if channel not in model.inputs or setup is None or setup.direction is None:
             refused.append(f"{axis}: the model has no {surface} input")
             continue
-        link = surface_link(
-            setup, options.linkage.get(surface, measured.get(surface, {}).get("gain"))
-        )
+        actuator = _actuator(surface, setup, options)
+        link = actuator.link
         mix = {}
         for other, param in mixed.items():
             other_setup = surfaces.get(other)
             if other_setup is None or other_setup.direction is None:
                 continue
             if getattr(channels, other) in model.inputs:
-                given = options.linkage.get(other, measured.get(other, {}).get("gain"))
                 mix[getattr(channels, other)] = (
-                    DEFAULTS[param] * surface_link(other_setup, given) / link
+                    DEFAULTS[param] * _actuator(other, other_setup, options).link / link
                 )
-        lag = measured.get(surface, {}).get("lag_s")
-        servo = options.servo_lag_s
-        delay = options.delay_s
-        actuator = Actuator(
-            link=link,
-            lag_s=servo if servo is not None else SERVO_LAG_S if lag is None else 0.0,
-            delay_s=delay if delay is not None else SERVO_DELAY_S if lag is None else lag,
-        )
         try:
             plant = axis_plant(
                 cont,
@@ -1083,7 +1152,6 @@ def _yaw(model, channels, surfaces, options, roll, loop, eas, scaling) -> YawTun
     names = {
         role: getattr(channels, role) for role in ("beta", "p", "r", "phi", "theta", "airspeed")
     }
-    measured = options.measured.get("rudder", {})
     rudder = axis_plant(
         {"A": model.A, "B": model.B, "C": model.C},
         model.inputs,
@@ -1093,20 +1161,7 @@ def _yaw(model, channels, surfaces, options, roll, loop, eas, scaling) -> YawTun
         angle=names["phi"],
         axis_outputs=[names[r] for r in AXES["roll"][4]],
     )
-    lag = measured.get("lag_s")
-    actuator = Actuator(
-        link=surface_link(setup, options.linkage.get("rudder", measured.get("gain"))),
-        lag_s=options.servo_lag_s
-        if options.servo_lag_s is not None
-        else SERVO_LAG_S
-        if lag is None
-        else 0.0,
-        delay_s=options.delay_s
-        if options.delay_s is not None
-        else SERVO_DELAY_S
-        if lag is None
-        else lag,
-    )
+    actuator = _actuator("rudder", setup, options)
     S = float(np.clip(scaling / eas, 0.1, 10.0))
     p = roll.params
     law = Law(
@@ -1118,6 +1173,26 @@ def _yaw(model, channels, surfaces, options, roll, loop, eas, scaling) -> YawTun
     )
     plant, roll_actuator = loop
     return design_yaw(plant, roll_actuator, law, rudder, actuator, scaler=S, eas=eas)
+
+
+def _actuator(surface: str, setup, options: Options) -> Actuator:
+    """A surface's actuator for the design: its linkage given, else as a run measured it (with
+    its even part: the travel each way), else the servo mapping's alone; the lag a run measured
+    as a dead time (the best correlation's), else a small hobby servo's; the servo's lag and
+    dead time given win."""
+    measured = options.measured.get(surface, {})
+    given = options.linkage.get(surface)
+    shape = {} if given is not None else measured  # a given linkage is taken straight
+    lag = measured.get("lag_s")
+    servo, delay = options.servo_lag_s, options.delay_s
+    per_degree = surface_link(setup, None)  # plan units per notional degree
+    return Actuator(
+        link=surface_link(setup, given if given is not None else measured.get("gain")),
+        lag_s=servo if servo is not None else SERVO_LAG_S if lag is None else 0.0,
+        delay_s=delay if delay is not None else SERVO_DELAY_S if lag is None else lag,
+        even=abs(per_degree) * float(shape.get("even", 0.0)),
+        knee=float(shape.get("knee", 0.0)) / per_degree,
+    )
 
 
 def surface_link(setup, linkage: float | None) -> float:

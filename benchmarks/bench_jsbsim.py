@@ -324,14 +324,19 @@ def _spread(model: StateSpace, columns: list[int], r: int) -> StateSpace:
     return dataclasses.replace(model, B=B, D=D)
 
 
-def _linkage(setup: Setup, rec: Record, played: Plan) -> dict:
-    """Each surface's linkage measured against what `played` commanded, as the agent
-    measures it (agent.excitation.follow)."""
+def followed(setup: Setup, rec: Record, played: Plan) -> list:
+    """How each surface followed what `played` commanded, as the agent measures it on a
+    finished run (agent.excitation.follow: its linkage and lag)."""
     timeline = render(played, COMMAND_HZ)
     measured = {c: rec.u[:, INPUT_CHANNELS.index(c)] for c in setup.controls}
     times = np.arange(len(rec.u)) * rec.dt
     # `fly` records from its margin (2 s) before the plan's first command.
-    return {f.control: (f.gain, f.even) for f in following(timeline, 2.0, times, measured)}
+    return following(timeline, 2.0, times, measured)
+
+
+def _linkage(setup: Setup, rec: Record, played: Plan) -> dict:
+    """Each surface's linkage (gain, even, knee) measured against what `played` commanded."""
+    return {f.control: (f.gain, f.even, f.knee) for f in followed(setup, rec, played)}
 
 
 def predictor_of(setup: Setup, result, rec: Record, exp: Experiment, played: Plan, others=()):

@@ -1,6 +1,7 @@
 """`sysid tune`'s gains against the flight, on each benchmark aircraft: designed on JSBSim's
-validated linear model (agent.sim.truth) with the installation's linkage, flown in FBWA by the
-emulated ArduPlane on the nonlinear aircraft (agent.sim.steps), beside ArduPlane's defaults.
+validated linear model (agent.sim.truth) with the installation's linkage (probed each way) and
+the emulated servo's dead time, flown in FBWA by the emulated ArduPlane on the nonlinear
+aircraft (agent.sim.steps), beside ArduPlane's defaults.
 
     .venv/bin/python benchmarks/tune_check.py                   # six aircraft, a few minutes
     .venv/bin/python benchmarks/tune_check.py --aircraft J3Cub  # one
@@ -9,8 +10,11 @@ emulated ArduPlane on the nonlinear aircraft (agent.sim.steps), beside ArduPlane
 `--model identified` designs instead on the model the agent identifies from a flight: the
 full preset sized as the agent sizes it (benchmarks/bench_jsbsim.py's calibration runs),
 flown once in calm air and once in light turbulence, each record identified as the agent
-does with the INS (the whole-aircraft method, the surfaces as measured); the calm model's
-gains flown calm, the light model's in light turbulence and held beside the defaults.
+does with the INS (the whole-aircraft method, the surfaces as measured) and its surfaces'
+linkage and lag measured on it as the agent measures them (agent.excitation.follow); the calm
+model's gains flown calm, the light model's in light turbulence and held beside the defaults.
+Each step is judged against its own way's prediction (the linkage may move a surface more one
+way than the other).
 
 Per aircraft and axis: the designed gains, the whole loop's margins, the ±20° bank and ±5°
 pitch steps' rise time and overshoot predicted and flown (calm, and in light turbulence, W20 =
@@ -41,6 +45,7 @@ from agent.sim.steps import (
     truth_plants,
 )
 from agent.tune import Model, TuneError, design, design_axis, scaling_for
+from agent.tune import Options as TuneOptions
 
 LIGHT = 1.0  # turbulence: W20 = 5 ft/s
 CONDITIONS = {"calm": 0.0, "light": LIGHT}
@@ -91,7 +96,7 @@ def main() -> None:
                         turbulence=turbulence,
                         seed=args.seed,
                     )
-                    rise_error = step.rise_s / tune.rise_s - 1
+                    rise_error = step.rise_s / predicted(tune, sign)[0] - 1
                     print(
                         f"    {'calm ' if not turbulence else 'light'} {sign * tune.step_deg:+g}°:"
                         f" flown rise {step.rise_s:.2f} s ({rise_error:+.0%}), overshoot "
@@ -109,14 +114,27 @@ def main() -> None:
         yaw_damper(aircraft, speed, altitude)
 
 
+def predicted(tune, sign: int) -> tuple[float, float]:
+    """The predicted step's (rise s, overshoot %) the way of `sign` (the linkage's travel may
+    differ each way: agent.tune.AxisTune.each_way)."""
+    return tune.each_way()["+" if sign > 0 else "−"]
+
+
 def designed_line(label: str, tune) -> str:
-    """One axis's designed gains, whole-loop margins and predicted step."""
+    """One axis's designed gains, whole-loop margins and predicted step (each way where the
+    linkage's travel differs)."""
     gains = ", ".join(f"{k} {v:g}" for k, v in tune.params.items())
     m = tune.attitude_loop
+    steps = (
+        f"rise {tune.rise_s:.2f} s, overshoot {tune.overshoot_pct:.1f} %"
+        if tune.down is None
+        else "; ".join(
+            f"{w}: rise {r:.2f} s, overshoot {o:.1f} %" for w, (r, o) in tune.each_way().items()
+        )
+    )
     return (
         f"{label}: {gains}; whole loop {m.gain_db:.1f} dB, {m.phase_deg:.0f}° at "
-        f"{m.crossover_rad_s:.2f} rad/s; predicted rise {tune.rise_s:.2f} s, overshoot "
-        f"{tune.overshoot_pct:.1f} %"
+        f"{m.crossover_rad_s:.2f} rad/s; predicted {steps}"
     )
 
 
@@ -125,7 +143,6 @@ def identified(aircraft: str, seed: int) -> None:
     in light turbulence, each flown in its condition beside its prediction (steps), the light
     one held hands off beside ArduPlane's defaults."""
     speed, altitude = FLOWN[aircraft][:2]
-    _, options = truth_design_inputs(aircraft, speed, altitude)
     for condition, turbulence in CONDITIONS.items():
         setup = bench.setup_for(aircraft, turbulence)
         plans, refused, _ = bench.sized_plans(setup)
@@ -133,6 +150,23 @@ def identified(aircraft: str, seed: int) -> None:
             print(f"{aircraft} {condition}: the agent refused the full preset: {refused['full']}")
             continue
         rec = setup.fly(plans["full"], bench.FIRST_SEED)
+        # The linkage and lag as the agent measures them on the finished run (what its gains
+        # design and `sysid tune --exec-log` take).
+        options = TuneOptions(
+            measured={
+                f.control: {"gain": f.gain, "lag_s": f.lag_s, "even": f.even, "knee": f.knee}
+                for f in bench.followed(setup, rec, plans["full"])
+                if f.verdict == "follows"
+            }
+        )
+        print(
+            f"{aircraft} {condition}: linkage measured "
+            + ", ".join(
+                f"{c} {m['gain']:.3f} (even {m['even']:.3f} from {m['knee']:.2f}, "
+                f"lag {m['lag_s']:.2f} s)"
+                for c, m in options.measured.items()
+            )
+        )
         exp = bench.experiment(rec, setup)
         _, result, _, _ = bench.ours(exp, rec.dt, setup)
         if result.continuous is None or result.coordinates != "outputs":
@@ -174,10 +208,11 @@ def identified(aircraft: str, seed: int) -> None:
                     turbulence=turbulence,
                     seed=seed,
                 )
-                rise_error = step.rise_s / tune.rise_s - 1
+                rise, overshoot = predicted(tune, sign)
+                rise_error = step.rise_s / rise - 1
                 if abs(rise_error) > RISE_WITHIN:
                     misses.append(f"rise {rise_error:+.0%}")
-                if abs(step.overshoot_pct - tune.overshoot_pct) > OVERSHOOT_POINTS:
+                if abs(step.overshoot_pct - overshoot) > OVERSHOOT_POINTS:
                     misses.append(f"overshoot {step.overshoot_pct:.1f} % against predicted")
                 if step.overshoot_pct > OVERSHOOT_MAX:
                     misses.append(f"overshoot {step.overshoot_pct:.1f} %")

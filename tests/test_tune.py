@@ -28,6 +28,7 @@ from agent.tune import (
     design_axis,
     notional_link,
     param_file,
+    step_trace,
     toward,
 )
 from agent.tune import design as design_from
@@ -83,6 +84,75 @@ def test_the_rate_limit_is_the_rate_flown_with_part_of_the_servos_travel():
     assert 0 < tune.params["RLL2SRV_RMAX"] < 20.0 / tune.params["RLL2SRV_TCONST"]
     strong = design(L_da=0.6)
     assert strong.params["RLL2SRV_RMAX"] == pytest.approx(2 * tune.params["RLL2SRV_RMAX"], abs=1)
+
+
+def test_a_linkage_with_more_travel_one_way_is_designed_for_each_way():
+    """Differential travel (agent.excitation.follow's even part: 0.6 per degree one way, 0.4
+    the other): the loop shaped and its margins kept on the stronger way (P, I and TCONST as
+    a symmetric linkage of 0.6 gives), the feed-forward on the mean (FF as 0.5's), RMAX from
+    the weaker way, and each way's step predicted: the weaker one slower."""
+    plant = roll_plant()
+    even = design_axis("roll", plant, Actuator(link=0.5, even=0.1), eas=20.0, scaling_speed=20.0)
+    strong = design(link=0.6)
+    mean, weak = design(link=0.5), design(link=0.4)
+    for name in ("RLL_RATE_P", "RLL_RATE_I", "RLL2SRV_TCONST"):
+        assert even.params[name] == pytest.approx(strong.params[name], rel=1e-3), name
+    assert even.params["RLL_RATE_FF"] == pytest.approx(mean.params["RLL_RATE_FF"], rel=1e-3)
+    assert even.params["RLL2SRV_RMAX"] == weak.params["RLL2SRV_RMAX"]
+    assert even.params["RLL2SRV_RMAX"] < strong.params["RLL2SRV_RMAX"]
+    assert even.attitude_loop.gain_db >= GAIN_MARGIN_DB
+    assert even.attitude_loop.gain_db == pytest.approx(strong.attitude_loop.gain_db, abs=0.05)
+    # Each way its own step: the weaker way starts slower (half a second in, less of the
+    # bank), and a linkage mirrored (more travel for a negative output) mirrors the steps.
+    assert even.down is not None
+    assert mean.down is None
+    assert mean.each_way()["−"] == mean.each_way()["+"]
+    actuator = Actuator(link=0.5, even=0.1)
+    at_half = {
+        sign: step_trace("roll", plant, actuator, even.params, 20.0, 1.0, 20.0, sign=sign)[1][500]
+        for sign in (1, -1)
+    }
+    assert at_half[-1] < 0.95 * at_half[1], at_half
+    mirrored = design_axis(
+        "roll", plant, Actuator(link=0.5, even=-0.1), eas=20.0, scaling_speed=20.0
+    )
+    assert mirrored.params == even.params
+    assert mirrored.each_way()["+"] == pytest.approx(even.each_way()["−"])
+    assert mirrored.each_way()["−"] == pytest.approx(even.each_way()["+"])
+
+
+def test_the_pitch_rate_limits_each_come_from_their_own_way():
+    """PTCH2SRV_RMAX_UP from the travel a positive (nose-up) output has, RMAX_DN from the
+    other's: an elevator with more up travel than down allows more pitch-up rate."""
+    model = {"A": [[-4.0, 0.0], [1.0, 0.0]], "B": [[0.4], [0.0]], "C": np.eye(2)}
+    plant = axis_plant(
+        model,
+        INPUTS,
+        ("q", "theta"),
+        surface="aileron",
+        rate="q",
+        angle="theta",
+        axis_outputs=("q", "theta"),
+        slow=("theta",),
+    )
+    tune = design_axis("pitch", plant, Actuator(link=0.5, even=0.2), eas=20.0, scaling_speed=20.0)
+    per_degree = np.degrees(0.4 / 4.0)
+    up, down = tune.params["PTCH2SRV_RMAX_UP"], tune.params["PTCH2SRV_RMAX_DN"]
+    assert up == np.floor(RATE_SHARE * per_degree * 0.7 * 45.0)
+    assert down == np.floor(RATE_SHARE * per_degree * 0.3 * 45.0)
+    # A knee away from trim (5° of nose-down output): the travel beyond it counts at its own
+    # rate, RMAX from the secant over RATE_SHARE of the travel each way.
+    kneed = design_axis(
+        "pitch", plant, Actuator(link=0.5, even=0.2, knee=-5.0), eas=20.0, scaling_speed=20.0
+    )
+    output = RATE_SHARE * 45.0
+    up_moved = 0.7 * output  # above the knee all the way
+    down_moved = 0.7 * 5.0 + 0.3 * (output - 5.0)  # 0.7 to the knee, 0.3 beyond
+    assert kneed.params["PTCH2SRV_RMAX_UP"] == np.floor(per_degree * up_moved)
+    assert kneed.params["PTCH2SRV_RMAX_DN"] == np.floor(per_degree * down_moved)
+    assert kneed.params["PTCH2SRV_RMAX_DN"] > down
+    with pytest.raises(TuneError, match="would not move one way"):
+        design_axis("pitch", plant, Actuator(link=0.5, even=0.5), eas=20.0, scaling_speed=20.0)
 
 
 def test_a_slower_servo_gets_less_rate_gain_and_a_lower_crossover():
@@ -290,7 +360,9 @@ def test_the_linkage_and_lag_a_run_measured_are_read_from_the_execution_log(tmp_
     args = ["tune", str(model), "--scaling-speed", "25", "--json"]
     assert main([*args, "--exec-log", str(log)]) == 0
     measured = json.loads(capsys.readouterr().out)
-    assert measured["measured_linkage"] == {"aileron": {"gain": 0.5, "lag_s": 0.04}}
+    assert measured["measured_linkage"] == {
+        "aileron": {"gain": 0.5, "lag_s": 0.04, "even": 0.0, "knee": 0.0}
+    }
     assert main(args) == 0
     given = json.loads(capsys.readouterr().out)
     roll = {a["axis"]: a for a in measured["axes"]}["roll"]
@@ -302,6 +374,37 @@ def test_the_linkage_and_lag_a_run_measured_are_read_from_the_execution_log(tmp_
     empty.write_text(lines[0] + "\n")
     assert main([*args, "--exec-log", str(empty)]) == 2
     assert "no run's linkage" in json.loads(capsys.readouterr().out)["error"]["message"]
+
+
+def test_the_linkages_travel_each_way_from_the_execution_log_is_designed_with(tmp_path, capsys):
+    """A run that measured the aileron's travel differ each way (even 0.1 beside a gain of
+    0.5): the design predicts each way's step and takes RMAX from the weaker way. Bad input
+    tried: an even part as large as the gain (the surface would not move one way: refused
+    when it is the only surface, noted and left out beside a usable one)."""
+    model = _model_file(tmp_path)
+    args = ["tune", str(model), "--scaling-speed", "25", "--json", "--exec-log"]
+    log = tmp_path / "0001_exec_20261206.jsonl"
+    link = {"gain": 0.5, "lag_s": 0.04, "correlation": 0.99}
+    log.write_text(json.dumps({"linkage": {"aileron": {**link, "even": 0.1}}}) + "\n")
+    assert main([*args, str(log)]) == 0
+    differs = json.loads(capsys.readouterr().out)
+    assert differs["measured_linkage"]["aileron"]["even"] == 0.1
+    log.write_text(json.dumps({"linkage": {"aileron": {**link, "even": 0.0}}}) + "\n")
+    assert main([*args, str(log)]) == 0
+    even = json.loads(capsys.readouterr().out)
+    roll, level = ({a["axis"]: a for a in d["axes"]}["roll"] for d in (differs, even))
+    assert roll["each_way"]["+"] != roll["each_way"]["-"]
+    assert level["each_way"]["+"] == level["each_way"]["-"]
+    assert roll["params"]["RLL2SRV_RMAX"] < level["params"]["RLL2SRV_RMAX"]
+    log.write_text(json.dumps({"linkage": {"aileron": {**link, "even": 0.5}}}) + "\n")
+    assert main([*args, str(log)]) == 2
+    assert "no usable linkage" in json.loads(capsys.readouterr().out)["error"]["message"]
+    both = {"aileron": link, "elevator": {**link, "even": 0.5}}
+    log.write_text(json.dumps({"linkage": both}) + "\n")
+    assert main([*args, str(log)]) == 0
+    noted = json.loads(capsys.readouterr().out)
+    assert list(noted["measured_linkage"]) == ["aileron"]
+    assert any(n.startswith("elevator: the log's linkage") for n in noted["notes"])
 
 
 def _lateral_with_rudder(N_beta=4.0, N_r=-0.5, rudder=-0.3):

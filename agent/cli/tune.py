@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from agent.cli import common
@@ -82,7 +83,9 @@ def run(args: argparse.Namespace) -> int:
     for option, value in (("--servo-lag", args.servo_lag), ("--delay", args.delay)):
         if value is not None and not 0 <= value <= 1:
             raise common.refused(f"{option} {value:g}: seconds between 0 and 1")
-    measured = {} if args.exec_log is None else _measured_linkage(args.exec_log)
+    measured, unusable = {}, []
+    if args.exec_log is not None:
+        measured, unusable = _measured_linkage(args.exec_log)
     for option, value in (
         ("--roll-tconst", args.roll_tconst),
         ("--pitch-tconst", args.pitch_tconst),
@@ -135,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
         )
     except TuneError as exc:
         raise common.failed(str(exc)) from None
-    tunes, refused, notes = designed.tunes, designed.refused, designed.notes
+    tunes, refused, notes = designed.tunes, designed.refused, (*unusable, *designed.notes)
     eas, scaling = designed.eas, designed.scaling_speed
     yaw = designed.yaw
     setup_params = {**(yaw.params if yaw is not None else {}), "SCALING_SPEED": round(scaling, 1)}
@@ -168,9 +171,13 @@ def run(args: argparse.Namespace) -> int:
     for note in notes:
         print(f"note: {note}")
     for surface, m in measured.items():
+        each_way = ""
+        if m.get("even"):
+            up, down = m["gain"] + m["even"], m["gain"] - m["even"]
+            each_way = f" ({down:.3g} below {m['knee']:.3g}°, {up:.3g} above)"
         print(
-            f"{surface}: linkage {m['gain']:.3g} and lag {m['lag_s']:.3f} s as the run measured "
-            f"them ({args.exec_log.name})"
+            f"{surface}: linkage {m['gain']:.3g}{each_way} and lag {m['lag_s']:.3f} s as the run "
+            f"measured them ({args.exec_log.name})"
         )
     for t in tunes:
         print(f"\n{t.axis}:")
@@ -188,10 +195,17 @@ def run(args: argparse.Namespace) -> int:
             if a.rejection_rad_s is not None
             else ""
         )
-        print(
-            f"  a {t.step_deg:g}° step: rise (10–90 %) {t.rise_s:.2f} s, overshoot "
-            f"{t.overshoot_pct:.1f} %"
-        )
+        if t.down is None:
+            print(
+                f"  a {t.step_deg:g}° step: rise (10–90 %) {t.rise_s:.2f} s, overshoot "
+                f"{t.overshoot_pct:.1f} %"
+            )
+        else:  # the linkage moves the surface more one way: each way its own
+            for sign, (rise, overshoot) in t.each_way().items():
+                print(
+                    f"  a {sign}{t.step_deg:g}° step: rise (10–90 %) {rise:.2f} s, overshoot "
+                    f"{overshoot:.1f} %"
+                )
         for note in t.notes:
             print(f"  note: {note}")
     if yaw is not None:
@@ -213,9 +227,10 @@ def run(args: argparse.Namespace) -> int:
     return common.EXIT_OK
 
 
-def _measured_linkage(path: Path) -> dict[str, dict[str, float]]:
-    """Each surface's linkage gain and lag from the last linkage line of an execution log
-    (agent.logs.Logbook.linkage); refused when it has none."""
+def _measured_linkage(path: Path) -> tuple[dict[str, dict[str, float]], list[str]]:
+    """Each surface's linkage gain, its even part and lag from the last linkage line of an
+    execution log (agent.logs.Logbook.linkage), and why any surface's there is not used;
+    refused when it has none, or none usable."""
     import json
 
     found = None
@@ -233,15 +248,27 @@ def _measured_linkage(path: Path) -> dict[str, dict[str, float]]:
         raise common.refused(f"{path}: cannot be read ({exc.strerror or exc})") from None
     if not found:
         raise common.refused(f"{path}: no run's linkage in it (a finished excitation logs one)")
-    measured = {}
+    measured, unusable = {}, []
     for surface, values in found.items():
         try:
             gain, lag = float(values["gain"]), float(values["lag_s"])
-        except (KeyError, TypeError, ValueError):
+            # Logs from before these were measured have neither: a straight linkage.
+            even = float(values.get("even", 0.0))
+            knee = float(values.get("knee", 0.0))
+        except (AttributeError, KeyError, TypeError, ValueError):
+            unusable.append(f"{surface}: the log's linkage is not numbers: not used")
             continue
-        if gain > 0 and 0 <= lag <= 1:
-            measured[surface] = {"gain": gain, "lag_s": lag}
-    return measured
+        # A linkage that moves the surface, each way, within a second's lag.
+        if gain > 0 and abs(even) < gain and 0 <= lag <= 1 and math.isfinite(knee):
+            measured[surface] = {"gain": gain, "lag_s": lag, "even": even, "knee": knee}
+        else:
+            unusable.append(
+                f"{surface}: the log's linkage (gain {gain:.3g}, even part {even:.3g}, lag "
+                f"{lag:.3g} s) does not move the surface both ways within a second: not used"
+            )
+    if not measured:
+        raise common.refused(f"{path}: no usable linkage in it ({'; '.join(unusable)})")
+    return measured, unusable
 
 
 def _gains(text: str) -> dict[str, float]:
@@ -296,5 +323,9 @@ def _as_json(t, defaults) -> dict:
         "step_deg": t.step_deg,
         "rise_s": t.rise_s,
         "overshoot_pct": t.overshoot_pct,
+        "each_way": {
+            sign: {"rise_s": rise, "overshoot_pct": overshoot}
+            for sign, (rise, overshoot) in zip(("+", "-"), t.each_way().values(), strict=True)
+        },
         "notes": list(t.notes),
     }

@@ -25,6 +25,13 @@ MAX_LAG_S = 0.3
 # Below this correlation a surface did not follow its command; below its negative, it moved
 # against it. A surface following a doublet through 0.1° of pot noise correlates above 0.9.
 FOLLOWS = 0.5
+# The linkage's knee (where its travel per degree changes) is searched at these quantiles of
+# the commanded deflections, and kept away from trim only where it takes at least KNEE_SHARE
+# off the residual of a knee at trim: a straight linkage's residual is the servo's lag and the
+# pot's noise, which a knee does not explain (JSBSim's Cessna 310, its elevator 14° per unit
+# one way of zero and 4° the other, zero 1.5° of command from trim: 20 % off).
+KNEE_QUANTILES = np.linspace(0.05, 0.95, 19)
+KNEE_SHARE = 0.05
 
 
 @dataclass(frozen=True)
@@ -38,10 +45,19 @@ class Following:
     gain: float
     """Measured per commanded deflection at that lag (the servo's and linkage's gain)."""
     even: float = 0.0
-    """Measured per |commanded| deflection at that lag, fitted with the gain: the linkage's
-    even part. Differential ailerons (more up than down) make the ganged aileron's mean move
-    with the command's amplitude, |δA| acting as a bias that banks the aircraft (the sizing's
-    prediction uses it, agent/sizing.py)."""
+    """Measured per |commanded − knee| deflection at that lag, fitted with the gain: the
+    linkage's even part. Differential ailerons (more up than down) make the ganged aileron's
+    mean move with the command's amplitude, |δA| acting as a bias that banks the aircraft (the
+    sizing's prediction uses it, agent/sizing.py); an elevator with more travel up than down
+    moves more per degree one way (the gains' design uses it, agent/tune.py)."""
+    knee: float = 0.0
+    """The commanded deflection where the travel per degree changes (0: at trim): the
+    position moves gain·u + even·(|u − knee| − |knee|) from trim (`moved`)."""
+
+    def moved(self, u):
+        """The position's change from trim for commanded deflections `u` (the linkage fitted)."""
+        u = np.asarray(u, dtype=float)
+        return self.gain * u + self.even * (np.abs(u - self.knee) - abs(self.knee))
 
     @property
     def verdict(self) -> str:
@@ -88,18 +104,34 @@ def following(
         best = _best_lag(commanded, np.asarray(column, dtype=float), round(MAX_LAG_S / dt))
         if best is not None:
             lag, r, _ = best
-            gain, even = _linkage(commanded, np.asarray(column, dtype=float), lag)
-            result.append(Following(control, r, lag * dt, gain, even))
+            gain, even, knee = linkage(commanded[: commanded.size - lag], column[lag:])
+            result.append(Following(control, r, lag * dt, gain, even, knee))
     return result
 
 
-def _linkage(u: np.ndarray, y: np.ndarray, lag: int) -> tuple[float, float]:
-    """y = trim + gain·u + even·|u| by least squares, u delayed by `lag` samples."""
-    a, b = u[: u.size - lag], y[lag:]
-    ok = np.isfinite(a) & np.isfinite(b)
-    regressors = np.column_stack([np.ones(np.count_nonzero(ok)), a[ok], np.abs(a[ok])])
-    (_, gain, even), *_ = np.linalg.lstsq(regressors, b[ok], rcond=None)
-    return float(gain), float(even)
+def linkage(u: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
+    """(gain, even, knee): y = c + gain·u + even·|u − knee| by least squares over the finite
+    pairs, the knee at trim (0) or at the quantile of the commands (KNEE_QUANTILES) that
+    fits best where that takes KNEE_SHARE off the residual (`Following.moved`)."""
+    u, y = np.asarray(u, dtype=float), np.asarray(y, dtype=float)
+    ok = np.isfinite(u) & np.isfinite(y)
+    a, b = u[ok], y[ok]
+
+    def fit(knee: float) -> tuple[float, np.ndarray]:
+        regressors = np.column_stack([np.ones(a.size), a, np.abs(a - knee)])
+        coef, *_ = np.linalg.lstsq(regressors, b, rcond=None)
+        return float(np.sum((regressors @ coef - b) ** 2)), coef
+
+    at_trim, coef = fit(0.0)
+    knee, best = 0.0, (1.0 - KNEE_SHARE) * at_trim
+    moving = a[a != 0.0]
+    # (A residual at rounding's level, a static map's without noise, holds no knee to find.)
+    straight = at_trim <= 1e-12 * float(np.sum((b - b.mean()) ** 2))
+    for k in np.quantile(moving, KNEE_QUANTILES) if moving.size and not straight else ():
+        residual, c = fit(float(k))
+        if residual < best:
+            knee, coef, best = float(k), c, residual
+    return float(coef[1]), float(coef[2]), knee
 
 
 def _best_lag(u: np.ndarray, y: np.ndarray, lags: int) -> tuple[int, float, float] | None:

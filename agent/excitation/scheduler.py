@@ -72,6 +72,9 @@ class Playing:
     plan: Plan
     start: float
     timeline: Timeline
+    on_sticks: bool = False
+    """Played on the pilot's sticks (a stabilised mode, ON_STICKS): the autopilot's laws moved
+    the surfaces, so they do not follow the plan's commands through their linkage."""
 
     def fraction(self, now: float) -> float:
         """The share of the plan played by `now` (0 to 1)."""
@@ -320,7 +323,7 @@ class Scheduler:
         trim_pwm = {surfaces[n].channel: round(trim[n]) for n in plan.controls()}
         self._running, self._abort_request = plan, None
         start = self._clock.now()
-        self.playing = self.played = Playing(plan, start, timeline)
+        self.playing = self.played = Playing(plan, start, timeline, self._mode in ON_STICKS)
         altitude_ref = self._state.altitude_m if self._state else None
         self.counters["runs"] += 1
         detail = ", ".join(f"{n} {trim[n]:.0f} µs" for n in plan.controls())

@@ -323,6 +323,9 @@ class LoopPrediction(BaseModel):
     rejection_rad_s: float | None = None
     rise_s: float | None = None
     overshoot_pct: float | None = None
+    rise_down_s: float | None = None
+    """The step the other way where the linkage's travel differs each way (None: as rise_s)."""
+    overshoot_down_pct: float | None = None
     sound: bool = False
     """Whether the whole loop keeps 6 dB and 45° (MIL-F-9490D)."""
     stable: bool = True

@@ -306,6 +306,10 @@ class Agent:
             return
         if played is None or played.plan.id != window.plan_id or len(rows) == 0:
             return
+        if played.on_sticks:
+            # Closed loop: the surfaces moved as the autopilot's laws asked, not as the plan's
+            # stick commands; their linkage (sizing's, the gains design's) is not measured.
+            return
         frames = self.recorder.frames(rows)
         followed = following(played.timeline, played.start, frames.time, frames.values)
         # Logged for `sysid tune` (the linkage and the servo's lag the gains are designed with).
@@ -314,8 +318,13 @@ class Agent:
             if f.verdict == "follows":
                 # Its linkage sizes the next plans (agent/runtime/sizer.py) and, with its lag,
                 # the gains designed onboard (agent/runtime/gains.py).
-                self.sizer.linkage[f.control] = (f.gain, f.even)
-                self.gains.linkage[f.control] = {"gain": f.gain, "lag_s": f.lag_s}
+                self.sizer.linkage[f.control] = (f.gain, f.even, f.knee)
+                self.gains.linkage[f.control] = {
+                    "gain": f.gain,
+                    "lag_s": f.lag_s,
+                    "even": f.even,
+                    "knee": f.knee,
+                }
                 continue
             self.counters[f"surface_{f.verdict.replace(' ', '_')}"] += 1
             log.warning("%s: %s", window.plan_id, f.text())

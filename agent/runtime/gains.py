@@ -366,6 +366,8 @@ def _loop(axis: str, which: str, a: tune.Assessed) -> messages.LoopPrediction:
         rejection_rad_s=finite(m.rejection_rad_s),
         rise_s=finite(a.rise_s),
         overshoot_pct=finite(a.overshoot_pct),
+        rise_down_s=None if a.down is None else finite(a.down[0]),
+        overshoot_down_pct=None if a.down is None else finite(a.down[1]),
         sound=a.sound(),
     )
 

@@ -4,10 +4,10 @@ refusals; an armed plan whose predicted response leaves the envelope is refused.
 
 The model is the one `Identifier.sizing_model` names (the nominal, else this flight's newest
 good candidate), checked against this flight's other records of its axes (`Identifier.recent`);
-each surface's linkage (its measured position per commanded degree, and per |commanded
-degree|) is the last finished run's, measured where the agent checks that the surfaces
-followed their commands. Rendering and prediction take seconds for the full preset:
-they run on a thread, never on the event loop.
+each surface's linkage (its measured position per commanded degree, per |commanded degree|
+from its knee, and the knee: agent.excitation.follow) is the last finished run's, measured
+where the agent checks that the surfaces followed their commands. Rendering and prediction
+take seconds for the full preset: they run on a thread, never on the event loop.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ class Sizer:
         flight: Callable[[], FlightState | None],
     ):
         self.config, self.identification, self._flight = config, identification, flight
-        self.linkage: dict[str, tuple[float, float]] = {}
+        self.linkage: dict[str, tuple[float, float, float]] = {}
         """Control → (gain, even) of the last finished run (agent.excitation.follow)."""
 
     def flight(self) -> dict[str, float]:

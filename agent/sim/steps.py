@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agent.config import Excitation
+from agent.excitation.follow import linkage
 from agent.fbwa import DEFAULTS, TRAVEL_DEG
 from agent.sim.ardupilot import (
     FBWA,
@@ -32,6 +33,9 @@ from agent.tune import Options as TuneOptions
 from agent.tune import Plant as AxisPlant
 
 TICK_S = 0.01  # the emulated autopilot's tick
+# The emulated servo's dead time (agent.sim.ardupilot.Params), which a run's "follows" check
+# measures as the lag of the best correlation (agent.excitation.follow): 0.02 s.
+SERVO_DELAY_S = Params().servo_delay_s
 # Each axis: its surface, rate, angle and states, as `sysid tune` takes them.
 AXES = {
     "roll": ("aileron", "p", "phi", ("beta", "p", "r", "phi")),
@@ -152,40 +156,55 @@ def flown_step(
     return Step(axis, abs(step_deg), np.asarray(trace))
 
 
-def links(aircraft: str, airspeed_kts: float, altitude_ft: float) -> dict[str, float]:
-    """Measured surface degrees per ArduPlane notional degree, probed on the aircraft: ±45° is
-    the servo's whole travel, JSBSim's ±1 (the emulated installation)."""
+# The notional outputs (degrees from trim) `links` probes each surface at, either way: up
+# to 30 % of the servo's travel, about what a step's or a sized plan's command moves it.
+PROBES = (0.0, 2.25, -2.25, 4.5, -4.5, 9.0, -9.0, 13.5, -13.5)
+
+
+def links(
+    aircraft: str, airspeed_kts: float, altitude_ft: float
+) -> dict[str, tuple[float, float, float]]:
+    """Per surface (link, even, knee) as agent.tune.Actuator takes them: the measured surface's
+    degrees per ArduPlane notional degree, fitted to its positions at PROBES as a run's are
+    (agent.excitation.follow.linkage: a knee where the travel per degree changes). ±45° is the
+    servo's whole travel, JSBSim's ±1 (the emulated installation); JSBSim's surfaces may travel
+    further one way (the C310's elevator 14° per unit one way of zero and 4° the other, the
+    C172R's ailerons 20° down, 15° up)."""
+    channel = {name: ch for ch, name in OUTPUTS.items()}
+    names = ("aileron", "elevator", "rudder")
     plant = Plant(aircraft, airspeed_kts=airspeed_kts, altitude_ft=altitude_ft, linearise=False)
     before = plant.state()
-    nudged = dict(plant.trim)
-    for name in ("aileron", "elevator", "rudder"):
-        nudged[name] += 0.1
-    plant.set_normalised(nudged, 40)
-    for _ in range(40):
-        plant.step()
-    after = plant.state()
-    channel = {name: ch for ch, name in OUTPUTS.items()}
-    return {
-        name: LINKAGE[channel[name]] * (after[name] - before[name]) / 0.1 / TRAVEL_DEG
-        for name in ("aileron", "elevator", "rudder")
-    }
+    positions = {name: [] for name in names}
+    for output in PROBES:  # the surfaces' mapping is static: one plant, each held 40 steps
+        nudged = dict(plant.trim)
+        for name in names:  # a positive notional output moves JSBSim's command by LINKAGE
+            nudged[name] += LINKAGE[channel[name]] * output / TRAVEL_DEG
+        plant.set_normalised(nudged, 40)
+        for _ in range(40):
+            plant.step()
+        after = plant.state()
+        for name in names:
+            positions[name].append(after[name] - before[name])
+    return {name: linkage(np.array(PROBES), np.array(positions[name])) for name in names}
 
 
 def truth_plants(
     aircraft: str, airspeed_kts: float, altitude_ft: float
 ) -> tuple[dict[str, tuple[AxisPlant, Actuator]], float]:
     """Each axis's plant and actuator as `sysid tune` takes them, from the aircraft's validated
-    linear model (agent.sim.truth) and the installation's linkage (`links`); and the trim's
+    linear model (agent.sim.truth), the installation's linkage (`links`) and the emulated
+    servo's dead time taken whole, as a run measures it (`SERVO_DELAY_S`); and the trim's
     airspeed (m/s)."""
     truth = linear_truth(aircraft, airspeed_kts, altitude_ft=altitude_ft)
     names = list(truth.states)
     model = {"A": truth.A, "B": truth.B, "C": np.eye(len(names))[:8]}
-    linkage = links(aircraft, airspeed_kts, altitude_ft)
+    linked = links(aircraft, airspeed_kts, altitude_ft)
     result = {}
     for axis, (surface, rate, angle, states) in AXES.items():
         mix = None
         if axis == "roll":
-            mix = {"rudder": DEFAULTS["KFF_RDDRMIX"] * linkage["rudder"] / linkage["aileron"]}
+            share = linked["rudder"][0] / linked["aileron"][0]
+            mix = {"rudder": DEFAULTS["KFF_RDDRMIX"] * share}
         plant = axis_plant(
             model,
             INPUTS,
@@ -197,7 +216,9 @@ def truth_plants(
             slow=("phi", "theta", "Vt"),
             mix=mix,
         )
-        result[axis] = (plant, Actuator(link=linkage[surface]))
+        link, even, knee = linked[surface]
+        servo = {"lag_s": 0.0, "delay_s": SERVO_DELAY_S}
+        result[axis] = (plant, Actuator(link=link, even=even, knee=knee, **servo))
     return result, float(truth.trim_state[names.index("Vt")])
 
 
@@ -253,9 +274,9 @@ def truth_design_inputs(
     aircraft: str, airspeed_kts: float, altitude_ft: float
 ) -> tuple[TuneModel, TuneOptions]:
     """The aircraft's validated linear model (agent.sim.truth) as `agent.tune.design` takes an
-    identified one, and the installation's linkage (`links`) as the gains a finished run's
-    "follows" check measures over the default config's surfaces: the design the agent would
-    make from a perfect model."""
+    identified one, and the installation's linkage (`links`) and the servo's lag as a finished
+    run's "follows" check measures them over the default config's surfaces: the design the
+    agent would make from a perfect model."""
     truth = linear_truth(aircraft, airspeed_kts, altitude_ft=altitude_ft)
     names = list(truth.states)
     surfaces = Excitation().surfaces
@@ -269,5 +290,13 @@ def truth_design_inputs(
         C=np.eye(len(names))[:8],
         trim={n: float(v) for n, v in zip(names, truth.trim_state, strict=True)},
     )
-    linkage = {c: probed[c] / surface_link(surfaces[c], None) for c in probed}
-    return model, TuneOptions(linkage=linkage)
+    measured = {}
+    for c, (link, even, knee) in probed.items():
+        mapping = surface_link(surfaces[c], None)  # plan units per notional degree
+        measured[c] = {
+            "gain": link / mapping,
+            "even": even / abs(mapping),
+            "knee": knee * mapping,
+            "lag_s": SERVO_DELAY_S,
+        }
+    return model, TuneOptions(measured=measured)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agent.excitation.follow import FOLLOWS, MAX_LAG_S, following
+from agent.excitation.follow import FOLLOWS, MAX_LAG_S, Following, following, linkage
 from agent.excitation.plan import Doublet, Plan, Segment, render
 
 RATE = 50.0
@@ -91,3 +91,24 @@ def test_too_little_data_or_nothing_commanded_is_not_judged(doublet):
     before = times < START  # the margin before the plan: the command holds trim
     assert following(timeline, START, times[before], {"aileron": measured["aileron"][before]}) == []
     assert MAX_LAG_S >= 0.1  # a servo's delay and slew lie inside the lags searched
+
+
+def test_a_linkage_with_more_travel_one_way_is_measured_with_its_knee():
+    """Travel per degree that changes at a knee: differential ailerons (at trim) and an
+    elevator whose travel changes 1.5° of command from trim (JSBSim's Cessna 310: 14° per unit
+    one way of its zero, 4° the other). A sine of commands through the pot's 0.1° noise: the
+    gain, even part and knee recovered, and the position each way (`moved`) within 5 %; a
+    straight linkage keeps its knee at trim. Bad input tried: gaps (NaN) in the record."""
+    u = 4.0 * np.sin(np.linspace(0.0, 12 * np.pi, 3000))
+    noise = np.random.default_rng(2).normal(0, 0.1, u.size)
+    for gain, even, knee in ((0.7, 0.2, 0.0), (0.37, -0.19, 1.5), (0.7, 0.0, 0.0)):
+        y = 2.0 + gain * u + even * (np.abs(u - knee) - abs(knee)) + noise
+        y[500:520] = np.nan
+        g, e, k = linkage(u, y)
+        assert g == pytest.approx(gain, abs=0.02)
+        assert e == pytest.approx(even, abs=0.02)
+        assert k == pytest.approx(knee, abs=0.5)
+        f = Following("elevator", 0.99, 0.02, g, e, k)
+        for command in (-4.0, -1.0, 1.0, 3.0, 4.0):
+            truth = gain * command + even * (abs(command - knee) - abs(knee))
+            assert f.moved(command) == pytest.approx(truth, rel=0.05, abs=0.05)

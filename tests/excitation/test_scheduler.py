@@ -394,6 +394,7 @@ async def test_in_fbwa_the_plan_plays_on_the_sticks_trimmed_at_the_pilots():
     started = next(e for e in events if isinstance(e, Event) and e.kind == "started")
     assert "the sticks': FBWA" in started.detail
     assert events[-1].outcome == "finished"
+    assert s.played.on_sticks  # its surfaces followed the laws: no linkage measured from it
 
     s2, sink2, events2 = make(VirtualClock(100.0))
     sink2.flight_mode = "AUTO"
@@ -416,5 +417,6 @@ async def test_in_fbwa_the_plan_plays_on_the_sticks_trimmed_at_the_pilots():
     await fly(s4, sink4, long_plan(5.0))
     assert events4[-1].outcome == "aborted"
     assert "flight mode changed from MANUAL to FBWA" in events4[-1].reason
+    assert not s4.played.on_sticks
     assert sink4.commands()[-1][1] == {AIL: TRIM[AIL]}
     assert sink4.calls[-1][1:] == ("release", [AIL])

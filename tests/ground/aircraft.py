@@ -137,6 +137,8 @@ def proposal(model_id: str, count: int) -> messages.Gains:
             rejection_rad_s=1.4,
             rise_s=0.9,
             overshoot_pct=1.2,
+            rise_down_s=1.1,  # an aileron with more travel one way
+            overshoot_down_pct=0.4,
             sound=True,
         ),
     ]

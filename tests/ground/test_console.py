@@ -513,6 +513,7 @@ async def test_gains_are_proposed_shown_beside_the_autopilots_applied_and_revert
     loops = drawn(app, "#gains-loops")
     assert "UNSTABLE" in loops
     assert "58°" in loops
+    assert "+0.90 s / −1.10 s" in loops  # each way's step where the linkage differs
     assert "55% of the way" in loops
     assert "pitch: the model has no elevator input" in loops
     r.aircraft.refuse["gains-apply"] = "a plan is armed: gains are never changed while one is"

@@ -37,7 +37,7 @@ AIRCRAFT = "J3Cub"
 SWITCH = 7
 
 
-def truth_candidate(model_id: str = "ful-9-truth") -> tuple[Candidate, dict[str, float]]:
+def truth_candidate(model_id: str = "ful-9-truth") -> tuple[Candidate, dict[str, dict]]:
     """JSBSim's validated linear Cub as a whole-aircraft model in output coordinates, and the
     linkage a finished run measures on it (agent.sim.steps.truth_design_inputs)."""
     speed, altitude = FLOWN[AIRCRAFT][:2]
@@ -51,7 +51,7 @@ def truth_candidate(model_id: str = "ful-9-truth") -> tuple[Candidate, dict[str,
         record_s=60.0,
         trim={"inputs": {}, "outputs": {o: model.trim[o] for o in model.outputs}},
     )
-    return candidate, dict(options.linkage)
+    return candidate, dict(options.measured)
 
 
 @contextlib.asynccontextmanager
@@ -86,7 +86,7 @@ async def tuned_flight(tmp_path, **tuning):
         agent.models.add(candidate)
         agent.models.accept(candidate.model_id)
         # The linkage a finished run measures (agent.excitation.follow), as its gains hold it.
-        agent.gains.linkage.update({c: {"gain": g} for c, g in linkage.items()})
+        agent.gains.linkage.update(linkage)
         tasks.append(asyncio.create_task(agent.autopilot.run(), name="autopilot"))
         tasks.append(asyncio.create_task(agent.gains.run(), name="gains"))
         while not agent.autopilot.connected:

@@ -18,6 +18,7 @@ ground) with one part made to fail mid-flight.
 from __future__ import annotations
 
 import asyncio
+import json
 import re
 from pathlib import Path
 
@@ -57,6 +58,19 @@ async def start_run(sim: SimFlight, plan_id: str, axes: str = "lateral") -> int:
     assert ack.ok, ack.reason
     sim.aircraft.pilot.set_switch(True)
     await until(lambda: received(sim, messages.ExcitationEvent, seen, event="started"), "the start")
+    return seen
+
+
+async def play_doublet(sim: SimFlight, plan_id: str) -> int:
+    """Arm a 4° aileron doublet as plan `plan_id` and flip the switch; the inbox index before."""
+    doublet = Doublet(pulse_s=1.0, amplitude=4.0)
+    plan = Plan(
+        id=plan_id, axes="lateral", segments=(Segment(signals={"aileron": doublet}, free_s=1.0),)
+    )
+    seen = len(sim.ground.inbox)
+    ack = await sim.ground.command(messages.Arm(plan=plan))
+    assert ack.ok, ack.reason
+    sim.aircraft.pilot.set_switch(True)
     return seen
 
 
@@ -216,16 +230,7 @@ async def test_an_aileron_reversed_in_the_autopilot_is_told_after_its_first_doub
     # the other way. The identification alone cannot tell (B changes sign); the check can.
     params = Params(switch_channel=7, reversed={1: True})
     async with simulated(SimOptions(preset="lateral", directory=tmp_path), params) as sim:
-        doublet = Doublet(pulse_s=1.0, amplitude=4.0)
-        plan = Plan(
-            id="reversed",
-            axes="lateral",
-            segments=(Segment(signals={"aileron": doublet}, free_s=1.0),),
-        )
-        seen = len(sim.ground.inbox)
-        ack = await sim.ground.command(messages.Arm(plan=plan))
-        assert ack.ok, ack.reason
-        sim.aircraft.pilot.set_switch(True)
+        seen = await play_doublet(sim, "reversed")
 
         def told():
             return [
@@ -239,6 +244,41 @@ async def test_an_aileron_reversed_in_the_autopilot_is_told_after_its_first_doub
         assert "direction in [excitation.surfaces]" in notice.text
         assert sim.agent.counters["surface_reversed"] == 1
         assert sim.agent.counters["surface_not_following"] == 0
+
+
+async def test_a_run_in_fbwa_measures_no_linkage_the_next_manual_one_does(tmp_path):
+    """In FBWA the plan plays on the sticks and ArduPlane's laws move the surfaces, so they
+    do not follow the plan's commands through their linkage: a doublet flown there sets no
+    linkage for the sizing or the gains design and logs no linkage line (had it been judged,
+    its gain would be the loop's, not the linkage's); the same doublet flown next in MANUAL
+    does both, and is the only one in the execution log."""
+    async with simulated(SimOptions(preset="lateral", directory=tmp_path)) as sim:
+        agent = sim.agent
+        for plan_id, mode in (("stick", 5), ("surface", 0)):
+            assert sim.aircraft.autopilot.set_mode(mode)
+            name = "FBWA" if mode == 5 else "MANUAL"
+            await until(lambda name=name: agent.scheduler.flight_mode() == name, name)
+            seen = await play_doublet(sim, plan_id)
+            await until(
+                lambda seen=seen: received(sim, messages.ExcitationEvent, seen, event="finished"),
+                f"{plan_id} finished",
+            )
+            sim.aircraft.pilot.set_switch(False)
+            # The window handled (its identification answered): its surfaces judged then.
+            await answer(sim, seen)
+            if plan_id == "stick":
+                assert agent.gains.linkage == {}
+                assert agent.sizer.linkage == {}
+        assert agent.gains.linkage["aileron"]["gain"] > 0
+        assert agent.sizer.linkage["aileron"][0] > 0
+        assert agent.counters["surface_not_following"] == 0
+
+    events = [
+        json.loads(line)
+        for path in (tmp_path / "logs").glob("*_exec_*.jsonl")
+        for line in path.read_text().splitlines()
+    ]
+    assert [e["plan"] for e in events if e.get("logger") == "agent.linkage"] == ["surface"]
 
 
 async def test_a_flight_kept_in_a_relative_directory_comes_up(tmp_path, monkeypatch):

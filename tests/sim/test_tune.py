@@ -45,6 +45,32 @@ def test_the_designed_gains_fly_as_predicted(axis):
     assert flown.overshoot_pct <= 10.0
 
 
+def test_an_elevator_with_more_travel_one_way_flies_each_way_as_predicted():
+    """JSBSim's Cessna 310 (not a benchmark aircraft; 100 kt): its elevator moves 14° per unit
+    one way of its zero and 4° the other (c310.xml), the zero 1.6° of command from trim, so a
+    5° nose-down step drives it into its weak side. Designed through the linkage each way, the
+    ±5° pitch steps are flown each within 20 % of its own way's prediction, the nose-down one
+    predicted, and flown, the slower; the nose-down rate limit the lower. (With one linkage
+    for both ways the −5° step flew 22 % slower than predicted.)"""
+    aircraft, speed, altitude = "c310", 100.0, 1000.0
+    axes, eas = truth_plants(aircraft, speed, altitude)
+    plant, actuator = axes["pitch"]
+    assert actuator.way(-1) != pytest.approx(actuator.way(1), rel=0.2)
+    scaling = max(eas, *(scaling_for(p, a, eas) for p, a in axes.values()))
+    tune = design_axis("pitch", plant, actuator, eas=eas, scaling_speed=scaling)
+    ways = tune.each_way()
+    assert ways["−"][0] > 1.3 * ways["+"][0]
+    assert tune.params["PTCH2SRV_RMAX_DN"] < tune.params["PTCH2SRV_RMAX_UP"]
+    params = {**tune.params, "SCALING_SPEED": scaling}
+    for sign, way in ((1, "+"), (-1, "−")):
+        flown = flown_step(aircraft, speed, altitude, params, "pitch", sign * tune.step_deg)
+        rise, overshoot = ways[way]
+        assert flown.final_deg == pytest.approx(tune.step_deg, rel=0.1)
+        assert flown.rise_s == pytest.approx(rise, rel=0.2), (way, flown.rise_s, rise)
+        assert abs(flown.overshoot_pct - overshoot) <= 5.0
+        assert flown.overshoot_pct <= 10.0
+
+
 def test_the_yaw_damper_damps_the_dutch_roll_as_predicted():
     """The PA-28 (JSBSim's, its Dutch roll ζ 0.11 open loop, 0.04 with the roll loop closed):
     the whole design on its validated linear model with the installation's linkage, as the

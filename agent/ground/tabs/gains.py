@@ -93,8 +93,8 @@ class GainsTab(Vertical):
                 Text("∞" if p.gain_margin_db is None else f"{p.gain_margin_db:.1f} dB", style),
                 num(p.delay_margin_s, "{:.3f} s"),
                 num(p.rejection_rad_s, "{:.2f}"),
-                num(p.rise_s, "{:.2f} s"),
-                num(p.overshoot_pct, "{:.1f} %"),
+                _each_way(p.rise_s, p.rise_down_s, "{:.2f} s"),
+                _each_way(p.overshoot_pct, p.overshoot_down_pct, "{:.1f} %"),
             )
         text = Text()
         for axis, share in g.share.items():
@@ -154,3 +154,11 @@ def _stacked(table: Table, text: Text) -> Table:
     grid.add_row(table)
     grid.add_row(text)
     return grid
+
+
+def _each_way(value: float | None, down: float | None, fmt: str) -> str:
+    """A predicted step's figure, and the other way's beside it where the linkage's travel
+    differs each way ("+ … / − …")."""
+    if down is None:
+        return num(value, fmt)
+    return f"+{num(value, fmt)} / −{num(down, fmt)}"
