@@ -29,10 +29,14 @@ parameters, by classical loop shaping on the identified plant with its actuator:
 - RMAX: the rate the model flies with RATE_SHARE of the servo's travel, so that a step's rate
   demand does not saturate the surface (its flown response would then rest on the surface's
   authority each way, beyond any linear model); ArduPlane's AUTOTUNE sets it with TCONST.
+- A linkage with more travel one way than the other (Actuator.even and knee, as a run measures
+  them): the loop shaped and its margins kept through the stronger way, FF through the mean,
+  RMAX through each way (the roll's from the weaker, the pitch's UP and DN each its own).
 
 Predicted: each loop's margins and crossover, the attitude's disturbance-rejection bandwidth
 (where the sensitivity |1/(1 + L)| reaches −3 dB) and a step's rise time and overshoot, from the
-model flown with agent.fbwa's laws at 50 Hz (a ±20° bank step, a ±5° pitch step).
+model flown with agent.fbwa's laws at 50 Hz (a ±20° bank step, a ±5° pitch step; each way
+through the linkage where its travel differs).
 """
 
 from __future__ import annotations
