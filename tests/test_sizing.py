@@ -195,6 +195,23 @@ def test_the_linkage_even_part_is_a_bias_the_prediction_carries(plan_and_timelin
     assert np.allclose(u_biased[:, 0] - u_plain[:, 0], 0.1 * np.abs(u_plain[:, 0]))
 
 
+def test_a_linkage_knee_off_trim_is_carried_through_the_prediction(plan_and_timeline):
+    """A linkage whose travel per degree changes away from trim (agent.excitation.follow's
+    knee: an elevator 14° per unit one way of its zero and 4° the other, the zero off trim):
+    the commands the model is driven by move gain·u + even·(|u − knee| − |knee|) from trim,
+    the knee at trim the even part's bias as before."""
+    _plan, timeline = plan_and_timeline
+    u = lateral().commands(timeline, {"aileron": 1.0})[:, 0]  # the plan's deflections
+    kneed = lateral(linkage={"aileron": (0.37, -0.19, 1.5)})
+    moved = kneed.commands(timeline, {"aileron": 1.0})[:, 0]
+    assert np.allclose(moved, 0.37 * u - 0.19 * (np.abs(u - 1.5) - 1.5))
+    assert np.allclose(sizing.moved((1.0, 0.1, 0.0), u), sizing.moved((1.0, 0.1), u))
+    # Beyond the knee a degree of command moves the surface 0.18, before it 0.56.
+    assert sizing.moved((0.37, -0.19, 1.5), np.array([3.0]))[0] == pytest.approx(
+        0.56 * 1.5 + 0.18 * 1.5
+    )
+
+
 def test_the_model_is_checked_on_its_own_data(plan_and_timeline):
     """Data that moved twice as far as the model predicts double its predictions; data that
     moved half as far change nothing (the model is not trusted to be conservative); a drift
