@@ -46,6 +46,7 @@ import scipy.linalg
 from agent.channels import AXIS_SETS, OUTPUT_ROLES
 from agent.config import Channels, Envelope, Surface
 from agent.config import Sizing as SizingConfig
+from agent.excitation import follow
 from agent.excitation.plan import MAX_BREAKPOINTS, Multisine, Plan, Sweep, Timeline, render
 from agent.excitation.signals import shaped
 from agent.ident.aircraft.kinematics import KINEMATIC_STATES, kinematic_jacobian, kinematics
@@ -1064,9 +1065,7 @@ def moved(link: Sequence[float], values: np.ndarray) -> np.ndarray:
     """A control's recorded change from trim for commanded `values` through its linkage
     (gain, even[, knee]): gain·u + even·(|u − knee| − |knee|) (agent.excitation.follow's
     `Following.moved`; a knee at trim where none is given)."""
-    gain, even, *knee = link
-    k = knee[0] if knee else 0.0
-    return gain * values + even * (np.abs(values - k) - abs(k))
+    return follow.moved(values, *link)
 
 
 def deflections(

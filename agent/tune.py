@@ -50,6 +50,7 @@ import scipy.interpolate
 import scipy.linalg
 import scipy.signal
 
+from agent.excitation import follow
 from agent.fbwa import DEFAULTS, LOOP_HZ, TRAVEL_DEG, Fbwa, G, Sensed
 
 # Loop-shaping targets: the rate loop's phase margin (the attitude loop closed around it then
@@ -116,7 +117,7 @@ class Actuator:
 
     def moved(self, output: float) -> float:
         """The measured surface's change from trim for a notional output (degrees from trim)."""
-        return self.link * output + self.even * (abs(output - self.knee) - abs(self.knee))
+        return float(follow.moved(output, self.link, self.even, self.knee))
 
     @property
     def strongest(self) -> Actuator:

@@ -380,7 +380,8 @@ def test_the_linkages_travel_each_way_from_the_execution_log_is_designed_with(tm
     """A run that measured the aileron's travel differ each way (even 0.1 beside a gain of
     0.5): the design predicts each way's step and takes RMAX from the weaker way. Bad input
     tried: an even part as large as the gain (the surface would not move one way: refused
-    when it is the only surface, noted and left out beside a usable one)."""
+    when it is the only surface, noted and left out beside a usable one), a gain that is not a
+    number, a NaN knee (noted and left out)."""
     model = _model_file(tmp_path)
     args = ["tune", str(model), "--scaling-speed", "25", "--json", "--exec-log"]
     log = tmp_path / "0001_exec_20261206.jsonl"
@@ -399,12 +400,21 @@ def test_the_linkages_travel_each_way_from_the_execution_log_is_designed_with(tm
     log.write_text(json.dumps({"linkage": {"aileron": {**link, "even": 0.5}}}) + "\n")
     assert main([*args, str(log)]) == 2
     assert "no usable linkage" in json.loads(capsys.readouterr().out)["error"]["message"]
-    both = {"aileron": link, "elevator": {**link, "even": 0.5}}
+    # Beside a usable aileron: an elevator that would not move one way, a rudder whose gain
+    # is not a number, a throttle whose knee is NaN (the log's "NaN" token): each noted and
+    # left out, the design made with the aileron's.
+    both = {
+        "aileron": link,
+        "elevator": {**link, "even": 0.5},
+        "rudder": {**link, "gain": "x"},
+        "throttle": {**link, "knee": float("nan")},
+    }
     log.write_text(json.dumps({"linkage": both}) + "\n")
     assert main([*args, str(log)]) == 0
     noted = json.loads(capsys.readouterr().out)
     assert list(noted["measured_linkage"]) == ["aileron"]
-    assert any(n.startswith("elevator: the log's linkage") for n in noted["notes"])
+    for surface in ("elevator", "rudder", "throttle"):
+        assert any(n.startswith(f"{surface}: the log's linkage") for n in noted["notes"])
 
 
 def _lateral_with_rudder(N_beta=4.0, N_r=-0.5, rudder=-0.3):

@@ -263,8 +263,9 @@ def _measured_linkage(path: Path) -> tuple[dict[str, dict[str, float]], list[str
             measured[surface] = {"gain": gain, "lag_s": lag, "even": even, "knee": knee}
         else:
             unusable.append(
-                f"{surface}: the log's linkage (gain {gain:.3g}, even part {even:.3g}, lag "
-                f"{lag:.3g} s) does not move the surface both ways within a second: not used"
+                f"{surface}: the log's linkage (gain {gain:.3g}, even part {even:.3g}, knee "
+                f"{knee:.3g}, lag {lag:.3g} s) is not one that moves the surface both ways, "
+                "from a finite knee, within a second: not used"
             )
     if not measured:
         raise common.refused(f"{path}: no usable linkage in it ({'; '.join(unusable)})")

@@ -56,8 +56,7 @@ class Following:
 
     def moved(self, u):
         """The position's change from trim for commanded deflections `u` (the linkage fitted)."""
-        u = np.asarray(u, dtype=float)
-        return self.gain * u + self.even * (np.abs(u - self.knee) - abs(self.knee))
+        return moved(u, self.gain, self.even, self.knee)
 
     @property
     def verdict(self) -> str:
@@ -107,6 +106,15 @@ def following(
             gain, even, knee = linkage(commanded[: commanded.size - lag], column[lag:])
             result.append(Following(control, r, lag * dt, gain, even, knee))
     return result
+
+
+def moved(u, gain: float, even: float, knee: float = 0.0):
+    """A linkage's change from trim for commands `u` from trim: gain·u + even·(|u − knee| −
+    |knee|), the travel per unit gain − even below the knee and gain + even above it (the
+    same for a surface's commanded degrees here, the sizing's, and ArduPlane's notional
+    degrees in agent.tune)."""
+    u = np.asarray(u, dtype=float)
+    return gain * u + even * (np.abs(u - knee) - abs(knee))
 
 
 def linkage(u: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
