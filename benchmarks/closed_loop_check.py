@@ -9,7 +9,8 @@ on the surfaces, MANUAL), on each benchmark aircraft.
 Per aircraft, condition and seed: the full preset at SCALE of its amplitudes flown offline
 (agent.sim.offline.fly, with and without the emulated ArduPlane in FBWA at ArduPlane's default
 gains), each record identified as the agent does (benchmarks/bench_jsbsim.py `ours`: the
-whole-aircraft method with the INS's wind), and per named mode the closed-loop model's
+whole-aircraft method with the INS's wind; the closed-loop one told so, its lateral axis refined
+by prediction error, agent.ident.aircraft.predictor), and per named mode the closed-loop model's
 difference from the open-loop one (bench_jsbsim.mode_errors: pole by pole, an overdamped short
 period by its ωn and ζ) and each one's error against the validated truth. `--bound`: each
 record's Cramér–Rao bound for the validated truth (bench_jsbsim.truth_bound: each mode's
@@ -22,10 +23,20 @@ from __future__ import annotations
 
 import argparse
 import os
+from dataclasses import replace
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from bench_jsbsim import AIRCRAFT, MODES, experiment, mode_errors, ours, setup_for, truth_bound
+from bench_jsbsim import (
+    AIRCRAFT,
+    MODES,
+    OURS,
+    experiment,
+    mode_errors,
+    ours,
+    setup_for,
+    truth_bound,
+)
 
 from agent.excitation.plan import preset
 from agent.ident.errors import DataError, IdentificationFailed
@@ -57,7 +68,10 @@ def main() -> None:
                     rec = setup.fly(plan, seed, fbwa=loop == "closed")
                     exp = experiment(rec, setup)
                     try:
-                        found[loop], _, _, _ = ours(exp, rec.dt, setup)
+                        # The agent tells the identification a run flown on the sticks
+                        # was closed loop (agent.ident.aircraft.predictor).
+                        settings = replace(OURS, closed_loop=loop == "closed")
+                        found[loop], _, _, _ = ours(exp, rec.dt, setup, settings)
                         if args.bound:
                             bounds[loop] = truth_bound(exp, rec.dt, setup, reference)[1]
                     except (IdentificationFailed, DataError) as exc:

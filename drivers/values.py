@@ -39,3 +39,6 @@ class Window:
     end: float
     outcome: Literal["finished", "aborted"]
     reason: str = ""
+    # Played on the pilot's sticks with the autopilot's loops closed (FBWA): its surfaces
+    # answered the disturbances too, which the identification must know (closed loop).
+    closed_loop: bool = False

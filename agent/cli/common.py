@@ -218,6 +218,12 @@ def identification_options(parser: argparse.ArgumentParser) -> None:
         help="model-structure selection (whole-aircraft method): derivatives whose standard "
         "error is above their value fixed at 0, listed in the result; judge it with --validate",
     )
+    parser.add_argument(
+        "--closed-loop",
+        action="store_true",
+        help="the record was flown with the autopilot's loops closed (FBWA: the manoeuvre on "
+        "the sticks): the lateral axis is refined by prediction error (whole-aircraft method)",
+    )
     parser.add_argument("--start", type=float, metavar="T0", help="first time used, s")
     parser.add_argument("--end", type=float, metavar="T1", help="last time used, s")
     parser.add_argument(
@@ -468,6 +474,7 @@ def identification_request(args: argparse.Namespace, paths, *, sampled_inputs: b
         method=args.method,
         period_s=args.period,
         select=getattr(args, "select", False),
+        closed_loop=getattr(args, "closed_loop", False),
     )
     return config, request, settings
 

@@ -417,7 +417,8 @@ class Scheduler:
         if outcome == "aborted":
             log.warning("plan %s aborted: %s", plan.id, reason)
         self._emit(Event(outcome, plan.id, end, reason))
-        self._emit(Window(plan.id, plan.axes, start, end, outcome, reason))
+        closed = self.played is not None and self.played.plan is plan and self.played.on_sticks
+        self._emit(Window(plan.id, plan.axes, start, end, outcome, reason, closed_loop=closed))
 
     def _emit(self, item: Event | Window) -> None:
         for listener in self._listeners:

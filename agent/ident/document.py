@@ -195,9 +195,12 @@ class AxisDocument(Document):
     iterations: int
     converged: bool
     # "filter error" where the record showed process noise (agent.ident.aircraft.process),
-    # with each output's share of its residual power that the process noise explains.
-    estimator: Literal["output error", "filter error"] = "output error"
+    # with each output's share of its residual power that the process noise explains;
+    # "prediction error": refined in the time domain with coloured process noise
+    # (agent.ident.aircraft.predictor), each noisy equation's noise pole (1/s) by its output.
+    estimator: Literal["output error", "filter error", "prediction error"] = "output error"
     process_share: dict[str, float] = {}
+    process_poles: dict[str, float] = {}
     # Each output's Theil inequality coefficient at the bins the fit used (the controls'
     # excited bins; agent.ident.aircraft.fit.excited_tic).
     tic_excited: dict[str, float] = {}

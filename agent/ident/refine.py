@@ -127,11 +127,15 @@ def _unpack_matrices(v: np.ndarray, n: int, m: int, r: int) -> StateSpace:
     return StateSpace(a.reshape(n, n), b.reshape(n, r), c.reshape(m, n), d.reshape(m, r))
 
 
-def discretization_jacobian(model: StateSpace, dt: float, hold: str) -> np.ndarray:
+def discretization_jacobian(
+    model: StateSpace, dt: float, hold: str, moving: np.ndarray | None = None
+) -> np.ndarray:
     """∂[vec Φ, vec Bd, vec C, vec Dd]/∂[vec Ac, vec Bc, vec C, vec D] of `discretize_hold`.
 
     The derivative of expm(M) along dM is the top-right block of expm([[M, dM], [0, M]]);
-    all n² + n·r directions go through one batched expm.
+    all n² + n·r directions go through one batched expm, or only those `moving` (a mask
+    over [vec Ac, vec Bc]) marks, the others' columns left zero (a structured model's fixed
+    entries: no derivative is asked of them).
     """
     n, m, r = _shape(model)
     size = n + 2 * r
@@ -141,15 +145,18 @@ def discretization_jacobian(model: StateSpace, dt: float, hold: str) -> np.ndarr
     E = scipy.linalg.expm(M)
     Phi, G2 = E[:n, :n], E[:n, n + r :]
     k = n * n + n * r
-    big = np.zeros((k, 2 * size, 2 * size))
+    which = np.arange(k) if moving is None else np.flatnonzero(moving)
+    big = np.zeros((which.size, 2 * size, 2 * size))
     big[:, :size, :size] = M
     big[:, size:, size:] = M
-    idx = np.arange(k)
-    rows, cols = np.divmod(idx[: n * n], n)
-    big[idx[: n * n], rows, size + cols] = dt
-    rows, cols = np.divmod(idx[: n * r], r)
-    big[n * n + idx[: n * r], rows, size + n + cols] = dt
-    dE = scipy.linalg.expm(big)[:, :size, size:]
+    in_a = which < n * n
+    rows, cols = np.divmod(which[in_a], n)
+    big[np.flatnonzero(in_a), rows, size + cols] = dt
+    rows, cols = np.divmod(which[~in_a] - n * n, r)
+    big[np.flatnonzero(~in_a), rows, size + n + cols] = dt
+    dE = np.zeros((k, size, size))
+    if which.size:
+        dE[which] = scipy.linalg.expm(big)[:, :size, size:]
     dPhi, dGa, dG2 = dE[:, :n, :n], dE[:, :n, n : n + r], dE[:, :n, n + r :]
     if hold == "zoh":
         dBd, G2, dG2 = dGa, np.zeros_like(G2), np.zeros_like(dG2)
@@ -221,7 +228,10 @@ class OutputErrorProblem:
         free_d: bool,
         hold: str,
         gain: np.ndarray | None = None,
+        fixed: np.ndarray | None = None,
     ):
+        """`fixed`: entries of [vec Ac, vec Bc] held at the model's values (a structured
+        model's known or absent terms), or None."""
         self.n, self.m, self.r = _shape(model)
         self.dt, self.hold = dt, hold
         self.batch = batch
@@ -241,6 +251,8 @@ class OutputErrorProblem:
         free[n * n + n * r + m * n : self.matrix_size] = free_d
         free[self.matrix_size : self.states_at] = self.innovation
         free[self.states_at :] = True
+        if fixed is not None:
+            free[: n * n + n * r] &= ~np.asarray(fixed, dtype=bool)
         selection = np.eye(self.full0.size)[:, free]
         if free_c:
             # Drop the n² directions that only change state coordinates.
@@ -312,7 +324,11 @@ class OutputErrorProblem:
         # ∂ŷ/∂discrete are applied as matrix products instead of being built.
         G = None
         if with_jacobian:
-            G = discretization_jacobian(cont, self.dt, self.hold) @ self.basis[: self.matrix_size]
+            moving = np.any(self.basis[: n * n + n * r] != 0, axis=1)
+            G = (
+                discretization_jacobian(cont, self.dt, self.hold, moving)
+                @ self.basis[: self.matrix_size]
+            )
             q = G.shape[1]
             k_ab = n * n + n * r
             dPhi = G[: n * n].reshape(n, n, q)
@@ -398,7 +414,10 @@ class OutputErrorProblem:
 
 
 def _levenberg_marquardt(
-    problem: OutputErrorProblem, beta: np.ndarray, max_iterations: int
+    problem: OutputErrorProblem,
+    beta: np.ndarray,
+    max_iterations: int,
+    relative_decrease: float = RELATIVE_DECREASE,
 ) -> tuple[np.ndarray, int, bool]:
     """Minimise ‖residuals‖² from beta: Marquardt-scaled Levenberg–Marquardt steps.
 
@@ -433,7 +452,7 @@ def _levenberg_marquardt(
         decrease = (cost - new_cost) / cost
         beta, cost = trial, new_cost
         damping = max(damping / 10, 1e-9)
-        if decrease < RELATIVE_DECREASE:
+        if decrease < relative_decrease:
             settled = True
             break
         res, (H, g) = problem.evaluate(beta, "normal")
@@ -450,16 +469,25 @@ def refine(
     hold: str = "zoh",
     gain: np.ndarray | None = None,
     max_passes: int = MAX_PASSES,
+    fixed: np.ndarray | None = None,
+    initial_states: Sequence[np.ndarray] | None = None,
+    relative_decrease: float = RELATIVE_DECREASE,
 ) -> Refinement:
     """Maximum-likelihood refinement of a continuous model (see module text).
 
     `model` is continuous (Ac, Bc, C, D). `output_coordinates`: C is the identity and stays
     fixed; otherwise C is refined too. D is refined only when `estimate_d`, else held.
     `gain`: None for output error; a starting K (n × m, discrete) for the prediction-error
-    fit of the innovation form, which also models process noise (turbulence).
+    fit of the innovation form, which also models process noise (turbulence). `fixed`: the
+    entries of [vec Ac, vec Bc] held at their values (a structured model). `initial_states`:
+    each experiment's starting x(0), else the least-squares one of the simulation.
+    `relative_decrease`: the cost's relative fall below which a pass ends.
     """
     start = discretize_hold(model.A, model.B, model.C, model.D, dt, hold)
-    x0s = [estimate_initial_state(start, e.u, e.y) for e in batch]
+    if initial_states is None:
+        x0s = [estimate_initial_state(start, e.u, e.y) for e in batch]
+    else:
+        x0s = [np.asarray(x, dtype=float) for x in initial_states]
     problem = OutputErrorProblem(
         model,
         dt,
@@ -469,6 +497,7 @@ def refine(
         free_d=estimate_d,
         hold=hold,
         gain=gain,
+        fixed=fixed,
     )
     y_rms = np.sqrt(np.mean(np.vstack([e.y for e in batch]) ** 2, axis=0))
     floor = NOISE_FLOOR * np.where(y_rms > 0, y_rms, 1.0)
@@ -481,7 +510,7 @@ def refine(
     iterations, passes, settled = 0, 0, True
     for passes in range(1, max_passes + 1):  # noqa: B007 - reported
         problem.weights = 1.0 / sigma
-        beta, used, settled = _levenberg_marquardt(problem, beta, MAX_ITERATIONS)
+        beta, used, settled = _levenberg_marquardt(problem, beta, MAX_ITERATIONS, relative_decrease)
         iterations += used
         new_sigma = np.maximum(problem.rms_errors(beta), floor)
         change = np.max(np.abs(new_sigma - sigma) / sigma)

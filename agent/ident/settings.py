@@ -45,6 +45,12 @@ class Settings:
     # The longitudinal axis fitted by the filter-error method, the turbulence the record does
     # not measure modelled as process noise (agent.ident.aircraft.process); off, output error.
     process_noise: bool = True
+    # The record was flown with the autopilot's loops closed (FBWA: the plan on the sticks),
+    # so the surfaces answer the disturbances: the lateral axis is then refined by prediction
+    # error in the time domain, the rolling gust as coloured process noise
+    # (agent.ident.aircraft.predictor). `predictor` off: the frequency-domain fit always.
+    closed_loop: bool = False
+    predictor: bool = True
     # Model-structure selection (agent.ident.aircraft.fit.selected): the derivatives whose
     # standard error is above their value fixed at zero, axis by axis (`--select`).
     select: bool = False
@@ -62,6 +68,7 @@ class Settings:
         method: Method | None = None,
         period_s: float | None = None,
         select: bool = False,
+        closed_loop: bool = False,
     ) -> Settings:
         """The settings of an `[identification]` section; the keywords given (not None)
         override it, as command-line options do. `sampled_inputs`: the inputs are the agent's
@@ -86,6 +93,7 @@ class Settings:
             period_s=period_s if period_s is not None else config.period_s,
             noise_model=config.noise_model,
             select=select,
+            closed_loop=closed_loop,
         )
 
 

@@ -118,11 +118,21 @@ def _method_lines(result: Identification) -> list[str]:
     wind = aircraft.wind
     gusts = ", ".join(f"{name} {rms:.3g}" for name, rms in wind.gust_rms.items())
     filtered = [a for a in aircraft.axes if a.estimator == "filter error"]
+    predicted = [a for a in aircraft.axes if a.estimator == "prediction error"]
     estimators = "; ".join(
-        f"{a.name} by filter error (process noise's share of the residual: "
-        + ", ".join(f"{k} {v:.2f}" for k, v in a.process_share.items())
-        + ")"
-        for a in filtered
+        [
+            f"{a.name} by filter error (process noise's share of the residual: "
+            + ", ".join(f"{k} {v:.2f}" for k, v in a.process_share.items())
+            + ")"
+            for a in filtered
+        ]
+        + [
+            f"{a.name} refined by prediction error in the time domain (coloured process noise "
+            "on "
+            + ", ".join(f"{k}'s equation, pole {v:.2g} 1/s" for k, v in a.process_poles.items())
+            + ")"
+            for a in predicted
+        ]
     )
     return [
         f"whole-aircraft method: {aircraft.model}; order n = {result.order} (the outputs"

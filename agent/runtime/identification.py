@@ -16,7 +16,7 @@ from collections import Counter, deque
 from collections.abc import Callable
 from concurrent.futures import Executor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -95,6 +95,8 @@ class Identifier:
         self._new_worker = worker
         self._pool: Executor | None = None  # the worker; replaced if it dies
         self._batch: dict[str, list] = {}  # by axes: the experiments of a batch so far
+        # By axes: whether a run of the batch so far was flown on the sticks (closed loop).
+        self._batch_closed: dict[str, bool] = {}
         self._self_check: dict[str, str] = {}  # by axes: a new nominal to check next run
         # By axes: the newest candidate that is stable and fits its own data to SIZING_TIC,
         # or passed the fit step (sizes plans while no model is nominal yet).
@@ -384,6 +386,7 @@ class Identifier:
         columns = {c: v for c, v in self.recorder.frames(rows).values.items() if c in needed}
         dt = 1.0 / self.config.recorder.rate_hz
         batch = self._batch.setdefault(axes, []) if ident.batch else []
+        closed = window.closed_loop or bool(batch and self._batch_closed.get(axes))
         job = jobs.Job(
             model_id=model_id,
             axes=axes,
@@ -393,7 +396,12 @@ class Identifier:
             roles=AXIS_SETS[axes][1],
             input_roles=tuple(r for r in AXIS_SETS[axes][0] if r in controls),
             experiments=tuple(batch),
-            settings=onboard_settings(self.config, ident),
+            # A run flown on the sticks (FBWA) is a closed-loop record: the lateral axis is
+            # refined by prediction error (agent.ident.aircraft.predictor).
+            settings=replace(
+                onboard_settings(self.config, ident),
+                closed_loop=closed,
+            ),
             window=columns,
             trim_s=self.config.identification.trim_seconds,
             navigation=navigation,
@@ -407,6 +415,7 @@ class Identifier:
             return self._failed(model_id, axes, outcome.reason)
         if ident.batch:
             batch.append(outcome.experiment)
+            self._batch_closed[axes] = closed
         candidate = Candidate(
             model_id=model_id,
             axes=axes,

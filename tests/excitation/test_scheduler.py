@@ -395,6 +395,7 @@ async def test_in_fbwa_the_plan_plays_on_the_sticks_trimmed_at_the_pilots():
     assert "the sticks': FBWA" in started.detail
     assert events[-1].outcome == "finished"
     assert s.played.on_sticks  # its surfaces followed the laws: no linkage measured from it
+    assert events[-1].closed_loop  # its window: identified as a closed-loop record
 
     s2, sink2, events2 = make(VirtualClock(100.0))
     sink2.flight_mode = "AUTO"
@@ -418,5 +419,6 @@ async def test_in_fbwa_the_plan_plays_on_the_sticks_trimmed_at_the_pilots():
     assert events4[-1].outcome == "aborted"
     assert "flight mode changed from MANUAL to FBWA" in events4[-1].reason
     assert not s4.played.on_sticks
+    assert not events4[-1].closed_loop
     assert sink4.commands()[-1][1] == {AIL: TRIM[AIL]}
     assert sink4.calls[-1][1:] == ("release", [AIL])

@@ -13,6 +13,7 @@ import scipy.linalg
 
 from agent.excitation.plan import preset, render
 from agent.ident import Experiment, Identification, Settings, identify
+from agent.ident.aircraft import predictor
 from agent.ident.aircraft.airangles import synthesise
 from agent.ident.aircraft.fit import COUPLED, SMOOTH_BINS, SMOOTH_FLOOR, bin_sigma, consistent
 from agent.ident.aircraft.kinematics import kinematic_jacobian, kinematic_remainder
@@ -309,6 +310,7 @@ def gusty_record(
     gust: float = 1.0,
     roll_gust: float = 0.0,
     roll_corner: float = 0.5,
+    roll_loop: tuple[float, float] | None = None,
 ):
     """The aircraft flown through a gust g (V, α, β; low-passed white noise, 0.03 m/s and
     0.03° rms), the controls at 0.15 % of the full preset (A.2's responses are large): the
@@ -324,7 +326,9 @@ def gusty_record(
     `roll_ab` (1/s² per rad²), ṗ also gains roll_ab · α β (the rolling moment's change with
     α, α and β air-relative from trim). With `roll_gust` (rad/s² rms), ṗ also takes a
     rolling gust nothing measures (the gust's gradient along the span: white noise low-passed
-    at `roll_corner` rad/s).
+    at `roll_corner` rad/s). With `roll_loop` (k_φ, k_p), the ailerons fly a roll loop too,
+    as FBWA's does: −k_φ φ − k_p p of the sensed state added to the plan's, so that they
+    answer the gusts (the record's aileron is what they did).
 
     A.2's models came from flight data and do not keep θ̇ = q: their θ and φ rows and
     columns are replaced by the kinematics at the operating point, as a real aircraft has
@@ -377,6 +381,10 @@ def gusty_record(
     state = np.zeros(A.shape[0])
     inertial = np.empty((len(u), 8))
     for k in range(len(u)):
+        if roll_loop is not None:
+            sensed = model.C @ state
+            w[k, 2] += -roll_loop[0] * sensed[7] - roll_loop[1] * sensed[5]
+            u[k, 2] = w[k, 2]
         inertial[k] = model.C @ state + model.D @ w[k]
         remainder = kinematic_remainder((inertial[k] + op)[None], op)[0] * ATTITUDE_ROWS
         remainder[0] -= drag * (inertial[k, 4] - g[k, 2]) ** 2
@@ -1176,3 +1184,25 @@ def test_in_a_rolling_gust_nothing_measures_the_fit_is_judged_where_the_inputs_a
     assert max(excited_tic(dominated.result).values()) < TIC_LIMIT
     assert not verdict.checks["fit"]
     assert not verdict.update
+
+
+def test_a_prediction_error_fit_that_fails_keeps_output_error_and_says_why(monkeypatch):
+    # Bad input tried: a closed-loop record whose predictor cannot be fitted (the refinement
+    # raises, as it does when every start diverges). The frequency-domain fit stands, with a
+    # note. Flown open loop, the same record is not refined at all.
+    u, air, op, navigation, _ = gusty_record(3, roll_gust=0.002, roll_corner=1.0)
+    record = Experiment(u, air, operating_point=op, navigation=navigation)
+    open_loop = aircraft_identify(record)
+    assert {a.name: a.estimator for a in open_loop.aircraft.axes}["lateral"] == "output error"
+
+    def diverges(*args, **kwargs):
+        raise IdentificationFailed("the predictor diverges")
+
+    monkeypatch.setattr(predictor, "refine", diverges)
+    kept = aircraft_identify(record, closed_loop=True)
+    plain = aircraft_identify(record, closed_loop=True, predictor=False)
+    note = "lateral axis: prediction error failed (the predictor diverges); output error kept"
+    assert note in kept.warnings
+    np.testing.assert_allclose(kept.continuous.A, plain.continuous.A)
+    assert {a.name: a.estimator for a in kept.aircraft.axes}["lateral"] == "output error"
+    np.testing.assert_allclose(open_loop.continuous.A, plain.continuous.A)

@@ -42,7 +42,9 @@ on θ.
 Used (agent.ident.aircraft.model) wherever nothing measures α's gust: the vanes alone, or
 no vanes. Only the longitudinal axis (`fit.fit_axis`): on JSBSim's aircraft the lateral axis's
 process-noise model moved the roll mode away from the truth on every variant tried
-(benchmarks/README.md, *The whole-aircraft method's terms*), where its output error holds it.
+(benchmarks/README.md, *The whole-aircraft method's terms*), where its output error holds it;
+the lateral axis's process noise (the rolling gust) is modelled in the time domain instead
+(agent.ident.aircraft.predictor).
 """
 
 from __future__ import annotations

@@ -1,0 +1,337 @@
+"""The lateral axis of a closed-loop record refined by prediction error in the time domain:
+the rolling gust as coloured process noise.
+
+No sensor measures the rolling gust: MIL-F-8785C's Dryden p_g, the vertical gust's gradient
+across the span, a moment L_p·p_g on the roll equation (and N_p·p_g on the yaw one), of
+first-order spectrum with its break near πV/(4b) (1.7 1/s for a glider at 27 m/s with a
+12.8 m span). The INS and the vanes measure the lateral gust (β's) and its rate, not it
+(agent.ident.aircraft.prepare). Frequency-domain output error (agent.ident.aircraft.fit)
+takes it as noise independent of the inputs: consistent in open loop. With the loop closed
+(FBWA) the ailerons answer the gust and the inputs are correlated with the noise: output
+error is then biased, JSBSim's SGS 1-26's roll mode 39–47 % off the truth in light
+turbulence (benchmarks/closed_loop_check.py), and the frequency-domain filter error
+(agent.ident.aircraft.process), which conditions on the inputs bin by bin, barely moves it
+(30–37 %). Nor is it the inputs' noise: the surfaces projected on the injected stick signals
+(the two-stage method) leave it at 44 %.
+
+The prediction-error method is consistent under feedback when its noise model can hold the
+disturbance (Ljung, *System Identification*, 2nd ed., 1999, §13.4: the direct approach), as
+the time-domain filter-error method of Maine & Iliff (NASA RP-1138, 1985, ch. 7) and
+Jategaonkar (*Flight Vehicle System Identification*, 2nd ed., 2015, ch. 5) is: the noisy
+aerodynamic equations (p's; β's and r's too where β's gust is not a known input) each get a
+first-order noise state w_i of its own estimated pole a_i, ẋ = A x + B u + K(t) + c + Σ e_i
+w_i, ẇ_i = −a_i w_i + white, the outputs y = x + sensor noise, and the fit minimises the
+one-step prediction errors of the innovation form x̂(k+1) = Φ x̂ + Γ u + K (y − x̂), the
+predictor gain K (every entry) estimated with A, B (the frequency-domain fit's structure: the
+kinematics' rows and columns fixed, and what the structure's selection zeroed), the noise
+poles, the constant c (trim errors: the transforms leave DC out, the time domain does not)
+and the initial state (agent.ident.refine: Levenberg–Marquardt on the exact Jacobian, the
+outputs' weights re-estimated between passes, the covariance corrected for the innovations'
+remaining colour). The known inputs are those of the frequency-domain fit (the measured
+gusts, their rates through the fitted lags, the α products, the other axis's states where
+they joined) and K(t) the kinematics' nonlinear rest; the lags keep their fitted time
+constants. The samples are averaged in blocks to RATE_HZ first.
+
+Measured (benchmarks/README.md, *Closed-loop excitation*): the SGS 1-26's closed-loop roll
+mode in light turbulence within 10 % of the open loop's on three seeds of three (30–39 %
+apart by output error). Not used in open loop (agent.ident.aircraft.model): there output
+error is consistent, and exact on a linear aircraft, where the block averages of step inputs
+cost accuracy.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+import scipy.linalg
+import scipy.signal
+
+from agent.ident.aircraft import process
+from agent.ident.aircraft.fit import (
+    AxisFit,
+    excited_tic,
+    minimise,
+    smooth_bins,
+    weighted_cost,
+)
+from agent.ident.aircraft.prepare import Prepared
+from agent.ident.aircraft.problem import THROTTLE_LAGS, AxisProblem
+from agent.ident.aircraft.transforms import Transforms
+from agent.ident.convert import StateSpace, discretize_hold
+from agent.ident.errors import IdentificationFailed
+from agent.ident.okid import Experiment
+from agent.ident.refine import Refinement, refine
+
+# The fit's sample rate, Hz, at least: the record's samples averaged in blocks of the largest
+# whole number that keeps it. Higher rates weight what lies beyond the modes (the surfaces'
+# measurement, the discretisation's hold), which no model here holds: JSBSim's Cessna 182 in
+# light turbulence, its roll mode 1.6 % off the truth at 12.5 Hz, 3.9 % at 25, 9.3 % at 50
+# and 16.4 % at 100 (its frequency-domain fit: 2.8 %); and each Levenberg–Marquardt step's
+# cost grows with the samples. Not the fit's band: in closed loop the surfaces follow the
+# sensors' noise and the band reaches its ceiling (the J-3 Cub's 25 Hz). A roll mode of
+# 12 1/s (the Cub's) is then 0.96 of a sample's time constant: well resolved.
+RATE_HZ = 12.5
+# Each noise state's pole at the start, 1/s: near Dryden's roll gust's break (module text).
+NOISE_POLE = 1.0
+# The starting predictor gain is the steady-state Kalman gain of the noise states' intensity
+# at each of these shares of the outputs' white noise (per step, as a rate): the one whose
+# predictor fits best starts the search.
+START_LEVELS = (1e-4, 1e-3, 1e-2, 1e-1, 1.0)
+# A noisy equation's output fitted at the excited bins with a Theil coefficient below this
+# leaves too little for a noise model to hold (`shows_process_noise`): JSBSim's aircraft in
+# light turbulence leave 0.2–0.5 on p's, a linear aircraft whose gusts are all measured 10⁻⁴.
+MATERIAL = 0.05
+# The search ends when a step lowers the cost by less than this share of it, and after PASSES
+# re-weightings of the outputs at most: with thousands of samples a step's fall of 10⁻⁵ moves
+# the modes by less than their standard errors' hundredth.
+SETTLED = 1e-4
+PASSES = 2
+
+
+@dataclass(frozen=True)
+class Predicted:
+    """What the prediction-error fit found beyond the axis model: each noise state's pole
+    (1/s) by the output of its equation, and the innovations' σ per output."""
+
+    poles: dict[int, float]  # output column → the pole of its equation's noise state
+    innovation_std: np.ndarray
+
+
+def shows_process_noise(
+    fit: AxisFit, problem: AxisProblem, rows: Sequence[int], tic: np.ndarray
+) -> bool:
+    """Whether the frequency-domain fit leaves process noise worth a model on `rows`: one of
+    their outputs' Theil coefficient at the excited bins (`tic`) at least MATERIAL, and the
+    filter-error method's likelihood ratio against white sensor noise alone
+    (agent.ident.aircraft.process.significant) above its threshold at the fit. Where output
+    error explains the excited bins (a record whose known inputs hold the disturbance, or
+    sensor noise alone) it is efficient, and exact on a linear aircraft; the block averages
+    would only cost it (a noise-free linear aircraft whose gusts are all measured, its inputs
+    steps: its worst mode 0.02 % off by output error, 1.1 % refined)."""
+    if max(float(tic[i]) for i in rows) < MATERIAL:
+        return False
+    theta = problem.pack(
+        fit.A,
+        fit.B,
+        np.array([fit.lags[fit.inputs[j]] for j in problem.lagged]),
+        fit.transients,
+    )
+    try:
+        noise = process.estimate(problem, theta, tuple(rows), smooth_bins)
+        _, width = smooth_bins(fit.bin_std, problem.s)
+        return bool(process.significant(problem, theta, noise, width))
+    except np.linalg.LinAlgError:  # spectra that do not converge: none shown
+        return False
+
+
+def lagged(signal: np.ndarray, tau: float, dt: float) -> np.ndarray:
+    """`signal` through one first-order lag of time constant `tau` (s), from rest (Tustin)."""
+    a = dt / (2 * tau)
+    return scipy.signal.lfilter([a / (1 + a), a / (1 + a)], [1.0, (a - 1) / (1 + a)], signal)
+
+
+def series(fit: AxisFit, ready: Prepared, sp: Transforms, dt: float) -> list[Experiment]:
+    """Per experiment, the axis's inputs in the time domain (through their fitted lags), the
+    kinematics' forcing of its states, and its outputs: u = [inputs, forcing], y."""
+    width = sp.U.shape[1]
+    states = list(fit.states)
+    out = []
+    for e, prepared in enumerate(ready.batch):
+        columns = []
+        for j in fit.inputs:
+            x = prepared.u[:, j] if j < width else prepared.y[:, j - width]
+            x = np.array(x, dtype=float)
+            if j in fit.lags:
+                for _ in range(fit.lag_powers.get(j, THROTTLE_LAGS)):
+                    x = lagged(x, fit.lags[j], dt)
+            columns.append(x)
+        forcing = np.zeros((prepared.y.shape[0], len(states)))
+        if ready.known is not None:
+            forcing += ready.known[e][:, states]
+        if sp.kinematics is not None:
+            others = [c for c in range(prepared.y.shape[1]) if c not in states]
+            forcing += prepared.y[:, others] @ sp.kinematics[np.ix_(states, others)].T
+        out.append(Experiment(np.column_stack([*columns, forcing]), prepared.y[:, states]))
+    return out
+
+
+def refined(
+    fit: AxisFit,
+    problem: AxisProblem,
+    ready: Prepared,
+    sp: Transforms,
+    *,
+    dt: float,
+    hold: str,
+    rows: Sequence[int],
+) -> tuple[AxisFit, Predicted]:
+    """`fit` refined by prediction error (module text), a noise state on each of `rows`
+    (positions among its states). `problem`: the frequency-domain problem the fit solved
+    (its fixed entries); `sp`: the record's transforms (the kinematics' Jacobian, the width of
+    its inputs). Raises IdentificationFailed when the predictor cannot be fitted (it diverges
+    from every start)."""
+    n, r = fit.A.shape[0], fit.B.shape[1]
+    rows = list(rows)
+    nw = len(rows)
+    size = n + nw
+    # Averaged in blocks (RATE_HZ): a low-pass that leaves the modes, applied alike to the
+    # inputs and the outputs. Picking every step-th sample instead aliased the noise
+    # above the band into it (the SGS 1-26's roll mode 13 % off at 50 Hz, 3 % averaged).
+    step = max(1, int(np.floor(1.0 / (dt * RATE_HZ) + 1e-9)))
+    batch = [
+        Experiment(_blocks(np.hstack([e.u, np.ones((e.u.shape[0], 1))]), step), _blocks(e.y, step))
+        for e in series(fit, ready, sp, dt)
+    ]
+    dt = dt * step
+    width = r + n + 1  # inputs, forcing, constant
+    A = np.zeros((size, size))
+    A[:n, :n] = fit.A
+    for k, i in enumerate(rows):
+        A[i, n + k] = 1.0
+        A[n + k, n + k] = -NOISE_POLE
+    B = np.zeros((size, width))
+    B[:n, :r] = fit.B
+    B[:n, r : r + n] = np.eye(n)
+    fixed_A = np.ones((size, size), dtype=bool)
+    fixed_A[:n, :n] = problem.fixed_A
+    fixed_A[n:, n:] = ~np.eye(nw, dtype=bool)
+    fixed_B = np.ones((size, width), dtype=bool)
+    fixed_B[:n, :r] = problem.fixed_B
+    fixed_B[[i for i in range(n) if not problem.fixed_A[i].all()], -1] = False  # c
+    C = np.hstack([np.eye(n), np.zeros((n, nw))])
+    model = StateSpace(A, B, C, np.zeros((n, width)))
+    starts = [np.concatenate([e.y[0], np.zeros(nw)]) for e in batch]
+    gain = _start_gain(model, batch, rows, dt, hold, starts)
+    # A trial step may make the predictor diverge: its cost is then inf and the step refused.
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        result = _refine(model, dt, batch, gain, fixed_A, fixed_B, hold, starts)
+    Ac, Bc = result.continuous.A, result.continuous.B
+    if not (np.all(np.isfinite(Ac)) and np.all(np.isfinite(Bc))):
+        raise IdentificationFailed(f"{fit.name}: the prediction-error fit diverged")
+    index_a = np.arange(size * size).reshape(size, size)[:n, :n]
+    index_b = size * size + np.arange(size * width).reshape(size, width)[:n, :r]
+    keep = np.concatenate([index_a.ravel(), index_b.ravel()])
+    A_fit, B_fit = Ac[:n, :n].copy(), Bc[:n, :r].copy()
+    # The frequency-domain record of the new model: its transients fitted again (they enter
+    # linearly), so the excited bins' TIC (the suggestion's fit step) and the cost are its own.
+    theta = problem.pack(
+        A_fit,
+        B_fit,
+        np.array([fit.lags[fit.inputs[j]] for j in problem.lagged]),
+        fit.transients,
+    )
+    transients_only = replace_free(problem, problem.size - 2 * n * problem.experiments)
+    theta, _, _ = minimise(transients_only, theta, fit.bin_std)
+    *_, transients = problem.unpack(theta)
+    axis = replace(
+        fit,
+        A=A_fit,
+        B=B_fit,
+        transients=transients,
+        covariance=result.covariance[np.ix_(keep, keep)],
+        cost=weighted_cost(problem, theta, fit.weights),
+        iterations=fit.iterations + result.iterations,
+        converged=result.converged,
+        tic_excited=excited_tic(problem, theta),
+    )
+    poles = {fit.states[i]: float(-Ac[n + k, n + k]) for k, i in enumerate(rows)}
+    return axis, Predicted(poles=poles, innovation_std=result.noise_std)
+
+
+def _refine(
+    model: StateSpace,
+    dt: float,
+    batch: Sequence[Experiment],
+    gain: np.ndarray,
+    fixed_A: np.ndarray,
+    fixed_B: np.ndarray,
+    hold: str,
+    starts: Sequence[np.ndarray],
+) -> Refinement:
+    """agent.ident.refine's prediction-error fit of the augmented model (`fixed_A`,
+    `fixed_B`: its entries held at their values)."""
+    return refine(
+        model,
+        dt,
+        batch,
+        output_coordinates=True,
+        estimate_d=False,
+        hold=hold,
+        gain=gain,
+        fixed=np.concatenate([fixed_A.ravel(), fixed_B.ravel()]),
+        initial_states=starts,
+        relative_decrease=SETTLED,
+        max_passes=PASSES,
+    )
+
+
+def replace_free(problem: AxisProblem, first: int) -> AxisProblem:
+    """A copy of `problem` whose only free parameters are those from `first` on."""
+    moved = copy.copy(problem)
+    moved.free = np.zeros_like(problem.free)
+    moved.free[first:] = True
+    return moved
+
+
+def _start_gain(
+    model: StateSpace,
+    batch: Sequence[Experiment],
+    rows: Sequence[int],
+    dt: float,
+    hold: str,
+    starts: Sequence[np.ndarray],
+) -> np.ndarray:
+    """The steady-state Kalman gain, among START_LEVELS of the noise states' intensity, whose
+    predictor's weighted one-step errors are smallest. The outputs' white noise is guessed
+    from their sample-to-sample differences."""
+    n = model.C.shape[0]
+    size = model.A.shape[0]
+    y = np.vstack([np.diff(e.y, axis=0) for e in batch])
+    white = np.maximum(np.var(y, axis=0) / 2, 1e-30)
+    disc = discretize_hold(model.A, model.B, model.C, model.D, dt, hold)
+    best, chosen = np.inf, np.zeros((size, n))
+    for level in START_LEVELS:
+        Q = np.zeros((size, size))
+        for k, i in enumerate(rows):
+            Q[n + k, n + k] = level * white[i] / dt**2
+        try:
+            P = scipy.linalg.solve_discrete_are(disc.A.T, disc.C.T, Q, np.diag(white))
+        except (np.linalg.LinAlgError, ValueError):
+            continue
+        K = disc.A @ P @ disc.C.T @ np.linalg.inv(disc.C @ P @ disc.C.T + np.diag(white))
+        cost = _prediction_cost(disc, K, batch, starts, white)
+        if cost < best:
+            best, chosen = cost, K
+    if not np.isfinite(best):
+        raise IdentificationFailed("no starting predictor for the prediction-error fit")
+    return chosen
+
+
+def _prediction_cost(
+    disc: StateSpace,
+    K: np.ndarray,
+    batch: Sequence[Experiment],
+    starts: Sequence[np.ndarray],
+    white: np.ndarray,
+) -> float:
+    """Σ of the one-step prediction errors squared, each output over its white noise."""
+    F = disc.A - K @ disc.C
+    total = 0.0
+    for e, x in zip(batch, starts, strict=True):
+        drive = e.u @ disc.B.T + e.y @ K.T
+        state = np.array(x, dtype=float)
+        predicted = np.empty_like(e.y)
+        with np.errstate(over="ignore", invalid="ignore"):
+            for t in range(e.y.shape[0]):
+                predicted[t] = disc.C @ state
+                state = F @ state + drive[t]
+            total += float(np.sum((e.y - predicted) ** 2 / white))
+    return total if np.isfinite(total) else np.inf
+
+
+def _blocks(x: np.ndarray, step: int) -> np.ndarray:
+    usable = x.shape[0] // step * step
+    return x[:usable].reshape(-1, step, x.shape[1]).mean(axis=1)
