@@ -188,10 +188,11 @@ def fitted_axes(
         fits, fixed = _structure(sp, fits, inputs, outputs, experiments=len(batch))
         notes.append(fixed)
     predicted: dict[str, Predicted] = {}
-    # Closed loop only: there output error is biased and the prediction error consistent; in
-    # open loop output error is consistent and exact on a linear aircraft, where the
-    # prediction error's block averages of step inputs cost accuracy (the thesis's aircraft
-    # with a rolling gust: its roll mode 4–14 % off by output error, 7–21 % refined).
+    # Closed loop only: there output error is biased and the prediction error consistent. In
+    # open loop output error is consistent, and the refinement did not do better on the
+    # thesis's linear aircraft (step inputs): without vanes (β's gust unmeasured) its worst
+    # mode 1.5 → 26 % off; with a rolling gust, five seeds, the roll mode 9.8–40.4 % off by
+    # output error, 10.4–22.6 % refined (tests/ident/test_aircraft.py's records).
     if settings.closed_loop and settings.predictor and ready.known is not None:
         fits, predicted, failed = _by_prediction(
             sp,
