@@ -18,25 +18,26 @@ The prediction-error method is consistent under feedback when its noise model ca
 disturbance (Ljung, *System Identification*, 2nd ed., 1999, §13.4: the direct approach), as
 the time-domain filter-error method of Maine & Iliff (NASA RP-1138, 1985, ch. 7) and
 Jategaonkar (*Flight Vehicle System Identification*, 2nd ed., 2015, ch. 5) is: the noisy
-aerodynamic equations (p's; β's and r's too where β's gust is not a known input) each get a
-first-order noise state w_i of its own estimated pole a_i, ẋ = A x + B u + K(t) + c + Σ e_i
-w_i, ẇ_i = −a_i w_i + white, the outputs y = x + sensor noise, and the fit minimises the
-one-step prediction errors of the innovation form x̂(k+1) = Φ x̂ + Γ u + K (y − x̂), the
-predictor gain K (every entry) estimated with A, B (the frequency-domain fit's structure: the
-kinematics' rows and columns fixed, and what the structure's selection zeroed), the noise
-poles, the constant c (trim errors: the transforms leave DC out, the time domain does not)
-and the initial state (agent.ident.refine: Levenberg–Marquardt on the exact Jacobian, the
-outputs' weights re-estimated between passes, the covariance corrected for the innovations'
-remaining colour). The known inputs are those of the frequency-domain fit (the measured
-gusts, their rates through the fitted lags, the α products, the other axis's states where
-they joined) and K(t) the kinematics' nonlinear rest; the lags keep their fitted time
-constants. The samples are averaged in blocks to RATE_HZ first.
+aerodynamic equations (p's; β's and r's too where β's gust is not a known input, the vanes
+measuring β: agent.ident.aircraft.model) each get a first-order noise state w_i of its own
+estimated pole a_i, ẋ = A x + B u + K(t) + c + Σ e_i w_i, ẇ_i = −a_i w_i + white, the
+outputs y = x + sensor noise, and the fit minimises the one-step prediction errors of the
+innovation form x̂(k+1) = Φ x̂ + Γ u + K (y − x̂), the predictor gain K (every entry)
+estimated with A, B (the frequency-domain fit's structure: the kinematics' rows and columns
+fixed, and what the structure's selection zeroed), the noise poles, the constant c (trim
+errors: the transforms leave DC out, the time domain does not) and the initial state
+(agent.ident.refine: Levenberg–Marquardt on the exact Jacobian, the outputs' weights
+re-estimated between passes, the covariance corrected for the innovations' remaining
+colour). The known inputs are those of the frequency-domain fit (the measured gusts, their
+rates through the fitted lags, the α products, the other axis's states where they joined)
+and K(t) the kinematics' nonlinear rest; the lags keep their fitted time constants. The
+samples are averaged in blocks to RATE_HZ first.
 
 Measured (benchmarks/README.md, *Closed-loop excitation*): the SGS 1-26's closed-loop roll
 mode in light turbulence within 10 % of the open loop's on three seeds of three (30–39 %
-apart by output error). Not used in open loop (agent.ident.aircraft.model): there output
-error is consistent, and exact on a linear aircraft, where the block averages of step inputs
-cost accuracy.
+apart by output error). Not used in open loop, where output error is consistent and the
+refinement did no better on a linear aircraft flown with step inputs, nor where β was
+synthesised from the INS (agent.ident.aircraft.model).
 """
 
 from __future__ import annotations
