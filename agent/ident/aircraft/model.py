@@ -270,7 +270,7 @@ def _by_prediction(
             for i, c in enumerate(f.states)
             if output_roles[c] in noisy and not problem.fixed_A[i].all()
         ]
-        if not rows or not shows_process_noise(f, problem, rows, f.tic_excited):
+        if not rows or not shows_process_noise(f, problem, rows):
             out.append(f)
             continue
         try:
