@@ -517,7 +517,8 @@ class Logbook:
         extra = (
             f"excitation plan {window.plan_id}, {window.outcome}"
             f"{': ' + window.reason if window.reason else ''}, "
-            f"window {window.start:.6f} – {window.end:.6f} s"
+            + ("flown on the sticks (FBWA: closed loop), " if window.closed_loop else "")
+            + f"window {window.start:.6f} – {window.end:.6f} s"
             + (f", recorded at {self._rate_hz:.17g} Hz" if self._rate_hz else "")
         )
         header = csv_header(window.axes, self._columns, self._units, self._sha, extra)

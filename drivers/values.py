@@ -40,5 +40,6 @@ class Window:
     outcome: Literal["finished", "aborted"]
     reason: str = ""
     # Played on the pilot's sticks with the autopilot's loops closed (FBWA): its surfaces
-    # answered the disturbances too, which the identification must know (closed loop).
+    # answered the disturbances too, which the identification must know (closed loop); the
+    # run's log says so (agent.logs).
     closed_loop: bool = False

@@ -78,8 +78,13 @@ def test_an_excitation_log_reads_back_the_exact_float64_values_and_the_rate(tmp_
     try:
         book = Logbook(writer, ["time", "a", "b", "c"], ["s", "-", "-", "-"], "0" * 64, 400.0)
         path = book.excitation(Window("lat1", "lateral", 100.1, 100.4, "finished", ""), rows)
+        sticks = Window("lat2", "lateral", 101.0, 101.2, "finished", "", closed_loop=True)
+        closed = book.excitation(sticks, rows)
     finally:
         writer.close()
+    # A run played on the sticks (FBWA) says so in its log; one on the surfaces does not.
+    assert "flown on the sticks (FBWA: closed loop)" in closed.read_text().split("\ntime,")[0]
+    assert "sticks" not in path.read_text().split("\ntime,")[0]
     _, back = read_log(path)
     assert np.array_equal(back[:, 1:], rows[:, 1:], equal_nan=True)
     assert np.abs(back[:, 0] - rows[:, 0]).max() < 1e-6  # time: µs
