@@ -129,6 +129,13 @@ def _plan(path: Path) -> str | None:
     return _header(path, r"excitation plan (\S+),")
 
 
+def flown_on_sticks(path: Path) -> bool:
+    """Whether the agent's own log says its run was played on the sticks with the autopilot's
+    loops closed (agent.logs: "flown on the sticks (FBWA: closed loop)"): identified as a
+    closed-loop record, as onboard (`Settings.closed_loop`)."""
+    return own_log(path) and _header(path, r"(flown on the sticks)") is not None
+
+
 def own_log(path: Path) -> bool:
     """Whether `path` is one of the agent's own logs (its first line says so): its inputs are
     then the surface potentiometers' samples of moving surfaces, which the settings of
@@ -150,9 +157,12 @@ def build_cases(
     input_roles: Sequence[str | None] = (),
 ) -> tuple[list[Case], float]:
     """Every identification the analysis needs, and the records' sample time. `settings`:
-    made with `sampled_inputs` when any of the logs is the agent's own (`own_log`), as onboard.
-    `roles` and `input_roles`: the outputs' and inputs' roles (None where a channel has none)."""
+    made with `sampled_inputs` when any of the logs is the agent's own (`own_log`), as onboard;
+    a log flown on the sticks (`flown_on_sticks`) is identified as a closed-loop record, and a
+    batch with one, as onboard. `roles` and `input_roles`: the outputs' and inputs' roles
+    (None where a channel has none)."""
     data, contexts, rates, commands = [], [], [], []
+    closed = [flown_on_sticks(Path(p)) for p in request.paths]
     for path in request.paths:
         exp, dt, declared = _experiment(Path(path), request)
         data.append((exp.u, exp.y))
@@ -166,16 +176,18 @@ def build_cases(
         raise AnalyzeError(f"the logs are sampled at different rates ({sorted(set(rates))} s)")
     pairs = list(zip(data, contexts, strict=True))
     if batch:
-        groups = [("batch", tuple(data), tuple(contexts))]
+        groups = [("batch", tuple(data), tuple(contexts), any(closed))]
     else:
-        groups = [(str(k + 1), (d,), (c,)) for k, (d, c) in enumerate(pairs)]
+        groups = [(str(k + 1), (d,), (c,), closed[k]) for k, (d, c) in enumerate(pairs)]
     keys: list[tuple[tuple[str, int], ...]] = [()]
     if sweep is not None:
         keys = [((sweep[0], v),) for v in sweep[1]]
     cases = []
     for key in keys:
-        case_settings = replace(settings, **dict(key))
-        for label, group, context in groups:
+        for label, group, context, sticks in groups:
+            case_settings = replace(
+                settings, **dict(key), closed_loop=settings.closed_loop or sticks
+            )
             job = jobs.Job(
                 model_id=label,
                 axes="analysis",

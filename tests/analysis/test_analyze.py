@@ -106,6 +106,26 @@ def test_cross_validation_and_batch(tmp_path):
     assert an.run_cases([batch])[0].ok
 
 
+def test_a_log_flown_on_the_sticks_is_replayed_as_a_closed_loop_record(tmp_path):
+    # The agent's log of a run played on the sticks (FBWA) says so in its header
+    # (agent.logs); its replay is identified as a closed-loop record, as onboard, and a batch
+    # with one such run too. A foreign CSV whose comment says the same is not the agent's log:
+    # nothing is read into it.
+    paths = excitation_logs(tmp_path)
+    lines = paths[1].read_text().splitlines()
+    lines[1] = lines[1].replace(", window", ", flown on the sticks (FBWA: closed loop), window")
+    paths[1].write_text("\n".join(lines) + "\n")
+    foreign = tmp_path / "other.csv"
+    foreign.write_text("# flown on the sticks\n" + "\n".join(paths[0].read_text().splitlines()[2:]))
+    assert [an.flown_on_sticks(p) for p in (*paths, foreign)] == [False, True, False, False]
+    single = cases_for(paths, batch=False, sweep=None)
+    assert [c.job.settings.closed_loop for c in single] == [False, True, False]
+    (batch,) = cases_for(paths, batch=True, sweep=None)
+    assert batch.job.settings.closed_loop
+    (alone,) = cases_for([paths[0], paths[2]], batch=True, sweep=None)
+    assert not alone.job.settings.closed_loop
+
+
 def test_command_line_with_a_dask_cluster(tmp_path):
     from dask.distributed import LocalCluster
 
