@@ -125,7 +125,7 @@ def test_the_expected_modes_not_identified_are_in_the_document_with_why():
     assert missing["Dutch roll"].startswith("no named mode: no lateral pair damped below")
     assert "resolves time constants up to" in missing["spiral"]
     text = format_text(found, 1, record.length)
-    assert "not identified: roll: no named mode: no fast real lateral mode" in text
+    assert "not identified: roll: no named mode: no fast stable real lateral mode" in text
 
 
 def test_a_document_of_before_reads_with_empty_lists_and_its_nan_mode_left_out():

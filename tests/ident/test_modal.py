@@ -186,6 +186,29 @@ def test_a_nearly_real_pair_is_not_the_dutch_roll_but_a_split_real_pole():
     assert [m.name for m in named] == ["spiral", None, "Dutch roll", "roll"]
 
 
+def test_a_real_lateral_mode_that_does_not_subside_is_not_the_roll():
+    # Bad input tried: the record of JSBSim's glider in light turbulence that did not resolve
+    # the roll mode left two real poles near zero, +0.149 and −0.119 1/s: the faster, being
+    # unstable, is not the roll subsidence (its damping is negative on every aircraft), and
+    # the roll is missing with the reason, not a pole named roll 104 % off. A stable real pole
+    # slower than a spiral can be (τ 4.2 s) is not it either; a single unstable one neither.
+    roles = ("beta", "p", "r", "phi")
+    dutch = _mode(-0.96 + 2.0j, [1, 0.5, 0.9, 0.2], msv=30.0)
+    spiral = _mode(-0.119 + 0j, [0.3, 0.1, 0.5, 1], msv=30.0)
+    for faster in (0.149, -0.236):
+        other = _mode(faster + 0j, [0.05, 1, 0.1, 0.3], msv=40.0)
+        named = name_modes([dutch, other, spiral], roles)
+        assert [m.name for m in named] == ["Dutch roll", None, "spiral"]
+        ((name, reason),) = missing_modes(named, roles)
+        assert name == "roll"
+        assert "stable" in reason
+    roll = _mode(-3.4 + 0j, [0.05, 1, 0.1, 0.3], msv=40.0)
+    named = name_modes([dutch, roll, spiral], roles)
+    assert [m.name for m in named] == ["Dutch roll", "roll", "spiral"]
+    unstable = _mode(3.4 + 0j, [0.05, 1, 0.1, 0.3], msv=40.0)
+    assert [m.name for m in name_modes([dutch, unstable], roles)] == ["Dutch roll", None]
+
+
 def test_a_lightly_damped_pair_is_preferred_for_the_dutch_roll():
     # Seen in the simulator: the roll pole split into a pair at ζ = 0.92 that carried more of
     # the response than the real Dutch roll (ζ = 0.29), and took its name.
