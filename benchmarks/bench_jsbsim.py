@@ -9,6 +9,8 @@ peers, in one process.
         --excitation card --nav ins                      # one row in about a minute
     .venv/bin/python benchmarks/bench_jsbsim.py --sizing nominal --aircraft pa28
     .venv/bin/python benchmarks/bench_jsbsim.py --no-peers --without alpha-products
+    .venv/bin/python benchmarks/bench_jsbsim.py --no-peers --open-loop-prediction \
+        --aircraft sgs126 --turbulence 1 --excitation card sweep   # not the default (below)
     .venv/bin/python benchmarks/bench_jsbsim.py --still --aircraft sgs126 --turbulence 1 \
         --excitation full                                # what the air alone does
     .venv/bin/python benchmarks/bench_jsbsim.py --quick --bound --aircraft sgs126 \
@@ -357,10 +359,11 @@ def predictor_of(setup: Setup, result, rec: Record, exp: Experiment, played: Pla
     )
 
 
-def calibrate(setup: Setup, plan: Plan):
+def calibrate(setup: Setup, plan: Plan, settings: Settings = OURS):
     """The agent's amplitude build-up (module docstring): the sizing the seeds fly, the model
     that sized it (None: none could), each calibration run's (sizing, excursions), and with
-    no model what the last run flew (the build-up grows from it)."""
+    no model what the last run flew (the build-up grows from it). `settings`: the
+    identification's of the calibration runs."""
     timeline = render(plan, CONFIG.rate_hz)
     sized = sizing.size(plan, timeline, None, CONFIG.sizing, setup.surfaces, setup.envelope)
     predictor, runs, flown, records = None, [], None, []
@@ -369,7 +372,7 @@ def calibrate(setup: Setup, plan: Plan):
         runs.append((sized, excursions(rec)))
         exp = experiment(rec, setup)
         try:
-            _, result, _, _ = ours(exp, rec.dt, setup)
+            _, result, _, _ = ours(exp, rec.dt, setup, settings)
         except (IdentificationFailed, DataError) as exc:
             print(f"  calibration run {step + 1} not identified: {exc}")
             break
@@ -777,6 +780,13 @@ def main() -> None:
         help="leave out a term of the whole-aircraft method, to see what it does",
     )
     parser.add_argument(
+        "--open-loop-prediction",
+        action="store_true",
+        help="refine the lateral axis by prediction error in open loop too, the calibration "
+        "runs' included (the method does it for closed-loop records only): what it gains and "
+        "costs (benchmarks/README.md)",
+    )
+    parser.add_argument(
         "--bound",
         action="store_true",
         help="with each row, the validated truth's Cramér–Rao bound on its records",
@@ -800,7 +810,11 @@ def main() -> None:
             f"{' and '.join(missing)} not installed: pip install -e '.[bench]' (make "
             "bench-jsbsim does), or --no-peers"
         )
-    settings = dataclasses.replace(OURS, **{ABLATIONS[term]: False for term in args.without})
+    settings = dataclasses.replace(
+        OURS,
+        **{ABLATIONS[term]: False for term in args.without},
+        closed_loop=args.open_loop_prediction,
+    )
     print(
         "cells: median / worst over seeds; errors in %; ≤10 %: seeds with every named mode "
         "within 10 %; spiral: seeds with the truth within 3σ; TIC: validation record"
@@ -826,10 +840,13 @@ def setup_for(name: str, turbulence: float) -> Setup:
     return Setup(name, flight, turbulence, controls, plant.true_airspeed)
 
 
-def sized_plans(setup: Setup, auto: bool = True) -> tuple[dict, dict, list]:
+def sized_plans(
+    setup: Setup, auto: bool = True, settings: Settings = OURS
+) -> tuple[dict, dict, list]:
     """The benchmark's manoeuvres for `setup` (EXCITATIONS), sized as the agent sizes them
-    when `auto` (the full preset by its calibration runs, the others by the model those runs
-    identified): the plans, each one's envelope refusals, and the calibration runs."""
+    when `auto` (the full preset by its calibration runs, identified with `settings`, the
+    others by the model those runs identified): the plans, each one's envelope refusals, and
+    the calibration runs."""
     full = preset("full", controls=setup.controls)
     plans = {
         "full": full,
@@ -839,7 +856,7 @@ def sized_plans(setup: Setup, auto: bool = True) -> tuple[dict, dict, list]:
     refused: dict[str, tuple] = dict.fromkeys(plans, ())
     if not auto:
         return plans, refused, []
-    sized, predictor, runs, flown = calibrate(setup, full)
+    sized, predictor, runs, flown = calibrate(setup, full, settings)
     plans["full"], refused["full"] = sized.plan, sized.refusals
     for other in ("card", "sweep"):
         card_sized = sizing.size(
@@ -862,7 +879,11 @@ def run(setup: Setup, args, seeds: int, settings: Settings, peers: bool, validat
         return
     reference = setup.truth()
     truth = reference.modes()
-    plans, refused, runs = sized_plans(setup, auto=args.sizing == "auto")
+    # The calibration runs identified as the agent would (their model sizes the plans): with
+    # the method's terms, whatever `--without` leaves out of the rows, but with the open-loop
+    # prediction error when it is asked for, whose model sizes differently.
+    calibration = dataclasses.replace(OURS, closed_loop=settings.closed_loop)
+    plans, refused, runs = sized_plans(setup, auto=args.sizing == "auto", settings=calibration)
     for k, (step, (bank, speed, lowest)) in enumerate(runs):
         print(
             f"{setup.name:8} {setup.turbulence:4.1f} calibration run {k + 1}: "

@@ -6,9 +6,9 @@ and the smallest run (`--quick --aircraft J3Cub --turbulence 0 --excitation full
 --seeds 1`: the calibration runs that size the preset, then one flight) 27 s. The suite's
 smoke tests share a budget of about a minute and a half with two real-time simulated flights
 (test_bench_agent, test_bench_abort), so this one stops short of the flights: the script
-starts with no aircraft,
-after its imports, its arguments and its `--without` terms are applied (the terms reach into
-the aircraft method, whose options have moved before), and prints its table's head. The
+starts with no aircraft, after its imports, its arguments, its `--without` terms and
+`--open-loop-prediction` are applied (the terms reach into the aircraft method, whose options
+have moved before), and prints its table's head. The
 truth is checked in the suite by tests/sim/test_truth.py and an offline flight through the full
 preset identified by tests/sim/test_wind_job.py; the whole benchmark runs by `make
 bench-jsbsim`."""
@@ -30,6 +30,7 @@ def test_starts_with_every_term_left_out():
     done = run(
         "bench_jsbsim.py",
         *("--aircraft", "--no-peers", "--bound", "--without", "alpha-products", "sideslip-drag"),
+        "--open-loop-prediction",
         timeout_s=TIMEOUT_S,
     )
     assert done.stdout.startswith("cells: median / worst over seeds"), done.stdout
@@ -41,6 +42,7 @@ def test_help_and_arguments():
     assert "--without" in text
     assert "--still" in text  # what the air alone does
     assert "--bound" in text  # the truth's Cramér–Rao bound on each row's records
+    assert "--open-loop-prediction" in text  # the lateral refinement's open-loop measurement
     refused(
         "bench_jsbsim.py",
         "--without",
