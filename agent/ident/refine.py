@@ -179,64 +179,6 @@ def discretization_jacobian(
     return chain
 
 
-def lifted(fine: StateSpace, lift: int) -> StateSpace:
-    """The discrete model of `fine` (a step's, its inputs u_i) over blocks of `lift` steps whose
-    outputs are averaged: x(k+1) = Φᴺ x(k) + Σ_i Φᴺ⁻¹⁻ⁱ Bd u_i, ȳ(k) = (1/N) Σ_j y_j, the
-    block's N inputs side by side as one input of N·r (an integrating sampler of the outputs,
-    exact for the inputs as `fine` holds them). N = 1: `fine` itself."""
-    if lift == 1:
-        return fine
-    A, B, C, D = fine.A, fine.B, fine.C, fine.D
-    powers = [np.eye(A.shape[0])]
-    for _ in range(lift):
-        powers.append(powers[-1] @ A)
-    B_L = np.hstack([powers[lift - 1 - i] @ B for i in range(lift)])
-    C_L = sum(C @ powers[j] for j in range(lift)) / lift
-    D_L = np.hstack(
-        [
-            (D + sum((C @ powers[j - 1 - i] @ B for j in range(i + 1, lift)), np.zeros_like(D)))
-            / lift
-            for i in range(lift)
-        ]
-    )
-    return StateSpace(powers[lift], B_L, C_L, D_L)
-
-
-def _lifted_derivatives(
-    fine: StateSpace, d: tuple[np.ndarray, ...], lift: int
-) -> tuple[np.ndarray, ...]:
-    """∂ of `lifted(fine, lift)`'s (A, B, C, D) along directions whose ∂(Φ, Bd, C, Dd) are `d`
-    (each with the directions last), by the product rule on the powers of Φ."""
-    A, B, C, _ = fine.A, fine.B, fine.C, fine.D
-    dA, dB, dC, dD = d
-    n = A.shape[0]
-    powers = [np.eye(n)]
-    dpowers = [np.zeros_like(dA)]
-    for _ in range(lift):
-        dpowers.append(
-            np.einsum("ijq,jk->ikq", dpowers[-1], A) + np.einsum("ij,jkq->ikq", powers[-1], dA)
-        )
-        powers.append(powers[-1] @ A)
-
-    def d_product(P, dP, M, dM):  # ∂(P M)
-        return np.einsum("ijq,jk->ikq", dP, M) + np.einsum("ij,jkq->ikq", P, dM)
-
-    dB_L = np.concatenate(
-        [d_product(powers[lift - 1 - i], dpowers[lift - 1 - i], B, dB) for i in range(lift)],
-        axis=1,
-    )
-    dC_L = sum(d_product(C, dC, powers[j], dpowers[j]) for j in range(lift)) / lift
-    blocks = []
-    for i in range(lift):
-        total = dD.copy()
-        for j in range(i + 1, lift):
-            CP = C @ powers[j - 1 - i]
-            dCP = d_product(C, dC, powers[j - 1 - i], dpowers[j - 1 - i])
-            total = total + d_product(CP, dCP, B, dB)
-        blocks.append(total / lift)
-    return dpowers[lift], dB_L, dC_L, np.concatenate(blocks, axis=1)
-
-
 # Above this many (state × direction) sensitivities the Jacobian comes from one recursion of
 # all directions (`_propagate`), below from the per-entry lifted convolution: measured, the
 # crossover lies between the A.2 lateral case (n·q ≈ 120) and the 8-state models (n·q ≈ 1000).
@@ -287,13 +229,11 @@ class OutputErrorProblem:
         hold: str,
         gain: np.ndarray | None = None,
         fixed: np.ndarray | None = None,
-        lift: int = 1,
     ):
         """`fixed`: entries of [vec Ac, vec Bc] held at the model's values (a structured
-        model's known or absent terms), or None. `lift`: the batch's samples are blocks of
-        that many steps of `dt` (`lifted`)."""
+        model's known or absent terms), or None."""
         self.n, self.m, self.r = _shape(model)
-        self.dt, self.hold, self.lift = dt, hold, lift
+        self.dt, self.hold = dt, hold
         self.batch = batch
         self.innovation = gain is not None
         n, m, r = self.n, self.m, self.r
@@ -373,10 +313,8 @@ class OutputErrorProblem:
         with_jacobian = jacobian is not None
         cont, x0s = self.unpack(beta)
         K = self.gain(beta)
-        n, m = self.n, self.m
-        r = self.r * self.lift  # the discrete model's inputs: a block's, side by side
-        fine = discretize_hold(cont.A, cont.B, cont.C, cont.D, self.dt, self.hold)
-        disc = lifted(fine, self.lift)
+        n, m, r = self.n, self.m, self.r
+        disc = discretize_hold(cont.A, cont.B, cont.C, cont.D, self.dt, self.hold)
         Abar = disc.A - K @ disc.C
         Bbar = np.hstack([disc.B - K @ disc.D, K])
         predictor = StateSpace(Abar, Bbar, disc.C, np.hstack([disc.D, np.zeros((m, m))]))
@@ -386,20 +324,17 @@ class OutputErrorProblem:
         # ∂ŷ/∂discrete are applied as matrix products instead of being built.
         G = None
         if with_jacobian:
-            moving = np.any(self.basis[: n * n + n * self.r] != 0, axis=1)
+            moving = np.any(self.basis[: n * n + n * r] != 0, axis=1)
             G = (
                 discretization_jacobian(cont, self.dt, self.hold, moving)
                 @ self.basis[: self.matrix_size]
             )
             q = G.shape[1]
-            rc = self.r
-            k_ab = n * n + n * rc
+            k_ab = n * n + n * r
             dPhi = G[: n * n].reshape(n, n, q)
-            dBd = G[n * n : k_ab].reshape(n, rc, q)
+            dBd = G[n * n : k_ab].reshape(n, r, q)
             dC = G[k_ab : k_ab + m * n].reshape(m, n, q)
-            dDd = G[k_ab + m * n :].reshape(m, rc, q)
-            if self.lift > 1:
-                dPhi, dBd, dC, dDd = _lifted_derivatives(fine, (dPhi, dBd, dC, dDd), self.lift)
+            dDd = G[k_ab + m * n :].reshape(m, r, q)
             dK = self.basis[self.matrix_size : self.states_at].reshape(n, m, q)
             # ∂Ā = ∂Φ − ∂K C − K ∂C; ∂B̄ = [∂Bd − ∂K Dd − K ∂Dd, ∂K].
             dAbar = dPhi - np.einsum("imq,mj->ijq", dK, disc.C) - np.einsum("im,mjq->ijq", K, dC)
@@ -427,7 +362,7 @@ class OutputErrorProblem:
                 carried = self.basis[rows] if direct else np.zeros((n, n, width))
                 reach = self.basis[rows]  # Ā^first ∂x0: the free response's start
                 stretches = sample_stretches(exp.u.shape[0], per_sample)
-                longest = BLOCK_MAX if len(stretches) > 1 else None  # divides every stretch
+                lifted = BLOCK_MAX if len(stretches) > 1 else None  # divides every stretch
                 for first, last in stretches:
                     length, z = last - first, z_all[first:last]
                     if direct:
@@ -440,7 +375,7 @@ class OutputErrorProblem:
                         dstates, carried = _propagate(Abar, forcing.reshape(length, n, q), carried)
                         jac = np.matmul(disc.C, dstates).reshape(length * m, q)
                     else:
-                        sens, carried = state_convolution_from(Abar, disc.C, z, carried, longest)
+                        sens, carried = state_convolution_from(Abar, disc.C, z, carried, lifted)
                         jac = sens.reshape(length * m, n * width) @ G_all
                         jac += (
                             free_response_basis(StateSpace(Abar, Bbar, disc.C, disc.D), length)
@@ -537,7 +472,6 @@ def refine(
     fixed: np.ndarray | None = None,
     initial_states: Sequence[np.ndarray] | None = None,
     relative_decrease: float = RELATIVE_DECREASE,
-    lift: int = 1,
 ) -> Refinement:
     """Maximum-likelihood refinement of a continuous model (see module text).
 
@@ -547,11 +481,9 @@ def refine(
     fit of the innovation form, which also models process noise (turbulence). `fixed`: the
     entries of [vec Ac, vec Bc] held at their values (a structured model). `initial_states`:
     each experiment's starting x(0), else the least-squares one of the simulation.
-    `relative_decrease`: the cost's relative fall below which a pass ends. `lift`: each
-    sample of `batch` is a block of that many steps of `dt`, its inputs the block's side by
-    side and its outputs their means (`lifted`); `dt` stays the step's.
+    `relative_decrease`: the cost's relative fall below which a pass ends.
     """
-    start = lifted(discretize_hold(model.A, model.B, model.C, model.D, dt, hold), lift)
+    start = discretize_hold(model.A, model.B, model.C, model.D, dt, hold)
     if initial_states is None:
         x0s = [estimate_initial_state(start, e.u, e.y) for e in batch]
     else:
@@ -566,7 +498,6 @@ def refine(
         hold=hold,
         gain=gain,
         fixed=fixed,
-        lift=lift,
     )
     y_rms = np.sqrt(np.mean(np.vstack([e.y for e in batch]) ** 2, axis=0))
     floor = NOISE_FLOOR * np.where(y_rms > 0, y_rms, 1.0)
@@ -594,9 +525,7 @@ def refine(
     return Refinement(
         gain=problem.gain(beta) if problem.innovation else None,
         continuous=refined,
-        discrete=lifted(
-            discretize_hold(refined.A, refined.B, refined.C, refined.D, dt, hold), lift
-        ),
+        discrete=discretize_hold(refined.A, refined.B, refined.C, refined.D, dt, hold),
         hold=hold,
         dt=dt,
         initial_states=tuple(x0s),

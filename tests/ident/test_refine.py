@@ -252,21 +252,6 @@ def _process_noise_record(seed: int, gust: float = 0.3) -> Experiment:
     return Experiment(u, reference.with_output_noise(y, 0.01, seed + 100))
 
 
-def _assert_jacobian_is_exact(problem, rng) -> None:
-    """`problem`'s Jacobian at a small random β against central finite differences."""
-    beta = 1e-3 * rng.normal(size=problem.basis.shape[1])
-    _, jac = problem.evaluate(beta, "full")
-    step = 1e-6
-    numeric = np.column_stack(
-        [
-            (problem.evaluate(beta + step * e)[0] - problem.evaluate(beta - step * e)[0])
-            / (2 * step)
-            for e in np.eye(beta.size)
-        ]
-    )
-    assert np.allclose(jac, numeric, rtol=1e-5, atol=1e-6 * np.abs(numeric).max())
-
-
 def test_innovation_form_jacobian_matches_finite_differences():
     from agent.ident.refine import OutputErrorProblem
 
@@ -278,40 +263,17 @@ def test_innovation_form_jacobian_matches_finite_differences():
         problem = OutputErrorProblem(
             model, DT, [short], [np.zeros(4)], free_c=free_c, free_d=False, hold=hold, gain=K
         )
-        _assert_jacobian_is_exact(problem, np.random.default_rng(2))
-
-
-def test_a_lifted_model_predicts_block_means_exactly_and_its_jacobian_is_exact():
-    # Blocks of N steps whose outputs are averaged, the block's N inputs side by side
-    # (agent.ident.refine.lifted): the lifted model run block by block gives the means of the
-    # step-by-step simulation's outputs to rounding, for either hold; and the innovation
-    # form's Jacobian over such blocks matches finite differences.
-    from agent.ident.refine import OutputErrorProblem, lifted
-
-    rng = np.random.default_rng(3)
-    N, blocks = 4, 30
-    model = StateSpace(LAT.A * 1.02, LAT.B, np.eye(4), np.zeros((4, 2)))
-    u = rng.normal(size=(N * blocks, 2))
-    for hold in ("zoh", "foh"):
-        fine = discretize_hold(model.A, model.B, model.C, model.D, DT, hold)
-        means = simulate(fine, u, np.zeros(4)).reshape(blocks, N, 4).mean(axis=1)
-        sides = u.reshape(blocks, N * 2)
-        np.testing.assert_allclose(
-            simulate(lifted(fine, N), sides, np.zeros(4)), means, atol=1e-12 * np.abs(means).max()
+        beta = 1e-3 * np.random.default_rng(2).normal(size=problem.basis.shape[1])
+        _, jac = problem.evaluate(beta, "full")
+        step = 1e-6
+        numeric = np.column_stack(
+            [
+                (problem.evaluate(beta + step * e)[0] - problem.evaluate(beta - step * e)[0])
+                / (2 * step)
+                for e in np.eye(beta.size)
+            ]
         )
-        K = 0.1 * rng.normal(size=(4, 4))
-        problem = OutputErrorProblem(
-            model,
-            DT,
-            [Experiment(sides, means + 0.01 * rng.normal(size=means.shape))],
-            [np.zeros(4)],
-            free_c=False,
-            free_d=False,
-            hold=hold,
-            gain=K,
-            lift=N,
-        )
-        _assert_jacobian_is_exact(problem, rng)
+        assert np.allclose(jac, numeric, rtol=1e-5, atol=1e-6 * np.abs(numeric).max())
 
 
 def test_process_noise_switches_refinement_to_the_innovation_form():

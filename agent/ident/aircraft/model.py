@@ -192,8 +192,8 @@ def fitted_axes(
     # open loop output error is consistent, and the refinement did not do better: on the
     # thesis's linear aircraft with a rolling gust, five seeds, the roll mode 9.8–40.4 % off
     # by output error, 10.4–22.6 % refined (tests/ident/test_aircraft.py's records); on the
-    # benchmark the Cub's moderate sweep 9 → 4 and the T-6's 9 → 0 of 10 seeds within 10 %,
-    # where the glider's light cards gained (docs/limitations.md).
+    # benchmark the J-3 Cub's card's roll mode 1.1 → 6.0 % in median and its moderate sweep
+    # 9 → 4 of 10 seeds within 10 %, where the glider's light cards gained (docs/limitations.md).
     if settings.closed_loop and settings.predictor and ready.known is not None:
         fits, predicted, failed = _by_prediction(
             sp,

@@ -31,17 +31,15 @@ re-estimated between passes, the covariance corrected for the innovations' remai
 colour). The known inputs are those of the frequency-domain fit (the measured gusts, their
 rates through the fitted lags, the α products, the other axis's states where they joined)
 and K(t) the kinematics' nonlinear rest; the lags keep their fitted time constants. The
-outputs are averaged in blocks to RATE_HZ, and the predictor steps block by block, the state
-carried across each block at the record's rate by the block's inputs (an integrating
-sampler: exact for the inputs as held).
+samples are averaged in blocks to RATE_HZ first.
 
 Measured (benchmarks/README.md, *Closed-loop excitation*): the SGS 1-26's closed-loop roll
 mode in light turbulence within 10 % of the open loop's on three seeds of three (30–39 %
 apart by output error). Not used in open loop, where output error is consistent and the
 refinement, though it took the glider's light-turbulence cards to 9 of 10 seeds within 10 %,
-cost other rows as much through the plans its calibration model sized (the T-6's moderate
-sweep 9 → 0; docs/limitations.md), nor where β was synthesised from the INS
-(agent.ident.aircraft.model).
+cost the J-3 Cub's card its fast roll mode (1.1 → 6.0 % off in median: the one-step predictor
+weights high frequencies, where the model is least right; docs/limitations.md), nor where β
+was synthesised from the INS (agent.ident.aircraft.model).
 """
 
 from __future__ import annotations
@@ -69,17 +67,16 @@ from agent.ident.convert import StateSpace, discretize_hold
 from agent.ident.errors import IdentificationFailed
 from agent.ident.fit import simulate_states
 from agent.ident.okid import Experiment
-from agent.ident.refine import Refinement, lifted, refine
+from agent.ident.refine import Refinement, refine
 
-# The predictor's rate, Hz, at least: the record's outputs averaged in blocks of the largest
-# whole number of samples that keeps it. Higher rates weight what lies beyond the modes,
-# which no model here holds: JSBSim's Cessna 182 in light turbulence, its roll mode 1.6 % off
-# the truth at 12.5 Hz, 3.9 % at 25, 9.3 % at 50 and 16.4 % at 100 (its frequency-domain fit:
-# 2.8 %; measured with the inputs averaged too), a calm, noise-free J-3 Cub card at 100 Hz its
-# Dutch roll 27.6 % off; and each Levenberg–Marquardt step's cost grows with the samples.
-# Not the fit's band: in closed loop the surfaces follow the sensors' noise and the band
-# reaches its ceiling (the J-3 Cub's 25 Hz). A roll mode of 12 1/s (the Cub's) crosses
-# 0.96 of its time constant in a block, which the lifted model carries exactly.
+# The fit's sample rate, Hz, at least: the record's samples averaged in blocks of the largest
+# whole number that keeps it. Higher rates weight what lies beyond the modes (the surfaces'
+# measurement, the discretisation's hold), which no model here holds: JSBSim's Cessna 182 in
+# light turbulence, its roll mode 1.6 % off the truth at 12.5 Hz, 3.9 % at 25, 9.3 % at 50
+# and 16.4 % at 100 (its frequency-domain fit: 2.8 %); and each Levenberg–Marquardt step's
+# cost grows with the samples. Not the fit's band: in closed loop the surfaces follow the
+# sensors' noise and the band reaches its ceiling (the J-3 Cub's 25 Hz). A roll mode of
+# 12 1/s (the Cub's) is then 0.96 of a sample's time constant: well resolved.
 RATE_HZ = 12.5
 # Each noise state's pole at the start, 1/s: near Dryden's roll gust's break (module text).
 NOISE_POLE = 1.0
@@ -178,20 +175,15 @@ def refined(
     rows = list(rows)
     nw = len(rows)
     size = n + nw
-    # The outputs averaged in blocks (RATE_HZ): a low-pass that leaves the modes. Picking
-    # every step-th sample instead aliased the noise above the band into it (the SGS 1-26's
-    # roll mode 13 % off at 50 Hz, 3 % averaged). The state crosses each block at the record's
-    # rate driven by the block's own inputs, the outputs' mean predicted exactly
-    # (agent.ident.refine.lifted): the block means of the inputs with a hold between them
-    # were not the model's, and a calm, noise-free J-3 Cub card (its roll mode 12 1/s, a
-    # block 0.08 s) had its roll 16.2 % off the truth so, 0.1 % lifted (output error 0.5 %).
+    # Averaged in blocks (RATE_HZ): a low-pass that leaves the modes, applied alike to the
+    # inputs and the outputs. Picking every step-th sample instead aliased the noise
+    # above the band into it (the SGS 1-26's roll mode 13 % off at 50 Hz, 3 % averaged).
     step = max(1, int(np.floor(1.0 / (dt * RATE_HZ) + 1e-9)))
     batch = [
-        Experiment(
-            _side_by_side(np.hstack([e.u, np.ones((e.u.shape[0], 1))]), step), _blocks(e.y, step)
-        )
+        Experiment(_blocks(np.hstack([e.u, np.ones((e.u.shape[0], 1))]), step), _blocks(e.y, step))
         for e in series(fit, ready, sp, dt)
     ]
+    dt = dt * step
     width = r + n + 1  # inputs, forcing, constant
     A = np.zeros((size, size))
     A[:n, :n] = fit.A
@@ -210,10 +202,10 @@ def refined(
     C = np.hstack([np.eye(n), np.zeros((n, nw))])
     model = StateSpace(A, B, C, np.zeros((n, width)))
     starts = [np.concatenate([e.y[0], np.zeros(nw)]) for e in batch]
-    gain = _start_gain(model, batch, rows, dt, hold, starts, step)
+    gain = _start_gain(model, batch, rows, dt, hold, starts)
     # A trial step may make the predictor diverge: its cost is then inf and the step refused.
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        result = _refine(model, dt, batch, gain, fixed_A, fixed_B, hold, starts, step)
+        result = _refine(model, dt, batch, gain, fixed_A, fixed_B, hold, starts)
     Ac, Bc = result.continuous.A, result.continuous.B
     if not (np.all(np.isfinite(Ac)) and np.all(np.isfinite(Bc))):
         raise IdentificationFailed(f"{fit.name}: the prediction-error fit diverged")
@@ -251,7 +243,6 @@ def _refine(
     fixed_B: np.ndarray,
     hold: str,
     starts: Sequence[np.ndarray],
-    lift: int = 1,
 ) -> Refinement:
     """agent.ident.refine's prediction-error fit of the augmented model (`fixed_A`,
     `fixed_B`: its entries held at their values)."""
@@ -267,7 +258,6 @@ def _refine(
         initial_states=starts,
         relative_decrease=SETTLED,
         max_passes=PASSES,
-        lift=lift,
     )
 
 
@@ -292,7 +282,6 @@ def _start_gain(
     dt: float,
     hold: str,
     starts: Sequence[np.ndarray],
-    lift: int = 1,
 ) -> np.ndarray:
     """The steady-state Kalman gain, among START_LEVELS of the noise states' intensity, whose
     predictor's weighted one-step errors are smallest. The outputs' white noise is guessed
@@ -301,8 +290,7 @@ def _start_gain(
     size = model.A.shape[0]
     y = np.vstack([np.diff(e.y, axis=0) for e in batch])
     white = np.maximum(np.var(y, axis=0) / 2, 1e-30)
-    disc = lifted(discretize_hold(model.A, model.B, model.C, model.D, dt, hold), lift)
-    dt = dt * lift
+    disc = discretize_hold(model.A, model.B, model.C, model.D, dt, hold)
     best, chosen = np.inf, np.zeros((size, n))
     for level in START_LEVELS:
         Q = np.zeros((size, size))
@@ -340,15 +328,7 @@ def _prediction_cost(
     return total if np.isfinite(total) else np.inf
 
 
-def _side_by_side(x: np.ndarray, step: int) -> np.ndarray:
-    """`x`'s rows in consecutive blocks of `step`, each block's side by side in one row (a last
-    partial block dropped): the inputs of agent.ident.refine.lifted."""
-    usable = x.shape[0] // step * step
-    return x[:usable].reshape(-1, step * x.shape[1])
-
-
 def _blocks(x: np.ndarray, step: int) -> np.ndarray:
-    """The means of `x`'s rows in consecutive blocks of `step` (a last partial block dropped):
-    the outputs of agent.ident.refine.lifted."""
+    """The means of `x`'s rows in consecutive blocks of `step` (a last partial block dropped)."""
     usable = x.shape[0] // step * step
     return x[:usable].reshape(-1, step, x.shape[1]).mean(axis=1)
