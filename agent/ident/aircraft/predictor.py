@@ -37,8 +37,8 @@ Measured (benchmarks/README.md, *Closed-loop excitation*): the SGS 1-26's closed
 mode in light turbulence within 10 % of the open loop's on three seeds of three (30–39 %
 apart by output error). Not used in open loop, where output error is consistent and the
 refinement, though it took the glider's light-turbulence cards to 9 of 10 seeds within 10 %,
-cost the J-3 Cub's card its fast roll mode (1.1 → 6.0 % off in median: the one-step predictor
-weights high frequencies, where the model is least right; docs/limitations.md), nor where β
+cost the J-3 Cub's card its fast roll mode (1.1 → 6.0 % off in median: the inputs' block
+means with a hold between them are not the model's for it; docs/limitations.md), nor where β
 was synthesised from the INS (agent.ident.aircraft.model).
 """
 
