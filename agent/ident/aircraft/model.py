@@ -42,7 +42,13 @@ from agent.ident.aircraft.fit import (
     lag_order_cost,
     selected,
 )
-from agent.ident.aircraft.predictor import Predicted, lagged, refined, shows_process_noise
+from agent.ident.aircraft.predictor import (
+    Predicted,
+    lagged,
+    refined,
+    roll_imprecise,
+    shows_process_noise,
+)
 from agent.ident.aircraft.prepare import Prepared, prepare
 from agent.ident.aircraft.problem import ENGINE_ORDERS, THROTTLE_LAGS, AxisProblem
 from agent.ident.aircraft.transforms import Transforms, input_band, transforms
@@ -188,13 +194,11 @@ def fitted_axes(
         fits, fixed = _structure(sp, fits, inputs, outputs, experiments=len(batch))
         notes.append(fixed)
     predicted: dict[str, Predicted] = {}
-    # Closed loop only: there output error is biased and the prediction error consistent. In
-    # open loop output error is consistent, and the refinement did not do better: on the
-    # thesis's linear aircraft with a rolling gust, five seeds, the roll mode 9.8–40.4 % off
-    # by output error, 10.4–22.6 % refined (tests/ident/test_aircraft.py's records); on the
-    # benchmark the J-3 Cub's card's roll mode 1.1 → 6.0 % in median and its moderate sweep
-    # 9 → 4 of 10 seeds within 10 %, where the glider's light cards gained (docs/limitations.md).
-    if settings.closed_loop and settings.predictor and ready.known is not None:
+    # In closed loop always (output error is biased there, the prediction error consistent);
+    # in open loop, where output error is consistent, only where its roll mode is imprecise
+    # (agent.ident.aircraft.predictor.roll_imprecise: the rolling gust's own response then
+    # holds the roll's information, which only a noise model reads).
+    if settings.predictor and ready.known is not None:
         fits, predicted, failed = _by_prediction(
             sp,
             fits,
@@ -203,6 +207,7 @@ def fitted_axes(
             dt=dt,
             hold="zoh" if settings.held_inputs else "foh",
             experiments=len(batch),
+            closed_loop=settings.closed_loop,
         )
         notes += failed
     return Fitted(
@@ -236,12 +241,14 @@ def _by_prediction(
     dt: float,
     hold: str,
     experiments: int,
+    closed_loop: bool,
 ) -> tuple[list[AxisFit], dict[str, Predicted], list[str]]:
-    """The lateral axis refined by prediction error where its residual shows process noise,
-    the rolling gust (which nothing measures) as coloured process noise on p's equation, and
-    the lateral gust on β's and r's too where it is not a known input
-    (agent.ident.aircraft.predictor); what each refinement found, and a note for one that
-    failed (the frequency-domain fit is kept). Not where β was synthesised from the INS (no
+    """The lateral axis refined by prediction error where its residual shows process noise
+    and, in open loop, output error's roll mode is imprecise (`roll_imprecise`): the rolling
+    gust (which nothing measures) as coloured process noise on p's equation, and the lateral
+    gust on β's and r's too where it is not a known input (agent.ident.aircraft.predictor);
+    what each refinement found, and a note for one that failed (the frequency-domain fit is
+    kept). Not where β was synthesised from the INS (no
     vanes): the gust then forces the state and the output does not see it (the filter
     error's direct path, agent.ident.aircraft.process), which these noise states do not
     model; on the thesis's aircraft so flown the refinement took the worst mode 1.5 → 26 %
@@ -271,7 +278,8 @@ def _by_prediction(
             for i, c in enumerate(f.states)
             if output_roles[c] in noisy and not problem.fixed_A[i].all()
         ]
-        if not rows or not shows_process_noise(f, problem, rows):
+        wanted = closed_loop or roll_imprecise(f)
+        if not rows or not wanted or not shows_process_noise(f, problem, rows):
             out.append(f)
             continue
         try:
