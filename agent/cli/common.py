@@ -222,7 +222,8 @@ def identification_options(parser: argparse.ArgumentParser) -> None:
         "--closed-loop",
         action="store_true",
         help="the record was flown with the autopilot's loops closed (FBWA: the manoeuvre on "
-        "the sticks): the lateral axis is refined by prediction error (whole-aircraft method)",
+        "the sticks): the lateral axis is refined by prediction error (whole-aircraft method; "
+        "without it, only where output error's roll mode is imprecise)",
     )
     parser.add_argument("--start", type=float, metavar="T0", help="first time used, s")
     parser.add_argument("--end", type=float, metavar="T1", help="last time used, s")
