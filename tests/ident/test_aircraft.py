@@ -1249,6 +1249,7 @@ def test_roll_imprecise_reads_output_errors_fastest_subsiding_real_mode():
     slow = A.copy()
     slow[1, 1], slow[2, 2] = -0.2, -0.1
     assert imprecise(slow, 0.0)  # nothing faster than a spiral can be
+    assert imprecise(A, np.nan)  # bad input tried: a covariance that is not a number
 
 
 def test_a_prediction_error_fit_that_fails_keeps_output_error_and_says_why(monkeypatch):

@@ -78,7 +78,9 @@ from agent.ident.refine import Refinement, eigenvalue_std, refine
 # and 16.4 % at 100 (its frequency-domain fit: 2.8 %); and each Levenberg–Marquardt step's
 # cost grows with the samples. Not the fit's band: in closed loop the surfaces follow the
 # sensors' noise and the band reaches its ceiling (the J-3 Cub's 25 Hz). A roll mode of
-# 12 1/s (the Cub's) is then 0.96 of a sample's time constant: well resolved.
+# 12 1/s (the Cub's) crosses 0.96 of its time constant in a block, and the inputs' block means
+# with a hold between them are not the model's for it: a calm, noise-free J-3 Cub card forced
+# through the refinement had its roll 16.2 % off (docs/limitations.md).
 RATE_HZ = 12.5
 # Each noise state's pole at the start, 1/s: near Dryden's roll gust's break (module text).
 NOISE_POLE = 1.0
@@ -113,8 +115,8 @@ PRECISE = 0.05
 
 def roll_imprecise(fit: AxisFit) -> bool:
     """Whether `fit`'s (output error's) roll mode is missing or its relative σ above
-    PRECISE: the roll as agent.ident.naming names it, the fastest non-oscillatory eigenvalue
-    of the axis, stable and faster than a spiral can be."""
+    PRECISE or unknown: the roll as agent.ident.naming names it, the fastest
+    non-oscillatory eigenvalue of the axis, stable and faster than a spiral can be."""
     n = fit.A.shape[0]
     lam = np.linalg.eigvals(fit.A)
     std = eigenvalue_std(fit.A, fit.covariance[: n * n, : n * n])
@@ -128,7 +130,7 @@ def roll_imprecise(fit: AxisFit) -> bool:
     k = max(reals, key=lambda k: abs(lam[k]))
     if lam[k].real >= 0 or abs(lam[k]) <= 1.0 / SPIRAL_MIN_TIME_CONSTANT:
         return True
-    return std[k].frequency > PRECISE * abs(lam[k])
+    return not std[k].frequency <= PRECISE * abs(lam[k])  # an unknown (nan) σ: imprecise
 
 
 @dataclass(frozen=True)
