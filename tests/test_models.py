@@ -17,6 +17,7 @@ from agent.ident.document import (
     AircraftDocument,
     AxisDocument,
     ModeDocument,
+    NoiseMisfit,
     OkidDocument,
     ResultDocument,
     Wind,
@@ -439,9 +440,12 @@ def turbulent(
     roll_std: float = 0.4,
     excited: float = 0.2,
     tic: float = 0.45,
+    tics: dict[str, float] | None = None,
+    misfit: dict[str, NoiseMisfit] | None = None,
 ) -> Candidate:
     """A lateral whole-aircraft model from a record in turbulence it does not measure: its
-    whole-record TIC `tic`, its TIC at the excited bins `excited`, modes with standard errors."""
+    whole-record TIC `tic`, its TIC at the excited bins `excited` (or each output's, `tics`),
+    modes with standard errors; with `misfit`, refined by prediction error."""
     modes = [
         mode("Dutch roll", (-0.8, 3.0), None, frequency_std_rad_s=0.1, eigenvalue_std=(0.05, 0.1)),
         mode("roll", (roll, 0.0), None, frequency_std_rad_s=roll_std, eigenvalue_std=(roll_std, 0)),
@@ -453,7 +457,9 @@ def turbulent(
         inputs=list(INPUTS),
         iterations=5,
         converged=True,
-        tic_excited=dict.fromkeys(OUTPUTS, excited),
+        tic_excited=tics or dict.fromkeys(OUTPUTS, excited),
+        estimator="prediction error" if misfit else "output error",
+        noise_misfit=misfit or {},
     )
     aircraft = AircraftDocument(
         band_hz=(0.1, 2.0),
@@ -465,6 +471,47 @@ def turbulent(
     )
     c = _with(candidate(model_id, tic=tic, modes=modes, record_s=60.0), aircraft=aircraft)
     return c
+
+
+def test_an_axis_refined_by_prediction_error_is_judged_against_its_noise_model():
+    """An axis that models the disturbance it does not measure (prediction error): an output
+    whose excited bins hold that disturbance (p: TIC 0.55 there) passes when its misfit is no
+    more than its noise model leaves there, and the repeat decides; an output fitted well
+    passes on its TIC whatever its ratio. Bad input tried: a misfit above the band (refused,
+    named with its numbers), an unknown ratio (nan: refused), less misfit than the noise
+    model claims (passes: a noise model that claims too much is no misfit of the model)."""
+    tics = {"beta": 0.08, "p": 0.55, "r": 0.2, "phi": 0.35}
+
+    def refined(p: float, phi: float = 1.0) -> Candidate:
+        misfit = {
+            name: NoiseMisfit(ratio=ratio, low=0.5, high=1.8)
+            for name, ratio in zip(OUTPUTS, (3.0, p, 0.9, phi), strict=True)
+        }
+        return turbulent("b", tics=tics, misfit=misfit)
+
+    earlier = turbulent("a")
+    passed = suggest(refined(1.1), None, None, None, earlier=earlier)
+    assert passed.checks["fit"]
+    assert "prediction error" in passed.steps[3]
+    assert "p 1.10 ≤ 1.80" in passed.steps[3]
+    assert "a's modes repeat" in passed.steps[3]
+    assert suggest(refined(0.2), None, None, None, earlier=earlier).checks["fit"]
+    for bad, text in (
+        (refined(2.5), "p TIC 0.550, misfit 2.50 × its noise model's, above 1.80"),
+        (refined(float("nan")), "p TIC 0.550, misfit nan"),
+        (refined(1.0, phi=2.0), "phi TIC 0.350, misfit 2.00"),
+    ):
+        verdict = suggest(bad, None, None, None, earlier=earlier)
+        assert not verdict.checks["fit"]
+        assert text in verdict.steps[3]
+        assert "beta" not in verdict.steps[3].split("excited bins:")[1]  # TIC 0.08: fits
+    # The same TICs judged as output error's (no noise model): the mean, 0.295, passes; with
+    # p's 0.65 it does not.
+    plain = suggest(turbulent("b", tics=tics), None, None, None, earlier=earlier)
+    assert "0.295 at the excited bins (lateral)" in plain.steps[3]
+    worse = suggest(turbulent("b", tics=tics | {"p": 0.65}), None, None, None, earlier=earlier)
+    assert not worse.checks["fit"]
+    assert "0.320 at the excited bins (lateral) ≥ 0.3" in worse.steps[3]
 
 
 def test_in_unmeasured_turbulence_the_fit_is_judged_at_the_excited_bins_and_by_a_repeat():

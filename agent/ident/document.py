@@ -188,6 +188,16 @@ class Coupling(Document):
     response_by_states: float
 
 
+class NoiseMisfit(Document):
+    """An output's misfit power at the excited bins over what its axis's noise model leaves
+    there (1: as the model claims), and that ratio's central band for the noise alone
+    (agent.ident.aircraft.predictor.misfit_to_noise)."""
+
+    ratio: float
+    low: float
+    high: float
+
+
 class AxisDocument(Document):
     name: Literal["longitudinal", "lateral"]
     outputs: list[str]
@@ -204,6 +214,8 @@ class AxisDocument(Document):
     # Each output's Theil inequality coefficient at the bins the fit used (the controls'
     # excited bins; agent.ident.aircraft.fit.excited_tic).
     tic_excited: dict[str, float] = {}
+    # For a "prediction error" axis, each output's misfit against its noise model.
+    noise_misfit: dict[str, NoiseMisfit] = {}
 
 
 class Engine(Document):

@@ -1191,7 +1191,46 @@ def test_in_a_rolling_gust_nothing_measures_the_fit_is_judged_where_the_inputs_a
     assert estimators["lateral"] == "prediction error"
     assert excited_tic(dominated.result)["lateral"] >= TIC_LIMIT
     assert not verdict.checks["fit"]
+    # p's excited bins are the gust's, as its noise model says; φ's misfit (the gust's
+    # response integrated) is more than the noise model leaves there.
+    assert "its noise model's, above" in verdict.steps[3]
     assert not verdict.update
+
+
+def test_the_noise_models_yardstick_sees_a_misfit_its_noise_does_not_explain(monkeypatch):
+    # A rolling gust nothing measures inside the roll mode's band (corner 1 rad/s), the
+    # lateral axis refined by prediction error (closed loop told). What the refined model
+    # leaves at p's excited bins is no more than its noise model claims there; the same
+    # model with its roll damping L_p halved leaves about twice the band's top, so the fit
+    # step would not excuse it. Bad input tried: a model that misfits; a model whose
+    # response is not finite (a ratio of nan).
+    seen = {}
+    original = predictor.misfit_to_noise
+
+    def keep(problem, theta, weights, result, lengths):
+        seen.update(problem=problem, theta=theta, weights=weights, result=result, lengths=lengths)
+        return original(problem, theta, weights, result, lengths)
+
+    monkeypatch.setattr(predictor, "misfit_to_noise", keep)
+    u, air, op, navigation, _ = gusty_record(8, roll_gust=0.002, roll_corner=1.0)
+    record = Experiment(u, air, operating_point=op, navigation=navigation)
+    result = aircraft_identify(record, closed_loop=True)
+    (lateral,) = [a for a in result.aircraft.axes if a.name == "lateral"]
+    assert lateral.estimator == "prediction error"
+    p = lateral.noise_misfit["p"]
+    assert 0 < p.low < 1 < p.high
+    assert p.ratio <= p.high
+    problem, theta = seen["problem"], seen["theta"]
+    A, B, taus, d = problem.unpack(theta)
+    row = lateral.outputs.index("p")
+    worse = A.copy()
+    worse[row, row] *= 0.5
+    args = (seen["weights"], seen["result"], seen["lengths"])
+    ratio, _, high = original(problem, problem.pack(worse, B, taus, d), *args)[row]
+    assert ratio > 1.5 * high  # 2.8 against a band's top of 1.3, measured
+    broken = A.copy()
+    broken[row, row] = np.nan
+    assert np.isnan(original(problem, problem.pack(broken, B, taus, d), *args)).all()
 
 
 def _roll(result: Identification):

@@ -61,6 +61,7 @@ from agent.ident.document import (
     Coupling,
     Engine,
     Gain,
+    NoiseMisfit,
     Wind,
 )
 from agent.ident.errors import DataError, IdentificationFailed
@@ -713,6 +714,12 @@ def _report(
                 tic_excited={
                     outputs[i]: float(t) for i, t in zip(f.states, f.tic_excited, strict=True)
                 },
+                noise_misfit={
+                    outputs[i]: NoiseMisfit(ratio=row[0], low=row[1], high=row[2])
+                    for i, row in zip(f.states, predicted[f.name].misfit.tolist(), strict=True)
+                }
+                if f.name in predicted
+                else {},
             )
             for f in fits
         ],

@@ -47,11 +47,12 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.linalg
 import scipy.signal
+import scipy.stats
 
 from agent.ident.aircraft import process
 from agent.ident.aircraft.fit import (
@@ -98,6 +99,13 @@ MATERIAL = 0.05
 # instead of 50.
 SETTLED = 1e-4
 PASSES = 2
+# The noise model's yardstick (`misfit_to_noise`): the draws of the innovation model's
+# disturbance whose residual power gives the ratio's spread, their generator's seed (the
+# result does not change between runs), and the tail probability on either side of the
+# band the suggestion's fit step accepts (agent.models).
+NOISE_DRAWS = 2000
+NOISE_SEED = 0
+NOISE_TAIL = 0.001
 
 
 # In open loop output error is consistent, and the refinement is used only where output
@@ -140,6 +148,10 @@ class Predicted:
 
     poles: dict[int, float]  # output column → the pole of its equation's noise state
     innovation_std: np.ndarray
+    # Per state of the axis (rows as `states`): its misfit power at the excited bins over what
+    # the noise model leaves there, and that ratio's central band for the noise alone
+    # (`misfit_to_noise`): [ratio, low, high].
+    misfit: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
 
 def shows_process_noise(fit: AxisFit, problem: AxisProblem, rows: Sequence[int]) -> bool:
@@ -216,6 +228,7 @@ def refined(
     # inputs and the outputs. Picking every step-th sample instead aliased the noise
     # above the band into it (the SGS 1-26's roll mode 13 % off at 50 Hz, 3 % averaged).
     step = max(1, int(np.floor(1.0 / (dt * RATE_HZ) + 1e-9)))
+    lengths = np.array([prepared.y.shape[0] * dt for prepared in ready.batch])
     batch = [
         Experiment(_blocks(np.hstack([e.u, np.ones((e.u.shape[0], 1))]), step), _blocks(e.y, step))
         for e in series(fit, ready, sp, dt)
@@ -268,7 +281,66 @@ def refined(
         tic_excited=excited_tic(problem, theta),
     )
     poles = {fit.states[i]: float(-Ac[n + k, n + k]) for k, i in enumerate(rows)}
-    return axis, Predicted(poles=poles, innovation_std=result.noise_std)
+    misfit = misfit_to_noise(problem, theta, fit.bin_std, result, lengths)
+    return axis, Predicted(poles=poles, innovation_std=result.noise_std, misfit=misfit)
+
+
+def misfit_to_noise(
+    problem: AxisProblem,
+    theta: np.ndarray,
+    weights: np.ndarray,
+    result: Refinement,
+    lengths: np.ndarray,
+) -> np.ndarray:
+    """Each state's misfit power at `problem`'s (excited) bins over what the prediction-error
+    model's own noise leaves there, with that ratio's central band for the noise alone:
+    (n, 3) rows [ratio, low, high] (nan where the model has no response).
+
+    The model claims y = G u + v, v = H(z) e the innovation form's disturbance, H(z) = I +
+    C (zI − Φ)⁻¹ K, e white of the innovations' variances Σe at the blocks' interval Tb
+    (`result`). Its finite Fourier transform over a record of length T (`lengths`, s, per
+    experiment) has at ω the covariance T·Tb·H Σe Hᴴ, bins asymptotically independent
+    (Pintelon & Schoukens, *System Identification: A Frequency Domain Approach*, 2012, §6.3
+    for its leakage: the transient term), and the frequency-domain record's transients,
+    re-fitted by weighted least squares (`weights`: the fit's σ per bin and state), take their
+    share of it. NOISE_DRAWS draws of that disturbance with the transients' share projected
+    out give the power the model expects and its spread; the band is the gamma distribution
+    of those moments (Satterthwaite's approximation of a weighted sum of χ²) at NOISE_TAIL on
+    either side. Where the noise is coloured the expected power lies in few bins and the band
+    is wide (a glider's rolling gust: about 0.5–1.8 on p)."""
+    X, J = problem.response(theta, jacobian=True)
+    n, F = problem.n, problem.s.size
+    if not (np.all(np.isfinite(X)) and np.all(np.isfinite(result.discrete.A))):
+        return np.full((n, 3), np.nan)
+    Phi, C, K = result.discrete.A, result.discrete.C, result.gain
+    size = Phi.shape[0]
+    z = np.exp(problem.s * result.dt)
+    H = np.eye(n) + C @ np.linalg.solve(z[:, None, None] * np.eye(size) - Phi, K)
+    S = (lengths[problem.record] * result.dt)[:, None, None] * (
+        H * result.noise_std**2 @ H.conj().transpose(0, 2, 1)
+    )
+    values, vectors = np.linalg.eigh(S)
+    root = vectors * np.sqrt(np.clip(values, 0.0, None))[:, None, :]  # S = root rootᴴ
+    start = problem.size - 2 * n * problem.experiments
+    Jd = J[:, :, start:] / weights[:, :, None]
+    Q, _ = np.linalg.qr(np.vstack([Jd.real.reshape(F * n, -1), Jd.imag.reshape(F * n, -1)]))
+    rng = np.random.default_rng(NOISE_SEED)
+    powers = []
+    for first in range(0, NOISE_DRAWS, 250):
+        draws = min(250, NOISE_DRAWS - first)
+        Z = rng.standard_normal((draws, F, n)) + 1j * rng.standard_normal((draws, F, n))
+        V = np.einsum("fij,dfj->dfi", root, Z / np.sqrt(2)) / weights
+        stacked = np.hstack([V.real.reshape(draws, -1), V.imag.reshape(draws, -1)])
+        left = stacked - (stacked @ Q) @ Q.T
+        R = (left[:, : F * n] + 1j * left[:, F * n :]).reshape(draws, F, n) * weights
+        powers.append(np.sum(np.abs(R) ** 2, axis=1))
+    power = np.vstack(powers)
+    mean = power.mean(axis=0)
+    shape = 1.0 / np.maximum(np.var(power / mean, axis=0), 1e-12)
+    low = scipy.stats.gamma.ppf(NOISE_TAIL, shape, scale=1.0 / shape)
+    high = scipy.stats.gamma.ppf(1.0 - NOISE_TAIL, shape, scale=1.0 / shape)
+    ratio = np.sum(np.abs(problem.Y - X) ** 2, axis=0) / mean
+    return np.column_stack([ratio, low, high])
 
 
 def _refine(
