@@ -189,3 +189,23 @@ async def test_a_model_missing_a_mode_sizes_nothing(agent):
     assert whole.model_id in sizings(agent)[-1].source
     kept = [c.model_id for c in agent.identification.recent["lateral"]]
     assert kept == [lacking.model_id, whole.model_id]
+
+
+async def test_the_repeat_is_judged_against_the_last_model_with_every_mode(agent):
+    """Step 3's repeat (models._fit_step) compares a run's model with the axes' last one that
+    has every mode they must have. Bad input tried: a run whose model lacks its modes (3
+    states for the lateral axes) after one that has them: it does not become what the next
+    run is compared with; a run with them again does."""
+    await command(agent, messages.IdentSettings(axes="lateral"), 1)
+    first = await identify_a2(agent)
+    assert first.checks["modes"]
+    assert agent.identification.complete["lateral"].model_id == first.model_id
+    await command(agent, messages.IdentSettings(axes="lateral", order=3), 2)
+    lacking = await identify_a2(agent)
+    assert not lacking.checks["modes"]
+    assert agent.identification.latest["lateral"].model_id == lacking.model_id
+    assert agent.identification.complete["lateral"].model_id == first.model_id
+    await command(agent, messages.IdentSettings(axes="lateral"), 3)
+    again = await identify_a2(agent)
+    assert again.checks["modes"]
+    assert agent.identification.complete["lateral"].model_id == again.model_id

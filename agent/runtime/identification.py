@@ -103,6 +103,9 @@ class Identifier:
         self.newest: dict[str, Candidate] = {}
         # By axes: the latest candidate, good or not (what its run flew grows the build-up).
         self.latest: dict[str, Candidate] = {}
+        # By axes: the latest candidate with every mode its axes must have (step 2b passed):
+        # what step 3's repeat test compares the next one with.
+        self.complete: dict[str, Candidate] = {}
         # By axes: the RECORDS_KEPT latest candidates, good or not, newest last.
         self.recent: dict[str, deque[Candidate]] = {}
 
@@ -427,9 +430,14 @@ class Identifier:
             record_s=len(outcome.experiment[0]) * dt,
             trim=outcome.trim,
         )
-        # Step 3's repeat test takes the axes' last model, where its record is not also this
-        # one's (a batch holds the earlier records: not independent).
-        earlier = None if ident.batch else self.latest.get(axes)
+        # Step 3's repeat test takes the axes' last model that has every mode they must have,
+        # where its record is not also this one's (a batch holds the earlier records: not
+        # independent). A run whose model lacks a mode (the gusts took its short period)
+        # has nothing to repeat, and the run after it is judged against the last complete
+        # one, as a test engineer compares a repeat with the last good run: in a light-
+        # turbulence `sysid sim` of the glider (2026-12-06) such a run refused the next one
+        # ("has no short period to compare").
+        earlier = None if ident.batch else self.complete.get(axes)
         suggestion = await self._compare(candidate, len(rows), earlier)
         await self._in_store(self.models.add, candidate)
         self.latest[axes] = candidate
@@ -438,6 +446,8 @@ class Identifier:
         # from what stands in for it: it sizes nothing, and the last one that had them all
         # still does.
         checks = suggestion.checks
+        if checks.get("modes"):
+            self.complete[axes] = candidate
         if (
             checks.get("stability")
             and checks.get("modes", True)
