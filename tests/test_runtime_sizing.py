@@ -196,6 +196,14 @@ async def test_the_repeat_is_judged_against_the_last_model_with_every_mode(agent
     has every mode they must have. Bad input tried: a run whose model lacks its modes (3
     states for the lateral axes) after one that has them: it does not become what the next
     run is compared with; a run with them again does."""
+    compared = []  # what each suggestion was given to repeat (the call goes through)
+    suggest_with = agent.identification._compare
+
+    async def recording(candidate, samples, earlier):
+        compared.append(earlier.model_id if earlier else None)
+        return await suggest_with(candidate, samples, earlier)
+
+    agent.identification._compare = recording
     await command(agent, messages.IdentSettings(axes="lateral"), 1)
     first = await identify_a2(agent)
     assert first.checks["modes"]
@@ -209,3 +217,4 @@ async def test_the_repeat_is_judged_against_the_last_model_with_every_mode(agent
     again = await identify_a2(agent)
     assert again.checks["modes"]
     assert agent.identification.complete["lateral"].model_id == again.model_id
+    assert compared == [None, first.model_id, first.model_id]
