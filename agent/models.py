@@ -213,11 +213,15 @@ def excited_fit(result: ResultDocument) -> list[tuple[str, bool, str]]:
     it does not measure (agent.ident.aircraft.predictor), and the response to it is in
     the excited bins as well (a glider's rolling gust: p's TIC there 0.44–0.63 on the
     benchmark's card flights, with the roll mode within 10 % on 9 of 10): each of its
-    outputs passes when its TIC there is below TIC_LIMIT or its misfit power is what its
-    noise model leaves there (`NoiseMisfit`'s band): not more (a misfit the model does not
-    explain) and not less (the input model fitted the disturbance: on a record the rolling
-    gust dominates, p's misfit a tenth to four tenths of its noise model's, the roll mode
-    39–58 % off; tests/ident/test_aircraft.py)."""
+    outputs passes when its TIC there is below TIC_LIMIT or its misfit power is no more
+    than its noise model leaves there (`NoiseMisfit`'s band's top): more is a misfit the
+    model does not explain (on a record the rolling gust dominates, φ's at 4.0 × its noise
+    model's against a top of 3.3, the roll mode 39 % off; tests/ident/test_aircraft.py).
+    Less is not judged: a noise model that claims too much at the excited bins is no misfit
+    of the input model (the glider's last run of a light-turbulence `sysid sim`, its
+    lateral modes within 2 % of the truth, has p at 0.41 of its noise model's where the
+    noise alone gives 0.54–1.64), though on that gust-dominated record p's 0.1–0.4 came
+    with the input model fitted to the gust."""
     axes = result.aircraft.axes if result.aircraft else []
     out = []
     for a in axes:
