@@ -434,9 +434,7 @@ class Identifier:
         # where its record is not also this one's (a batch holds the earlier records: not
         # independent). A run whose model lacks a mode (the gusts took its short period)
         # has nothing to repeat, and the run after it is judged against the last complete
-        # one, as a test engineer compares a repeat with the last good run: in a light-
-        # turbulence `sysid sim` of the glider (2026-12-06) such a run refused the next one
-        # ("has no short period to compare").
+        # one, as a test engineer compares a repeat with the last good run.
         earlier = None if ident.batch else self.complete.get(axes)
         suggestion = await self._compare(candidate, len(rows), earlier)
         await self._in_store(self.models.add, candidate)

@@ -307,26 +307,39 @@ def misfit_to_noise(
     out give the power the model expects and its spread; the band is the gamma distribution
     of those moments (Satterthwaite's approximation of a weighted sum of χ²) at NOISE_TAIL on
     either side. Where the noise is coloured the expected power lies in few bins and the band
-    is wide (a glider's rolling gust: about 0.5–1.8 on p)."""
+    is wide."""
     X, J = problem.response(theta, jacobian=True)
-    n, F = problem.n, problem.s.size
+    n = problem.n
     if not (np.all(np.isfinite(X)) and np.all(np.isfinite(result.discrete.A))):
         return np.full((n, 3), np.nan)
     Phi, C, K = result.discrete.A, result.discrete.C, result.gain
-    size = Phi.shape[0]
     z = np.exp(problem.s * result.dt)
-    H = np.eye(n) + C @ np.linalg.solve(z[:, None, None] * np.eye(size) - Phi, K)
+    H = np.eye(n) + C @ np.linalg.solve(z[:, None, None] * np.eye(Phi.shape[0]) - Phi, K)
     S = (lengths[problem.record] * result.dt)[:, None, None] * (
         H * result.noise_std**2 @ H.conj().transpose(0, 2, 1)
     )
+    transients = J[:, :, problem.size - 2 * n * problem.experiments :]
+    power = _residual_power_draws(S, transients, weights)
+    mean = power.mean(axis=0)
+    shape = 1.0 / np.maximum(np.var(power / mean, axis=0), 1e-12)
+    low = scipy.stats.gamma.ppf(NOISE_TAIL, shape, scale=1.0 / shape)
+    high = scipy.stats.gamma.ppf(1.0 - NOISE_TAIL, shape, scale=1.0 / shape)
+    ratio = np.sum(np.abs(problem.Y - X) ** 2, axis=0) / mean
+    return np.column_stack([ratio, low, high])
+
+
+def _residual_power_draws(S: np.ndarray, transients: np.ndarray, weights: np.ndarray):
+    """(NOISE_DRAWS, n) each output's power summed over the bins of a disturbance drawn
+    with covariance S (F, n, n) per bin, less its weighted least-squares fit by the
+    transients' columns (F, n, q), as the frequency-domain record's transients take it."""
+    F, n = weights.shape
     values, vectors = np.linalg.eigh(S)
     root = vectors * np.sqrt(np.clip(values, 0.0, None))[:, None, :]  # S = root rootᴴ
-    start = problem.size - 2 * n * problem.experiments
-    Jd = J[:, :, start:] / weights[:, :, None]
+    Jd = transients / weights[:, :, None]
     Q, _ = np.linalg.qr(np.vstack([Jd.real.reshape(F * n, -1), Jd.imag.reshape(F * n, -1)]))
     rng = np.random.default_rng(NOISE_SEED)
     powers = []
-    for first in range(0, NOISE_DRAWS, 250):
+    for first in range(0, NOISE_DRAWS, 250):  # in chunks: memory stays small on long records
         draws = min(250, NOISE_DRAWS - first)
         Z = rng.standard_normal((draws, F, n)) + 1j * rng.standard_normal((draws, F, n))
         V = np.einsum("fij,dfj->dfi", root, Z / np.sqrt(2)) / weights
@@ -334,13 +347,7 @@ def misfit_to_noise(
         left = stacked - (stacked @ Q) @ Q.T
         R = (left[:, : F * n] + 1j * left[:, F * n :]).reshape(draws, F, n) * weights
         powers.append(np.sum(np.abs(R) ** 2, axis=1))
-    power = np.vstack(powers)
-    mean = power.mean(axis=0)
-    shape = 1.0 / np.maximum(np.var(power / mean, axis=0), 1e-12)
-    low = scipy.stats.gamma.ppf(NOISE_TAIL, shape, scale=1.0 / shape)
-    high = scipy.stats.gamma.ppf(1.0 - NOISE_TAIL, shape, scale=1.0 / shape)
-    ratio = np.sum(np.abs(problem.Y - X) ** 2, axis=0) / mean
-    return np.column_stack([ratio, low, high])
+    return np.vstack(powers)
 
 
 def _refine(
