@@ -391,6 +391,10 @@ class Recorder(Section):
     delay_s: float = Field(0.25, ge=0.0, le=1.0)
     """Frames are assembled this long after their time, so samples just after it (for
     interpolation) and late arrivals are in."""
+    hold_s: float = Field(3.0, ge=1.0, le=5.0)
+    """A frame whose samples are later than delay_s (a loop held up by a busy CPU, a device's
+    backlog read after it) waits for them up to this long after its time, then is recorded
+    with what came; a channel silent for longer holds nothing back."""
     max_age_s: float = Field(0.1, gt=0.0, le=10.0)
     """A channel whose newest sample is older than this at a frame time is recorded empty
     (NaN) there; its age is recorded either way."""

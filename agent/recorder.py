@@ -6,8 +6,16 @@ T (default every 10 ms, assembled `delay_s` later so the samples around T are in
 is sampled by linear interpolation between the samples around T or by holding the latest one
 (flags, counters), and the age of its newest sample at T is recorded beside it; a channel whose
 newest sample is older than `max_age_s` is recorded empty (NaN) — a gap is visible, never
-papered over. Nothing here blocks: histories and the ring are fixed-size, and rows go to the
-log writer thread through its bounded queue (drops counted).
+papered over.
+
+Samples can come later than `delay_s`: a loop held up by a busy CPU, or a device's backlog read
+in pieces after it (pyserial-asyncio reads a port's buffer a chunk per loop turn, and the readers
+run after the recorder's own wake-up). While a live channel's next sample is overdue, the frames
+after its newest sample wait for it, up to `hold_s` after their time, so late data are recorded,
+not lost; a channel silent for longer than that (unplugged) holds nothing back.
+
+Nothing here blocks: histories and the ring are fixed-size, and rows go to the log writer
+thread through its bounded queue (drops counted).
 """
 
 from __future__ import annotations
@@ -29,8 +37,14 @@ from drivers.values import Window
 
 log = logging.getLogger(__name__)
 
-# Samples kept per channel: 2 s at 100 Hz covers the frame delay and any catch-up.
-HISTORY = 200
+# Samples kept per channel: the frames they serve are at most `hold_s` old (≤ 5 s), and a
+# channel samples at up to 1000 Hz (a VN-200's binary output); older ones are dropped by time.
+HISTORY = 6000
+# Past the newest sample's time, its channel's next is due within this many of its intervals
+# (the devices' clocks are smooth; a dropped frame doubles one interval).
+DUE_INTERVALS = 2.5
+# The intervals a channel's sample interval is averaged over.
+INTERVALS = 10
 # Excitation windows remembered.
 MARKS = 256
 
@@ -52,6 +66,23 @@ class _History:
     def __init__(self) -> None:
         self.times: deque[float] = deque(maxlen=HISTORY)
         self.values: deque[float] = deque(maxlen=HISTORY)
+
+    def due(self) -> float:
+        """The time by which this channel's next sample is due (inf while it has fewer than
+        two: nothing to expect yet)."""
+        times = self.times
+        n = min(len(times) - 1, INTERVALS)
+        if n < 1:
+            return math.inf
+        return times[-1] + DUE_INTERVALS * (times[-1] - times[-1 - n]) / n
+
+    def forget_before(self, t: float) -> None:
+        """Drop samples older than t, keeping the newest before it (a hold or an interpolation
+        at t still needs it) and the last INTERVALS + 1 (the next sample's due time)."""
+        times, values = self.times, self.values
+        while len(times) > INTERVALS + 1 and times[1] <= t:
+            times.popleft()
+            values.popleft()
 
     def sample(self, t: float, linear: bool, max_age: float) -> tuple[float, float]:
         """(value, age) at t."""
@@ -85,6 +116,11 @@ class Ring:
         self._time[self._next] = row[0]
         self._next = (self._next + 1) % len(self._data)
         self.count = min(self.count + 1, len(self._data))
+
+    @property
+    def newest(self) -> float | None:
+        """Column 0 of the newest row (None while empty)."""
+        return None if self.count == 0 else float(self._time[self._next - 1])
 
     def _segments(self) -> list[slice]:
         """The stored rows as slices of the array, oldest first."""
@@ -136,6 +172,7 @@ class Recorder:
         self.ring = Ring(round(config.capacity_s * config.rate_hz), 1 + 2 * len(self.channels))
         self.marks: deque = deque(maxlen=MARKS)
         self.counters: Counter[str] = Counter()
+        self._waited = -1  # the last frame that waited for a late sample
 
     @property
     def columns(self) -> list[str]:
@@ -191,25 +228,62 @@ class Recorder:
             row[1 + k], row[1 + n + k] = self._histories[name].sample(t, linear, max_age)
         return row
 
+    @property
+    def newest(self) -> float | None:
+        """The time of the newest frame in the ring (None while it is empty)."""
+        return self.ring.newest
+
+    def _ready_until(self, now: float) -> float:
+        """Frames up to this time have every live channel's samples in: the newest sample's
+        time of each channel whose next sample was due by `now` and has not come, over those
+        heard from within `hold_s` (one silent for longer is unplugged or dead: its frames are
+        recorded empty). A frame after it would hold that channel's newest sample in place of
+        the late ones."""
+        hold = self._config.hold_s
+        ready = math.inf
+        for history in self._histories.values():
+            times = history.times
+            if times and now - times[-1] < hold and history.due() < now:
+                ready = min(ready, times[-1])
+        return ready
+
     async def run(self) -> None:
-        """Assemble a frame every 1/rate_hz s, `delay_s` after its time, until cancelled."""
-        delay = self._config.delay_s
+        """Assemble a frame every 1/rate_hz s, `delay_s` after its time (or once its late
+        samples are in, at most `hold_s` after it), until cancelled."""
+        delay, hold, dt = self._config.delay_s, self._config.hold_s, self._dt
         start = self._clock.now()
         i = 0
+        wake = start + delay
         while True:
-            await self._clock.sleep_until(start + i * self._dt + delay)
-            due = math.floor((self._clock.now() - delay - start) / self._dt + 1e-9)
-            if due - i > 1:
-                self.counters["catch_up_frames"] += due - i
-            # Late frames are still assembled (the histories hold 2 s): none is lost.
+            await self._clock.sleep_until(wake)
+            now = self._clock.now()
+            due = math.floor((now - delay - start) / dt + 1e-9)
+            ready = self._ready_until(now)
+            # Late frames are still assembled (the histories hold what they need): none is lost.
+            assembled = 0
             while i <= due:
-                row = self.frame(start + i * self._dt)
+                t = start + i * dt
+                if t > ready and now - t < hold:
+                    if self._waited != i:  # a live channel's sample is late: wait for it
+                        self._waited = i
+                        self.counters["waited_frames"] += 1
+                    break
+                row = self.frame(t)
                 self.ring.append(row)
                 self.counters["frames"] += 1
                 if self.sink is not None:
                     self.sink(row)
+                assembled += 1
                 i += 1
-            self._flush_excitations(start + (i - 1) * self._dt)
+            if assembled > 1:
+                self.counters["catch_up_frames"] += assembled - 1
+            if assembled:
+                last = start + (i - 1) * dt
+                for history in self._histories.values():
+                    history.forget_before(last)
+                self._flush_excitations(last)
+            # The next frame's time, or a frame's period from now while one waits.
+            wake = start + i * dt + delay if i > due else now + dt
 
     def window(self, t0: float, t1: float) -> Frames:
         """A copy of the frames with time in [t0, t1]."""

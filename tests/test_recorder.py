@@ -64,11 +64,12 @@ async def test_frames_at_the_rate_with_catch_up_after_a_stall():
     rows = []
     rec = Recorder(RecorderConfig(capacity_s=10.0), clock, channels=["p"], sink=rows.append)
     task = asyncio.create_task(rec.run(), name="recorder")
-    for k in range(1000):
-        rec.push(Sample("vn200", k * 0.01, {"p": k * 0.01}))
+    k = 0
+    while clock.now() <= 9.0:
+        while k * 0.01 <= clock.now():  # the device's samples, on time: the loop was late
+            rec.push(Sample("vn200", k * 0.01, {"p": k * 0.01}))
+            k += 1
         await asyncio.sleep(0)
-        if clock.now() > 9.0:
-            break
     task.cancel()
     with pytest.raises(asyncio.CancelledError):
         await task
@@ -78,6 +79,71 @@ async def test_frames_at_the_rate_with_catch_up_after_a_stall():
     window = rec.window(2.0, 3.0)
     assert len(window.time) == 101
     assert np.allclose(window.values["p"], window.time, atol=1e-9)
+
+
+async def _recording(rec, clock, until, deliver):
+    """Run `rec` on the virtual clock until `until`; before each of its wake-ups `deliver(now)`
+    pushes what a device has delivered by then."""
+    task = asyncio.create_task(rec.run(), name="recorder")
+    try:
+        while clock.now() <= until:
+            deliver(clock.now())
+            await asyncio.sleep(0)
+    finally:
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await task
+
+
+async def test_samples_later_than_the_delay_are_waited_for_not_lost():
+    # Bad input tried: a device's samples from 5.0 s to 6.5 s all delivered at once at 6.5 s
+    # (a loop held up 1.5 s, or a backlog read after it), six times the assembly delay.
+    clock = VirtualClock(0.0)
+    rows = []
+    rec = Recorder(RecorderConfig(capacity_s=20.0), clock, channels=["p"], sink=rows.append)
+    sent = {"k": 0}
+
+    def deliver(now):
+        while (t := sent["k"] * 0.01) <= now and not (t >= 5.0 and now < 6.5):
+            rec.push(Sample("vn200", t, {"p": np.sin(t)}))
+            sent["k"] += 1
+
+    await _recording(rec, clock, 9.0, deliver)
+    frames = rec.window(-np.inf, np.inf)
+    assert np.allclose(np.diff(frames.time), 0.01)  # every frame, in order
+    settled = frames.time > 0.02
+    assert np.isfinite(frames.values["p"][settled]).all()  # none recorded empty
+    assert np.allclose(frames.values["p"][settled], np.sin(frames.time[settled]), atol=1e-3)
+    assert rec.counters["waited_frames"] >= 1
+    assert rec.counters["late_samples"] == 0
+
+
+async def test_a_silent_channel_holds_the_frames_back_no_longer_than_hold_s():
+    # Bad input tried: one of two sensors silent from 5 s on (unplugged), the other on time.
+    clock = VirtualClock(0.0)
+    config = RecorderConfig(capacity_s=20.0, hold_s=1.5)
+    rec = Recorder(config, clock, channels=["p", "Vt"])
+    newest = []
+    sent = {"k": 0}
+
+    def deliver(now):
+        while (t := sent["k"] * 0.01) <= now:
+            values = {"p": 1.0} if t > 5.0 else {"p": 1.0, "Vt": 20.0}
+            rec.push(Sample("dev", t, values))
+            sent["k"] += 1
+        if rec.newest is not None:
+            newest.append((now, rec.newest))
+
+    await _recording(rec, clock, 12.0, deliver)
+    lag = np.array([now - t for now, t in newest])
+    assert lag.max() <= config.hold_s + 0.02  # waited for Vt while it might have been late
+    assert lag.max() > 1.0
+    assert lag[-100:].max() <= config.delay_s + 0.02  # then on time again, Vt or not
+    frames = rec.window(-np.inf, np.inf)
+    assert np.allclose(np.diff(frames.time), 0.01)
+    assert np.isfinite(frames.values["p"][frames.time > 0.02]).all()
+    gone = frames.time > 5.0 + config.max_age_s + 0.01
+    assert np.isnan(frames.values["Vt"][gone]).all()  # the silence is a gap in the record
 
 
 def test_ring_keeps_the_newest_rows():

@@ -1,12 +1,14 @@
 """The whole recording chain over pseudo-terminals: three fake sensors at 100 Hz, the real
 drivers, the recorder, and the flight log.
 
-Bad input tried: unplugging one sensor's port for 1.5 s in the middle of a recording.
+Bad input tried: unplugging one sensor's port for 1.5 s in the middle of a recording; the event
+loop blocked for 1 s (the fake sensors' frames then come late, in a burst).
 """
 
 from __future__ import annotations
 
 import asyncio
+import time
 
 import numpy as np
 import pytest
@@ -102,3 +104,41 @@ async def test_unplugging_one_sensor_records_the_gap_and_never_stalls_the_others
     assert vt_age[missing].max() > 1.4
     assert np.isfinite(vt[-50:]).all()  # recording resumed
     assert np.isfinite(frames.values["p"][missing]).all()  # the INS kept recording
+
+
+def _hold_up_the_loop(rig: Rig, seconds: float) -> None:
+    """Block the event loop for `seconds` (a busy CPU) while the fake sensors go on sending,
+    as devices with their own oscillators do: their bytes wait in the ports."""
+    end = rig.clock.now() + seconds
+    while (now := rig.clock.now()) < end:
+        for emitter in rig.emitters.values():
+            emitter.emit_owed(now)
+        time.sleep(PERIOD / 2)
+
+
+async def test_a_stalled_loop_loses_no_recorded_data(tmp_path):
+    stalled = {}
+
+    async def stall(rig: Rig) -> None:
+        await asyncio.sleep(2.0)
+        stalled["at"] = rig.clock.now()
+        # Six times the recorder's delay, and longer than the drivers' silence watchdog (1 s).
+        _hold_up_the_loop(rig, 1.5)
+        await asyncio.sleep(3.0)
+
+    rig, recorder, _, _ = await _record(tmp_path, 0, during=stall)
+    frames = recorder.window(-np.inf, np.inf)
+    assert np.allclose(np.diff(frames.time), 0.01)  # every frame
+    settled = frames.time > frames.time[0] + 1.0
+    around = settled & (frames.time > stalled["at"] - 1.0) & (frames.time < stalled["at"] + 2.5)
+    assert around.sum() >= 340
+    # The frames of the stall came late, in a burst after it: each recorded, none empty.
+    for name in ("p", "Vt", "aileron", "vn_time", "adc_sample", "box_seq"):
+        assert np.isfinite(frames.values[name][settled]).all(), name
+    for name in ("vn200", "airdata", "surfaces"):
+        assert len(rig.samples[name]) == rig.emitters[name].sent, name
+        health = rig.drivers[name].health()
+        assert (health.opens, health.silences) == (1, 0), name  # not taken for a silent device
+        errors = _truth_errors(rig, recorder, name, frames)
+        assert np.all(np.abs(errors[settled[np.isfinite(frames.values[COUNTERS[name]])]]) < PERIOD)
+    assert recorder.counters["waited_frames"] >= 1

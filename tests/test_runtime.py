@@ -127,11 +127,11 @@ def test_an_agent_built_without_config_text_logs_the_hash_of_its_settings(tmp_pa
 
 def test_every_update_period_queues_the_latest_data(agent):
     n = len(agent.recorder.channels)
-    for k in range(3000):  # 30 s of frames at 100 Hz
+    for k in range(3001):  # 30 s of frames at 100 Hz, the newest at 130 s
         row = np.zeros(1 + 2 * n)
         row[0] = 100.0 + k * 0.01
         agent.recorder.ring.append(row)
-    window, rows = agent.identification.periodic_window(130.0, 20.0)
+    window, rows = agent.identification.periodic_window(20.0)
     assert window.end - window.start == pytest.approx(20.0)
     assert rows[0, 0] >= window.start
     assert rows[-1, 0] <= window.end

@@ -147,10 +147,12 @@ class Identifier:
             name, since, _ = self._stage
             self._took[(axes, name)] = (self.clock.now() - since, samples)
 
-    def periodic_window(self, now: float, period: float) -> tuple[Window, np.ndarray] | None:
-        """Queue the last `period` seconds of frames for identification: the window and its
-        rows, or None when there are none or the queue is full."""
-        end = now - self.config.recorder.delay_s
+    def periodic_window(self, period: float) -> tuple[Window, np.ndarray] | None:
+        """Queue the last `period` seconds of frames recorded for identification: the window and
+        its rows, or None when there are none or the queue is full."""
+        end = self.recorder.newest
+        if end is None:
+            return None
         rows = self.recorder.ring.between(end - period, end)
         if len(rows) < 2:
             return None
@@ -165,7 +167,7 @@ class Identifier:
             period = self.settings.update_period_s
             await asyncio.sleep(period or PERIODIC_IDLE_S)
             if period:
-                self.periodic_window(self.clock.now(), period)
+                self.periodic_window(period)
 
     # -- the ground's settings and decisions -----------------------------------------------
 

@@ -121,7 +121,11 @@ class Live:
         live = self.config.live
         dt = 1.0 / live.rate_hz
         count = max(1, round(live.period_s * live.rate_hz))
-        end = now - self.config.recorder.delay_s  # the newest frame assembled
+        # Up to the newest frame recorded (`delay_s` behind, more while late samples are waited
+        # for): a frame not yet assembled would show as missing.
+        end = self.recorder.newest
+        if end is None:
+            end = now - self.config.recorder.delay_s
         times = end - dt * np.arange(count)[::-1]
         tenths: dict[str, list[int | None]] = {}
         if playing is not None:

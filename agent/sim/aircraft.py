@@ -186,6 +186,12 @@ class SimAircraft:
         self.emitters: dict[str, devices.Emitter] = {}
         self.mavlink_address: tuple[str, int] | None = None
         self.ticks = 0
+        self._due: float | None = None  # the clock time the next sample is simulated at
+
+    def behind(self) -> float:
+        """How far the simulated world is behind the clock, s (0 before it flies): a process
+        starved of CPU runs the samples it owes back to back, its sensors' frames late."""
+        return 0.0 if self._due is None else max(0.0, self._clock.now() - self._due)
 
     def _state(self) -> dict[str, float]:
         return self.truth
@@ -244,7 +250,8 @@ class SimAircraft:
                 if sample % every[name] == 0:
                     emitter.emit(t + h, sample // every[name])
             sample += 1
-            await self._clock.sleep_until(start + sample * h)
+            self._due = start + sample * h
+            await self._clock.sleep_until(self._due)
 
 
 async def serve(

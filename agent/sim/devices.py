@@ -120,20 +120,29 @@ class Emitter:
         self.dropped = 0
         self.truth: deque[tuple[int, float]] = deque(maxlen=TRUTH)
         """(frame number, sample time) of every frame written whole and uncorrupted."""
+        self._start = 0.0  # set when `run` starts
+        self._next = 0  # the next frame's number
 
     @property
     def rate_hz(self) -> float:
         return self._rate
 
     async def run(self) -> None:
-        """Emit on the clock's deadlines (a device with its own oscillator)."""
-        start = self._clock.now()
-        k = 0
+        """Emit on the clock's deadlines (a device with its own oscillator), one frame a turn
+        of the loop when it is behind."""
+        self._start = self._clock.now()
         while True:
-            t = start + k / self._rate
-            await self._clock.sleep_until(t)
-            self.emit(t, k)
-            k += 1
+            await self._clock.sleep_until(self._start + self._next / self._rate)
+            self.emit_owed(self._clock.now(), most=1)
+
+    def emit_owed(self, now: float, most: int | None = None) -> None:
+        """Emit the frames due by `now` not yet emitted (at most `most`): what a device with
+        its own oscillator sends while the loop that runs `run` is held up."""
+        sent = 0
+        while self._start + self._next / self._rate <= now and (most is None or sent < most):
+            self.emit(self._start + self._next / self._rate, self._next)
+            self._next += 1
+            sent += 1
 
     def emit(self, t: float, k: int) -> None:
         """Encode and write frame k sampled at time t (a simulator calls this in step with

@@ -60,6 +60,9 @@ GROUND_ADDR = bytes.fromhex("0013A20041000002")
 # (recorder margin + identification + radio). Each stretches with the slowness measured while
 # it runs (agent.sim.pace): a busy laptop still flies.
 CONNECT_S, ACK_S, RESULT_S = 30.0, 10.0, 90.0
+# The simulated world counts as in real time within this (its sensors' frames then arrive
+# within the recorder's assembly delay).
+CAUGHT_UP_S = 0.1
 OPEN_ATTEMPTS = 3
 
 
@@ -471,6 +474,10 @@ async def one_run(options: SimOptions, aircraft: SimAircraft, ground: Ground, ru
     ack = await ground.command(messages.Arm(plan=plan))
     if not ack.ok:
         raise SimError(f"the agent refused the plan: {ack.reason}")
+    # A busy machine can leave the simulated world behind real time (its sensors' frames late,
+    # a driver taking a second's silence for an unplugged device): the pilot waits for it, as
+    # no real aircraft falls behind.
+    await wait(ground.pace, lambda: aircraft.behind() < CAUGHT_UP_S, "the simulation behind", ACK_S)
     say(f"run {run + 1}: {plan.id} armed; the pilot flips the switch")
     seen = len(ground.inbox)
     aircraft.pilot.set_switch(True)
