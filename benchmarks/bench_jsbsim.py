@@ -103,7 +103,7 @@ from agent.excitation.plan import (
     preset,
     render,
 )
-from agent.ident import Experiment, Settings, identify
+from agent.ident import Experiment, Settings, identify, refine
 from agent.ident.aircraft import axes_present
 from agent.ident.aircraft.airangles import synthesise
 from agent.ident.aircraft.bound import bound
@@ -787,6 +787,13 @@ def main() -> None:
         "costs (benchmarks/README.md)",
     )
     parser.add_argument(
+        "--unwidened",
+        action="store_true",
+        help="the modes' standard errors as the sandwich gives them, without the widening for "
+        "the few bins that carry a mode (agent.ident.refine.dof_factor): what it changes in "
+        "the z-scores",
+    )
+    parser.add_argument(
         "--bound",
         action="store_true",
         help="with each row, the validated truth's Cramér–Rao bound on its records",
@@ -797,6 +804,8 @@ def main() -> None:
         help="fly each excitation's length with no input: what the air alone does",
     )
     args = parser.parse_args()
+    if args.unwidened:  # looked up at each call: every identification in this process
+        refine.dof_factor = lambda g, spread: 1.0
     seeds = args.seeds if args.seeds is not None else 3 if args.quick else 10
     peers = not (args.no_peers or args.quick)
     validate = not (args.no_validation or args.quick)

@@ -75,6 +75,10 @@ NOISE_FLOOR = 1e-9
 # record is taken in segments of that size, their cross terms left out.
 COLOURED_BINS = 8
 COLOURED_ENTRIES = 20_000_000
+# The small-sample correction of a sandwich standard error (`dof_factor`): the degrees of
+# freedom are held at this floor, where the t distribution's variance ν/(ν − 2) is still
+# finite and the Satterthwaite approximation from so few bins is itself rough.
+DOF_FLOOR = 3.0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -91,6 +95,10 @@ class Refinement:
     # Of [vec Ac, vec Bc, vec C, vec D] (row-major), fixed entries 0: corrected for the
     # residuals' colour (`coloured_covariance`).
     covariance: np.ndarray
+    # Where the covariance is a sandwich over frequency bins (the whole-aircraft method): per
+    # fitted axis, its bins' shares of a contrast's variance (bins, residual parts, columns)
+    # and those columns' positions in the covariance's vector (`dof_factor`); else empty.
+    spread: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
     cost_initial: float  # weighted cost of the starting model (final σ)
     cost: float
     iterations: int
@@ -109,6 +117,16 @@ class Refinement:
     def covariance_of_a(self) -> np.ndarray:
         n = self.continuous.A.shape[0]
         return self.covariance[: n * n, : n * n]
+
+    def spread_of_a(self) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+        """`spread` restricted to vec Ac's entries."""
+        n = self.continuous.A.shape[0]
+        out = []
+        for G, pos in self.spread:
+            keep = pos < n * n
+            if keep.any():
+                out.append((G[:, :, keep], pos[keep]))
+        return tuple(out)
 
     def matrix_std(self) -> StateSpace:
         """Standard errors of Ac, Bc, C, D entry by entry (0 for entries held fixed)."""
@@ -628,8 +646,34 @@ def _covariance(jac: np.ndarray, basis: np.ndarray) -> np.ndarray:
     return basis @ inv @ basis.T
 
 
-def eigenvalue_std(Ac: np.ndarray, covariance_A: np.ndarray) -> list[EigenvalueStd]:
-    """First-order uncertainty of every eigenvalue of Ac given the covariance of vec(Ac).
+def dof_factor(g: np.ndarray, spread) -> float:
+    """How much wider a sandwich standard error must be for the few frequency bins that carry
+    the contrast g (over the covariance's vector) to be honest: √(ν/(ν − 2)), ν the
+    Satterthwaite degrees of freedom of its variance estimate, ν = (Σ q_k)² / Σ q_k², q_k bin
+    k's share of that variance by design (`agent.ident.aircraft.fit.sandwich`), ν at least
+    DOF_FLOOR (1 where `spread` is empty).
+
+    The sandwich estimates a contrast's variance from the residuals of the bins that
+    determine it; a phugoid or a spiral lies in a handful of a minute's bins, so its estimate
+    has the variance of a χ² of few degrees of freedom, and the error over it is t-like, the
+    rms of its z-scores √(ν/(ν − 2)) rather than 1 (Bell & McCaffrey, *Survey Methodology*
+    28(2), 2002, §3, the Satterthwaite approximation for their CR2 sandwich; Imbens & Kolesár,
+    *Review of Economics and Statistics* 98(4), 2016). A mode many bins carry (ν in the tens
+    or hundreds: a short period, a roll mode) is left as it was."""
+    shares = [((G @ g[pos]) ** 2).sum(axis=1) for G, pos in spread]
+    if not shares:
+        return 1.0
+    q = np.concatenate(shares)
+    total, squares = float(q.sum()), float((q * q).sum())
+    if total <= 0 or squares <= 0:
+        return 1.0
+    nu = max(total * total / squares, DOF_FLOOR)
+    return float(np.sqrt(nu / (nu - 2.0)))
+
+
+def eigenvalue_std(Ac: np.ndarray, covariance_A: np.ndarray, spread=()) -> list[EigenvalueStd]:
+    """First-order uncertainty of every eigenvalue of Ac given the covariance of vec(Ac), each
+    widened for the few bins that carry it where `spread` (`Refinement.spread_of_a`) says.
 
     ∂λ/∂A_ij = w̄_i v_j / (wᴴ v) for right and left eigenvectors v, w (Wilkinson, *The
     Algebraic Eigenvalue Problem*, 1965, §2.8). Order follows `np.linalg.eig(Ac)`.
@@ -647,7 +691,7 @@ def eigenvalue_std(Ac: np.ndarray, covariance_A: np.ndarray) -> list[EigenvalueS
         g_zeta = -(g_re * mag - s.real * g_mag) / mag**2 if mag > 0 else 0 * g_re
 
         def std(g: np.ndarray) -> float:
-            return float(np.sqrt(max(g @ covariance_A @ g, 0.0)))
+            return float(np.sqrt(max(g @ covariance_A @ g, 0.0))) * dof_factor(g, spread)
 
         out.append(
             EigenvalueStd(real=std(g_re), imag=std(g_im), frequency=std(g_mag), damping=std(g_zeta))
@@ -666,7 +710,9 @@ def simulate_refined(refinement: Refinement, batch: Sequence[Experiment]) -> lis
 def with_uncertainty(modes: Sequence[Mode], refinement: Refinement) -> list[Mode]:
     """Attach the Cramér–Rao 1-σ of each mode's eigenvalue (nearest eigenvalue of Ac)."""
     lam = np.linalg.eigvals(refinement.continuous.A)
-    stds = eigenvalue_std(refinement.continuous.A, refinement.covariance_of_a())
+    stds = eigenvalue_std(
+        refinement.continuous.A, refinement.covariance_of_a(), refinement.spread_of_a()
+    )
     out = []
     for mode in modes:
         k = int(np.argmin(np.abs(lam - mode.eigenvalue)))
@@ -689,9 +735,9 @@ def second_order_std(order: SecondOrder, refinement: Refinement) -> SecondOrder:
     wn, p1 = order.frequency, float((s1 + s2).real)
     d_wn = ((s2 * g1 + s1 * g2) / (2 * wn)).real
     d_zeta = (-(g1 + g2) / (2 * wn)).real + p1 / (2 * wn**2) * d_wn
-    covariance = refinement.covariance_of_a()
+    covariance, spread = refinement.covariance_of_a(), refinement.spread_of_a()
 
     def std(g: np.ndarray) -> float:
-        return float(np.sqrt(max(g @ covariance @ g, 0.0)))
+        return float(np.sqrt(max(g @ covariance @ g, 0.0))) * dof_factor(g, spread)
 
     return replace(order, frequency_std=std(d_wn), damping_std=std(d_zeta))

@@ -93,6 +93,8 @@ class AxisFit:
     zeros: tuple[tuple[str, int, int], ...] = ()
     # Theil's inequality coefficient of each state at the bins the fit used (`excited_tic`).
     tic_excited: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    # Each bin's share of a [vec A, vec B] contrast's variance (`sandwich`), or None.
+    spread: np.ndarray | None = None
 
     @property
     def weights(self) -> np.ndarray | ProcessNoise:
@@ -319,6 +321,11 @@ def minimise(problem: AxisProblem, theta: np.ndarray, weights):
 
 
 def covariance(problem: AxisProblem, theta: np.ndarray, weights) -> np.ndarray:
+    """`sandwich`'s covariance alone."""
+    return sandwich(problem, theta, weights)[0]
+
+
+def sandwich(problem: AxisProblem, theta: np.ndarray, weights) -> tuple[np.ndarray, np.ndarray]:
     """Sandwich covariance of θ from the bin-wise gradients of the weighted cost, each bin's
     residual corrected for its leverage: ẽ_k = (I − h_k)^(−1/2) e_k, h_k = R_k H⁻¹ R_kᵀ the
     bin's block of the hat matrix (the CR2 correction of Bell & McCaffrey, *Survey
@@ -327,7 +334,13 @@ def covariance(problem: AxisProblem, theta: np.ndarray, weights) -> np.ndarray:
     noise there, so their fitted residuals understate it, and the uncorrected sandwich the
     mode's variance. `weights` as `minimise`'s: with the filter-error method's noise model the
     residuals and the Jacobian are whitened by its spectra (the log-determinant's part of the
-    score left out)."""
+    score left out).
+
+    Also each bin's share of any [vec A, vec B] contrast's variance, by design: G (bins, 2n
+    residual parts, n² + nr) with G_k c the bin's whitened residual parts' sensitivity, so
+    that ‖G_k c‖² is what bin k adds to that contrast's variance at unit noise (the fit's
+    weights whiten it). How few bins carry a contrast sets how many degrees of freedom the
+    sandwich's estimate of its variance has (`agent.ident.refine.dof_factor`)."""
     e, J, _ = _linearised(problem, theta, weights)
     free = problem.free
     Jw = J[:, :, free]
@@ -346,7 +359,12 @@ def covariance(problem: AxisProblem, theta: np.ndarray, weights) -> np.ndarray:
     g = np.einsum("fip,fi->fp", R, r)
     out = np.zeros((theta.size, theta.size))
     out[np.ix_(free, free)] = Hinv @ (g.T @ g) @ Hinv  # the fixed entries are exact
-    return out
+    k = problem.n * problem.n + problem.n * problem.r
+    spread = np.zeros((R.shape[0], R.shape[1], k))
+    columns = np.flatnonzero(free)  # θ's free entries, in Hinv's order
+    matrices = columns < k
+    spread[:, :, columns[matrices]] = R @ Hinv[:, matrices]
+    return out, spread
 
 
 def fit_axis(
@@ -395,7 +413,7 @@ def fit_axis(
     if not np.all(np.isfinite(A)):
         raise IdentificationFailed(f"{name}: the output-error fit diverged")
     weights = sigma if noise_model is None else noise_model
-    cov = covariance(problem, theta, weights)
+    cov, spread = sandwich(problem, theta, weights)
     k = problem.n * problem.n + problem.n * problem.r
     lags = {list(inputs)[j]: float(abs(taus[i])) for i, j in enumerate(problem.lagged)}
     noise = np.sqrt(np.mean(sigma**2, axis=0))
@@ -408,6 +426,7 @@ def fit_axis(
         lags=lags,
         transients=d,
         covariance=cov[:k, :k],
+        spread=spread,
         noise_std=noise,
         bin_std=sigma,
         cost_start=start,

@@ -304,7 +304,7 @@ def identify(fitted: Fitted, settings: Settings) -> Identification:
     output_roles, present, measured = fitted.output_roles, fitted.present, fitted.measured
     couplings, structure = fitted.couplings, fitted.structure
     width = sp.U.shape[1]
-    model, covariance = assemble(
+    model, covariance, spread = assemble(
         fits, r=len(inputs), m=len(outputs), states_of={width + c: c for c in range(len(outputs))}
     )
     report = _report(
@@ -340,6 +340,7 @@ def identify(fitted: Fitted, settings: Settings) -> Identification:
         initial_states=fit_in_time.initial_states,
         noise_std=residuals.std(axis=0),
         covariance=covariance,
+        spread=spread,
         cost_initial=sum(f.cost_start for f in fits),
         cost=sum(f.cost for f in fits),
         iterations=sum(f.iterations for f in fits),
@@ -780,6 +781,7 @@ def _modes(
         refinement,
         continuous=states_only,
         covariance=refinement.covariance[np.ix_(index, index)],
+        spread=_within(refinement.spread, index),
     )
     Am, Bmd = discretize(states_only.A, states_only.B, dt)
     input_rms, output_rms = channel_rms(batch)
@@ -950,13 +952,26 @@ def _sampled(model: StateSpace, dt: float, hold: str, outputs: Sequence[str]) ->
     )
 
 
+def _within(spread, index: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+    """`Refinement.spread` for the entries `index` of its vector, renumbered in their order
+    (the columns elsewhere dropped)."""
+    where = {int(k): i for i, k in enumerate(index)}
+    out = []
+    for G, pos in spread:
+        keep = np.array([int(k) in where for k in pos], dtype=bool)
+        if keep.any():
+            out.append((G[:, :, keep], np.array([where[int(k)] for k in pos[keep]])))
+    return tuple(out)
+
+
 def assemble(
     fits: Sequence[AxisFit], *, r: int, m: int, states_of: dict[int, int] | None = None
-) -> tuple[StateSpace, np.ndarray]:
+) -> tuple[StateSpace, np.ndarray, tuple[tuple[np.ndarray, np.ndarray], ...]]:
     """One continuous model (states: the m outputs, then the lag states of each lagged input
-    of each axis, its number of lags) and the covariance of [vec Ac, vec Bc, vec C, vec D]
-    (zero where fixed). `states_of`: an input column that is another axis's state → that
-    state."""
+    of each axis, its number of lags), the covariance of [vec Ac, vec Bc, vec C, vec D]
+    (zero where fixed), and each axis's bins' shares of a contrast's variance with the
+    positions in that vector of their columns (`Refinement.spread`). `states_of`: an input
+    column that is another axis's state → that state."""
     states_of = states_of or {}
     lagged = [(f, j) for f in fits for j in f.lags if j < r]  # the gust rates' are no state
     n = m + sum(f.lag_powers.get(j, THROTTLE_LAGS) for f, j in lagged)
@@ -965,6 +980,7 @@ def assemble(
     index_b = n * n + np.arange(n * r).reshape(n, r)
     size = n * n + n * r + m * n + m * r
     cov = np.zeros((size, size))
+    spreads = []
     extra = m
     for f in fits:
         st = list(f.states)
@@ -994,5 +1010,7 @@ def assemble(
         pos = np.concatenate([index_a[np.ix_(st, st)].ravel(), where_b.ravel()])
         kept = pos >= 0
         cov[np.ix_(pos[kept], pos[kept])] = f.covariance[np.ix_(kept, kept)]
+        if f.spread is not None:
+            spreads.append((f.spread[:, :, kept], pos[kept]))
     C = np.hstack([np.eye(m), np.zeros((m, n - m))])
-    return StateSpace(A, B, C, np.zeros((m, r))), cov
+    return StateSpace(A, B, C, np.zeros((m, r))), cov, tuple(spreads)

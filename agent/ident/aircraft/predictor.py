@@ -275,6 +275,7 @@ def refined(
         B=B_fit,
         transients=transients,
         covariance=result.covariance[np.ix_(keep, keep)],
+        spread=None,  # the time domain's covariance, not a sandwich over bins
         cost=weighted_cost(problem, theta, fit.weights),
         iterations=fit.iterations + result.iterations,
         converged=result.converged,
