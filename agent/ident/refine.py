@@ -129,9 +129,12 @@ class Refinement:
         return tuple(out)
 
     def matrix_std(self) -> StateSpace:
-        """Standard errors of Ac, Bc, C, D entry by entry (0 for entries held fixed)."""
+        """Standard errors of Ac, Bc, C, D entry by entry (0 for entries held fixed), each
+        widened for the few bins that carry it where `spread` says (`dof_factor`)."""
         std = np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
-        return _unpack_matrices(std, *_shape(self.continuous))
+        return _unpack_matrices(
+            std * entry_dof_factors(self.spread, std.size), *_shape(self.continuous)
+        )
 
 
 def _shape(model: StateSpace) -> tuple[int, int, int]:
@@ -669,6 +672,19 @@ def dof_factor(g: np.ndarray, spread) -> float:
         return 1.0
     nu = max(total * total / squares, DOF_FLOOR)
     return float(np.sqrt(nu / (nu - 2.0)))
+
+
+def entry_dof_factors(spread, size: int) -> np.ndarray:
+    """`dof_factor` of each entry of the covariance's vector alone (1 where `spread` has no
+    column of it)."""
+    factors = np.ones(size)
+    for G, pos in spread:
+        q = (G * G).sum(axis=1)  # (bins, columns): each bin's share of each entry's variance
+        total, squares = q.sum(axis=0), (q * q).sum(axis=0)
+        carried = squares > 0  # a fixed entry's column is zero: no bin carries it
+        nu = np.maximum(total[carried] ** 2 / squares[carried], DOF_FLOOR)
+        factors[pos[carried]] = np.sqrt(nu / (nu - 2.0))
+    return factors
 
 
 def eigenvalue_std(Ac: np.ndarray, covariance_A: np.ndarray, spread=()) -> list[EigenvalueStd]:

@@ -6,6 +6,8 @@ Schroeder multisines (aileron k = 3, 6, 9, 12; rudder k = 5, 10, 15, 20 of 20 s)
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import scipy.signal
@@ -211,6 +213,35 @@ def test_a_sandwich_standard_error_carried_by_few_bins_is_widened_to_its_scatter
     assert rms[0] / dof_factor(few, spread) == pytest.approx(1.0, abs=0.1)
     assert dof_factor(every, spread) == pytest.approx(1.0, abs=0.02)
     assert rms[1] == pytest.approx(1.0, abs=0.05)
+
+
+def test_each_entrys_standard_error_is_widened_by_its_own_degrees_of_freedom():
+    """A one-state model's [Ac, Bc, C, D]: Ac carried by one bin of a hundred (ν at its floor
+    of 3: ×√3), Bc by all hundred alike (ν 100: ×√(100/98)), C and D not in the spread."""
+    G = np.zeros((100, 2, 2))
+    G[0, 0, 0] = 1.0
+    G[:, 1, 1] = 0.1
+    model = StateSpace(np.array([[-1.0]]), np.array([[2.0]]), np.eye(1), np.zeros((1, 1)))
+    refinement = Refinement(
+        gain=None,
+        continuous=model,
+        discrete=model,
+        dt=DT,
+        hold="zoh",
+        initial_states=(np.zeros(1),),
+        noise_std=np.ones(1),
+        covariance=np.diag([0.04, 0.09, 0.01, 0.01]),
+        spread=((G, np.array([0, 1])),),
+        cost_initial=1.0,
+        cost=1.0,
+        iterations=1,
+        passes=1,
+    )
+    std = refinement.matrix_std()
+    assert std.A[0, 0] == pytest.approx(0.2 * np.sqrt(3.0))
+    assert std.B[0, 0] == pytest.approx(0.3 * np.sqrt(100 / 98))
+    assert (std.C[0, 0], std.D[0, 0]) == pytest.approx((0.1, 0.1))
+    assert replace(refinement, spread=()).matrix_std().A[0, 0] == pytest.approx(0.2)
 
 
 def test_modal_truncation_keeps_exactly_the_chosen_modes():
