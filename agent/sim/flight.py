@@ -477,7 +477,12 @@ async def one_run(options: SimOptions, aircraft: SimAircraft, ground: Ground, ru
     # A busy machine can leave the simulated world behind real time (its sensors' frames late,
     # a driver taking a second's silence for an unplugged device): the pilot waits for it, as
     # no real aircraft falls behind.
-    await wait(ground.pace, lambda: aircraft.behind() < CAUGHT_UP_S, "the simulation behind", ACK_S)
+    await wait(
+        ground.pace,
+        lambda: aircraft.behind() < CAUGHT_UP_S,
+        "the simulated world not back to real time",
+        ACK_S,
+    )
     say(f"run {run + 1}: {plan.id} armed; the pilot flips the switch")
     seen = len(ground.inbox)
     aircraft.pilot.set_switch(True)
