@@ -666,12 +666,8 @@ def dof_factor(g: np.ndarray, spread) -> float:
     shares = [((G @ g[pos]) ** 2).sum(axis=1) for G, pos in spread]
     if not shares:
         return 1.0
-    q = np.concatenate(shares)
-    total, squares = float(q.sum()), float((q * q).sum())
-    if total <= 0 or squares <= 0:
-        return 1.0
-    nu = max(total * total / squares, DOF_FLOOR)
-    return float(np.sqrt(nu / (nu - 2.0)))
+    q = np.concatenate(shares)[:, None]
+    return float(_widening(q)[0])
 
 
 def entry_dof_factors(spread, size: int) -> np.ndarray:
@@ -680,11 +676,20 @@ def entry_dof_factors(spread, size: int) -> np.ndarray:
     factors = np.ones(size)
     for G, pos in spread:
         q = (G * G).sum(axis=1)  # (bins, columns): each bin's share of each entry's variance
-        total, squares = q.sum(axis=0), (q * q).sum(axis=0)
-        carried = squares > 0  # a fixed entry's column is zero: no bin carries it
-        nu = np.maximum(total[carried] ** 2 / squares[carried], DOF_FLOOR)
-        factors[pos[carried]] = np.sqrt(nu / (nu - 2.0))
+        factors[pos] = _widening(q)
     return factors
+
+
+def _widening(q: np.ndarray) -> np.ndarray:
+    """√(ν/(ν − 2)) per column of q (bins, columns), each bin's share of that column's
+    variance; ν = (Σ q)² / Σ q², at least DOF_FLOOR; 1 for a column no bin carries (a fixed
+    entry's, all zero)."""
+    total, squares = q.sum(axis=0), (q * q).sum(axis=0)
+    out = np.ones(q.shape[1])
+    carried = (squares > 0) & (total > 0)
+    nu = np.maximum(total[carried] ** 2 / squares[carried], DOF_FLOOR)
+    out[carried] = np.sqrt(nu / (nu - 2.0))
+    return out
 
 
 def eigenvalue_std(Ac: np.ndarray, covariance_A: np.ndarray, spread=()) -> list[EigenvalueStd]:
