@@ -15,7 +15,14 @@ from agent.excitation.plan import preset, render
 from agent.ident import Experiment, Identification, Settings, identify
 from agent.ident.aircraft import predictor
 from agent.ident.aircraft.airangles import synthesise
-from agent.ident.aircraft.fit import COUPLED, SMOOTH_BINS, SMOOTH_FLOOR, bin_sigma, consistent
+from agent.ident.aircraft.fit import (
+    COUPLED,
+    SMOOTH_BINS,
+    SMOOTH_FLOOR,
+    bin_sigma,
+    consistent,
+    smooth_bins,
+)
 from agent.ident.aircraft.kinematics import kinematic_jacobian, kinematic_remainder
 from agent.ident.aircraft.model import _mode_axes
 from agent.ident.aircraft.noise import FALSE_ALARM, conditional_mean, detected
@@ -891,6 +898,25 @@ def test_a_steady_wind_is_not_a_gust():
     worst = max(np.min(np.abs(found - t)) / max(abs(t), 1.0) for t in true)
     assert result.aircraft.wind.measured
     assert worst < 0.01
+
+
+def test_bin_averages_hold_small_values_beside_huge_ones():
+    # Bad input tried: a spectrum spanning twenty-five decades (a noise-free record's
+    # filter-error information, 1e28 beside 1e-3). A running sum's rounding made the small
+    # bins' means negative (-7e11 in place of ~0), and the process noise's solve overflowed.
+    rng = np.random.default_rng(3)
+    F = 200
+    s = 1j * np.linspace(0.1, 60.0, F)
+    values = rng.uniform(0.5, 1.5, (F, 2)) * 1e-3
+    values[:20, 0] = 1e28  # the low bins huge in one column only
+    smooth, width = smooth_bins(values, s)
+    assert width == 2 * SMOOTH_BINS + 1
+    assert np.all(smooth >= 0)
+    far = slice(20 + SMOOTH_BINS, F - SMOOTH_BINS)  # whole windows holding no huge value
+    expected = np.array(
+        [values[max(0, k - SMOOTH_BINS) : k + SMOOTH_BINS + 1].mean(axis=0) for k in range(F)]
+    )
+    assert np.allclose(smooth[far], expected[far], rtol=1e-12, atol=0)
 
 
 def test_calm_air_measured_without_noise_has_no_gust_to_fit():

@@ -33,7 +33,6 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.ndimage
 import scipy.optimize
 
 from agent.ident.aircraft import process
@@ -223,8 +222,19 @@ def smooth_bins(values: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, int]:
     width = 2 * SMOOTH_BINS + 1
     if SMOOTH_BINS > 0 and values.shape[0] > width:
         order = np.argsort(np.abs(s), kind="stable")
+        # Each window summed on its own: a running sum (scipy.ndimage.uniform_filter1d's)
+        # carries the rounding of the largest values it passed, and over spectra spanning
+        # twenty decades (a noise-free record's) it turned small means negative.
+        padded = np.concatenate(
+            [
+                values[order[:1]].repeat(SMOOTH_BINS, 0),
+                values[order],
+                values[order[-1:]].repeat(SMOOTH_BINS, 0),
+            ]
+        )
+        windows = np.lib.stride_tricks.sliding_window_view(padded, width, axis=0)
         smooth = np.empty_like(values)
-        smooth[order] = scipy.ndimage.uniform_filter1d(values[order], width, axis=0, mode="nearest")
+        smooth[order] = windows.mean(axis=-1)
         return smooth, width
     return np.broadcast_to(values.mean(axis=0), values.shape).copy(), values.shape[0]
 
