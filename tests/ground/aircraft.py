@@ -160,6 +160,7 @@ class ScriptedAircraft:
     nominal: list[str] = field(default_factory=list)  # the nominal history, latest last
     excitation: str = "idle"
     airspeed: float = 22.0
+    recorder: dict[str, float] = field(default_factory=lambda: {"frames": 1200.0})
     proposals: int = 0  # gain proposals sent
     settings: messages.IdentSettings | None = field(default_factory=messages.IdentSettings)
     """The settings in effect its status reports (None: an older agent, which does not)."""
@@ -225,7 +226,7 @@ class ScriptedAircraft:
             loop_lag_ms=0.9,
             nominal={"lateral": self.nominal[-1]} if self.nominal else {},
             settings=self.settings,
-            recorder={"frames": 1200.0},
+            recorder=dict(self.recorder),
             sensors={
                 "vn200": {
                     "state": "open",

@@ -75,6 +75,10 @@ async def test_status_renders_and_stale_sensors_show(console):
     assert [str(c) for c in sensors.get_row_at(1)][:2] == ["airdata", "waiting"]
     r.aircraft.airspeed = 25.5
     await until(pilot, lambda: "25.5 m/s" in text_of(app, "#flight"), "a status update")
+    # The recorder's counters, each under its own name: frames assembled after a late
+    # wake-up, and those that waited for a live sensor's late sample.
+    r.aircraft.recorder = {"frames": 1300.0, "catch_up_frames": 4.0, "waited_frames": 7.0}
+    await until(pilot, lambda: "(4 late, 7 waited)" in text_of(app, "#health"), "counters")
     # The ground module's RSSI (AT DB) of the last frame heard.
     r.channel.rssi_dbm = -71
     await until(pilot, lambda: "-71 dBm" in text_of(app, "#top"), "RSSI")

@@ -66,9 +66,11 @@ class StatusTab(Horizontal):
         self._sensors(s)
         r = s.recorder
         # Each number is what its label says: frames recorded (of them, assembled after a
-        # late wake-up), samples dropped as stamped before one already held, log lines lost.
+        # late wake-up; and how often assembling waited for a live sensor's late sample),
+        # samples dropped as stamped before one already held, log lines lost.
         self.health.update(
-            f"frames     {int(r.get('frames', 0))} ({int(r.get('catch_up_frames', 0))} late)\n"
+            f"frames     {int(r.get('frames', 0))} ({int(r.get('catch_up_frames', 0))} late, "
+            f"{int(r.get('waited_frames', 0))} waited)\n"
             f"dropped    {int(r.get('late_samples', 0))} late samples\n"
             f"log lost   {int(r.get('log_lost_lines', 0))} lines"
         )
