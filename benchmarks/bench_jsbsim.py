@@ -749,6 +749,7 @@ ABLATIONS = {
     "alpha-products": "alpha_products",
     "sideslip-drag": "sideslip_drag",
     "process-noise": "process_noise",
+    "throttle-curve": "throttle_curve",
 }
 
 

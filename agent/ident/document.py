@@ -245,6 +245,9 @@ class AircraftDocument(Document):
     engine: list[Engine] = []  # each engine input: its lags as the data chose them
     sideslip_drag: Gain | None = None  # V̇'s gain on β²
     alpha_products: dict[str, dict[str, Gain]] = {}  # "alpha·beta" → output → gain
+    # "throttle²" → output → gain: the throttle's square over its record's largest deviation,
+    # in the throttle's units (agent.ident.aircraft.prepare).
+    throttle_curve: dict[str, dict[str, Gain]] = {}
 
 
 class PreprocessingDocument(Document):

@@ -42,6 +42,9 @@ class Settings:
     # derivatives' change with α). Off only to measure what they do (bench_jsbsim --without).
     sideslip_drag: bool = True
     alpha_products: bool = True
+    # The throttle's curvature: its square (about the trim) a known input of the longitudinal
+    # axis (agent.ident.aircraft.prepare), where no rpm or thrust is measured.
+    throttle_curve: bool = True
     # The longitudinal axis fitted by the filter-error method, the turbulence the record does
     # not measure modelled as process noise (agent.ident.aircraft.process); off, output error.
     process_noise: bool = True

@@ -502,6 +502,19 @@ def coupling(
     second tells a coupling the outputs show from the last digits of a perfect fit."""
     if not other_inputs:
         return 0.0, 0.0
+    before, after, change = added_costs(
+        sp, fitted, other_inputs=other_inputs, experiments=experiments
+    )
+    fraction = max(0.0, 1.0 - after / before) if before > 0 else 0.0
+    return fraction, change
+
+
+def added_costs(
+    sp: Transforms, fitted: AxisFit, *, other_inputs: Sequence[int], experiments: int
+) -> tuple[float, float, float]:
+    """`fitted` fitted again with `other_inputs` added (their gains started at zero), weighted
+    as it was: its weighted cost before and after, and the rms of the outputs' change as a
+    fraction of the outputs' rms (weighted alike)."""
     problem = AxisProblem(
         sp,
         states=fitted.states,
@@ -520,9 +533,8 @@ def coupling(
     X1 = problem.response(theta)[0]
     after = _cost(problem.Y - X1, fitted.bin_std)
     signal = _cost(problem.Y, fitted.bin_std)
-    fraction = max(0.0, 1.0 - after / before) if before > 0 else 0.0
     change = float(np.sqrt(_cost(X1 - X0, fitted.bin_std) / signal)) if signal > 0 else 0.0
-    return fraction, change
+    return before, after, change
 
 
 def lag_order_cost(

@@ -36,6 +36,7 @@ from agent.ident.aircraft.axes import AXES, LONGITUDINAL, moved_axes
 from agent.ident.aircraft.fit import (
     COUPLED,
     AxisFit,
+    added_costs,
     coupling,
     fit_axis,
     known_gain,
@@ -133,6 +134,15 @@ def fitted_axes(
     # The transforms leave out DC, so trim errors do not matter to the fit; the time-domain
     # simulation (TIC) starts from the records' own trim, as the other methods'.
     batch = list(raw)
+    # The throttle's curvature, where the longitudinal axis is fitted and no measured rpm or
+    # thrust carries the engine instead (prepare's module docstring).
+    curved = (
+        {j: inputs[j] for j, role in enumerate(input_roles) if role == "throttle"}
+        if settings.throttle_curve
+        and "longitudinal" in present
+        and not any(role in POWER_ROLES for role in input_roles)
+        else {}
+    )
     ready = prepare(
         batch,
         output_roles,
@@ -140,6 +150,7 @@ def fitted_axes(
         dt=dt,
         sideslip_drag=settings.sideslip_drag,
         alpha_products=settings.alpha_products,
+        throttles=curved,
     )
     sp = transforms(
         ready.batch,
@@ -465,7 +476,11 @@ def _fit_axes(
     the throttle and the gust rates through fitted lags; the longitudinal axis by the
     filter-error method with `process_noise` (agent.ident.aircraft.process; `synthesised`:
     its states whose air angle the INS gave, fit.fit_axis's)."""
-    known = {axis: [j for j, a in ready.extra_axes.items() if a == axis] for axis in AXES}
+    # The throttle's curvature joins on its own test, after the engine's order (`_curved`).
+    known = {
+        axis: [j for j, a in ready.extra_axes.items() if a == axis and j not in ready.curve]
+        for axis in AXES
+    }
     if "longitudinal" not in present:  # α barely moves: its products only add unknowns
         known["lateral"] = [j for j in known["lateral"] if j not in ready.bilinear]
     fits, engine = [], {}
@@ -503,6 +518,8 @@ def _fit_axes(
                     controls=ins,
                     powers={**fitted.lag_powers, j: order},
                 )
+        if ready.curve and axis == "longitudinal":
+            fitted = _curved(sp, fitted, ready.curve, ins, experiments)
         if filtered and engines:
             fitted = fit_axis(
                 sp,
@@ -518,6 +535,31 @@ def _fit_axes(
             )
         fits.append(fitted)
     return fits, engine
+
+
+def _curved(
+    sp: Transforms, fitted: AxisFit, curve: Sequence[int], controls: list[int], experiments: int
+) -> AxisFit:
+    """`fitted` with the throttles' squares (`curve`: their known input columns) as inputs
+    where the data ask for them: their gains, fitted with `fitted`'s weights, lower its
+    weighted cost J by more than their number (the Akaike criterion 2 J + 2 k, as the
+    engine's order is chosen). A throttle whose thrust does not bend within the record's
+    deflections, or whose bend the turbulence hides, adds free gains that only fit noise: on
+    JSBSim's Cessna 182 in light turbulence they took a seed's phugoid from 8 to 12 % off
+    (benchmarks/README.md)."""
+    before, after, _ = added_costs(sp, fitted, other_inputs=curve, experiments=experiments)
+    if before - after <= len(fitted.states) * len(curve):
+        return fitted
+    return fit_axis(
+        sp,
+        name=fitted.name,
+        states=fitted.states,
+        inputs=[*fitted.inputs, *curve],
+        lagged=tuple(fitted.lags),
+        experiments=experiments,
+        controls=controls,
+        powers=fitted.lag_powers,
+    )
 
 
 def _engine_order(
@@ -674,14 +716,17 @@ def _report(
             if gain is not None:
                 drag = Gain(gain=gain[0], std=gain[1])
     products: dict[str, dict[str, Gain]] = {}
-    for column in ready.bilinear:  # the lateral derivatives' change with α
-        for f in fits:
-            for row in f.states:
-                gain = known_gain(f, column, row)
-                if gain is not None and row not in ready.attitude:
-                    products.setdefault(names[column], {})[outputs[row]] = Gain(
-                        gain=gain[0], std=gain[1]
-                    )
+    curve: dict[str, dict[str, Gain]] = {}
+    # The lateral derivatives' change with α, and the throttle's curvature.
+    for columns, found in ((ready.bilinear, products), (ready.curve, curve)):
+        for column in columns:
+            for f in fits:
+                for row in f.states:
+                    gain = known_gain(f, column, row)
+                    if gain is not None and row not in ready.attitude:
+                        found.setdefault(names[column], {})[outputs[row]] = Gain(
+                            gain=gain[0], std=gain[1]
+                        )
     return AircraftDocument(
         band_hz=(float(sp.band_hz[0]), float(sp.band_hz[1])),
         bins=int(sp.s.size),
@@ -742,6 +787,7 @@ def _report(
         ],
         sideslip_drag=drag,
         alpha_products=products,
+        throttle_curve=curve,
     )
 
 
@@ -807,7 +853,8 @@ def _fit_with_known(
 ) -> FitInTime:
     """The model's time-domain fit driven by everything the record measured that it was
     fitted with: its controls, and the known inputs (the measured gusts, their rates through
-    their fitted lags, sideslip drag, the α products) and the kinematics' nonlinear rest, with
+    their fitted lags, sideslip drag, the α products, the throttle's square) and the
+    kinematics' nonlinear rest, with
     their fitted gains. The model's outputs are the inertial states where the wind is
     measured; each prediction goes back to the recorded channel (less the same gust the
     record's inertial output adds), so residuals and TIC are on what was recorded."""
@@ -933,14 +980,17 @@ def _longer_than_the_record(modes: Sequence[Mode], span: float) -> list[str]:
 
 def _sampled(model: StateSpace, dt: float, hold: str, outputs: Sequence[str]) -> StateSpace:
     """The whole-aircraft model sampled at dt. An output with no response above its noise (a
-    dead sensor's noise alone) gets gains of 10¹⁰ in the other equations and the model a pole
-    millions of 1/s fast, which no sampling survives: a clear failure naming that output, not
-    an overflow deep in the modal analysis."""
+    dead sensor's noise alone) gets gains of 10¹⁰ in the other equations and the model an
+    unstable pole thousands or millions of 1/s fast, which no sampling shows (or survives): a
+    clear failure naming that output, not an overflow or a divergence deep in the modal
+    analysis. An aircraft's own unstable modes (a spiral) grow by far less than e per sample."""
     with np.errstate(all="ignore"):
         discrete = discretize_hold(model.A, model.B, model.C, model.D, dt, hold)
-    if all(np.all(np.isfinite(x)) for x in (discrete.A, discrete.B)):
+    finite = all(np.all(np.isfinite(x)) for x in (discrete.A, discrete.B))
+    eigenvalues = np.linalg.eigvals(model.A) if np.all(np.isfinite(model.A)) else np.array([np.inf])
+    if finite and np.max(eigenvalues.real) * dt <= 1.0:
         return discrete
-    pole = np.max(np.abs(np.linalg.eigvals(model.A)))
+    pole = np.max(np.abs(eigenvalues))
     m = len(outputs)
     gains = np.max(np.abs(model.A[:m, :m]), axis=0)  # what each output's changes are worth
     where = outputs[int(np.argmax(gains))]

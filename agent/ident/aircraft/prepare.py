@@ -57,6 +57,21 @@ function of the attitude collinear with the states (on JSBSim's C172R in light t
 took the short period up to 17 % off). Only the airspeed's gust (pitot against INS) is a
 known input then; the vertical and lateral gusts are unmeasured process noise.
 
+The throttle's curvature (`throttles`): a throttle's square about the trim (over its largest
+deviation in the batch, so in the throttle's units) is a known input of the longitudinal axis,
+free on each of its equations, where no rpm or thrust is measured. A piston engine's thrust
+bends with the throttle near full power: JSBSim's Cessna 310 at its 100-kt trim gained 93 lb
+and lost 172 lb of thrust at ±10 % throttle, and a linear model of a classic card's 5-s
+throttle doublet put its phugoid's damping 55 % high on every seed (benchmarks/README.md). An
+odd-harmonic multisine keeps the square on the lines between its own; steps and doublets do
+not. It is a term of still air only: where the INS measured the longitudinal gusts (airspeed
+and, with vanes, α) and found them within the sensors' noise. The square of a doublet or of a
+multisine's throttle is slow, its information in a few low bins, and where the air moves the
+aircraft there its free gains fitted the gusts' slow response instead (JSBSim's Cessna 182 in
+light turbulence: a seed's phugoid 8.4 → 11.3 % off, the J-3 Cub's 2.4 → 4.7 %, their gains
+3–7 σ from nought; benchmarks/README.md). There it joins the fit where the data ask
+for it (agent.ident.aircraft.model `_curved`: the Akaike criterion).
+
 What each term does on the benchmark aircraft: benchmarks/README.md, *The whole-aircraft
 method's terms* (`make bench-jsbsim`, with `--without` to leave one out).
 """
@@ -105,6 +120,7 @@ class Prepared:
     rates: tuple[int, ...] = ()  # known input columns of gust rates (GUST_RATE_LAGS lags each)
     rows: dict[int, int] = field(default_factory=dict)  # see Transforms.rows
     bilinear: tuple[int, ...] = ()  # known input columns of α·β, α·p, α·r (BILINEAR)
+    curve: tuple[int, ...] = ()  # known input columns of the throttles' squares
     # Per experiment whose α and β were synthesised (no vanes), how (else empty).
     air_angles: tuple[Synthesised, ...] = ()
 
@@ -118,6 +134,9 @@ class _Terms:
     inertial: tuple[str, ...]  # outputs put on their inertial footing (the wind measured)
     drag: bool  # β², sideslip drag
     bilinear: bool  # α·β, α·p, α·r
+    # Throttle input column → (its name, the batch's largest |deviation|): its square over
+    # that, a known input (the throttle's curvature).
+    curve: dict[int, tuple[str, float]] = field(default_factory=dict)
 
 
 def prepare(
@@ -128,11 +147,13 @@ def prepare(
     dt: float = 1.0,
     sideslip_drag: bool = True,
     alpha_products: bool = True,
+    throttles: dict[int, str] | None = None,
 ) -> Prepared:
     """Use the operating point and the INS's velocities when every experiment carries them:
     the kinematic forcing with the first, the measured wind with both (module docstring).
     `trim_samples`: the records' first samples whose mean is the trim; `dt` (s): the records'
-    sample time, for the gust rates."""
+    sample time, for the gust rates; `throttles`: input column → name of each throttle whose
+    curvature is a known input (module docstring)."""
     index = {role: k for k, role in enumerate(output_roles) if role is not None}
     # The kinematics need the airspeed and θ: outputs, or measured as the flight's states
     # (`Experiment.flight`) in every experiment.
@@ -158,6 +179,7 @@ def prepare(
         inertial=gusts,
         drag=sideslip_drag and "beta" in index and "airspeed" in index,
         bilinear=alpha_products and all(role in index for role in ("alpha", *BILINEAR)),
+        curve=_curves(batch, throttles or {}) if "airspeed" in index else {},
     )
     out, known, jacobians, squares, motion, count, heard = _assemble(
         batch, index, terms, trim_samples, dt
@@ -169,14 +191,22 @@ def prepare(
     calm = {
         role for role in gusts if squares[role] <= NO_GUST**2 * motion[role] or role not in heard
     }
-    if calm:
+    # The throttle's curvature only where the record shows still air (module docstring):
+    # the INS measured the longitudinal gusts and found them within the sensors' noise.
+    still = "airspeed" in calm and {"airspeed", "alpha"} & set(gusts) <= calm
+    if calm or (terms.curve and not still):
         gusts = tuple(role for role in gusts if role not in calm)
-        terms = replace(terms, gusts=gusts, rated=tuple(g for g in terms.rated if g in gusts))
+        terms = replace(
+            terms,
+            gusts=gusts,
+            rated=tuple(g for g in terms.rated if g in gusts),
+            curve=terms.curve if still else {},
+        )
         out, known, jacobians, squares, motion, count, _ = _assemble(
             batch, index, terms, trim_samples, dt
         )
     r, m = batch[0].u.shape[1], batch[0].y.shape[1]
-    names, axes, rates, rows, products = _columns(terms, index, r)
+    names, axes, rates, rows, products, curve = _columns(terms, index, r)
     return Prepared(
         batch=out,
         known=known,
@@ -190,8 +220,19 @@ def prepare(
         rates=rates,
         rows=rows,
         bilinear=products,
+        curve=curve,
         air_angles=tuple(e.air_angles for e in batch if e.air_angles is not None),
     )
+
+
+def _curves(batch, throttles: dict[int, str]) -> dict[int, tuple[str, float]]:
+    """Each throttle that moved in the batch: its name and largest |deviation from trim|."""
+    out = {}
+    for j, name in throttles.items():
+        peak = max(float(np.max(np.abs(e.u[:, j]))) for e in batch)
+        if peak > 0:
+            out[j] = (name, peak)
+    return out
 
 
 def _assemble(batch, index: dict[str, int], terms: _Terms, trim_samples: int, dt: float):
@@ -236,7 +277,10 @@ def _columns(terms: _Terms, index: dict[str, int], r: int):
         products = tuple(r + len(names) + k for k in range(len(BILINEAR)))
         names = (*names, *(f"alpha·{role}" for role in BILINEAR))
         axes = [*axes, *(["lateral"] * len(BILINEAR))]
-    return names, {r + k: a for k, a in enumerate(axes)}, rates, rows, products
+    curve = tuple(r + len(names) + k for k in range(len(terms.curve)))
+    names = (*names, *(f"{name}²" for name, _ in terms.curve.values()))
+    axes = [*axes, *(["longitudinal"] * len(terms.curve))]
+    return names, {r + k: a for k, a in enumerate(axes)}, rates, rows, products, curve
 
 
 def _output_jacobian(mean: np.ndarray, index: dict[str, int], m: int) -> np.ndarray:
@@ -286,6 +330,8 @@ def _known_inputs(e: Experiment, index: dict[str, int], terms: _Terms, trim_samp
         alpha = deviation[:, KINEMATIC_STATES.index("alpha")]
         lateral = [KINEMATIC_STATES.index(role) for role in BILINEAR]
         u = np.hstack([u, alpha[:, None] * deviation[:, lateral]])
+    for j, (_, peak) in terms.curve.items():  # in the throttle's units: δ² / its peak
+        u = np.hstack([u, (e.u[:, j] * e.u[:, j] / peak)[:, None]])
     return u, y, x, air, gusts, raw
 
 
