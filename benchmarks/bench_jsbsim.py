@@ -35,8 +35,9 @@ leaves it out and says so.
 Sizing (`--sizing auto`, agent/sizing.py): as the agent flies them. For each aircraft and
 condition the full preset is first flown at the build-up share of its amplitudes; each run is
 identified (with the INS), its surfaces' linkage measured, and the next sized from that
-model, until no amplitude is held back by the build-up (at most CALIBRATION_RUNS runs, seeds
-from CALIBRATION_SEED). The ten seeds then fly the full preset as sized last, and the cards
+model, until the plan is sized by the model of a run that a model sized (not the build-up's)
+and no amplitude is held back by the build-up's growth limit (at most CALIBRATION_RUNS runs,
+seeds from CALIBRATION_SEED). The ten seeds then fly the full preset as sized last, and the cards
 sized by the same model. `--sizing nominal` flies each at its plan's own amplitudes.
 
 Each seed is one offline flight (`agent.sim.offline.fly`: JSBSim trimmed as `sysid sim` trims
@@ -412,8 +413,14 @@ def calibrate(setup: Setup, plan: Plan, settings: Settings = OURS):
         sized = sizing.size(
             plan, timeline, predictor, CONFIG.sizing, setup.surfaces, setup.envelope, flown=flown
         )
+        # Done when the plan is sized by a model of a run that a model sized itself (not the
+        # build-up's small-amplitude run, whose model the sizing extrapolates furthest) and
+        # no amplitude is held back by the build-up's growth limit: stopping on the growth
+        # limit alone made the plan flown hinge on which limit bound first by a few tenths
+        # of a degree after the build-up run.
         grown = f"{CONFIG.sizing.max_growth:g}× the"
-        if not any(grown in why for why in sized.limited_by.values()):
+        model_sized = not runs[-1][0].build_up
+        if model_sized and not any(grown in why for why in sized.limited_by.values()):
             break
     return sized, predictor, runs, flown
 
