@@ -59,18 +59,20 @@ known input then; the vertical and lateral gusts are unmeasured process noise.
 
 The throttle's curvature (`throttles`): a throttle's square about the trim (over its largest
 deviation in the batch, so in the throttle's units) is a known input of the longitudinal axis,
-free on each of its equations, where no rpm or thrust is measured. A piston engine's thrust
-bends with the throttle near full power: JSBSim's Cessna 310 at its 100-kt trim gained 93 lb
-and lost 172 lb of thrust at ±10 % throttle, and a linear model of a classic card's 5-s
-throttle doublet put its phugoid's damping 55 % high on every seed (benchmarks/README.md). An
-odd-harmonic multisine keeps the square on the lines between its own; steps and doublets do
-not. It is a term of still air only: where the INS measured the longitudinal gusts (airspeed
-and, with vanes, α) and found them within the sensors' noise. The square of a doublet or of a
-multisine's throttle is slow, its information in a few low bins, and where the air moves the
-aircraft there its free gains fitted the gusts' slow response instead (JSBSim's Cessna 182 in
-light turbulence: a seed's phugoid 8.4 → 11.3 % off, the J-3 Cub's 2.4 → 4.7 %, their gains
-3–7 σ from nought; benchmarks/README.md). There it joins the fit where the data ask
-for it (agent.ident.aircraft.model `_curved`: the Akaike criterion).
+on V̇ alone (thrust acts along the airspeed; its share in α̇ is T sin α / m V: a gain free on
+each equation took JSBSim's C172R's card phugoid from 3.0 to 4.2 % off in median, on V̇ alone
+it stays at 3.0 %; benchmarks/README.md), where no rpm or thrust is measured. A piston
+engine's thrust bends with the throttle near full power: JSBSim's Cessna 310 at its 100-kt
+trim gained 93 lb and lost 172 lb of thrust at ±10 % throttle, and a linear model of a classic
+card's 5-s throttle doublet put its phugoid's damping 55 % high on every seed
+(benchmarks/README.md). An odd-harmonic multisine keeps the square on the lines between its
+own; steps and doublets do not. It is a term of still air only: where the INS measured the
+longitudinal gusts (airspeed and, with vanes, α) and found them within the sensors' noise. The
+square of a doublet or of a multisine's throttle is slow, its information in a few low bins,
+and where the air moves the aircraft there its free gains fitted the gusts' slow response
+instead (JSBSim's Cessna 182 in light turbulence: a seed's phugoid 8.4 → 11.3 % off, the J-3
+Cub's 2.4 → 4.7 %, their gains 3–7 σ from nought; benchmarks/README.md). In still air it joins the
+fit where the data ask for it (agent.ident.aircraft.model `_curved`: the Akaike criterion).
 
 What each term does on the benchmark aircraft: benchmarks/README.md, *The whole-aircraft
 method's terms* (`make bench-jsbsim`, with `--without` to leave one out).
@@ -278,6 +280,8 @@ def _columns(terms: _Terms, index: dict[str, int], r: int):
         names = (*names, *(f"alpha·{role}" for role in BILINEAR))
         axes = [*axes, *(["lateral"] * len(BILINEAR))]
     curve = tuple(r + len(names) + k for k in range(len(terms.curve)))
+    for column in curve:  # the thrust's line is the airspeed's (module docstring)
+        rows[column] = index["airspeed"]
     names = (*names, *(f"{name}²" for name, _ in terms.curve.values()))
     axes = [*axes, *(["longitudinal"] * len(terms.curve))]
     return names, {r + k: a for k, a in enumerate(axes)}, rates, rows, products, curve
