@@ -36,9 +36,9 @@ Sizing (`--sizing auto`, agent/sizing.py): as the agent flies them. For each air
 condition the full preset is first flown at the build-up share of its amplitudes; each run is
 identified (with the INS), its surfaces' linkage measured, and the next sized from that
 model, until the plan is sized by the model of a run that a model sized (not the build-up's)
-and no amplitude is held back by the build-up's growth limit (at most CALIBRATION_RUNS runs,
-seeds from CALIBRATION_SEED). The ten seeds then fly the full preset as sized last, and the cards
-sized by the same model. `--sizing nominal` flies each at its plan's own amplitudes.
+and no amplitude is held back by the build-up's growth limit, or the next plan is one the
+agent refuses (at most CALIBRATION_RUNS runs, seeds from CALIBRATION_SEED). The ten seeds
+then fly the full preset as sized last, and the cards sized by the same model. `--sizing nominal` flies each at its plan's own amplitudes.
 
 Each seed is one offline flight (`agent.sim.offline.fly`: JSBSim trimmed as `sysid sim` trims
 it, the emulated ArduPlane's servos, the sensors' noise, 100 Hz), 2 s before to 2 s after the
@@ -413,6 +413,8 @@ def calibrate(setup: Setup, plan: Plan, settings: Settings = OURS):
         sized = sizing.size(
             plan, timeline, predictor, CONFIG.sizing, setup.surfaces, setup.envelope, flown=flown
         )
+        if sized.refusals:  # the agent would not arm it: no further run to calibrate on
+            break
         # Done when the plan is sized by a model of a run that a model sized itself (not the
         # build-up's small-amplitude run, whose model the sizing extrapolates furthest) and
         # no amplitude is held back by the build-up's growth limit: stopping on the growth
