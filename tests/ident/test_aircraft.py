@@ -593,6 +593,10 @@ def test_the_throttles_curvature_is_a_known_input_of_the_longitudinal_axis():
     blind, blind_report = _card_phugoid(-0.3, throttle_curve=False)
     gain = report.throttle_curve["throttle²"]["airspeed"]
     assert set(report.throttle_curve["throttle²"]) == {"airspeed"}  # V̇ alone
+    # V̇'s other one-equation input, sideslip drag (none on this aircraft), is its own.
+    drag = report.sideslip_drag
+    assert drag.gain != gain.gain
+    assert abs(drag.gain) < 3 * drag.std
     assert gain.gain < 0
     assert abs(gain.gain) > 3 * gain.std
     longitudinal, lateral = report.axes

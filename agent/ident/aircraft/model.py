@@ -711,22 +711,27 @@ def _report(
     names = [*inputs, *ready.extra_names]
     drag = None
     for column, row in ready.rows.items():  # sideslip drag: V̇ = … + X_β² β²
+        if column in ready.curve:  # the throttle's square acts on V̇ alone too (below)
+            continue
         for f in fits:
             gain = known_gain(f, column, row)
             if gain is not None:
                 drag = Gain(gain=gain[0], std=gain[1])
     products: dict[str, dict[str, Gain]] = {}
     curve: dict[str, dict[str, Gain]] = {}
-    # The lateral derivatives' change with α, and the throttle's curvature.
+    # The lateral derivatives' change with α, and the throttle's curvature (its one row).
     for columns, found in ((ready.bilinear, products), (ready.curve, curve)):
         for column in columns:
             for f in fits:
                 for row in f.states:
                     gain = known_gain(f, column, row)
-                    if gain is not None and row not in ready.attitude:
-                        found.setdefault(names[column], {})[outputs[row]] = Gain(
-                            gain=gain[0], std=gain[1]
-                        )
+                    if gain is None or row in ready.attitude:
+                        continue
+                    if column in ready.rows and row != ready.rows[column]:
+                        continue
+                    found.setdefault(names[column], {})[outputs[row]] = Gain(
+                        gain=gain[0], std=gain[1]
+                    )
     return AircraftDocument(
         band_hz=(float(sp.band_hz[0]), float(sp.band_hz[1])),
         bins=int(sp.s.size),
