@@ -38,7 +38,8 @@ identified (with the INS), its surfaces' linkage measured, and the next sized fr
 model, until the plan is sized by the model of a run that a model sized (not the build-up's)
 and no amplitude is held back by the build-up's growth limit, or the next plan is one the
 agent refuses (at most CALIBRATION_RUNS runs, seeds from CALIBRATION_SEED). The ten seeds
-then fly the full preset as sized last, and the cards sized by the same model. `--sizing nominal` flies each at its plan's own amplitudes.
+then fly the full preset as sized last, and the cards sized by the same model. `--sizing
+nominal` flies each at its plan's own amplitudes.
 
 Each seed is one offline flight (`agent.sim.offline.fly`: JSBSim trimmed as `sysid sim` trims
 it, the emulated ArduPlane's servos, the sensors' noise, 100 Hz), 2 s before to 2 s after the
