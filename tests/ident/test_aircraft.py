@@ -607,6 +607,15 @@ def test_the_throttles_curvature_is_a_known_input_of_the_longitudinal_axis():
     # drives the engine's lags and through them α̇ and q̇ too), 1.1 % without.
     assert error < 0.004
     assert blind > 3 * error
+    # Bad input tried: the throttle recorded as its absolute setting (0.7 of full at the
+    # trim), not as a deviation: its square is still taken about the trim, the same gain.
+    u, air, op, navigation, _ = gusty_record(
+        seed=5, scale=0.03, plan=classic_card(), curve=-0.3, gust=0.0
+    )
+    u[:, 0] += 0.7
+    absolute = aircraft_identify(Experiment(u, air, operating_point=op, navigation=navigation))
+    same = absolute.aircraft.throttle_curve["throttle²"]["airspeed"]
+    assert same.gain == pytest.approx(gain.gain, rel=1e-6)
 
 
 def test_a_straight_throttle_has_no_curvature_and_turbulence_leaves_it_out():

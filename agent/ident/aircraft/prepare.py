@@ -181,7 +181,7 @@ def prepare(
         inertial=gusts,
         drag=sideslip_drag and "beta" in index and "airspeed" in index,
         bilinear=alpha_products and all(role in index for role in ("alpha", *BILINEAR)),
-        curve=_curves(batch, throttles or {}) if "airspeed" in index else {},
+        curve=_curves(batch, throttles or {}, trim_samples) if "airspeed" in index else {},
     )
     out, known, jacobians, squares, motion, count, heard = _assemble(
         batch, index, terms, trim_samples, dt
@@ -227,14 +227,20 @@ def prepare(
     )
 
 
-def _curves(batch, throttles: dict[int, str]) -> dict[int, tuple[str, float]]:
+def _curves(batch, throttles: dict[int, str], trim_samples: int) -> dict[int, tuple[str, float]]:
     """Each throttle that moved in the batch: its name and largest |deviation from trim|."""
     out = {}
     for j, name in throttles.items():
-        peak = max(float(np.max(np.abs(e.u[:, j]))) for e in batch)
+        peak = max(float(np.max(np.abs(_about_trim(e.u[:, j], trim_samples)))) for e in batch)
         if peak > 0:
             out[j] = (name, peak)
     return out
+
+
+def _about_trim(signal: np.ndarray, trim_samples: int) -> np.ndarray:
+    """`signal` less its mean over the record's first `trim_samples` (the trim): a square of
+    a control is a curvature about the trim only from there, whatever the record's units."""
+    return signal - signal[:trim_samples].mean()
 
 
 def _assemble(batch, index: dict[str, int], terms: _Terms, trim_samples: int, dt: float):
@@ -309,8 +315,7 @@ def _known_inputs(e: Experiment, index: dict[str, int], terms: _Terms, trim_samp
     u, y = e.u, e.y.copy()
     # Sideslip drag's regressor: the air-relative β (the vane's), before the wind's
     # correction below puts the inertial β in its place.
-    beta = x[:, KINEMATIC_STATES.index("beta")]
-    beta = beta - beta[:trim_samples].mean()
+    beta = _about_trim(x[:, KINEMATIC_STATES.index("beta")], trim_samples)
     air = x.copy()  # the air-relative states: what the forces depend on
     gusts, raw = [], {}
     if terms.inertial:
@@ -335,7 +340,8 @@ def _known_inputs(e: Experiment, index: dict[str, int], terms: _Terms, trim_samp
         lateral = [KINEMATIC_STATES.index(role) for role in BILINEAR]
         u = np.hstack([u, alpha[:, None] * deviation[:, lateral]])
     for j, (_, peak) in terms.curve.items():  # in the throttle's units: δ² / its peak
-        u = np.hstack([u, (e.u[:, j] * e.u[:, j] / peak)[:, None]])
+        delta = _about_trim(e.u[:, j], trim_samples)
+        u = np.hstack([u, (delta * delta / peak)[:, None]])
     return u, y, x, air, gusts, raw
 
 
