@@ -140,9 +140,17 @@ def estimate(
     Q, R = np.zeros((F, m)), level.copy()
     if not np.all(np.isfinite(T)):
         raise np.linalg.LinAlgError("the model has a pole on the frequency axis")
-    for _ in range(STEPS):
+    best, kept = np.inf, (Q, R)
+    for step in range(STEPS + 1):
         S = np.einsum("fia,fa,fja->fij", T, Q, T.conj()) + np.diag(R)
-        _, P, _ = whiten(0.5 * (S + S.conj().transpose(0, 2, 1)))
+        W, P, logdet = whiten(0.5 * (S + S.conj().transpose(0, 2, 1)))
+        # Scoring has no line search: keep the spectra of the best likelihood met (the start,
+        # white sensor noise, among them), never a step that left it.
+        value = float(np.sum(np.abs(np.einsum("fij,fj->fi", W, e)) ** 2)) + logdet
+        if value < best:
+            best, kept = value, (Q, R)
+        if step == STEPS:
+            break
         PZ = P @ Z
         M = np.abs(Z.conj().transpose(0, 2, 1) @ PZ) ** 2  # (F, p, p): tr(P D_a P D_b)
         v = np.abs(np.einsum("fia,fi->fa", PZ.conj(), e)) ** 2  # tr(P D_a P e eᴴ)
@@ -157,6 +165,7 @@ def estimate(
         R = np.maximum(R, R_FLOOR * level)
         if not (np.all(np.isfinite(Q)) and np.all(np.isfinite(R))):
             raise np.linalg.LinAlgError("the process-noise spectra did not converge")
+    Q, R = kept
     return ProcessNoise(tuple(rows), Q, R, s, tuple(direct))
 
 
