@@ -21,6 +21,7 @@ from agent.ident.aircraft.fit import (
     SMOOTH_FLOOR,
     bin_sigma,
     consistent,
+    normal_inverse,
     smooth_bins,
 )
 from agent.ident.aircraft.kinematics import kinematic_jacobian, kinematic_remainder
@@ -1449,3 +1450,18 @@ def test_a_prediction_error_fit_that_fails_keeps_output_error_and_says_why(monke
         assert note in kept.warnings
         np.testing.assert_allclose(kept.continuous.A, plain.continuous.A)
         assert {a.name: a.estimator for a in kept.aircraft.axes}["lateral"] == "output error"
+
+
+def test_the_normal_equations_keep_every_direction_whatever_the_parameters_units():
+    # Bad input tried: a Jacobian whose columns span twelve decades (a derivative in 1/s
+    # beside a gain on a squared input whose excursion is tiny), as the filter error's
+    # whitening makes them: the pseudo-inverse of JᵀJ dropped the small columns' directions
+    # and gave their parameters a variance of almost nothing.
+    rng = np.random.default_rng(3)
+    J = rng.normal(size=(400, 6))
+    scales = 10.0 ** np.array([6, 3, 0, -2, -4, -6])
+    exact = np.linalg.inv(J.T @ J) / np.outer(scales, scales)
+    H = (J * scales).T @ (J * scales)
+    assert np.allclose(normal_inverse(H), exact, rtol=1e-6)
+    dropped = np.linalg.pinv(H, rcond=1e-12)
+    assert np.diag(dropped)[-1] < 1e-6 * np.diag(exact)[-1]  # what the sandwich used to do

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from agent.ident.aircraft.fit import AxisFit, bin_sigma, minimise, smooth_bins
+from agent.ident.aircraft.fit import AxisFit, bin_sigma, minimise, normal_inverse, smooth_bins
 from agent.ident.aircraft.model import Fitted
 from agent.ident.aircraft.problem import AxisProblem
 
@@ -137,5 +137,5 @@ def whittle(problem: AxisProblem, theta: np.ndarray) -> np.ndarray:
     weighted = inverse @ Jf  # (F, n, p)
     M = 2 * (Jf.conj().reshape(-1, Jf.shape[2]).T @ weighted.reshape(-1, Jf.shape[2])).real
     out = np.zeros((theta.size, theta.size))
-    out[np.ix_(free, free)] = np.linalg.pinv(M, rcond=1e-12)
+    out[np.ix_(free, free)] = normal_inverse(M)  # a direction the record does not determine kept
     return out
