@@ -61,6 +61,43 @@ def hold_block(Ac: np.ndarray, Bc: np.ndarray, dt: float) -> np.ndarray:
     return M * dt
 
 
+def hold_derivatives(
+    Ac: np.ndarray, Bc: np.ndarray, dt: float, hold: str, moving: np.ndarray | None = None
+) -> tuple[np.ndarray, ...]:
+    """Φ, Γa, Γ2 of the hold's step (`hold_block`; Γ2 = 0 for "zoh") and their derivatives
+    along each entry of [vec Ac, vec Bc] (row-major), (n² + n·r, …) stacked: the derivative of
+    expm(M) along dM is the top-right block of expm([[M, dM], [0, M]]), all directions through
+    one batched expm, or only those `moving` (a mask over the entries) marks, the others left
+    zero."""
+    n, r = Bc.shape
+    size = n + 2 * r
+    M = hold_block(Ac, Bc, dt)
+    if hold == "zoh":
+        M[:, n + r :] = 0.0  # no ramp input: the top row of expm is then [Φ, Γ, 0]
+    E = scipy.linalg.expm(M)
+    k = n * n + n * r
+    which = np.arange(k) if moving is None else np.flatnonzero(moving)
+    big = np.zeros((which.size, 2 * size, 2 * size))
+    big[:, :size, :size] = M
+    big[:, size:, size:] = M
+    in_a = which < n * n
+    rows, cols = np.divmod(which[in_a], n)
+    big[np.flatnonzero(in_a), rows, size + cols] = dt
+    rows, cols = np.divmod(which[~in_a] - n * n, r)
+    big[np.flatnonzero(~in_a), rows, size + n + cols] = dt
+    dE = np.zeros((k, size, size))
+    if which.size:
+        dE[which] = scipy.linalg.expm(big)[:, :size, size:]
+    return (
+        E[:n, :n],
+        E[:n, n : n + r],
+        E[:n, n + r :],
+        dE[:, :n, :n],
+        dE[:, :n, n : n + r],
+        dE[:, :n, n + r :],
+    )
+
+
 def discretize_hold(
     Ac: np.ndarray, Bc: np.ndarray, C: np.ndarray, D: np.ndarray, dt: float, hold: str
 ) -> StateSpace:

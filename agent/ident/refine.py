@@ -48,7 +48,7 @@ import numpy as np
 import scipy.linalg
 import scipy.ndimage
 
-from agent.ident.convert import StateSpace, discretize_hold, hold_block
+from agent.ident.convert import StateSpace, discretize_hold, hold_derivatives
 from agent.ident.errors import IdentificationFailed
 from agent.ident.fit import (
     BLOCK_MAX,
@@ -58,6 +58,7 @@ from agent.ident.fit import (
     simulate_states,
     state_convolution_from,
 )
+from agent.ident.lifted import block_means, blocks_jacobian, discretize_blocks, lift
 from agent.ident.modal import EigenvalueStd, Mode, SecondOrder
 from agent.ident.okid import Experiment
 
@@ -87,9 +88,12 @@ class Refinement:
 
     gain: np.ndarray | None  # K of the innovation form; None for output error
     continuous: StateSpace  # Ac, Bc, C, D
-    discrete: StateSpace  # its first-order-hold discretisation at dt (what was fitted)
+    discrete: StateSpace  # its discretisation at dt (what was fitted)
     dt: float
     hold: str  # "zoh" or "foh": how the fitted discretisation treats the inputs
+    # The outputs were means over blocks of this many of the record's samples, dt the blocks'
+    # interval and `discrete` their lifted model (agent.ident.lifted); None: the samples.
+    block: int | None = None
     initial_states: tuple[np.ndarray, ...]
     noise_std: np.ndarray  # σ_i per output: of the final residuals (innovations for PEM)
     # Of [vec Ac, vec Bc, vec C, vec D] (row-major), fixed entries 0: corrected for the
@@ -159,26 +163,8 @@ def discretization_jacobian(
     entries: no derivative is asked of them).
     """
     n, m, r = _shape(model)
-    size = n + 2 * r
-    M = hold_block(model.A, model.B, dt)
-    if hold == "zoh":
-        M[:, n + r :] = 0.0  # no ramp input: the top row of expm is then [Φ, Γ, 0]
-    E = scipy.linalg.expm(M)
-    Phi, G2 = E[:n, :n], E[:n, n + r :]
     k = n * n + n * r
-    which = np.arange(k) if moving is None else np.flatnonzero(moving)
-    big = np.zeros((which.size, 2 * size, 2 * size))
-    big[:, :size, :size] = M
-    big[:, size:, size:] = M
-    in_a = which < n * n
-    rows, cols = np.divmod(which[in_a], n)
-    big[np.flatnonzero(in_a), rows, size + cols] = dt
-    rows, cols = np.divmod(which[~in_a] - n * n, r)
-    big[np.flatnonzero(~in_a), rows, size + n + cols] = dt
-    dE = np.zeros((k, size, size))
-    if which.size:
-        dE[which] = scipy.linalg.expm(big)[:, :size, size:]
-    dPhi, dGa, dG2 = dE[:, :n, :n], dE[:, :n, n : n + r], dE[:, :n, n + r :]
+    Phi, _, G2, dPhi, dGa, dG2 = hold_derivatives(model.A, model.B, dt, hold, moving)
     if hold == "zoh":
         dBd, G2, dG2 = dGa, np.zeros_like(G2), np.zeros_like(dG2)
     else:
@@ -200,9 +186,28 @@ def discretization_jacobian(
     return chain
 
 
+def _discretize(model: StateSpace, dt: float, hold: str, block: int | None) -> StateSpace:
+    """The discrete model fitted: sampled at `dt` with `hold`, or of `block` means."""
+    if block is None:
+        return discretize_hold(model.A, model.B, model.C, model.D, dt, hold)
+    return discretize_blocks(model, dt, hold, block)
+
+
+def _discretization_chain(
+    model: StateSpace, dt: float, hold: str, block: int | None, moving: np.ndarray
+) -> np.ndarray:
+    """`_discretize`'s derivative in the continuous model's entries."""
+    if block is None:
+        return discretization_jacobian(model, dt, hold, moving)
+    return blocks_jacobian(model, dt, hold, block, moving)[1]
+
+
 # Above this many (state × direction) sensitivities the Jacobian comes from one recursion of
-# all directions (`_propagate`), below from the per-entry lifted convolution: measured, the
-# crossover lies between the A.2 lateral case (n·q ≈ 120) and the 8-state models (n·q ≈ 1000).
+# all directions (`_propagate`), below from the per-entry lifted convolution unless that one's
+# m·n·width per sample is the more (block means' lifted inputs: agent.ident.lifted): measured,
+# the crossover lies between the A.2 lateral case (n·q ≈ 120) and the 8-state models (n·q ≈
+# 1000); on a lifted lateral axis of JSBSim's Cessna 182 (n·q ≤ 400, m·n·width ≈ 1800) the
+# recursion took an identification 2.2 → 1.2 s.
 DIRECT_SENSITIVITY_SIZE = 400
 
 
@@ -250,11 +255,14 @@ class OutputErrorProblem:
         hold: str,
         gain: np.ndarray | None = None,
         fixed: np.ndarray | None = None,
+        block: int | None = None,
     ):
         """`fixed`: entries of [vec Ac, vec Bc] held at the model's values (a structured
-        model's known or absent terms), or None."""
+        model's known or absent terms), or None. `block`: the outputs are means over blocks
+        of this many of the record's steps (`dt`) and the inputs lifted
+        (agent.ident.lifted), or None: samples at `dt`."""
         self.n, self.m, self.r = _shape(model)
-        self.dt, self.hold = dt, hold
+        self.dt, self.hold, self.block = dt, hold, block
         self.batch = batch
         self.innovation = gain is not None
         n, m, r = self.n, self.m, self.r
@@ -334,8 +342,9 @@ class OutputErrorProblem:
         with_jacobian = jacobian is not None
         cont, x0s = self.unpack(beta)
         K = self.gain(beta)
-        n, m, r = self.n, self.m, self.r
-        disc = discretize_hold(cont.A, cont.B, cont.C, cont.D, self.dt, self.hold)
+        n, m = self.n, self.m
+        disc = _discretize(cont, self.dt, self.hold, self.block)
+        r = disc.B.shape[1]  # the discrete model's inputs: lifted ones are more
         Abar = disc.A - K @ disc.C
         Bbar = np.hstack([disc.B - K @ disc.D, K])
         predictor = StateSpace(Abar, Bbar, disc.C, np.hstack([disc.D, np.zeros((m, m))]))
@@ -345,9 +354,9 @@ class OutputErrorProblem:
         # ∂ŷ/∂discrete are applied as matrix products instead of being built.
         G = None
         if with_jacobian:
-            moving = np.any(self.basis[: n * n + n * r] != 0, axis=1)
+            moving = np.any(self.basis[: n * n + n * self.r] != 0, axis=1)
             G = (
-                discretization_jacobian(cont, self.dt, self.hold, moving)
+                _discretization_chain(cont, self.dt, self.hold, self.block, moving)
                 @ self.basis[: self.matrix_size]
             )
             q = G.shape[1]
@@ -378,7 +387,8 @@ class OutputErrorProblem:
                     continue
                 z_all = np.hstack([states, v if self.innovation else exp.u])
                 rows = slice(self.states_at + index * n, self.states_at + (index + 1) * n)
-                direct = n * q > DIRECT_SENSITIVITY_SIZE
+                # Per sample the recursion costs n·q, the convolution m·n·width.
+                direct = n * q > DIRECT_SENSITIVITY_SIZE or n * q < m * n * width
                 per_sample = (n * q if direct else m * n * width) + m * q
                 carried = self.basis[rows] if direct else np.zeros((n, n, width))
                 reach = self.basis[rows]  # Ā^first ∂x0: the free response's start
@@ -493,6 +503,7 @@ def refine(
     fixed: np.ndarray | None = None,
     initial_states: Sequence[np.ndarray] | None = None,
     relative_decrease: float = RELATIVE_DECREASE,
+    block: int | None = None,
 ) -> Refinement:
     """Maximum-likelihood refinement of a continuous model (see module text).
 
@@ -502,9 +513,13 @@ def refine(
     fit of the innovation form, which also models process noise (turbulence). `fixed`: the
     entries of [vec Ac, vec Bc] held at their values (a structured model). `initial_states`:
     each experiment's starting x(0), else the least-squares one of the simulation.
-    `relative_decrease`: the cost's relative fall below which a pass ends.
+    `relative_decrease`: the cost's relative fall below which a pass ends. `block`: fit the
+    means of the outputs over blocks of this many samples, exactly (agent.ident.lifted), the
+    initial states those of the blocks' first samples; None: the samples.
     """
-    start = discretize_hold(model.A, model.B, model.C, model.D, dt, hold)
+    if block is not None:
+        batch = [Experiment(lift(e.u, block), block_means(e.y, block)) for e in batch]
+    start = _discretize(model, dt, hold, block)
     if initial_states is None:
         x0s = [estimate_initial_state(start, e.u, e.y) for e in batch]
     else:
@@ -519,6 +534,7 @@ def refine(
         hold=hold,
         gain=gain,
         fixed=fixed,
+        block=block,
     )
     y_rms = np.sqrt(np.mean(np.vstack([e.y for e in batch]) ** 2, axis=0))
     floor = NOISE_FLOOR * np.where(y_rms > 0, y_rms, 1.0)
@@ -546,9 +562,10 @@ def refine(
     return Refinement(
         gain=problem.gain(beta) if problem.innovation else None,
         continuous=refined,
-        discrete=discretize_hold(refined.A, refined.B, refined.C, refined.D, dt, hold),
+        discrete=_discretize(refined, dt, hold, block),
         hold=hold,
-        dt=dt,
+        dt=dt * (block or 1),
+        block=block,
         initial_states=tuple(x0s),
         noise_std=sigma,
         covariance=basis @ coloured_covariance(problem, beta, triangle[:, :-1]) @ basis.T,
@@ -721,9 +738,11 @@ def eigenvalue_std(Ac: np.ndarray, covariance_A: np.ndarray, spread=()) -> list[
 
 
 def simulate_refined(refinement: Refinement, batch: Sequence[Experiment]) -> list[np.ndarray]:
-    """The refined model's simulated outputs per experiment, from its refined initial states."""
+    """The refined model's simulated outputs per experiment, from its refined initial states
+    (the blocks' means where it fitted them)."""
+    block = refinement.block
     return [
-        simulate(refinement.discrete, e.u, x0)
+        simulate(refinement.discrete, e.u if block is None else lift(e.u, block), x0)
         for e, x0 in zip(batch, refinement.initial_states, strict=True)
     ]
 

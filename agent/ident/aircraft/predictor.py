@@ -30,17 +30,25 @@ errors: the transforms leave DC out, the time domain does not) and the initial s
 re-estimated between passes, the covariance corrected for the innovations' remaining
 colour). The known inputs are those of the frequency-domain fit (the measured gusts, their
 rates through the fitted lags, the α products, the other axis's states where they joined)
-and K(t) the kinematics' nonlinear rest; the lags keep their fitted time constants. The
-samples are averaged in blocks to RATE_HZ first.
+and K(t) the kinematics' nonlinear rest; the lags keep their fitted time constants. The fit
+is to the outputs' means over blocks (RATE_HZ), modelled exactly: the state carried across
+each block at the record's rate by the block's own input samples, the block's mean output
+predicted from it (agent.ident.lifted). The blocks' means taken instead as the samples of a
+first-order hold between them, as before, are not the aircraft's response to a card's
+steps within a block: the SGS 1-26's light-turbulence card came out with its roll 6.5–22.9 %
+slow (5 seeds of 10 within 10 %), lifted within 8.8 % (10 of 10); a calm, noise-free J-3
+Cub card forced through the refinement 15.8 % off, lifted 0.2 %.
 
 Measured (benchmarks/README.md, *Closed-loop excitation*): the SGS 1-26's closed-loop roll
 mode in light turbulence within 10 % of the open loop's on three seeds of three (30–39 %
 apart by output error). In open loop, where output error is consistent, only where output
-error's roll mode is imprecise (PRECISE): used on every record it took the glider's
-light-turbulence cards to 9 of 10 seeds within 10 %, but cost the J-3 Cub's card its fast
-roll mode (1.1 → 6.0 % off in median: the inputs' block means with a hold between them are
-not the model's for it) and the Cub's and the T-6's moderate-turbulence sweeps theirs
-(docs/limitations.md). Not where β was synthesised from the INS (agent.ident.aircraft.model).
+error's roll mode is imprecise (PRECISE): where output error already knows the roll, the
+noise model's own error only costs. In moderate turbulence the refinement's roll comes out
+fast: the T-6's card, noise-free, on the two seeds of three it refined 15.6 and 14.9 % (the
+hold's approximation 17.4 and 24.7 %), output error 16.5 and 4.9 %; with noise states on β's
+and r's equations too 2.6 and 9.5 %, but the glider's light card then 9 of 10 for 10
+(docs/limitations.md).
+Not where β was synthesised from the INS (agent.ident.aircraft.model).
 """
 
 from __future__ import annotations
@@ -68,20 +76,18 @@ from agent.ident.aircraft.transforms import Transforms
 from agent.ident.convert import StateSpace, discretize_hold
 from agent.ident.errors import IdentificationFailed
 from agent.ident.fit import simulate_states
+from agent.ident.lifted import block_means, discretize_blocks, lift
 from agent.ident.naming import DUTCH_ROLL_MAX_DAMPING, SPIRAL_MIN_TIME_CONSTANT
 from agent.ident.okid import Experiment
 from agent.ident.refine import Refinement, eigenvalue_std, refine
 
 # The fit's sample rate, Hz, at least: the record's samples averaged in blocks of the largest
-# whole number that keeps it. Higher rates weight what lies beyond the modes (the surfaces'
-# measurement, the discretisation's hold), which no model here holds: JSBSim's Cessna 182 in
-# light turbulence, its roll mode 1.6 % off the truth at 12.5 Hz, 3.9 % at 25, 9.3 % at 50
-# and 16.4 % at 100 (its frequency-domain fit: 2.8 %); and each Levenberg–Marquardt step's
-# cost grows with the samples. Not the fit's band: in closed loop the surfaces follow the
-# sensors' noise and the band reaches its ceiling (the J-3 Cub's 25 Hz). A roll mode of
-# 12 1/s (the Cub's) crosses 0.96 of its time constant in a block, and the inputs' block means
-# with a hold between them are not the model's for it: a calm, noise-free J-3 Cub card forced
-# through the refinement had its roll 16.2 % off (docs/limitations.md).
+# whole number that keeps it, a low-pass that leaves the modes (the means are modelled
+# exactly, so the rate costs no accuracy through the hold). Higher rates weight what lies
+# beyond the modes, where the turbulence's structure differs most from the noise model's, and
+# each Levenberg–Marquardt step's cost grows with the samples. Not the fit's band: in closed
+# loop the surfaces follow the sensors' noise and the band reaches its ceiling (the J-3
+# Cub's 25 Hz).
 RATE_HZ = 12.5
 # Each noise state's pole at the start, 1/s: near Dryden's roll gust's break (module text).
 NOISE_POLE = 1.0
@@ -224,16 +230,16 @@ def refined(
     rows = list(rows)
     nw = len(rows)
     size = n + nw
-    # Averaged in blocks (RATE_HZ): a low-pass that leaves the modes, applied alike to the
-    # inputs and the outputs. Picking every step-th sample instead aliased the noise
-    # above the band into it (the SGS 1-26's roll mode 13 % off at 50 Hz, 3 % averaged).
+    # The outputs averaged in blocks (RATE_HZ), the inputs lifted (agent.ident.lifted).
+    # Picking every step-th sample instead aliased the noise above the band into it (the
+    # SGS 1-26's roll mode 13 % off at 50 Hz, 3 % averaged).
     step = max(1, int(np.floor(1.0 / (dt * RATE_HZ) + 1e-9)))
+    block = step if step > 1 else None
     lengths = np.array([prepared.y.shape[0] * dt for prepared in ready.batch])
     batch = [
-        Experiment(_blocks(np.hstack([e.u, np.ones((e.u.shape[0], 1))]), step), _blocks(e.y, step))
+        Experiment(np.hstack([e.u, np.ones((e.u.shape[0], 1))]), e.y)
         for e in series(fit, ready, sp, dt)
     ]
-    dt = dt * step
     width = r + n + 1  # inputs, forcing, constant
     A = np.zeros((size, size))
     A[:n, :n] = fit.A
@@ -251,11 +257,11 @@ def refined(
     fixed_B[[i for i in range(n) if not problem.fixed_A[i].all()], -1] = False  # c
     C = np.hstack([np.eye(n), np.zeros((n, nw))])
     model = StateSpace(A, B, C, np.zeros((n, width)))
-    starts = [np.concatenate([e.y[0], np.zeros(nw)]) for e in batch]
-    gain = _start_gain(model, batch, rows, dt, hold, starts)
+    starts = [np.concatenate([_means(e.y, step)[0], np.zeros(nw)]) for e in batch]
+    gain = _start_gain(model, batch, rows, dt, hold, starts, block)
     # A trial step may make the predictor diverge: its cost is then inf and the step refused.
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        result = _refine(model, dt, batch, gain, fixed_A, fixed_B, hold, starts)
+        result = _refine(model, dt, batch, gain, fixed_A, fixed_B, hold, starts, block)
     Ac, Bc = result.continuous.A, result.continuous.B
     if not (np.all(np.isfinite(Ac)) and np.all(np.isfinite(Bc))):
         raise IdentificationFailed(f"{fit.name}: the prediction-error fit diverged")
@@ -360,9 +366,10 @@ def _refine(
     fixed_B: np.ndarray,
     hold: str,
     starts: Sequence[np.ndarray],
+    block: int | None,
 ) -> Refinement:
     """agent.ident.refine's prediction-error fit of the augmented model (`fixed_A`,
-    `fixed_B`: its entries held at their values)."""
+    `fixed_B`: its entries held at their values) to the means of `batch`'s blocks."""
     return refine(
         model,
         dt,
@@ -375,6 +382,7 @@ def _refine(
         initial_states=starts,
         relative_decrease=SETTLED,
         max_passes=PASSES,
+        block=block,
     )
 
 
@@ -399,15 +407,22 @@ def _start_gain(
     dt: float,
     hold: str,
     starts: Sequence[np.ndarray],
+    block: int | None,
 ) -> np.ndarray:
     """The steady-state Kalman gain, among START_LEVELS of the noise states' intensity, whose
-    predictor's weighted one-step errors are smallest. The outputs' white noise is guessed
-    from their sample-to-sample differences."""
+    predictor's weighted one-step errors are smallest, for the means of `batch`'s blocks
+    (`dt` its step). The outputs' white noise is guessed from their block-to-block
+    differences."""
     n = model.C.shape[0]
     size = model.A.shape[0]
+    if block is None:
+        disc = discretize_hold(model.A, model.B, model.C, model.D, dt, hold)
+    else:
+        disc = discretize_blocks(model, dt, hold, block)
+        batch = [Experiment(lift(e.u, block), block_means(e.y, block)) for e in batch]
+        dt = dt * block
     y = np.vstack([np.diff(e.y, axis=0) for e in batch])
     white = np.maximum(np.var(y, axis=0) / 2, 1e-30)
-    disc = discretize_hold(model.A, model.B, model.C, model.D, dt, hold)
     best, chosen = np.inf, np.zeros((size, n))
     for level in START_LEVELS:
         Q = np.zeros((size, size))
@@ -433,19 +448,24 @@ def _prediction_cost(
     starts: Sequence[np.ndarray],
     white: np.ndarray,
 ) -> float:
-    """Σ of the one-step prediction errors squared, each output over its white noise."""
+    """Σ of the one-step prediction errors squared, each output over its white noise: x̂(k+1) =
+    Φ x̂ + Bd u + K (y − C x̂ − Dd u)."""
     predictor = StateSpace(
-        disc.A - K @ disc.C, np.hstack([disc.B, K]), disc.C, np.zeros((disc.C.shape[0], 0))
+        disc.A - K @ disc.C,
+        np.hstack([disc.B - K @ disc.D, K]),
+        disc.C,
+        np.zeros((disc.C.shape[0], 0)),
     )
     total = 0.0
     with np.errstate(over="ignore", invalid="ignore"):
         for e, x in zip(batch, starts, strict=True):
             states = simulate_states(predictor, np.hstack([e.u, e.y]), x)
-            total += float(np.sum((e.y - states @ disc.C.T) ** 2 / white))
+            predicted = states @ disc.C.T + e.u @ disc.D.T
+            total += float(np.sum((e.y - predicted) ** 2 / white))
     return total if np.isfinite(total) else np.inf
 
 
-def _blocks(x: np.ndarray, step: int) -> np.ndarray:
+def _means(x: np.ndarray, step: int) -> np.ndarray:
     """The means of `x`'s rows in consecutive blocks of `step` (a last partial block dropped)."""
     usable = x.shape[0] // step * step
     return x[:usable].reshape(-1, step, x.shape[1]).mean(axis=1)
