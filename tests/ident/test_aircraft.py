@@ -1465,3 +1465,18 @@ def test_the_normal_equations_keep_every_direction_whatever_the_parameters_units
     assert np.allclose(normal_inverse(H), exact, rtol=1e-6)
     dropped = np.linalg.pinv(H, rcond=1e-12)
     assert np.diag(dropped)[-1] < 1e-6 * np.diag(exact)[-1]  # what the sandwich used to do
+
+
+def test_a_record_too_short_for_the_prediction_errors_blocks_keeps_output_error(monkeypatch):
+    # Bad input tried: a closed-loop record shorter than two of the refinement's averaging
+    # blocks (the blocks made longer than half the record). The refinement refuses it by
+    # name, and the frequency-domain fit stands with a note, as for any failed refinement.
+    u, air, op, navigation, _ = gusty_record(3, roll_gust=0.002, roll_corner=1.0)
+    record = Experiment(u, air, operating_point=op, navigation=navigation)
+    monkeypatch.setattr(predictor, "RATE_HZ", 1.5 / (u.shape[0] * DT))
+    kept = aircraft_identify(record, closed_loop=True)
+    (note,) = [w for w in kept.warnings if "prediction error failed" in w]
+    assert "a record shorter than two blocks" in note
+    assert {a.name: a.estimator for a in kept.aircraft.axes}["lateral"] == "output error"
+    plain = aircraft_identify(record, closed_loop=True, predictor=False)
+    np.testing.assert_allclose(kept.continuous.A, plain.continuous.A)

@@ -257,7 +257,12 @@ def refined(
     fixed_B[[i for i in range(n) if not problem.fixed_A[i].all()], -1] = False  # c
     C = np.hstack([np.eye(n), np.zeros((n, nw))])
     model = StateSpace(A, B, C, np.zeros((n, width)))
-    starts = [np.concatenate([_means(e.y, step)[0], np.zeros(nw)]) for e in batch]
+    # Bad input: a record too short for two blocks has no prediction to fit.
+    if any(e.y.shape[0] < 2 * step + 1 for e in batch):
+        raise IdentificationFailed(
+            f"{fit.name}: a record shorter than two blocks of {step * dt:.3g} s"
+        )
+    starts = [np.concatenate([block_means(e.y, step)[0], np.zeros(nw)]) for e in batch]
     gain = _start_gain(model, batch, rows, dt, hold, starts, block)
     # A trial step may make the predictor diverge: its cost is then inf and the step refused.
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
@@ -463,9 +468,3 @@ def _prediction_cost(
             predicted = states @ disc.C.T + e.u @ disc.D.T
             total += float(np.sum((e.y - predicted) ** 2 / white))
     return total if np.isfinite(total) else np.inf
-
-
-def _means(x: np.ndarray, step: int) -> np.ndarray:
-    """The means of `x`'s rows in consecutive blocks of `step` (a last partial block dropped)."""
-    usable = x.shape[0] // step * step
-    return x[:usable].reshape(-1, step, x.shape[1]).mean(axis=1)
