@@ -87,6 +87,43 @@ ENGINE_STATES = {
 # residual accepted (ft/s², and rad/s² for q̇).
 GLIDE_ITERATIONS = 30
 GLIDE_RESIDUAL = 1e-6
+# JSBSim's own trim does not trim every powered aircraft. Its steady-state search runs the
+# engines without refreshing their inputs from the flight controls (JSBSim issue 1440, "udot
+# doesn't appear to be trimmable"), and its turboprop engine (FGTurboProp) gives no power while
+# time is frozen and drops its gas generator to idle at the first step after any frozen
+# evaluation (FGTurboProp::Calculate, JSBSim 1.3: the PC-7's trim fails, and the DHC-6's left it
+# at idle power, 9 kt slower within 6 s). Such aircraft are trimmed here (`_trim_powered`):
+# Newton's method on α, elevator, throttle, aileron, rudder and β (the propeller's torque and
+# slipstream) for level flight, each residual read with the engines settled, the fuel frozen;
+# accepted below POWERED_RESIDUAL (ft/s², rad/s²), from START_THROTTLE.
+START_THROTTLE = 0.6
+POWERED_RESIDUAL = 1e-5
+MAX_TRIM_STEP = np.array([2.0, 0.1, 0.1, 0.1, 0.1, 2.0])
+# The engines run to their steady state with the airframe held: JSBSim's four integrators off
+# (0), so time passes for the engines, the propellers and the flight controls, not for the
+# motion. Steady: the total thrust moved by less than ENGINE_STEADY of it (of 100 lbf at least)
+# over ENGINE_CHECK_S, tight enough for the trim's finite differences; ENGINE_SETTLE_S at most
+# (the PC-7's gas generator takes about 20 s from idle).
+ENGINE_CHECK_S = 1.0
+ENGINE_STEADY = 1e-9
+ENGINE_SETTLE_S = 120.0
+HELD_INTEGRATORS = (
+    "simulation/integrator/rate/rotational",
+    "simulation/integrator/rate/translational",
+    "simulation/integrator/position/rotational",
+    "simulation/integrator/position/translational",
+)
+# What a trim found by the plant must leave, read with the engines running after it (ft/s² for
+# u̇, v̇, ẇ; rad/s² for ṗ, q̇, ṙ): 0.002 g, and a pitch or roll rate of 0.1°/s gained per second.
+TRIM_CHECK = (0.05, 0.0017)
+# The surfaces' positions as state() reads them, per control (see `_position_maps`).
+POSITION_PROPERTIES = {
+    "throttle": ("fcs/throttle-pos-norm",),
+    "elevator": ("fcs/elevator-pos-deg",),
+    "aileron": ("fcs/left-aileron-pos-deg", "fcs/right-aileron-pos-deg"),
+    "rudder": ("fcs/rudder-pos-deg",),
+}
+MAP_POINTS = 81
 # The throttles a multi-engine aircraft starts its trim from (the plant's constructor).
 TWIN_START_THROTTLE = 0.6
 
@@ -158,53 +195,25 @@ class Plant:
     ):
         import jsbsim  # imported here: the identification core does not need it
 
-        with _stdout_to_stderr():  # JSBSim's banner: stdout is for `--json`'s one object
-            self.fdm = jsbsim.FGFDMExec(None)
-            self.fdm.set_debug_level(0)
-            if not self.fdm.load_model(aircraft):
-                raise PlantError(f"JSBSim has no aircraft {aircraft!r}")
-        self.fdm.set_dt(1.0 / integration_hz)
-        for prop, method in INTEGRATORS.items():
-            self.fdm[prop] = method
-        self.fdm["simulation/randomseed"] = seed
-        self.fdm["atmosphere/randomseed"] = seed
-        self.fdm["ic/h-sl-ft"] = altitude_ft
-        self.fdm["ic/vc-kts"] = airspeed_kts
-        self.fdm["ic/gamma-deg"] = 0.0
-        self.fdm["ic/psi-true-deg"] = heading_deg
-        self.kind, self.engines = powerplant(self.fdm)
-        # The controls this aircraft has (a glider has no throttle), each on its JSBSim
-        # commands: the throttle on every engine's, as one lever moves them all.
-        self.commands = {
-            name: (prop,) for name, prop in COMMAND_PROPERTY.items() if name != "throttle"
-        }
-        if self.engines:
-            self.commands["throttle"] = tuple(
-                f"fcs/throttle-cmd-norm[{k}]" if k else "fcs/throttle-cmd-norm"
-                for k in range(self.engines)
-            )
-        if not self.fdm.run_ic():
-            raise PlantError("JSBSim rejected the initial conditions")
-        self.dt = self.fdm.get_delta_t()
-        with _stdout_to_stderr():  # JSBSim prints its trim's complaints with printf
-            if self.engines:
-                # Every engine's mixture rich, and on a multi-engine aircraft every throttle
-                # open to TWIN_START_THROTTLE (the trim moves it from there): JSBSim starts
-                # the second engine lean and closed, dead at the trim, which then fails.
-                for k in range(self.engines):
-                    self.fdm[f"fcs/mixture-cmd-norm[{k}]"] = 1.0
-                    if self.engines > 1:
-                        self.fdm[f"fcs/throttle-cmd-norm[{k}]"] = TWIN_START_THROTTLE
-                self.fdm["propulsion/set-running"] = -1
-                self.fdm.run()
-                try:
-                    self.fdm["simulation/do_simple_trim"] = 1
-                except Exception as exc:  # JSBSim raises its own TrimFailureException
-                    raise PlantError(
-                        f"JSBSim could not trim {aircraft} at {airspeed_kts} kt: {exc}"
-                    ) from exc
-            else:
-                self._trim_glide(aircraft, airspeed_kts)
+        # JSBSim raises its own errors (a model that reads a property only FlightGear
+        # provides fails at its initial conditions: the Dr.I's pushback, the L-17's flaps).
+        self._jsbsim_error = jsbsim.BaseError
+        with _stdout_to_stderr():  # JSBSim's banner and complaints: stdout is for `--json`
+            try:
+                self._load(jsbsim, aircraft, integration_hz, seed, altitude_ft, airspeed_kts)
+                self._heading(heading_deg)
+                self._start(aircraft, airspeed_kts)
+                # FGLinearization at the trim (slow on some aircraft: ten seconds for the
+                # PA-28); agent.sim.truth explains why it is not the truth identified models
+                # are judged by. JSBSim 1.3.3's FGLinearization crashes the process (a
+                # segmentation fault) on an aircraft without engines: a glider has none.
+                self.linearisation = self._linearise() if linearise and self.engines else None
+                self._finish_trim(aircraft, airspeed_kts)
+            except jsbsim.BaseError as exc:
+                raise PlantError(
+                    f"JSBSim could not fly {aircraft}: {str(exc).strip()} (an aircraft that "
+                    "needs FlightGear's properties does not fly in JSBSim alone)"
+                ) from exc
         self.trim = {
             name: float(self.fdm[self.commands[name][0]]) if name in self.commands else 0.0
             for name in COMMAND_PROPERTY
@@ -216,11 +225,7 @@ class Plant:
         # (set_normalised); _settled: the surfaces are where the ramps have them now.
         self._ramp = {name: (value, value) for name, value in self.trim.items()}
         self._ramp_steps, self._ramp_done, self._settled = 1, 1, True
-        # FGLinearization at the trim (slow on some aircraft: ten seconds for the PA-28);
-        # agent.sim.truth explains why it is not the truth identified models are judged by.
-        # JSBSim 1.3.3's FGLinearization crashes the process (a segmentation fault) on an
-        # aircraft without engines: a glider has none.
-        self.linearisation = self._linearise() if linearise and self.engines else None
+        self._positions: dict[str, float] | None = None  # where `_settle` put the surfaces
         if turbulence > 0:
             self.fdm["atmosphere/turb-type"] = 3
             self.fdm["atmosphere/turbulence/milspec/severity"] = int(
@@ -233,55 +238,303 @@ class Plant:
             # (with none it resets it to north) and `step` can align them with the aircraft.
             self.fdm["atmosphere/wind-mag-fps"] = 1e-6
         self.turbulence = turbulence
+        # Time from the trim: the engines may have run before it (`_settle_engines`).
+        self._t0 = float(self.fdm.get_sim_time())
+
+    def _load(self, jsbsim, aircraft, integration_hz, seed, altitude_ft, airspeed_kts) -> None:
+        self.fdm = jsbsim.FGFDMExec(None)
+        self.fdm.set_debug_level(0)
+        if not self.fdm.load_model(aircraft):
+            raise PlantError(f"JSBSim has no aircraft {aircraft!r}")
+        self.fdm.set_dt(1.0 / integration_hz)
+        for prop, method in INTEGRATORS.items():
+            self.fdm[prop] = method
+        self.fdm["simulation/randomseed"] = seed
+        self.fdm["atmosphere/randomseed"] = seed
+        self.fdm["ic/h-sl-ft"] = altitude_ft
+        self.fdm["ic/vc-kts"] = airspeed_kts
+        self.fdm["ic/gamma-deg"] = 0.0
+        self.kind, self.engines = powerplant(self.fdm)
+        names = {k.split(" ")[0] for k in self.fdm.get_property_catalog()}
+        # JSBSim's turboprop engine (FGTurboProp, the only engine with a torque limiter) drops
+        # to idle after a frozen evaluation: the plant trims it itself and never leaves it one.
+        self._frozen_idles = "propulsion/engine/ielu_intervent" in names
+        # The controls this aircraft has (a glider has no throttle), each on its JSBSim
+        # commands: the throttle on every engine's, as one lever moves them all.
+        self.commands = {
+            name: (prop,) for name, prop in COMMAND_PROPERTY.items() if name != "throttle"
+        }
+        if self.engines:
+            self.commands["throttle"] = tuple(
+                f"fcs/throttle-cmd-norm[{k}]" if k else "fcs/throttle-cmd-norm"
+                for k in range(self.engines)
+            )
+
+    def _heading(self, heading_deg: float) -> None:
+        self.fdm["ic/psi-true-deg"] = heading_deg
+        if not self.fdm.run_ic():
+            raise PlantError("JSBSim rejected the initial conditions")
+        self.dt = self.fdm.get_delta_t()
+
+    def _start(self, aircraft: str, airspeed_kts: float) -> None:
+        """The engines running and the aircraft trimmed: JSBSim's trim where it can, the
+        plant's own where it cannot (module constants above), a glide without engines."""
+        self.glide_deg, self._own_trim = None, False
+        if not self.engines:
+            self._trim_glide(aircraft, airspeed_kts)
+            return
+        # Every engine's mixture rich, and on a multi-engine aircraft every throttle open to
+        # TWIN_START_THROTTLE (the trim moves it from there): JSBSim starts the second engine
+        # lean and closed, dead at the trim, which then fails. A turboprop's pitch lever
+        # (advance) forward, to its governor's highest speed: at JSBSim's default (0) the
+        # PC-7's propeller windmills at 150 kt whatever the throttle.
+        for k in range(self.engines):
+            self.fdm[f"fcs/mixture-cmd-norm[{k}]"] = 1.0
+            if self._frozen_idles:
+                self.fdm[f"fcs/advance-cmd-norm[{k}]"] = 1.0
+            if self.engines > 1:
+                self.fdm[f"fcs/throttle-cmd-norm[{k}]"] = TWIN_START_THROTTLE
+        self.fdm["propulsion/set-running"] = -1
+        self.fdm.run()
+        if self._frozen_idles:
+            self._trim_powered(aircraft, airspeed_kts)
+            return
+        try:
+            self.fdm["simulation/do_simple_trim"] = 1
+        except self._jsbsim_error:  # JSBSim raises its own TrimFailureException
+            self._trim_powered(aircraft, airspeed_kts)
+
+    def _finish_trim(self, aircraft: str, airspeed_kts: float) -> None:
+        """After a trim of the plant's own: the surfaces' maps where a frozen evaluation idles
+        the engine, then the engines run to their steady state at the trim (the airframe
+        held), and the trim is checked with them running."""
+        self._maps = self._position_maps() if self._frozen_idles else None
+        if not self._own_trim:
+            return
+        self._settle_engines()
+        f = self.fdm
+        linear = [abs(float(f[f"accelerations/{a}dot-ft_sec2"])) for a in "uvw"]
+        angular = [abs(float(f[f"accelerations/{a}dot-rad_sec2"])) for a in "pqr"]
+        if max(linear) > TRIM_CHECK[0] or max(angular) > TRIM_CHECK[1]:
+            raise PlantError(
+                f"could not trim {aircraft} at {airspeed_kts:g} kt: with the engines running "
+                f"the trim leaves accelerations u̇, v̇, ẇ {np.round(linear, 3).tolist()} ft/s², "
+                f"ṗ, q̇, ṙ {np.round(angular, 4).tolist()} rad/s²"
+            )
+
+    def _throttle(self, value: float) -> None:
+        for prop in self.commands["throttle"]:
+            self.fdm[prop] = value
+
+    def _settle_engines(self, strict: bool = True) -> float:
+        """Run the engines to their steady state at the present flight condition, the
+        airframe held (HELD_INTEGRATORS off); returns the total thrust (lbf). Not `strict`:
+        where they do not settle, they stop at ENGINE_SETTLE_S (the trim's search goes on from
+        there; the trim found is checked strictly)."""
+        f = self.fdm
+        saved = {prop: float(f[prop]) for prop in HELD_INTEGRATORS}
+        check = max(1, round(ENGINE_CHECK_S / self.dt))
+        thrust = [f"propulsion/engine[{k}]/thrust-lbs" for k in range(self.engines)]
+        for prop in HELD_INTEGRATORS:
+            f[prop] = 0
+        try:
+            last = None
+            for _ in range(round(ENGINE_SETTLE_S / ENGINE_CHECK_S)):
+                for _ in range(check):
+                    if not f.run():
+                        raise PlantError("JSBSim stopped")
+                total = sum(float(f[prop]) for prop in thrust)
+                if last is not None and abs(total - last) <= ENGINE_STEADY * max(abs(total), 100.0):
+                    return total
+                last = total
+        finally:
+            for prop, method in saved.items():
+                f[prop] = method
+        if not strict:
+            return last
+        raise PlantError(f"the engines did not settle within {ENGINE_SETTLE_S:g} s")
+
+    def _steady(self, x: np.ndarray, airspeed_kts: float) -> np.ndarray:
+        """The accelerations of the aircraft set at `x` = (α, γ in degrees, elevator[, aileron,
+        rudder, β in degrees]) at the airspeed, the engines as they are, time frozen:
+        (u̇, ẇ, q̇[, v̇, ṗ, ṙ]) in ft/s² and rad/s²."""
+        f = self.fdm
+        f["ic/alpha-deg"], f["ic/gamma-deg"] = x[0], x[1]
+        lateral = len(x) > 3
+        if lateral:
+            f["ic/beta-deg"] = x[5]
+            f["fcs/aileron-cmd-norm"], f["fcs/rudder-cmd-norm"] = x[3], x[4]
+        f["ic/vc-kts"] = airspeed_kts
+        f["fcs/elevator-cmd-norm"] = x[2]
+        if not f.run_ic():
+            raise PlantError("JSBSim rejected the initial conditions")
+        f.suspend_integration()  # the flight controls at the command, time frozen
+        try:
+            f.run()
+        finally:
+            f.resume_integration()
+        names = ("udot-ft_sec2", "wdot-ft_sec2", "qdot-rad_sec2")
+        if lateral:
+            names += ("vdot-ft_sec2", "pdot-rad_sec2", "rdot-rad_sec2")
+        return np.array([float(f[f"accelerations/{name}"]) for name in names])
+
+    def _newton(self, x: np.ndarray, airspeed_kts: float) -> np.ndarray | None:
+        """Newton's method (central-difference Jacobian) from `x` on `_steady`; the solution,
+        the aircraft left there, or None where it does not converge within bounds."""
+        step = np.array([1e-3, 1e-3, 1e-4, 1e-4, 1e-4, 1e-3])[: len(x)]
+        bound = np.array([20.0, 30.0, 1.0, 1.0, 1.0, 20.0])[: len(x)]
+        for _ in range(GLIDE_ITERATIONS):
+            r = self._steady(x, airspeed_kts)
+            if np.max(np.abs(r)) < GLIDE_RESIDUAL:
+                return x
+            J = np.empty((len(x), len(x)))
+            for j in range(len(x)):
+                d = np.zeros(len(x))
+                d[j] = step[j]
+                J[:, j] = (
+                    self._steady(x + d, airspeed_kts) - self._steady(x - d, airspeed_kts)
+                ) / (2 * step[j])
+            try:
+                x = x - np.linalg.solve(J, r)
+            except np.linalg.LinAlgError:
+                return None
+            if not np.all(np.isfinite(x)) or np.any(np.abs(x) > bound):
+                return None
+        return x if np.max(np.abs(self._steady(x, airspeed_kts))) < GLIDE_RESIDUAL else None
 
     def _trim_glide(self, aircraft: str, airspeed_kts: float) -> None:
         """A steady wings-level glide at the airspeed: α, the flight-path angle γ and the
-        elevator such that u̇, ẇ and q̇ vanish (Newton's method, central-difference Jacobian);
-        the aircraft is assumed symmetric (no lateral trim). Left at the solution."""
-        f = self.fdm
-
-        def residual(x: np.ndarray) -> np.ndarray:
-            f["ic/alpha-deg"], f["ic/gamma-deg"] = x[0], x[1]
-            f["ic/vc-kts"] = airspeed_kts
-            f["fcs/elevator-cmd-norm"] = x[2]
-            if not f.run_ic():
-                raise PlantError("JSBSim rejected the initial conditions")
-            f.suspend_integration()  # the flight controls at the command, time frozen
-            try:
-                f.run()
-            finally:
-                f.resume_integration()
-            return np.array(
-                [
-                    f["accelerations/udot-ft_sec2"],
-                    f["accelerations/wdot-ft_sec2"],
-                    f["accelerations/qdot-rad_sec2"],
-                ]
-            )
-
-        x, step = np.array([2.0, -3.0, 0.0]), np.array([1e-3, 1e-3, 1e-4])
-        for _ in range(GLIDE_ITERATIONS):
-            r = residual(x)
-            if np.max(np.abs(r)) < GLIDE_RESIDUAL:
-                break
-            J = np.empty((3, 3))
-            for j in range(3):
-                d = np.zeros(3)
-                d[j] = step[j]
-                J[:, j] = (residual(x + d) - residual(x - d)) / (2 * step[j])
-            try:
-                x = x - np.linalg.solve(J, r)
-            except np.linalg.LinAlgError as exc:
-                raise PlantError(f"could not trim {aircraft} in a glide: {exc}") from exc
-            if not np.all(np.isfinite(x)) or abs(x[0]) > 20 or abs(x[1]) > 30 or abs(x[2]) > 1:
-                break
-        r = residual(x)
-        if np.max(np.abs(r)) >= GLIDE_RESIDUAL:
+        elevator such that u̇, ẇ and q̇ vanish (`_newton`); the aircraft is assumed symmetric
+        (no lateral trim). Left at the solution."""
+        self._own_trim = False
+        x = self._newton(np.array([2.0, -3.0, 0.0]), airspeed_kts)
+        if x is None:
             raise PlantError(
                 f"could not trim {aircraft} in a steady glide at {airspeed_kts:g} kt "
-                f"(residual accelerations {np.array2string(r, precision=3)})"
+                f"(residual accelerations {np.array2string(self._last_residual(), precision=3)})"
             )
         self.glide_deg = float(x[1])
+
+    def _last_residual(self) -> np.ndarray:
+        f = self.fdm
+        return np.array(
+            [
+                float(f[f"accelerations/{n}"])
+                for n in ("udot-ft_sec2", "wdot-ft_sec2", "qdot-rad_sec2")
+            ]
+        )
+
+    def _trim_powered(self, aircraft: str, airspeed_kts: float) -> None:
+        """Straight and level flight with the engines as they run (module constants above):
+        Newton's method on α, elevator, throttle, aileron, rudder and β for u̇, ẇ, q̇, v̇, ṗ, ṙ
+        at γ = 0, each read after the engines settle at the flight condition (`_running`).
+        Left at the solution, the engines settled."""
+        self._own_trim = True
+        f = self.fdm
+        frozen_fuel = float(f["propulsion/fuel_freeze"])
+        f["propulsion/fuel_freeze"] = 1  # the same mass at every evaluation
+        try:
+            y = np.array([2.0, 0.0, START_THROTTLE, 0.0, 0.0, 0.0])
+            step = np.array([1e-3, 1e-4, 1e-3, 1e-4, 1e-4, 1e-3])
+            low = np.array([-20.0, -1.0, 0.0, -1.0, -1.0, -20.0])
+            high = np.array([20.0, 1.0, 1.0, 1.0, 1.0, 20.0])
+            for _ in range(GLIDE_ITERATIONS):
+                r = self._running(y, airspeed_kts)
+                if np.max(np.abs(r)) < POWERED_RESIDUAL:
+                    return
+                J = np.empty((6, 6))
+                for j in range(6):
+                    d = np.zeros(6)
+                    d[j] = step[j]
+                    ahead, behind = (
+                        self._running(y + d, airspeed_kts),
+                        self._running(y - d, airspeed_kts),
+                    )
+                    J[:, j] = (ahead - behind) / (2 * step[j])
+                try:
+                    change = np.linalg.solve(J, r)
+                except np.linalg.LinAlgError:
+                    break
+                # Damped: no step beyond MAX_TRIM_STEP in any unknown (a throttle pushed to
+                # its stop can hold an engine's torque limiter in a limit cycle: the DHC-6).
+                change *= min(
+                    1.0, float(np.min(MAX_TRIM_STEP / np.maximum(np.abs(change), 1e-300)))
+                )
+                y = np.clip(y - change, low, high)
+                if not np.all(np.isfinite(y)):
+                    break
+            r = self._running(y, airspeed_kts)
+            if np.max(np.abs(r)) >= POWERED_RESIDUAL:
+                throttle = "full throttle" if y[2] >= 1.0 else "idle" if y[2] <= 0.0 else ""
+                raise PlantError(
+                    f"could not trim {aircraft} at {airspeed_kts:g} kt in level flight "
+                    f"(JSBSim's own trim failed too)"
+                    f"{': it needs beyond ' + throttle if throttle else ''}"
+                    f"; residual accelerations {np.array2string(r, precision=4)}"
+                )
+        finally:
+            f["propulsion/fuel_freeze"] = frozen_fuel
+
+    def _running(self, y: np.ndarray, airspeed_kts: float) -> np.ndarray:
+        """The accelerations (u̇, ẇ, q̇, v̇, ṗ, ṙ: ft/s², rad/s²) of the aircraft in level flight
+        at the airspeed with y = (α°, elevator, throttle, aileron, rudder, β°), read with the
+        engines settled there (`_settle_engines`: the airframe held)."""
+        f = self.fdm
+        f["ic/alpha-deg"], f["ic/gamma-deg"], f["ic/beta-deg"] = y[0], 0.0, y[5]
+        f["ic/vc-kts"] = airspeed_kts
+        f["fcs/elevator-cmd-norm"] = y[1]
+        self._throttle(float(y[2]))
+        f["fcs/aileron-cmd-norm"], f["fcs/rudder-cmd-norm"] = y[3], y[4]
+        if not f.run_ic():
+            raise PlantError("JSBSim rejected the initial conditions")
+        self._settle_engines(strict=False)
+        names = ("udot-ft_sec2", "wdot-ft_sec2", "qdot-rad_sec2")
+        names += ("vdot-ft_sec2", "pdot-rad_sec2", "rdot-rad_sec2")
+        return np.array([float(f[f"accelerations/{name}"]) for name in names])
+
+    def _position_maps(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Each control's surface positions (POSITION_PROPERTIES) as JSBSim's flight controls
+        give them across the command's range, the others at the trim, by frozen evaluations:
+        where one idles the engine (FGTurboProp), `_settle` reads the surfaces from these
+        instead. Checked with every control moved at once (flight controls that mix the
+        commands, or that depend on anything else, would fail it)."""
+        f = self.fdm
+        at_trim = {name: float(f[props[0]]) for name, props in self.commands.items()}
+        maps = {}
+        for name in self.commands:
+            grid = np.linspace(0.0 if name == "throttle" else -1.0, 1.0, MAP_POINTS)
+            values = np.empty((MAP_POINTS, len(POSITION_PROPERTIES[name])))
+            for i, command in enumerate(grid):
+                self._set(name, command)
+                self._frozen()
+                values[i] = [float(f[prop]) for prop in POSITION_PROPERTIES[name]]
+            self._set(name, at_trim[name])
+            maps[name] = (grid, values)
+        moved = {name: float(np.clip(v + 0.37, -1.0, 1.0)) for name, v in at_trim.items()}
+        for name, value in moved.items():
+            self._set(name, value)
+        self._frozen()
+        for name, (grid, values) in maps.items():
+            for j, prop in enumerate(POSITION_PROPERTIES[name]):
+                mapped = np.interp(moved[name], grid, values[:, j])
+                if abs(mapped - float(f[prop])) > 1e-6 * max(np.ptp(values[:, j]), 1.0):
+                    raise PlantError(
+                        f"{prop} is not a fixed function of the {name} command alone, which "
+                        "the plant needs of an aircraft with JSBSim's turboprop engine"
+                    )
+        for name, value in at_trim.items():
+            self._set(name, value)
+        self._frozen()
+        return maps
+
+    def _frozen(self) -> None:
+        """JSBSim's models evaluated at the present commands and states, time frozen."""
+        self.fdm.suspend_integration()
+        try:
+            if not self.fdm.run():
+                raise PlantError("JSBSim stopped")
+        finally:
+            self.fdm.resume_integration()
 
     def _linearise(self) -> Linearisation:
         import jsbsim
@@ -298,7 +551,7 @@ class Plant:
 
     @property
     def time(self) -> float:
-        return float(self.fdm.get_sim_time())
+        return float(self.fdm.get_sim_time()) - self._t0
 
     def command(self, deltas: Mapping[str, float]) -> None:
         """Set each command to trim + delta (normalised units), clipped to JSBSim's range, at
@@ -352,12 +605,14 @@ class Plant:
         now = self._fraction()
         for name in self._ramp:
             self._set(name, self._value(name, now))
-        self.fdm.suspend_integration()
-        try:
-            if not self.fdm.run():
-                raise PlantError("JSBSim stopped")
-        finally:
-            self.fdm.resume_integration()
+        if self._maps is None:
+            self._frozen()
+        else:  # a frozen evaluation would idle the engine: the positions from the maps
+            self._positions = {
+                prop: float(np.interp(self._value(name, now), grid, values[:, j]))
+                for name, (grid, values) in self._maps.items()
+                for j, prop in enumerate(POSITION_PROPERTIES[name])
+            }
         self._settled = True
 
     def state(self) -> dict[str, float]:
@@ -365,6 +620,11 @@ class Plant:
         body accelerations (m/s², specific force), surface positions (deg), engine RPM."""
         self._settle()
         f = self.fdm
+        held = self._positions or {}
+
+        def position(prop: str) -> float:
+            return held[prop] if prop in held else float(f[prop])
+
         values = {name: float(f[prop]) * scale for name, (prop, scale) in OUTPUT_PROPERTY.items()}
         values.update(
             psi=float(f["attitude/psi-rad"]),
@@ -379,11 +639,11 @@ class Plant:
             ay=float(f["accelerations/a-pilot-y-ft_sec2"]) * FT,
             az=float(f["accelerations/a-pilot-z-ft_sec2"]) * FT,
             # Eq. 3.1 with JSBSim's signs: δA = ½(δA_R − δA_L) from its left/right positions.
-            aileron_left=float(f["fcs/left-aileron-pos-deg"]),
-            aileron_right=float(f["fcs/right-aileron-pos-deg"]),
-            elevator=float(f["fcs/elevator-pos-deg"]),
-            rudder=float(f["fcs/rudder-pos-deg"]),
-            throttle=float(f["fcs/throttle-pos-norm"]) if self.engines else 0.0,
+            aileron_left=position("fcs/left-aileron-pos-deg"),
+            aileron_right=position("fcs/right-aileron-pos-deg"),
+            elevator=position("fcs/elevator-pos-deg"),
+            rudder=position("fcs/rudder-pos-deg"),
+            throttle=position("fcs/throttle-pos-norm") if self.engines else 0.0,
         )
         if self.kind in ("piston", "turboprop"):  # the surface box's tachometer
             values["rpm"] = float(f["propulsion/engine/engine-rpm"])
@@ -406,7 +666,12 @@ class Plant:
             self._set(name, self._value(name, middle))
         self._ramp_done += 1
         self._settled = middle >= 1.0  # the step held the ramp's end: the surfaces are there
-        if not self.fdm.run():
+        self._positions = None
+        try:
+            running = self.fdm.run()
+        except self._jsbsim_error as exc:
+            raise PlantError(f"JSBSim stopped: {str(exc).strip()}") from exc
+        if not running:
             raise PlantError("JSBSim stopped")
 
     def outputs(self) -> np.ndarray:

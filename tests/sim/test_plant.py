@@ -225,3 +225,70 @@ def test_a_twin_trims_with_both_engines_running():
     start = twin.state()
     twin.fly(np.tile([0.0, 0.0, 0.0, 0.0], (250, 1)), DT)  # 5 s at the trim
     assert twin.state()["Vt"] == pytest.approx(start["Vt"], rel=0.01)
+
+
+@pytest.mark.parametrize(("aircraft", "speed"), [("pc7", 150.0), ("DHC6", 130.0)])
+def test_a_turboprop_is_trimmed_with_its_engines_running_and_stays_trimmed(aircraft, speed):
+    """JSBSim's turboprop engine (FGTurboProp) gives no power while time is frozen and drops
+    to idle at the first step after a frozen evaluation: JSBSim's trim failed on the PC-7
+    ("udot doesn't appear to be trimmable"), and the DHC-6 it trimmed lost 9 kt in 6 s at idle
+    power once the surfaces were read between steps. Both fly level, their gas generators at
+    power, through 20 s of ramps read as the sensors read them."""
+    plant = Plant(aircraft, airspeed_kts=speed, linearise=False)
+    assert plant.kind == "turboprop"
+    n1 = [f"propulsion/engine[{k}]/n1" for k in range(plant.engines)]
+    start, power = plant.state(), [float(plant.fdm[p]) for p in n1]
+    assert min(power) > 75.0  # idle is 60 %
+    for k in range(4000):
+        if k % 4 == 0:  # a servo's ramp each 50 Hz tick, the state read inside it
+            plant.set_normalised({"elevator": plant.trim["elevator"]}, steps=2)
+            plant.state()
+        plant.step()
+    after = plant.state()
+    assert after["Vt"] == pytest.approx(start["Vt"], abs=0.2)  # m/s over 20 s
+    assert after["theta"] == pytest.approx(start["theta"], abs=np.radians(0.2))
+    assert after["phi"] == pytest.approx(start["phi"], abs=np.radians(0.5))
+    assert [float(plant.fdm[p]) for p in n1] == pytest.approx(power, abs=0.1)
+    assert after["rpm"] > 1000.0
+
+
+def test_a_turboprops_surfaces_are_read_along_the_ramp_without_idling_its_engine():
+    # The same ramp as the Cub's above: read from the plant's map of its flight controls,
+    # the positions match where JSBSim puts the surfaces once a step has flown them.
+    plant = Plant("pc7", airspeed_kts=150.0, linearise=False)
+    n1 = float(plant.fdm["propulsion/engine/n1"])
+    start = plant.state()["elevator"]
+    plant.set_normalised({"elevator": plant.trim["elevator"] + 0.1}, steps=4)
+    plant.step()
+    plant.step()
+    halfway = plant.state()["elevator"]
+    plant.step()
+    plant.step()
+    end = plant.state()["elevator"]  # the map's
+    assert end != pytest.approx(start)
+    assert halfway == pytest.approx((start + end) / 2, rel=1e-6)
+    plant.step()  # the ramp over: JSBSim's own
+    assert plant.state()["elevator"] == pytest.approx(end, rel=1e-9)
+    assert float(plant.fdm["propulsion/engine/n1"]) == pytest.approx(n1, abs=0.05)
+
+
+def test_an_aircraft_that_needs_flightgear_is_refused_by_name_with_one_json_object():
+    """Bad input: JSBSim's Fokker Dr.I reads a property only FlightGear provides (its
+    pushback) and JSBSim raises at its initial conditions; that was an internal error, with
+    JSBSim's complaint on stdout before the JSON."""
+    import json
+    import subprocess
+    import sys
+
+    with pytest.raises(PlantError, match="FlightGear"):
+        Plant("dr1", airspeed_kts=70.0, linearise=False)
+    command = [sys.executable, "-m", "agent", "sim", "--aircraft", "dr1", "--speed-kts", "70"]
+    done = subprocess.run(
+        [*command, "--json"], capture_output=True, text=True, timeout=120, check=False
+    )
+    assert done.returncode == 2
+    assert done.stdout.count("\n") == 1
+    error = json.loads(done.stdout)["error"]
+    assert error["kind"] == "error"
+    assert "pushback" in error["message"]
+    assert "FlightGear" in error["message"]
