@@ -48,7 +48,7 @@ from agent.sim.ardupilot import Params
 from agent.sim.pace import Overdue, Pace
 from agent.sim.plant import KT
 from agent.sim.radio import EmulatedXBee, RfChannel, module_pair
-from agent.sim.truth import linear_truth
+from agent.sim.truth import CHECK_TIC, check, linear_truth
 from drivers.xbee.driver import RadioError, XBeeRadio
 
 log = logging.getLogger(__name__)
@@ -604,11 +604,23 @@ def _operator_accepts(result: messages.Result, first: bool) -> bool:
     return first and all(checks.get(step, False) for step in ("stability", "fit", "modes"))
 
 
-def _truth(aircraft: SimAircraft, axes: str) -> dict[str, complex | list[complex] | None]:
-    """The named modes of JSBSim's validated linear model at this trim (agent.sim.truth)."""
+def _truth(
+    aircraft: SimAircraft, axes: str
+) -> tuple[dict[str, complex | list[complex] | None], dict]:
+    """The named modes of JSBSim's linear model at this trim (agent.sim.truth), and its check
+    against JSBSim's own response there (truth.check: a doublet on each surface and a throttle
+    step; validated where every test's worst TIC is within truth.CHECK_TIC). The benchmark's
+    aircraft pass it (`benchmarks/truth_check.py`); another aircraft's truth may not, and the
+    errors against it then say little: the report says which."""
     options = aircraft.options
     truth_model = linear_truth(options.aircraft, options.speed_kts, altitude_ft=options.altitude_ft)
     modes = truth_model.modes()
+    tests = {c.test: c.worst for c in check(truth_model)}
+    verdict = {
+        "validated": all(tic <= CHECK_TIC for tic in tests.values()),
+        "bound": CHECK_TIC,
+        "worst_tic": tests,
+    }
 
     def one(name: str) -> complex | None:
         return modes[name][0] if modes.get(name) else None
@@ -621,7 +633,7 @@ def _truth(aircraft: SimAircraft, axes: str) -> dict[str, complex | list[complex
     if axes != "lateral":
         truth["phugoid"] = one("phugoid")
         truth["short period"] = list(modes.get("short period", []))
-    return truth
+    return truth, verdict
 
 
 def _report(
@@ -629,7 +641,7 @@ def _report(
 ) -> dict:
     last = outcomes[-1]
     result = last.get("result")
-    truth = _truth(aircraft, preset(options.preset).axes)
+    truth, truth_check = _truth(aircraft, preset(options.preset).axes)
     rows = []
     if result is not None:
         for mode in result.modes:
@@ -672,6 +684,7 @@ def _report(
         "events": last["events"],
         "modes": rows,
         "truth_modes": truth_modes,
+        "truth_check": truth_check,
         "tic_avg": None if result is None else result.tic_avg,
         "suggestion": None
         if result is None
@@ -728,6 +741,9 @@ def format_report(report: dict) -> str:
     # ERA's EMAC where the method has it; the whole-aircraft method's Cramér–Rao σ of ωn else.
     era = any(row["emac"] is not None for row in report["modes"])
     key, heading, form = ("emac", "EMAC %", ".0f") if era else ("sigma_pct", "σ(ωn) %", ".2f")
+    warning = truth_warning(report.get("truth_check"))
+    if warning:
+        lines.append(warning)
     lines.append(f"{'mode':<14}{'identified':>22}{'JSBSim':>22}{'error':>8}{heading:>9}")
     for row in report["modes"]:
         lam = complex(*row["eigenvalue"])
@@ -743,6 +759,20 @@ def format_report(report: dict) -> str:
     lines.append(f"operator: {report['decision']}")
     lines += [f"notice: {text}" for text in report["notices"]]
     return "\n".join(lines)
+
+
+def truth_warning(verdict: dict | None) -> str | None:
+    """What the report says where the truth failed its check (`_truth`); None where it passed."""
+    if not verdict or verdict["validated"]:
+        return None
+    failing = ", ".join(
+        f"{test} {tic:.3f}" for test, tic in verdict["worst_tic"].items() if tic > verdict["bound"]
+    )
+    return (
+        f"JSBSim's linear model here fails its check against JSBSim (worst TIC: {failing}; "
+        f"bound {verdict['bound']}): the errors below are against a truth that does not "
+        "reproduce the aircraft"
+    )
 
 
 def modes_within(report: dict, tolerance: float) -> bool:

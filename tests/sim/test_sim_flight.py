@@ -33,6 +33,7 @@ async def test_three_sized_lateral_runs_end_to_end(tmp_path):
     modes = {m["name"]: m for m in report["modes"] if m["name"]}
     for name in ("Dutch roll", "roll"):
         assert modes[name]["error"] < 0.15, (name, modes[name])
+    assert report["truth_check"]["validated"], report["truth_check"]  # errors against a truth
     # The build-up flew a quarter of the preset and calibrated the second run, whose sizing
     # came from its model, within the targets; the operator's accept made the second model
     # nominal, and the third, sized by it, got the TIC comparison.

@@ -57,3 +57,26 @@ def test_the_truth_names_every_mode_and_they_are_the_aircrafts(truth):
 def test_an_aircraft_jsbsim_does_not_have_is_refused():
     with pytest.raises(PlantError, match="no aircraft"):
         linear_truth("no-such-aircraft", 60.0)
+
+
+def test_a_truth_that_fails_its_check_is_reported_as_not_validated():
+    """`sysid sim` judges its modes against the truth; off the benchmark the truth may not hold
+    (JSBSim's T-37 at 200 kt: its linear model misses JSBSim's elevator doublet at TIC 0.55),
+    and a flight there reported its roll mode 280 % off a truth that was wrong. The report now
+    carries the check and says so; the Cub's passes."""
+    from types import SimpleNamespace
+
+    from agent.sim.aircraft import AircraftOptions
+    from agent.sim.flight import _truth, truth_warning
+
+    def verdict(aircraft, speed):
+        options = AircraftOptions(aircraft=aircraft, speed_kts=speed)
+        return _truth(SimpleNamespace(options=options), "full")[1]
+
+    cub = verdict("J3Cub", 60.0)
+    assert cub["validated"]
+    assert truth_warning(cub) is None
+    t37 = verdict("T37", 200.0)
+    assert not t37["validated"]
+    assert t37["worst_tic"]["elevator"] > CHECK_TIC
+    assert "elevator" in truth_warning(t37)
