@@ -565,3 +565,26 @@ def test_in_unmeasured_turbulence_the_fit_is_judged_at_the_excited_bins_and_by_a
     assert passed.checks["quality"]
     assert "spiral not determined by the record, not judged" in passed.steps[1]
     assert passed.checks["fit"]
+
+
+def test_in_calm_air_a_whole_record_misfit_is_not_excused_as_turbulence():
+    """The excited bins and a repeat excuse a whole-record TIC ≥ 0.3 as the response to
+    turbulence nothing measures. Where the INS looked for the gusts and found each within its
+    sensors' noise, there is none: the misfit is the model's (JSBSim's T-37, calm, was accepted
+    at TIC_jj 0.34 that way). Turbulence measured, or no INS to tell: as before."""
+    earlier = turbulent("a")
+
+    def with_wind(wind: Wind) -> Candidate:
+        c = turbulent("b")
+        return _with(c, aircraft=c.result.aircraft.model_copy(update={"wind": wind}))
+
+    calm = with_wind(Wind(measured=False, gust_rms={}, undetected=["Vt", "alpha", "beta"]))
+    verdict = suggest(calm, None, None, None, earlier=earlier)
+    assert not verdict.checks["fit"]
+    assert "TIC_jj 0.450 ≥ 0.3 in calm air" in verdict.steps[3]
+    assert "Vt, alpha, beta" in verdict.steps[3]
+    assert not verdict.update
+    unmeasured = with_wind(Wind(measured=False, gust_rms={}))  # no INS: cannot tell
+    assert suggest(unmeasured, None, None, None, earlier=earlier).checks["fit"]
+    gusty = with_wind(Wind(measured=True, gust_rms={"Vt": 0.4}, undetected=["beta"]))
+    assert suggest(gusty, None, None, None, earlier=earlier).checks["fit"]
