@@ -526,3 +526,73 @@ def test_a_shape_stays_a_valid_plan_whatever_the_band():
     )
     assert len(sized.plan.segments[0].signals["elevator"].shape) <= MAX_BREAKPOINTS
     assert Plan.from_bytes(sized.plan.to_bytes()) == sized.plan
+
+
+def _modes(roll: float, roll_std: float, dutch=(-0.8, 3.0)):
+    from agent.ident.document import ModeDocument
+
+    def mode(name, eigenvalue, std):
+        re, im = eigenvalue
+        return ModeDocument(
+            name=name,
+            eigenvalue=eigenvalue,
+            eigenvalue_std=std,
+            emac=None,
+            frequency_rad_s=float(np.hypot(re, im)),
+            damping=-re / float(np.hypot(re, im)),
+            time_constant_s=None,
+            msv=100.0,
+            mci=100.0,
+            moi=100.0,
+            mpc=100.0,
+            cmi=None,
+        )
+
+    from tests.documents import lateral_document
+
+    return lateral_document(
+        modes=[mode("roll", (roll, 0.0), (roll_std, 0.0)), mode("Dutch roll", dutch, (0.02, 0.02))]
+    )
+
+
+def test_a_mode_that_moves_with_the_amplitude_limits_its_controls_to_the_linear_range(
+    plan_and_timeline,
+):
+    """Two records of the axes at amplitudes apart whose roll modes differ beyond the noise:
+    the aircraft is not linear over that span (JSBSim's PC-7's short period: 10.5 % off at the
+    sized 2.2° of elevator, 0.1 % at a quarter). The aileron, which moves the roll mode, is held
+    where the bias growing with the amplitude would match the roll's standard error, never below
+    the smaller amplitude flown; the rudder, which does not, is not. Bad input tried: the same
+    difference between records flown alike (a repeat, not an amplitude: no limit), within the
+    standard errors (no limit), under LINEARITY_SHARE (no limit), no standard errors (none)."""
+    plan, timeline = plan_and_timeline
+    now = _modes(-8.0, 0.08)  # flown at 4° of aileron: roll 20 % faster than at 1°
+    then = _modes(-10.0, 0.2)
+    flown, small = {"aileron": 4.0, "rudder": 4.0}, {"aileron": 1.0, "rudder": 1.0}
+    linear = sizing.linear_range(now, flown, [(then, small)])
+    assert set(linear) == {"aileron"}
+    amplitude, why = linear["aileron"]
+    # bias 20 % over 3°, σ 1 % at 4°: they match at √(0.01·4 / (0.2/3)) = 0.77°, below the 1°
+    # flown: the smaller amplitude.
+    assert amplitude == pytest.approx(1.0)
+    assert why == "linear range: roll 20.0 % apart at 4 and 1"
+    noisy = sizing.linear_range(_modes(-8.0, 0.8), flown, [(_modes(-10.0, 0.8), small)])
+    assert noisy == {}  # 2.0 / 1.13 = 1.8 σ: the records do not tell
+    close = sizing.linear_range(_modes(-9.6, 0.01), flown, [(_modes(-10.0, 0.01), small)])
+    assert close == {}  # 4 % apart: within LINEARITY_SHARE
+    assert sizing.linear_range(now, flown, [(then, {"aileron": 3.5, "rudder": 3.5})]) == {}
+    bare = now.model_copy(
+        update={"modes": [m.model_copy(update={"eigenvalue_std": None}) for m in now.modes]}
+    )
+    assert sizing.linear_range(bare, flown, [(then, small)]) == {}
+    larger = sizing.linear_range(_modes(-8.0, 0.01), {"aileron": 1.0}, [(then, {"aileron": 4.0})])
+    # This model from the smaller amplitude (σ 0.125 %): matched at √(0.00125·1/(0.2/3)) = 0.14°,
+    # held at the 1° flown.
+    assert larger["aileron"][0] == pytest.approx(1.0)
+    # Through the sizing: the aileron held there, named, whatever the targets allow.
+    generous = Sizing(bank_deg=60.0, beta_deg=20.0, max_factor=10.0)
+    predictor = lateral(linear={"aileron": (0.6, why)})
+    sized = sizing.size(plan, timeline, predictor, generous, EX.surfaces, EX.envelope)
+    assert sized.amplitudes["aileron"] == pytest.approx(0.6)
+    assert sized.limited_by["aileron"] == why
+    assert sized.amplitudes["rudder"] > 0.6
