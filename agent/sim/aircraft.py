@@ -27,7 +27,7 @@ from agent.sim import devices
 from agent.sim.ardupilot import OUTPUTS, EmulatedArduPlane, Params, normalised_to_pwm, setup
 from agent.sim.dataflash import DataFlashWriter
 from agent.sim.pilot import ScriptedPilot
-from agent.sim.plant import Plant
+from agent.sim.plant import Plant, PlantError
 
 log = logging.getLogger(__name__)
 
@@ -246,6 +246,11 @@ class SimAircraft:
             for _ in range(steps):
                 self.plant.step()
             self.truth = self.plant.state()
+            if self.plant.on_ground:  # no flight to identify: end it, say why
+                raise PlantError(
+                    f"it touched the ground {t + h - start:.1f} s into the flight, "
+                    f"{self.truth['Vt']:.1f} m/s, pitch {math.degrees(self.truth['theta']):.0f}°"
+                )
             for name, emitter in self.emitters.items():
                 if sample % every[name] == 0:
                     emitter.emit(t + h, sample // every[name])

@@ -45,7 +45,7 @@ from agent.link.session import LinkSession
 from agent.runtime import Agent
 from agent.sim.aircraft import TICK_HZ, AircraftOptions, SimAircraft
 from agent.sim.ardupilot import Params
-from agent.sim.pace import Overdue, Pace
+from agent.sim.pace import Overdue, Pace, Stopped
 from agent.sim.plant import KT
 from agent.sim.radio import EmulatedXBee, RfChannel, module_pair
 from agent.sim.truth import CHECK_TIC, check, linear_truth
@@ -130,6 +130,8 @@ async def wait(pace: Pace, predicate, failure: str, base_s: float, fixed_s: floa
     found = await pace.until(predicate, base_s, fixed_s)
     if isinstance(found, Overdue):
         raise SimError(found.message(failure))
+    if isinstance(found, Stopped):
+        raise SimError(f"{failure}: {found.reason}")
     return found
 
 
@@ -357,6 +359,7 @@ async def _parts(
         return [] if agent is None else [agent.identification.worker_pid]
 
     pace = Pace(clock, flown=lambda: aircraft.ticks / TICK_HZ, pids=workers)
+    pace.stopped = lambda: _stopped(tasks[0])
     try:
         await wait(
             pace,
@@ -400,6 +403,8 @@ async def _parts(
             return agent.autopilot.connected and (ground is None or ground.session.link_up)
 
         late = await pace.until(connected, CONNECT_S)
+        if isinstance(late, Stopped):
+            raise SimError(f"the agent did not connect: {late.reason}")
         if isinstance(late, Overdue):
             if agent_process:
                 missing = "the autopilot and the ground (no status with a flight mode)"
@@ -602,6 +607,16 @@ def _operator_accepts(result: messages.Result, first: bool) -> bool:
         return True
     checks = result.checks
     return first and all(checks.get(step, False) for step in ("stability", "fit", "modes"))
+
+
+def _stopped(task: asyncio.Task) -> str | None:
+    """Why the simulated aircraft stopped flying (None: it flies): what ended its task."""
+    if not task.done():
+        return None
+    if task.cancelled():
+        return "the simulated aircraft was stopped"
+    exc = task.exception()
+    return f"the simulated aircraft stopped: {exc}" if exc else "the simulated aircraft stopped"
 
 
 def _truth(

@@ -191,6 +191,13 @@ def _stretch(before: dict[int, ThreadTimes], after: dict[int, ThreadTimes]) -> f
     return max(stretches, default=None)
 
 
+@dataclass(frozen=True)
+class Stopped:
+    """A wait ended because the flight cannot go on (`Pace.stopped`)."""
+
+    reason: str
+
+
 class Pace:
     """The measurements waits use: the clock, the simulated seconds flown so far (None: no
     simulator), the processes whose CPU waits count (this one always), and where thread times
@@ -207,6 +214,9 @@ class Pace:
     ):
         self.clock = clock
         self._flown, self._pids, self._threads, self.load = flown, pids, threads, load
+        # Why the flight cannot go on (None: it can): a wait ends at once with it, not at a
+        # deadline blamed on a busy machine (the simulated aircraft hit the ground).
+        self.stopped: Callable[[], str | None] = lambda: None
 
     def flown(self) -> float | None:
         return None if self._flown is None else self._flown()
@@ -231,6 +241,8 @@ class Pace:
         passed. `fixed_s` is time that does not stretch (a plan plays in real time)."""
         span = Span(self)
         while not (found := predicate()):
+            if (reason := self.stopped()) is not None:
+                return Stopped(reason)
             waited = self.clock.now() - span.start
             if waited > fixed_s + base_s:  # late for a quiet machine: how slow was this one?
                 slow = span.slowness()

@@ -550,6 +550,12 @@ class Plant:
         )
 
     @property
+    def on_ground(self) -> bool:
+        """The aircraft is on or below the ground: a gear unit carries weight, or its centre of
+        gravity is below the terrain (JSBSim flies on through it after a hard impact)."""
+        return bool(self.fdm["gear/wow"]) or float(self.fdm["position/h-agl-ft"]) <= 0.0
+
+    @property
     def time(self) -> float:
         return float(self.fdm.get_sim_time()) - self._t0
 

@@ -11,7 +11,7 @@ import pytest
 
 from agent.clock import VirtualClock
 from agent.sim import pace as pacing
-from agent.sim.pace import MAX_SLOWDOWN, Overdue, Pace, schedstat
+from agent.sim.pace import MAX_SLOWDOWN, Overdue, Pace, Stopped, schedstat
 
 BASE_S = 10.0
 NS = 1e9
@@ -113,3 +113,14 @@ def test_the_kernels_thread_times_name_this_thread_and_grow_as_it_runs():
     assert after[0] > before[0]
     assert after[1] >= before[1]
     assert schedstat(2**22 + 1) is None  # above any pid_max: no such process
+
+
+async def test_a_flight_that_cannot_go_on_ends_the_wait_at_once_with_why():
+    # The simulated aircraft down: no deadline to wait out, and no busy machine to blame.
+    clock = VirtualClock()
+    pace = Pace(clock, flown=clock.now, threads=stretched(clock, 3.0))
+    down = {"at": 4.0}
+    pace.stopped = lambda: "it touched the ground" if clock.now() >= down["at"] else None
+    found = await pace.until(lambda: False, BASE_S)
+    assert found == Stopped("it touched the ground")
+    assert clock.now() < down["at"] + 2 * pacing.POLL_S

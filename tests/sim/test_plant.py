@@ -292,3 +292,23 @@ def test_an_aircraft_that_needs_flightgear_is_refused_by_name_with_one_json_obje
     assert error["kind"] == "error"
     assert "pushback" in error["message"]
     assert "FlightGear" in error["message"]
+
+
+def test_a_flight_that_reaches_the_ground_ends_at_once_saying_so():
+    """Bad input: a glider trimmed 20 ft above the ground (`--altitude-ft 20`). JSBSim flies on
+    through the terrain after a hard impact; `sysid sim` then waited out its deadlines with its
+    sensors gone and blamed a busy machine (a DHC-6 whose engine idled dived in at 23 s and the
+    flight ended after 981 s). Now it ends when the aircraft is down, and says so."""
+    import json
+    import subprocess
+    import sys
+
+    command = [sys.executable, "-m", "agent", "sim", "--aircraft", "sgs126", "--altitude-ft", "20"]
+    done = subprocess.run(
+        [*command, "--json"], capture_output=True, text=True, timeout=120, check=False
+    )
+    assert done.returncode == 1
+    assert done.stdout.count("\n") == 1
+    error = json.loads(done.stdout)["error"]
+    assert "the simulated aircraft stopped: it touched the ground" in error["message"]
+    assert "busy" not in error["message"]
