@@ -25,11 +25,6 @@ sensor noise, small enough to stay linear and inside the envelope. Here:
    it has seen; amplitude build-up, as in flight test).
 4. With no model, the plan flies at `build_up` of its amplitudes: the first run is the
    calibration, and its identification sizes the next.
-   The linear range is found from the aircraft's own response too (`linear_range`): where
-   two records of the axes flown at amplitudes apart give a mode apart by more than
-   LINEARITY_SHARE and REPEAT_Z combined standard errors, the aircraft is not linear over
-   that span, and the mode's controls play no more than where the bias that grows with
-   amplitude would match the mode's standard error (never less than the smaller of the two).
 5. The targets never reach past the envelope ([excitation.envelope], from the flight state
    now: `within`), and whatever sized it, a plan whose predicted response (trim plus the
    peaks) leaves the envelope is refused before it is armed (`envelope_refusals`); the
@@ -59,7 +54,7 @@ from agent.ident.convert import StateSpace
 from agent.ident.document import ResultDocument
 from agent.ident.fit import simulate
 from agent.link import messages
-from agent.models import REPEAT_Z, Candidate
+from agent.models import Candidate
 
 G = 9.80665
 # Predicted after the plan ends (s): the free response still moves the aircraft (a phugoid's
@@ -102,23 +97,6 @@ UNKNOWN_SHARE = 0.5
 # the inputs' growth must stand above that (√2 ≈ 1.41); nearer 1, a drift that grows with the
 # inputs passes as the air's and the plan is sized past the envelope (benchmarks/README.md).
 AIR_GROWTH = 2.0
-# The linear range (`linear_range`): two records whose axis's controls played at least
-# AMPLITUDES_APART times apart, and a mode of that axis apart between their models by more
-# than LINEARITY_SHARE of it (pole distance over |λ|) and more than REPEAT_Z combined
-# standard errors: the mode moves with the amplitude (JSBSim's PC-7 at 150 kt: its short period
-# 0.1, 3.9 and 10.5 % off the small-amplitude truth at a quarter, half and all of a sized
-# full preset's 2.2° of elevator, noise-free; benchmarks/README.md). Nearer, a difference is
-# a repeat's, not the amplitude's (the suggestion's fit step judges repeats).
-AMPLITUDES_APART = 1.25
-LINEARITY_SHARE = 0.05
-# Each mode's controls: those that move it most (a short period's nonlinearity is no reason to
-# take the throttle, which the phugoid needs, away).
-MODE_CONTROLS = {
-    "short period": ("elevator",),
-    "phugoid": ("elevator", "throttle"),
-    "Dutch roll": ("rudder", "aileron"),
-    "roll": ("aileron",),
-}
 # Each checked quantity's axis: its controls are the ones grown from the data's peak.
 AXIS_OF = {
     "bank_deg": "lateral",
@@ -231,9 +209,6 @@ class Predictor:
     what the data flew (`flown`), when that is more than the model predicts: a response the
     model does not hold (a drift that grows with the inputs) must not be sized by the model
     alone (docs/excitation.md, *Sizing*)."""
-    linear: Mapping[str, tuple[float, str]] = field(default_factory=dict)
-    """Control → (the largest amplitude in plan units its axis stays linear at, why), where
-    another record of the axes showed a mode moving with the amplitude (`linear_range`)."""
     linkage: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
     """Control → (gain, even, knee): its recorded position per commanded deflection, per
     |commanded − knee| deflection, and the knee, measured on the last run
@@ -604,9 +579,6 @@ def _sized(
             limits[f"{config.max_growth:g}× the {flown:.3g} its model saw"] = (
                 config.max_growth * flown / peak[c]
             )
-        if c in predictor.linear and peak[c] > 0:
-            amplitude, why = predictor.linear[c]
-            limits[why] = amplitude / peak[c]
         for q, target in goal.items():
             if own.get(q, 0.0) > 0:
                 limits[f"{LABELS[q]} {target:.3g}{QUANTITIES[q]}"] = target / own[q]
@@ -997,15 +969,7 @@ def predictor_from(
 ) -> Predictor | None:
     """A stored model as a predictor of the plans' response (None: see `predictor`);
     `others`: other candidates of its axes, whose records tell the gusts from what the model
-    misses (`checked`), and whose models and amplitudes tell the linear range
-    (`linear_range`)."""
-    alike = [
-        c
-        for c in others
-        if c.model_id != candidate.model_id
-        and (c.result.inputs, c.result.outputs)
-        == (candidate.result.inputs, candidate.result.outputs)
-    ]
+    misses (`checked`)."""
     return predictor(
         candidate.result,
         trim=(candidate.trim or {}).get("outputs", {}),
@@ -1015,10 +979,13 @@ def predictor_from(
         source=source,
         flight=flight,
         linkage=linkage,
-        others=[e for c in alike for e in c.experiments],
-        earlier=[
-            (c.result, deflections(c.result, c.experiments, channels, surfaces, linkage))
-            for c in alike
+        others=[
+            e
+            for c in others
+            if c.model_id != candidate.model_id
+            and (c.result.inputs, c.result.outputs)
+            == (candidate.result.inputs, candidate.result.outputs)
+            for e in c.experiments
         ],
     )
 
@@ -1034,14 +1001,12 @@ def predictor(
     flight: Mapping[str, float] | None = None,
     linkage: Mapping[str, tuple[float, ...]] | None = None,
     others: Sequence[tuple[np.ndarray, np.ndarray]] = (),
-    earlier: Sequence[tuple[ResultDocument, Mapping[str, float]]] = (),
 ) -> Predictor | None:
     """An identified model as a predictor of the plans' response: `trim` is its record's trim
     outputs by channel, `experiments` its data (u, y), trim removed, `flight` the flight
     state now by output role (the trim of what the model does not hold), `others` other
     records of its axes in the same form (`checked`: the gusts told from what the model
-    misses), `earlier` other models of its axes with what their records flew (`deflections`:
-    the linear range, `linear_range`). None when it
+    misses). None when it
     predicts nothing a sizing uses: no configured control among its inputs or no output of a
     quantity. Without a known airspeed (a lateral model, flown with no flight state yet) the
     airspeed, load factor and height are not predicted."""
@@ -1092,74 +1057,8 @@ def predictor(
         correction=correction,
         unexplained=unexplained,
         extrapolated=extrapolated,
-        linear=linear_range(result, flown, earlier),
         linkage=linkage,
     )
-
-
-def linear_range(
-    result: ResultDocument,
-    flown: Mapping[str, float],
-    earlier: Sequence[tuple[ResultDocument, Mapping[str, float]]],
-) -> dict[str, tuple[float, str]]:
-    """Control → (the largest amplitude, plan units, at which its axis is linear enough, why),
-    from `result` (its record flew `flown`) and `earlier` models of the axes with theirs: the
-    module docstring's step 4. Where a mode is apart between two models (beyond
-    LINEARITY_SHARE and REPEAT_Z combined standard errors) and a control that moves it
-    (MODE_CONTROLS) flew amplitudes at least AMPLITUDES_APART apart, the difference is taken
-    as a bias growing in proportion to the amplitude (d over the span between the two
-    amplitudes), and the mode's standard error as shrinking in inverse proportion to it (this
-    model's σ at what it flew); the amplitude where the two match is the limit, never below
-    the smaller amplitude flown (a record the axis was identified from). The tightest over
-    the modes and the earlier models is kept."""
-    out: dict[str, tuple[float, str]] = {}
-    for other, other_flown in earlier:
-        for name, controls in MODE_CONTROLS.items():
-            found = _apart(_named(result, name), _named(other, name))
-            if found is None:
-                continue
-            apart, z, sigma = found
-            if apart <= LINEARITY_SHARE or z <= REPEAT_Z:
-                continue
-            for c in controls:
-                now, then = flown.get(c, 0.0), other_flown.get(c, 0.0)
-                small, big = min(now, then), max(now, then)
-                if small <= 0 or big < AMPLITUDES_APART * small:
-                    continue
-                per_unit = apart / (big - small)  # the bias per unit of amplitude
-                matched = math.sqrt(sigma * now / per_unit)  # where bias(a) = σ(a)
-                limit = max(matched, small)
-                if limit < out.get(c, (math.inf, ""))[0]:
-                    why = f"linear range: {name} {100 * apart:.1f} % apart"
-                    out[c] = (limit, f"{why} at {big:.3g} and {small:.3g}")
-    return out
-
-
-def _apart(mine: list, theirs: list) -> tuple[float, float, float] | None:
-    """Two models' poles of one mode (`_named`) compared pole by pole: the largest distance
-    over |λ| of the earlier's, the largest difference of a part over its combined standard
-    error, and this model's largest relative standard error; None where they do not pair
-    or a standard error is missing."""
-    if not mine or len(mine) != len(theirs):
-        return None
-    apart, z, sigma = 0.0, 0.0, 0.0
-    for a, b in zip(mine, theirs, strict=True):
-        if a.eigenvalue_std is None or b.eigenvalue_std is None:
-            return None
-        lam, ref = complex(*a.eigenvalue), complex(*b.eigenvalue)
-        apart = max(apart, abs(lam - ref) / max(abs(ref), 1e-12))
-        for k in (0, 1):
-            spread = math.hypot(a.eigenvalue_std[k], b.eigenvalue_std[k])
-            gap = abs(a.eigenvalue[k] - b.eigenvalue[k])
-            z = max(z, gap / spread if spread > 0 else (0.0 if gap == 0 else math.inf))
-        sigma = max(sigma, math.hypot(*a.eigenvalue_std) / max(abs(lam), 1e-12))
-    return apart, z, sigma
-
-
-def _named(result: ResultDocument, name: str) -> list:
-    """The modes named `name` in the upper half plane, by real part."""
-    found = [m for m in result.modes if m.name == name and m.eigenvalue[1] >= 0]
-    return sorted(found, key=lambda m: m.eigenvalue[0])
 
 
 def moved(link: Sequence[float], values: np.ndarray) -> np.ndarray:

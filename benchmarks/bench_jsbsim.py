@@ -145,9 +145,6 @@ AIRCRAFT = {
 # 100 kt (not at 120–160 kt) with its propellers at their pitch stop (benchmarks/README.md).
 OFF_BENCHMARK = {
     "c310": Flight(100.0, altitude_ft=2000.0, kind="piston twin, constant-speed propellers"),
-    # JSBSim's turboprop engine (FGTurboProp: a gas generator's N1 driving a governed
-    # propeller), trimmed by the plant itself (JSBSim's own trim fails on it: agent.sim.plant).
-    "pc7": Flight(150.0, kind="turboprop single, constant-speed propeller"),
 }
 MODES = ("short period", "phugoid", "Dutch roll", "roll")
 EXCITATIONS = ("full", "card", "sweep")
@@ -354,13 +351,10 @@ def _linkage(setup: Setup, rec: Record, played: Plan) -> dict:
     return {f.control: (f.gain, f.even, f.knee) for f in followed(setup, rec, played)}
 
 
-def predictor_of(
-    setup: Setup, result, rec: Record, exp: Experiment, played: Plan, others=(), earlier=()
-):
+def predictor_of(setup: Setup, result, rec: Record, exp: Experiment, played: Plan, others=()):
     """The identified model as the agent's sizing sees it: its surfaces' linkage measured
     against what `played` commanded, its trim the record's, checked against `others` (the
-    earlier calibration runs' records, as the agent's `Identifier.recent`) and `earlier`
-    (their models, each with what its record flew: the linear range)."""
+    earlier calibration runs' records, as the agent's `Identifier.recent`)."""
     linkage = _linkage(setup, rec, played)
     trim = dict(zip(Record.outputs, rec.y[:TRIM_SAMPLES].mean(0), strict=True))
     return sizing.predictor(
@@ -372,7 +366,6 @@ def predictor_of(
         source="the previous run's model",
         linkage=linkage,
         others=others,
-        earlier=earlier,
     )
 
 
@@ -383,7 +376,7 @@ def calibrate(setup: Setup, plan: Plan, settings: Settings = OURS):
     identification's of the calibration runs."""
     timeline = render(plan, CONFIG.rate_hz)
     sized = sizing.size(plan, timeline, None, CONFIG.sizing, setup.surfaces, setup.envelope)
-    predictor, runs, flown, records, models = None, [], None, [], []
+    predictor, runs, flown, records = None, [], None, []
     for step in range(CALIBRATION_RUNS):
         rec = setup.fly(sized.plan, CALIBRATION_SEED + step)
         runs.append((sized, excursions(rec)))
@@ -408,17 +401,9 @@ def calibrate(setup: Setup, plan: Plan, settings: Settings = OURS):
             and has_its_modes(candidate)
         )
         predictor = (
-            predictor_of(setup, result, rec, exp, sized.plan, records, models) if usable else None
+            predictor_of(setup, result, rec, exp, sized.plan, others=records) if usable else None
         )
         records.append((exp.u, exp.y))
-        document = result.document()
-        linkage = _linkage(setup, rec, sized.plan)
-        models.append(
-            (
-                document,
-                sizing.deflections(document, [(exp.u, exp.y)], Channels(), setup.surfaces, linkage),
-            )
-        )
         flown = None
         if predictor is None:  # the build-up grows from what this run flew, as the agent's
             linkage = _linkage(setup, rec, sized.plan)
