@@ -330,7 +330,8 @@ class Plant:
         """Run the engines to their steady state at the present flight condition, the
         airframe held (HELD_INTEGRATORS off); returns the total thrust (lbf). Not `strict`:
         where they do not settle, they stop at ENGINE_SETTLE_S (the trim's search goes on from
-        there; the trim found is checked strictly)."""
+        there; the trim found is checked strictly, and a PlantError says how far they were
+        from steady)."""
         f = self.fdm
         saved = {prop: float(f[prop]) for prop in HELD_INTEGRATORS}
         check = max(1, round(ENGINE_CHECK_S / self.dt))
@@ -346,13 +347,16 @@ class Plant:
                 total = sum(float(f[prop]) for prop in thrust)
                 if last is not None and abs(total - last) <= ENGINE_STEADY * max(abs(total), 100.0):
                     return total
-                last = total
+                before, last = last if last is not None else total, total
         finally:
             for prop, method in saved.items():
                 f[prop] = method
         if not strict:
-            return last
-        raise PlantError(f"the engines did not settle within {ENGINE_SETTLE_S:g} s")
+            return total
+        raise PlantError(
+            f"the engines did not settle within {ENGINE_SETTLE_S:g} s (thrust {total:.0f} lbf, "
+            f"moving {total - before:+.2g} lbf/s)"
+        )
 
     def _steady(self, x: np.ndarray, airspeed_kts: float) -> np.ndarray:
         """The accelerations of the aircraft set at `x` = (α, γ in degrees, elevator[, aileron,
