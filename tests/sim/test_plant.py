@@ -272,23 +272,27 @@ def test_a_turboprops_surfaces_are_read_along_the_ramp_without_idling_its_engine
     assert float(plant.fdm["propulsion/engine/n1"]) == pytest.approx(n1, abs=0.05)
 
 
-def test_an_aircraft_that_needs_flightgear_is_refused_by_name_with_one_json_object():
-    """Bad input: JSBSim's Fokker Dr.I reads a property only FlightGear provides (its
-    pushback) and JSBSim raises at its initial conditions; that was an internal error, with
-    JSBSim's complaint on stdout before the JSON."""
+def sim_error(*args: str) -> tuple[int, dict]:
+    """`sysid sim ARGS --json` that fails: its exit code and its one object's error (stdout
+    holds that one line: JSBSim's banner and complaints go to stderr)."""
     import json
     import subprocess
     import sys
 
+    command = [sys.executable, "-m", "agent", "sim", *args, "--json"]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=120, check=False)
+    assert done.stdout.count("\n") == 1, done.stdout
+    return done.returncode, json.loads(done.stdout)["error"]
+
+
+def test_an_aircraft_that_needs_flightgear_is_refused_by_name_with_one_json_object():
+    """Bad input: JSBSim's Fokker Dr.I reads a property only FlightGear provides (its
+    pushback) and JSBSim raises at its initial conditions; that was an internal error, with
+    JSBSim's complaint on stdout before the JSON."""
     with pytest.raises(PlantError, match="FlightGear"):
         Plant("dr1", airspeed_kts=70.0, linearise=False)
-    command = [sys.executable, "-m", "agent", "sim", "--aircraft", "dr1", "--speed-kts", "70"]
-    done = subprocess.run(
-        [*command, "--json"], capture_output=True, text=True, timeout=120, check=False
-    )
-    assert done.returncode == 2
-    assert done.stdout.count("\n") == 1
-    error = json.loads(done.stdout)["error"]
+    code, error = sim_error("--aircraft", "dr1", "--speed-kts", "70")
+    assert code == 2
     assert error["kind"] == "error"
     assert "pushback" in error["message"]
     assert "FlightGear" in error["message"]
@@ -299,16 +303,7 @@ def test_a_flight_that_reaches_the_ground_ends_at_once_saying_so():
     through the terrain after a hard impact; `sysid sim` then waited out its deadlines with its
     sensors gone and blamed a busy machine (a DHC-6 whose engine idled dived in at 23 s and the
     flight ended after 981 s). Now it ends when the aircraft is down, and says so."""
-    import json
-    import subprocess
-    import sys
-
-    command = [sys.executable, "-m", "agent", "sim", "--aircraft", "sgs126", "--altitude-ft", "20"]
-    done = subprocess.run(
-        [*command, "--json"], capture_output=True, text=True, timeout=120, check=False
-    )
-    assert done.returncode == 1
-    assert done.stdout.count("\n") == 1
-    error = json.loads(done.stdout)["error"]
+    code, error = sim_error("--aircraft", "sgs126", "--altitude-ft", "20")
+    assert code == 1
     assert "the simulated aircraft stopped: it touched the ground" in error["message"]
     assert "busy" not in error["message"]
