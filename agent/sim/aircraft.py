@@ -24,9 +24,17 @@ from pathlib import Path
 from agent.clock import Clock
 from agent.config import SurfacePort
 from agent.sim import devices
-from agent.sim.ardupilot import OUTPUTS, EmulatedArduPlane, Params, normalised_to_pwm, setup
+from agent.sim.ardupilot import (
+    FBWA,
+    MANUAL,
+    OUTPUTS,
+    EmulatedArduPlane,
+    Params,
+    normalised_to_pwm,
+    setup,
+)
 from agent.sim.dataflash import DataFlashWriter
-from agent.sim.pilot import ScriptedPilot
+from agent.sim.pilot import ScriptedPilot, departed
 from agent.sim.plant import Plant, PlantError
 
 log = logging.getLogger(__name__)
@@ -180,6 +188,10 @@ class SimAircraft:
         if options.mode and not self.autopilot.set_mode(options.mode):
             raise ValueError(f"the emulated ArduPlane does not fly mode {options.mode}")
         self.truth = self.plant.state()
+        self.trimmed = dict(self.truth)  # the flight a departure is judged from (`departed`)
+        if not self.plant.engines:  # a glider's height goes by design: no departure
+            self.trimmed.pop("agl")
+        self.recoveries: list[tuple[float, str]] = []  # (s into the flight, why)
         self.ports = {
             n: devices.PtyPort(self.directory / n) for n in ("vn200", "airdata", "surfaces")
         }
@@ -246,6 +258,12 @@ class SimAircraft:
             for _ in range(steps):
                 self.plant.step()
             self.truth = self.plant.state()
+            if self.autopilot.mode == MANUAL and (why := departed(self.truth, self.trimmed)):
+                # The safety pilot flips to FBWA, sticks centred: its laws level the wings and
+                # the pitch, and the flight goes on stabilised (the agent's next runs then
+                # excite closed loop, as a flight-test engineer flies an unstable aircraft).
+                self.autopilot.set_mode(FBWA)
+                self.recoveries.append((t + h - start, why))
             if self.plant.on_ground:  # no flight to identify: end it, say why
                 raise PlantError(
                     f"it touched the ground {t + h - start:.1f} s into the flight, "

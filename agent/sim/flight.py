@@ -46,7 +46,8 @@ from agent.runtime import Agent
 from agent.sim.aircraft import TICK_HZ, AircraftOptions, SimAircraft
 from agent.sim.ardupilot import Params
 from agent.sim.pace import Overdue, Pace, Stopped
-from agent.sim.plant import KT
+from agent.sim.pilot import recovered
+from agent.sim.plant import KT, PlantError
 from agent.sim.radio import EmulatedXBee, RfChannel, module_pair
 from agent.sim.truth import CHECK_TIC, check, linear_truth
 from drivers.xbee.driver import RadioError, XBeeRadio
@@ -488,20 +489,37 @@ async def one_run(options: SimOptions, aircraft: SimAircraft, ground: Ground, ru
         "the simulated world not back to real time",
         ACK_S,
     )
+    if aircraft.recoveries:  # the safety pilot has the aircraft in FBWA: back near the trim
+        await wait(
+            ground.pace,
+            lambda: recovered(aircraft.truth, aircraft.trimmed),
+            "the aircraft not recovered from its departure",
+            RESULT_S,
+        )
     say(f"run {run + 1}: {plan.id} armed; the pilot flips the switch")
     seen = len(ground.inbox)
     aircraft.pilot.set_switch(True)
 
+    def ends(m) -> bool:
+        """A result or a failure ends the run's wait; so does the run aborted (the agent does
+        not identify an aborted run: no result follows)."""
+        aborted = isinstance(m, messages.ExcitationEvent) and m.event == "aborted"
+        return (aborted and m.plan_id == plan.id) or isinstance(
+            m, messages.Result | messages.Failure
+        )
+
     def answered() -> bool:
-        return any(isinstance(m, messages.Result | messages.Failure) for m in ground.inbox[seen:])
+        return any(ends(m) for m in ground.inbox[seen:])
 
     failure = f"no identification result for {plan.id}"
     await wait(ground.pace, answered, failure, RESULT_S, fixed_s=planned_s(plan))
     aircraft.pilot.set_switch(False)
-    answer = next(
-        m for m in ground.inbox[seen:] if isinstance(m, messages.Result | messages.Failure)
-    )
+    answer = next(m for m in ground.inbox[seen:] if ends(m))
     events = [m.event for m in ground.inbox[seen:] if isinstance(m, messages.ExcitationEvent)]
+    if isinstance(answer, messages.ExcitationEvent):
+        reason = f"{plan.id} aborted: {answer.detail}"
+        say(f"run {run + 1}: {reason}")
+        return {"plan": plan.id, "events": events, "failure": reason, "sizing": sized}
     if isinstance(answer, messages.Failure):
         say(f"run {run + 1}: identification failed: {answer.reason}")
         return {"plan": plan.id, "events": events, "failure": answer.reason, "sizing": sized}
@@ -656,7 +674,10 @@ def _report(
 ) -> dict:
     last = outcomes[-1]
     result = last.get("result")
-    truth, truth_check = _truth(aircraft, preset(options.preset).axes)
+    try:
+        truth, truth_check = _truth(aircraft, preset(options.preset).axes)
+    except PlantError as exc:  # the flight's results stand without a truth to judge them by
+        truth, truth_check = {}, {"validated": False, "error": str(exc)}
     rows = []
     if result is not None:
         for mode in result.modes:
@@ -700,6 +721,8 @@ def _report(
         "modes": rows,
         "truth_modes": truth_modes,
         "truth_check": truth_check,
+        # The safety pilot's recoveries of a departure, in FBWA (agent.sim.pilot.departed).
+        "recoveries": [{"at_s": round(t, 1), "why": why} for t, why in aircraft.recoveries],
         "tic_avg": None if result is None else result.tic_avg,
         "suggestion": None
         if result is None
@@ -750,6 +773,11 @@ def format_report(report: dict) -> str:
         if run.get("sizing"):
             sized = messages.Sizing(plan=preset(report["preset"]), **run["sizing"])
             lines += [f"run {k + 1}: {line}" for line in sizing.message_lines(sized)]
+    for recovery in report.get("recoveries", []):
+        lines.append(
+            f"the safety pilot recovered a departure in FBWA {recovery['at_s']:.0f} s into the "
+            f"flight ({recovery['why']}); the runs after it excite closed loop"
+        )
     if report["failure"]:
         lines.append(f"identification failed: {report['failure']}")
         return "\n".join([*lines, *(f"notice: {text}" for text in report["notices"])])
@@ -780,6 +808,9 @@ def truth_warning(verdict: dict | None) -> str | None:
     """What the report says where the truth failed its check (`_truth`); None where it passed."""
     if not verdict or verdict["validated"]:
         return None
+    if "error" in verdict:
+        why = verdict["error"]
+        return f"no truth to judge the modes by: JSBSim's linear model was not built ({why})"
     failing = ", ".join(
         f"{test} {tic:.3f}" for test, tic in verdict["worst_tic"].items() if tic > verdict["bound"]
     )

@@ -292,3 +292,32 @@ async def test_a_flight_kept_in_a_relative_directory_comes_up(tmp_path, monkeypa
     assert (tmp_path / "flight" / "link.key").is_file()
     assert any((tmp_path / "flight" / "logs").glob("*_exec_*.jsonl"))
     assert not (tmp_path / "flight" / "flight").exists()
+
+
+async def test_the_operator_takes_an_aborted_run_as_its_answer_and_flies_on(tmp_path):
+    """The agent does not identify an aborted run, so no result follows it: the scripted
+    operator waited out its deadline for one (a DHC-6 aborted for its bank then ended "no
+    identification result for full-1 in 207 s", blaming a busy machine). An abort now ends
+    the run's wait with its reason. Bad input tried: the pilot drops the switch mid-run."""
+    from agent.sim.flight import one_run
+
+    async with simulated(SimOptions(preset="lateral", directory=tmp_path)) as sim:
+
+        async def drop_after_start():
+            seen = len(sim.ground.inbox)
+            await until(
+                lambda: received(sim, messages.ExcitationEvent, seen, event="started"), "start"
+            )
+            await asyncio.sleep(1.0)
+            sim.aircraft.pilot.take_control()
+
+        dropping = asyncio.create_task(drop_after_start())
+        outcome = await one_run(
+            SimOptions(preset="lateral", sizing=False), sim.aircraft, sim.ground, 0, lambda _: None
+        )
+        await dropping
+    # Answered by the abort itself: a deadline would have raised SimError instead.
+    assert outcome["failure"].startswith("lateral-1 aborted: ")
+    assert "switch" in outcome["failure"]
+    assert outcome["events"][-1] == "aborted"
+    assert "result" not in outcome

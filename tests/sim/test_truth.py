@@ -80,3 +80,8 @@ def test_a_truth_that_fails_its_check_is_reported_as_not_validated():
     assert not t37["validated"]
     assert t37["worst_tic"]["elevator"] > CHECK_TIC
     assert "elevator" in truth_warning(t37)
+    # A truth that could not be built at all (the DHC-6's: an engine settle went to NaN) leaves
+    # the flight's results standing, without errors, and says why.
+    failed = {"validated": False, "error": "the engines did not settle within 120 s"}
+    assert "no truth to judge the modes by" in truth_warning(failed)
+    assert "did not settle" in truth_warning(failed)
