@@ -87,6 +87,9 @@ ENGINE_STATES = {
 # residual accepted (ft/s², and rad/s² for q̇).
 GLIDE_ITERATIONS = 30
 GLIDE_RESIDUAL = 1e-6
+# JSBSim's accelerations the trims drive to zero (its `accelerations/` properties).
+LONGITUDINAL_ACCELERATIONS = ("udot-ft_sec2", "wdot-ft_sec2", "qdot-rad_sec2")
+LATERAL_ACCELERATIONS = ("vdot-ft_sec2", "pdot-rad_sec2", "rdot-rad_sec2")
 # JSBSim's own trim does not trim every powered aircraft. Its steady-state search runs the
 # engines without refreshing their inputs from the flight controls (JSBSim issue 1440, "udot
 # doesn't appear to be trimmable"), and its turboprop engine (FGTurboProp) gives no power while
@@ -210,10 +213,12 @@ class Plant:
                 self.linearisation = self._linearise() if linearise and self.engines else None
                 self._finish_trim(aircraft, airspeed_kts)
             except jsbsim.BaseError as exc:
-                raise PlantError(
-                    f"JSBSim could not fly {aircraft}: {str(exc).strip()} (an aircraft that "
-                    "needs FlightGear's properties does not fly in JSBSim alone)"
-                ) from exc
+                text = str(exc).strip()
+                if "does not exist" in text:  # a property only FlightGear provides
+                    text += (
+                        " (a model that needs FlightGear's properties does not fly in JSBSim alone)"
+                    )
+                raise PlantError(f"JSBSim could not fly {aircraft}: {text}") from exc
         self.trim = {
             name: float(self.fdm[self.commands[name][0]]) if name in self.commands else 0.0
             for name in COMMAND_PROPERTY
@@ -312,9 +317,8 @@ class Plant:
         if not self._own_trim:
             return
         self._settle_engines()
-        f = self.fdm
-        linear = [abs(float(f[f"accelerations/{a}dot-ft_sec2"])) for a in "uvw"]
-        angular = [abs(float(f[f"accelerations/{a}dot-rad_sec2"])) for a in "pqr"]
+        linear = np.abs(self._accelerations(("udot-ft_sec2", "vdot-ft_sec2", "wdot-ft_sec2")))
+        angular = np.abs(self._accelerations(("pdot-rad_sec2", "qdot-rad_sec2", "rdot-rad_sec2")))
         if max(linear) > TRIM_CHECK[0] or max(angular) > TRIM_CHECK[1]:
             raise PlantError(
                 f"could not trim {aircraft} at {airspeed_kts:g} kt: with the engines running "
@@ -359,34 +363,24 @@ class Plant:
         )
 
     def _steady(self, x: np.ndarray, airspeed_kts: float) -> np.ndarray:
-        """The accelerations of the aircraft set at `x` = (α, γ in degrees, elevator[, aileron,
-        rudder, β in degrees]) at the airspeed, the engines as they are, time frozen:
-        (u̇, ẇ, q̇[, v̇, ṗ, ṙ]) in ft/s² and rad/s²."""
+        """The accelerations u̇, ẇ, q̇ (ft/s², rad/s²) of the aircraft set at `x` = (α, γ in
+        degrees, elevator) at the airspeed, time frozen."""
         f = self.fdm
         f["ic/alpha-deg"], f["ic/gamma-deg"] = x[0], x[1]
-        lateral = len(x) > 3
-        if lateral:
-            f["ic/beta-deg"] = x[5]
-            f["fcs/aileron-cmd-norm"], f["fcs/rudder-cmd-norm"] = x[3], x[4]
         f["ic/vc-kts"] = airspeed_kts
         f["fcs/elevator-cmd-norm"] = x[2]
         if not f.run_ic():
             raise PlantError("JSBSim rejected the initial conditions")
-        f.suspend_integration()  # the flight controls at the command, time frozen
-        try:
-            f.run()
-        finally:
-            f.resume_integration()
-        names = ("udot-ft_sec2", "wdot-ft_sec2", "qdot-rad_sec2")
-        if lateral:
-            names += ("vdot-ft_sec2", "pdot-rad_sec2", "rdot-rad_sec2")
-        return np.array([float(f[f"accelerations/{name}"]) for name in names])
+        self._frozen()  # the flight controls at the command, time frozen
+        return self._accelerations(LONGITUDINAL_ACCELERATIONS)
+
+    def _accelerations(self, names: tuple[str, ...]) -> np.ndarray:
+        return np.array([float(self.fdm[f"accelerations/{name}"]) for name in names])
 
     def _newton(self, x: np.ndarray, airspeed_kts: float) -> np.ndarray | None:
         """Newton's method (central-difference Jacobian) from `x` on `_steady`; the solution,
         the aircraft left there, or None where it does not converge within bounds."""
-        step = np.array([1e-3, 1e-3, 1e-4, 1e-4, 1e-4, 1e-3])[: len(x)]
-        bound = np.array([20.0, 30.0, 1.0, 1.0, 1.0, 20.0])[: len(x)]
+        step, bound = np.array([1e-3, 1e-3, 1e-4]), np.array([20.0, 30.0, 1.0])
         for _ in range(GLIDE_ITERATIONS):
             r = self._steady(x, airspeed_kts)
             if np.max(np.abs(r)) < GLIDE_RESIDUAL:
@@ -413,20 +407,12 @@ class Plant:
         self._own_trim = False
         x = self._newton(np.array([2.0, -3.0, 0.0]), airspeed_kts)
         if x is None:
+            last = self._accelerations(LONGITUDINAL_ACCELERATIONS)
             raise PlantError(
                 f"could not trim {aircraft} in a steady glide at {airspeed_kts:g} kt "
-                f"(residual accelerations {np.array2string(self._last_residual(), precision=3)})"
+                f"(residual accelerations {np.array2string(last, precision=3)})"
             )
         self.glide_deg = float(x[1])
-
-    def _last_residual(self) -> np.ndarray:
-        f = self.fdm
-        return np.array(
-            [
-                float(f[f"accelerations/{n}"])
-                for n in ("udot-ft_sec2", "wdot-ft_sec2", "qdot-rad_sec2")
-            ]
-        )
 
     def _trim_powered(self, aircraft: str, airspeed_kts: float) -> None:
         """Straight and level flight with the engines as they run (module constants above):
@@ -492,9 +478,7 @@ class Plant:
         if not f.run_ic():
             raise PlantError("JSBSim rejected the initial conditions")
         self._settle_engines(strict=False)
-        names = ("udot-ft_sec2", "wdot-ft_sec2", "qdot-rad_sec2")
-        names += ("vdot-ft_sec2", "pdot-rad_sec2", "rdot-rad_sec2")
-        return np.array([float(f[f"accelerations/{name}"]) for name in names])
+        return self._accelerations(LONGITUDINAL_ACCELERATIONS + LATERAL_ACCELERATIONS)
 
     def _position_maps(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Each control's surface positions (POSITION_PROPERTIES) as JSBSim's flight controls

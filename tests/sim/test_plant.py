@@ -252,6 +252,16 @@ def test_a_turboprop_is_trimmed_with_its_engines_running_and_stays_trimmed(aircr
     assert after["rpm"] > 1000.0
 
 
+def test_an_aircraft_neither_trim_can_fly_level_is_refused_with_both_named():
+    """Bad input: JSBSim's P-51D at 200 kt, whose engine does not turn without FlightGear's
+    systems (0 rpm at any throttle). JSBSim's trim fails ("udot doesn't appear to be
+    trimmable"), the plant's own is tried and fails too: one PlantError that says so, with
+    the accelerations left, and nothing on stdout."""
+    with pytest.raises(PlantError, match="JSBSim's own trim failed too") as caught:
+        Plant("p51d", airspeed_kts=200.0, linearise=False)
+    assert "residual accelerations" in str(caught.value)
+
+
 def test_a_turboprops_surfaces_are_read_along_the_ramp_without_idling_its_engine():
     # The same ramp as the Cub's above: read from the plant's map of its flight controls,
     # the positions match where JSBSim puts the surfaces once a step has flown them.
