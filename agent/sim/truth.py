@@ -35,6 +35,12 @@ Schoukens, *System Identification: A Frequency Domain Approach*, 2nd ed., 2012, 
    body's kinematics linearised at the trim, and the θ and φ columns of the other rows are
    gravity's (no aerodynamic or engine force depends on the attitude). Left free, those
    entries came out 1–2 % off (θ̇ = 0.986 q − 0.004 α on the Cub).
+5. An aircraft that departs under the multisine (`_departed`: an unstable spiral driven by
+   its slowest lines; JSBSim's DHC-6 at 130 kt) is flown again, every realisation, held near
+   its trim by a feedback designed on what it flew before it departed (`_hold`). The
+   regression is the same: the data have no noise, so the feedback, which correlates the
+   inputs with the states, biases nothing, and the multisine keeps them apart. A flight
+   stops where it departs: flown on, the DHC-6 went into the ground and to NaN.
 
 The check (`check`): the odd part of a doublet on each surface and of a throttle step, each
 flown as a ± pair, against the truth driven by the same recorded positions; every output that
@@ -56,7 +62,7 @@ import numpy as np
 import scipy.linalg
 
 from agent.ident.aircraft.kinematics import kinematic_jacobian
-from agent.sim.plant import ENGINE_STATES, FT, INPUTS, Plant
+from agent.sim.plant import ENGINE_STATES, FT, INPUTS, Plant, PlantError
 
 OUTPUTS = ("Vt", "alpha", "q", "theta", "beta", "p", "r", "phi")
 BODY = (*OUTPUTS, "alt")  # the states every aircraft has; its engine's follow (states())
@@ -80,6 +86,17 @@ ATTITUDE = ("theta", "phi")
 CHECK_S, CHECK_START_S, DOUBLET_S = 20.0, 1.0, 1.0
 CHECK_TIC = 0.05
 COUNTED_SHARE = 0.1
+# A truth flight has departed (`_departed`) beyond these deviations from the trim (rad, rad, share
+# of the airspeed). The multisine moves the benchmark's aircraft by up to 20° of bank (the T-6's
+# slow spiral), 3.8° of pitch and 9 % of airspeed (the glider's), none of which departs; the
+# DHC-6 at 130 kt spiralled to 64° of bank 54 s in and into the ground at 56 s.
+DEPARTED = {"phi": np.radians(30.0), "theta": np.radians(15.0), "Vt": 0.2}
+# The hold's state weights against its controls' (`_hold`), tried in turn: the least that holds.
+# Weighted at 1e-4 the DHC-6's hold (its spiral mirrored) still let its bank follow the
+# multisine's slowest aileron lines past 20°; at 1e-2, within 1.4°.
+HOLD_WEIGHTS = (1e-3, 1e-2, 1e-1, 1.0)
+# A stretch before a departure shorter than this (s) is too little to design a hold on.
+MIN_STRETCH_S = 5.0
 
 _PROPERTIES = (
     ("velocities/vt-fps", FT),
@@ -113,6 +130,7 @@ class Truth:
     conditions: dict  # the Plant's other settings at this trim (altitude, rate)
     states: tuple[str, ...] = states("piston")
     powerplant: str = "piston"  # ENGINE_STATES's kind
+    hold: np.ndarray | None = None  # the feedback its flights were held by (`_hold`), if any
 
     def modes(self) -> dict[str, list[complex]]:
         """The aircraft's modes by name (one eigenvalue per pair, upper half-plane)."""
@@ -147,27 +165,63 @@ def _positions(plant: Plant) -> np.ndarray:
     return np.array([s[name] for name in INPUTS])
 
 
-def _fly(plant: Plant, commands: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _fly(
+    plant: Plant, commands: np.ndarray, hold: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Commands (normalised deltas, one row per integration step) in; states and positions
-    after each step out."""
-    x = np.empty((len(commands), len(BODY) + len(ENGINE_STATES[plant.kind])))
-    u = np.empty((len(commands), len(INPUTS)))
+    after each step out. `hold` (inputs × states, normalised command per unit of state): a
+    linear feedback on the state's deviation from the trim added to the commands (`_hold`).
+    A flight that departs (`_departed`) stops there, its remaining rows NaN: flown on into
+    the ground, JSBSim's DHC-6 went to NaN, and every DHC-6 the process made after it failed
+    its trim (its engines' thrust NaN; other aircraft unaffected)."""
+    x = np.full((len(commands), len(BODY) + len(ENGINE_STATES[plant.kind])), np.nan)
+    u = np.full((len(commands), len(INPUTS)), np.nan)
+    trim = _states(plant)
+    now = trim
     for k, row in enumerate(commands):
+        if hold is not None:
+            row = row - hold @ (now - trim)
         plant.command(dict(zip(INPUTS, row, strict=True)))
         plant.step()
-        x[k], u[k] = _states(plant), _positions(plant)
+        now = _states(plant)
+        x[k], u[k] = now, _positions(plant)
+        if _departed(now[None], trim) is not None:
+            break
     return x, u
 
 
-def odd_response(aircraft: str, airspeed_kts: float, commands: np.ndarray, **plant):
+def odd_response(aircraft: str, airspeed_kts: float, commands: np.ndarray, hold=None, **plant):
     """The odd part of JSBSim's response to `commands` from the trim: (states, positions) as
-    deviations, and the trim (states, positions)."""
+    deviations, and the trim (states, positions); `hold`: as `_fly`'s (a linear law: the
+    negated flight is held by the same feedback, and the odd part is still the odd part)."""
+    x, u, trim, _ = _odd(aircraft, airspeed_kts, commands, hold, **plant)
+    return x, u, trim
+
+
+def _odd(aircraft: str, airspeed_kts: float, commands: np.ndarray, hold=None, **plant):
+    """`odd_response`, and the first step at which either flight departed (`_departed`;
+    None: neither did)."""
     up = Plant(aircraft, airspeed_kts=airspeed_kts, linearise=False, **plant)
     trim = _states(up), _positions(up)
-    xp, up_u = _fly(up, commands)
+    xp, up_u = _fly(up, commands, hold)
     down = Plant(aircraft, airspeed_kts=airspeed_kts, linearise=False, **plant)
-    xm, down_u = _fly(down, -commands)
-    return (xp - xm) / 2, (up_u - down_u) / 2, trim
+    xm, down_u = _fly(down, -commands, hold)
+    gone = [k for k in (_departed(xp, trim[0]), _departed(xm, trim[0])) if k is not None]
+    return (xp - xm) / 2, (up_u - down_u) / 2, trim, min(gone, default=None)
+
+
+def _departed(x: np.ndarray, trim: np.ndarray) -> int | None:
+    """The first step at which a flight's states left the small perturbation the truth is
+    taken in (DEPARTED: bank, pitch attitude, airspeed), or stopped being numbers."""
+    V, theta, phi = (BODY.index(s) for s in ("Vt", "theta", "phi"))
+    with np.errstate(invalid="ignore"):
+        out = (
+            ~np.all(np.isfinite(x), axis=1)
+            | (np.abs(x[:, phi] - trim[phi]) > DEPARTED["phi"])
+            | (np.abs(x[:, theta] - trim[theta]) > DEPARTED["theta"])
+            | (np.abs(x[:, V] - trim[V]) > DEPARTED["Vt"] * trim[V])
+        )
+    return int(np.argmax(out)) if out.any() else None
 
 
 def excitation(
@@ -197,15 +251,47 @@ def linear_truth(
     for the process (JSBSim is deterministic: the same trim gives the same truth).
     `amplitude`: of the multisine's commands (AMPLITUDE unless asked: the best linear
     approximation of a nonlinear aircraft moves with the amplitude it is taken at,
-    `benchmarks/truth_check.py --amplitudes`)."""
+    `benchmarks/truth_check.py --amplitudes`). An aircraft that departs under the multisine
+    (an unstable spiral) is flown again, held by a feedback designed on what it flew before
+    it departed (`_hold`, module docstring step 5)."""
     rate = float(plant.get("integration_hz", 200.0))
     kind = Plant(aircraft, airspeed_kts=airspeed_kts, linearise=False, **plant).kind
     names = states(kind)
-    derivatives, rows = [], []
-    for m in range(REALISATIONS):
-        x, u, (x0, u0) = odd_response(
-            aircraft, airspeed_kts, excitation(rate, m, amplitude=amplitude), **plant
+    commands = [excitation(rate, m, amplitude=amplitude) for m in range(REALISATIONS)]
+    hold, gone, flights = None, None, []
+    for c in commands:
+        x, u, (x0, u0), gone = _odd(aircraft, airspeed_kts, c, **plant)
+        if gone is not None:
+            stretch = (x[:gone], u[:gone], c[:gone])
+            break
+        flights.append((x, u))
+    # Departed: all flown again, held by the least feedback of HOLD_WEIGHTS that holds them.
+    for weight in HOLD_WEIGHTS if gone is not None else ():
+        hold = _hold(*stretch, x0, names, rate, weight)
+        flights = []
+        for c in commands:
+            x, u, (x0, u0), gone = _odd(aircraft, airspeed_kts, c, hold, **plant)
+            if gone is not None:
+                break
+            flights.append((x, u))
+        if gone is None:
+            break
+    if gone is not None:
+        raise PlantError(
+            f"{aircraft} at {airspeed_kts:g} kt departs from its trim under the truth's "
+            f"multisine, held or not ({gone / rate:.0f} s in): no linear truth"
         )
+    A, B = _regression(flights, x0, names, rate)
+    return Truth(A, B, x0, u0, aircraft, airspeed_kts, dict(plant), names, kind, hold)
+
+
+def _regression(
+    flights: list[tuple[np.ndarray, np.ndarray]], x0: np.ndarray, names: tuple[str, ...], rate
+) -> tuple[np.ndarray, np.ndarray]:
+    """Step 4 of the module docstring: ẋ = A x + B u from the odd responses (states,
+    positions) by least squares, the kinematics held at their values."""
+    derivatives, rows = [], []
+    for x, u in flights:
         # x[k] is the state after step k, u[k] the positions held during it: the central
         # difference at k spans steps k and k + 1, so its inputs are their mean.
         derivatives.append((x[2:] - x[:-2]) * rate / 2)
@@ -231,7 +317,52 @@ def linear_truth(
         row[free] = theta[i]
         row[attitude] = known[i, attitude]
         A[i], B[i] = row[:n], row[n : n + r]
-    return Truth(A, B, x0, u0, aircraft, airspeed_kts, dict(plant), names, kind)
+    return A, B
+
+
+def _hold(
+    x: np.ndarray,
+    u: np.ndarray,
+    commands: np.ndarray,
+    x0: np.ndarray,
+    names: tuple[str, ...],
+    rate: float,
+    weight: float,
+) -> np.ndarray:
+    """A feedback (inputs × states, normalised command per unit of state) that holds the
+    aircraft near its trim under the multisine, designed on what it flew before it departed:
+    the regression's model of that stretch (`_regression`), and the linear-quadratic
+    regulator with each state weighted by `weight` over its spread there and each control by
+    one over its reach there (as the weight tends to zero, the regulator moves each unstable
+    pole to its mirror image and leaves the stable ones where they are: Anderson & Moore,
+    *Optimal Control: Linear Quadratic Methods*, 1990). Each control's position per commanded
+    unit, its least-squares gain over the stretch, turns the positions' feedback into
+    commands. The held flights' regression is not biased by the feedback: their data have
+    no noise, and the multisine keeps the inputs apart from the states."""
+    if len(x) < MIN_STRETCH_S * rate:
+        raise PlantError(
+            f"the aircraft departs from its trim within {len(x) / rate:.1f} s of the truth's "
+            "multisine: no linear truth"
+        )
+    A, B = _regression([(x, u)], x0, names, rate)
+    # The altitude's column is the density's small effect: nothing a hold needs to act on.
+    keep = [i for i, s in enumerate(names) if s != "alt"]
+    A, B = A[np.ix_(keep, keep)], B[keep]
+    spread = np.maximum(x[:, keep].std(axis=0), 1e-9)
+    reach = np.maximum(np.abs(u).max(axis=0), 1e-9)
+    Q = weight * np.diag(1.0 / spread**2)
+    R = np.diag(1.0 / reach**2)
+    try:
+        P = scipy.linalg.solve_continuous_are(A, B, Q, R)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        raise PlantError(f"no hold for the truth's flight could be designed: {exc}") from exc
+    K = np.linalg.solve(R, B.T @ P)  # positions per unit of state
+    gain = (commands * u).sum(axis=0) / np.maximum((commands**2).sum(axis=0), 1e-12)
+    if np.any(np.abs(gain) < 1e-9) or not np.all(np.isfinite(K)):
+        raise PlantError("no hold for the truth's flight could be designed")
+    out = np.zeros((len(INPUTS), len(names)))
+    out[:, keep] = K / gain[:, None]
+    return out
 
 
 def climb_rate(x: np.ndarray) -> np.ndarray:
@@ -296,7 +427,9 @@ def check(truth: Truth, amplitude: float = AMPLITUDE) -> list[Check]:
     checks = []
     for name in INPUTS:
         commands = check_commands(name, rate, amplitude)
-        x, u, _ = odd_response(truth.aircraft, truth.airspeed_kts, commands, **truth.conditions)
+        x, u, _ = odd_response(
+            truth.aircraft, truth.airspeed_kts, commands, truth.hold, **truth.conditions
+        )
         # The truth is driven by the positions: u[k] holds over step k, at whose end x[k] is
         # taken, so x[k] is the truth's state after k + 1 steps.
         predicted = truth.simulate(np.vstack([u, np.zeros(len(INPUTS))]), 1.0 / rate)[1:]

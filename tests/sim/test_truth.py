@@ -5,14 +5,17 @@ the test moves; and its modes must carry the right names. Here on the J-3 Cub (e
 truth takes about 25 s to build); `benchmarks/truth_check.py` holds every aircraft of
 `make bench-jsbsim` to the same bound.
 
-Bad input tried: an aircraft JSBSim does not have."""
+An aircraft that departs under the multisine is held (the Cub, its departure's bank lowered).
+
+Bad input tried: an aircraft JSBSim does not have; a flight past the departure's bank."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from agent.sim.plant import PlantError
+from agent.sim import truth as truth_module
+from agent.sim.plant import Plant, PlantError
 from agent.sim.truth import CHECK_TIC, check, linear_truth
 
 BENCHMARK = [("J3Cub", 60.0)]
@@ -85,3 +88,32 @@ def test_a_truth_that_fails_its_check_is_reported_as_not_validated():
     failed = {"validated": False, "error": "the engines did not settle within 120 s"}
     assert "no truth to judge the modes by" in truth_warning(failed)
     assert "did not settle" in truth_warning(failed)
+
+
+def test_an_aircraft_that_departs_under_the_multisine_is_held_and_its_truth_is_the_same(
+    truth, monkeypatch
+):
+    """The Cub's truth flights bank up to 12°: with the departure's bank set at 5° it
+    'departs', is flown again held by a feedback designed on what it flew before, and its
+    truth must not move (noise-free data: the feedback biases nothing) and must pass the
+    same check. Bad input tried: a flight past the departure's bank (it stops there)."""
+    monkeypatch.setattr(truth_module, "DEPARTED", {**truth_module.DEPARTED, "phi": np.radians(5)})
+    plant = Plant("J3Cub", airspeed_kts=60.0, linearise=False)
+    trim = truth_module._states(plant)
+    x, _ = truth_module._fly(plant, truth_module.excitation(200.0, 0))
+    gone = truth_module._departed(x, trim)
+    assert gone is not None
+    assert np.all(np.isfinite(x[gone])), "it departed by bank, not by numbers"
+    assert np.all(np.isnan(x[gone + 1 :]))  # stopped where it departed
+    linear_truth.cache_clear()
+    try:
+        held = linear_truth("J3Cub", 60.0)
+    finally:
+        linear_truth.cache_clear()
+    assert held.hold is not None
+    assert truth.hold is None
+    free, modes = truth.modes(), held.modes()
+    for name in ("short period", "phugoid", "Dutch roll", "roll"):
+        for a, b in zip(sorted(free[name], key=abs), sorted(modes[name], key=abs), strict=True):
+            assert abs(a - b) <= 0.02 * abs(a), (name, a, b)
+    assert all(c.worst <= CHECK_TIC for c in check(held)), [(c.test, c.worst) for c in check(held)]
