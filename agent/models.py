@@ -24,7 +24,7 @@ import re
 import secrets
 import zipfile
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -80,6 +80,9 @@ class Candidate:
     tic_nn: float | None = None  # as nominal: its TIC on its own data
     record_s: float | None = None  # the newest record's length (None: unknown)
     trim: dict[str, dict[str, float]] | None = None  # its trim, "inputs"/"outputs" by channel
+    # Its one record as the whole-aircraft method fitted it (agent.ident.job.Outcome.fitted):
+    # the sizing's linear range (agent.sizing.linear_range). None: not kept or not that method.
+    fitted: object | None = field(default=None, compare=False, repr=False)
 
     @property
     def tic_jj(self) -> float:

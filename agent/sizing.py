@@ -49,6 +49,7 @@ from agent.config import Sizing as SizingConfig
 from agent.excitation import follow
 from agent.excitation.plan import MAX_BREAKPOINTS, Multisine, Plan, Sweep, Timeline, render
 from agent.excitation.signals import shaped
+from agent.ident.aircraft import linearity
 from agent.ident.aircraft.kinematics import KINEMATIC_STATES, kinematic_jacobian, kinematics
 from agent.ident.convert import StateSpace
 from agent.ident.document import ResultDocument
@@ -97,6 +98,31 @@ UNKNOWN_SHARE = 0.5
 # the inputs' growth must stand above that (√2 ≈ 1.41); nearer 1, a drift that grows with the
 # inputs passes as the air's and the plan is sized past the envelope (benchmarks/README.md).
 AIR_GROWTH = 2.0
+# The linear range (`linear_range`): two records whose axis's controls played at least
+# AMPLITUDES_APART times apart; a named mode of the axis apart between their models by more than
+# LINEARITY_SHARE of it (pole distance over |λ|); and the larger record's model leaving more than
+# LINEARITY_EXCESS more of the smaller record's weighted cost unexplained than that record's own
+# model (agent.ident.aircraft.linearity): the aircraft is not linear over the span, and the
+# controls that grew play no more than the smaller record did. JSBSim's PC-7 at 150 kt, calm,
+# its full preset at 1, ½ and ¼ of a sized 2.1° of elevator (short period 10.5, 3.7 and 1.0 %
+# off the truth): the larger model's excess on its longitudinal axis 1.23 (1 on ½) and 2.16
+# (1 on ¼); the SGS 1-26 glider, whose short period moves by 1 % between the same scales, at
+# most 0.18. Nearer than AMPLITUDES_APART, a difference is a repeat's (the fit step's).
+AMPLITUDES_APART = 1.25
+LINEARITY_SHARE = 0.05
+LINEARITY_EXCESS = 0.5
+# Each axis's controls, the named modes that tell its linearity, and each mode's controls: those
+# that excite it, the ones held where it moves with the amplitude. A short period that moves is
+# no reason to take the throttle away: the PC-7 with both held (2.4 % of throttle for 4.9 %) had
+# its full preset's phugoid 9.3 % off in median (3.9 % before) and its card's 13.4 % (5.4 %).
+AXIS_CONTROLS = {"longitudinal": ("elevator", "throttle"), "lateral": ("aileron", "rudder")}
+AXIS_MODES = {"longitudinal": ("short period", "phugoid"), "lateral": ("Dutch roll", "roll")}
+MODE_CONTROLS = {
+    "short period": ("elevator",),
+    "phugoid": ("elevator", "throttle"),
+    "Dutch roll": ("rudder", "aileron"),
+    "roll": ("aileron",),
+}
 # Each checked quantity's axis: its controls are the ones grown from the data's peak.
 AXIS_OF = {
     "bank_deg": "lateral",
@@ -209,6 +235,10 @@ class Predictor:
     what the data flew (`flown`), when that is more than the model predicts: a response the
     model does not hold (a drift that grows with the inputs) must not be sized by the model
     alone (docs/excitation.md, *Sizing*)."""
+    linear: Mapping[str, tuple[float, str]] = field(default_factory=dict)
+    """Control → (the largest amplitude in plan units at which its axis showed itself linear,
+    why), where a record at a smaller amplitude showed the aircraft not linear beyond it
+    (`linear_range`)."""
     linkage: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
     """Control → (gain, even, knee): its recorded position per commanded deflection, per
     |commanded − knee| deflection, and the knee, measured on the last run
@@ -579,6 +609,9 @@ def _sized(
             limits[f"{config.max_growth:g}× the {flown:.3g} its model saw"] = (
                 config.max_growth * flown / peak[c]
             )
+        if c in predictor.linear and peak[c] > 0:
+            amplitude, why = predictor.linear[c]
+            limits[why] = amplitude / peak[c]
         for q, target in goal.items():
             if own.get(q, 0.0) > 0:
                 limits[f"{LABELS[q]} {target:.3g}{QUANTITIES[q]}"] = target / own[q]
@@ -969,7 +1002,15 @@ def predictor_from(
 ) -> Predictor | None:
     """A stored model as a predictor of the plans' response (None: see `predictor`);
     `others`: other candidates of its axes, whose records tell the gusts from what the model
-    misses (`checked`)."""
+    misses (`checked`), and whose records and models at other amplitudes the linear range
+    (`linear_range`)."""
+    alike = [
+        c
+        for c in others
+        if c.model_id != candidate.model_id
+        and (c.result.inputs, c.result.outputs)
+        == (candidate.result.inputs, candidate.result.outputs)
+    ]
     return predictor(
         candidate.result,
         trim=(candidate.trim or {}).get("outputs", {}),
@@ -979,13 +1020,12 @@ def predictor_from(
         source=source,
         flight=flight,
         linkage=linkage,
-        others=[
-            e
-            for c in others
-            if c.model_id != candidate.model_id
-            and (c.result.inputs, c.result.outputs)
-            == (candidate.result.inputs, candidate.result.outputs)
-            for e in c.experiments
+        others=[e for c in alike for e in c.experiments],
+        fitted=candidate.fitted,
+        earlier=[
+            (c.result, c.fitted, deflections(c.result, c.experiments, channels, surfaces, linkage))
+            for c in alike
+            if c.fitted is not None
         ],
     )
 
@@ -1001,12 +1041,16 @@ def predictor(
     flight: Mapping[str, float] | None = None,
     linkage: Mapping[str, tuple[float, ...]] | None = None,
     others: Sequence[tuple[np.ndarray, np.ndarray]] = (),
+    fitted: object | None = None,
+    earlier: Sequence[tuple[ResultDocument, object, Mapping[str, float]]] = (),
 ) -> Predictor | None:
     """An identified model as a predictor of the plans' response: `trim` is its record's trim
     outputs by channel, `experiments` its data (u, y), trim removed, `flight` the flight
     state now by output role (the trim of what the model does not hold), `others` other
     records of its axes in the same form (`checked`: the gusts told from what the model
-    misses). None when it
+    misses), `fitted` its record as the whole-aircraft method fitted it and `earlier` other
+    models of its axes with their records so fitted and what they flew (`deflections`): the
+    linear range (`linear_range`). None when it
     predicts nothing a sizing uses: no configured control among its inputs or no output of a
     quantity. Without a known airspeed (a lateral model, flown with no flight state yet) the
     airspeed, load factor and height are not predicted."""
@@ -1057,8 +1101,81 @@ def predictor(
         correction=correction,
         unexplained=unexplained,
         extrapolated=extrapolated,
+        linear=linear_range(result, fitted, flown, earlier),
         linkage=linkage,
     )
+
+
+def linear_range(
+    result: ResultDocument,
+    fitted: object | None,
+    flown: Mapping[str, float],
+    earlier: Sequence[tuple[ResultDocument, object, Mapping[str, float]]],
+) -> dict[str, tuple[float, str]]:
+    """Control → (the largest amplitude, plan units, at which its axis showed itself linear,
+    why): over this model (its record `fitted`, which flew `flown`) and each of `earlier`,
+    per axis, where one record's controls of the axis all played at least as large as the
+    other's and some at least AMPLITUDES_APART larger, a named mode of the axis is more than
+    LINEARITY_SHARE apart between the two models, and the larger record's model leaves more
+    than LINEARITY_EXCESS more of the smaller record's weighted cost unexplained than its own
+    (agent.ident.aircraft.linearity), the controls that grew and excite a mode that moved
+    (MODE_CONTROLS) play no more than the smaller record did. The tightest over the pairs is
+    kept."""
+    out: dict[str, tuple[float, str]] = {}
+    if fitted is None:
+        return out
+    mine = (result, fitted, flown)
+    for theirs in earlier:
+        for axis, controls in AXIS_CONTROLS.items():
+            both = [c for c in controls if flown.get(c, 0.0) > 0 and theirs[2].get(c, 0.0) > 0]
+            up = all(flown[c] >= theirs[2][c] for c in both)
+            down = all(flown[c] <= theirs[2][c] for c in both)
+            if not both or up == down:  # the same amplitudes, or one up and another down
+                continue
+            big, small = (mine, theirs) if up else (theirs, mine)
+            grown = [c for c in both if big[2][c] >= AMPLITUDES_APART * small[2][c]]
+            if not grown:
+                continue
+            apart = {
+                name: d
+                for name in AXIS_MODES[axis]
+                if (d := _mode_apart(big[0], small[0], name)) is not None and d > LINEARITY_SHARE
+            }
+            held = [c for c in grown if any(c in MODE_CONTROLS[name] for name in apart)]
+            if not held:
+                continue
+            share = linearity.excess(small[1], big[1]).get(axis)
+            if share is None or share <= LINEARITY_EXCESS:
+                continue
+            modes = ", ".join(f"{name} {100 * d:.0f} %" for name, d in apart.items())
+            for c in held:
+                if small[2][c] < out.get(c, (math.inf, ""))[0]:
+                    out[c] = (
+                        small[2][c],
+                        f"linear range: {modes} apart at {big[2][c]:.3g} and "
+                        f"{small[2][c]:.3g}, the larger's model leaving {100 * share:.0f} % "
+                        "more of the smaller record unexplained",
+                    )
+    return out
+
+
+def _mode_apart(a: ResultDocument, b: ResultDocument, name: str) -> float | None:
+    """How far apart a named mode is between two models: the largest distance pole by pole
+    over |λ| of `b`'s; None where it does not pair."""
+    mine, theirs = _named(a, name), _named(b, name)
+    if not mine or len(mine) != len(theirs):
+        return None
+    return max(
+        abs(complex(*p.eigenvalue) - complex(*q.eigenvalue))
+        / max(abs(complex(*q.eigenvalue)), 1e-12)
+        for p, q in zip(mine, theirs, strict=True)
+    )
+
+
+def _named(result: ResultDocument, name: str) -> list:
+    """The modes named `name` in the upper half plane, by real part."""
+    found = [m for m in result.modes if m.name == name and m.eigenvalue[1] >= 0]
+    return sorted(found, key=lambda m: m.eigenvalue[0])
 
 
 def moved(link: Sequence[float], values: np.ndarray) -> np.ndarray:

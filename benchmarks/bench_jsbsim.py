@@ -354,10 +354,13 @@ def _linkage(setup: Setup, rec: Record, played: Plan) -> dict:
     return {f.control: (f.gain, f.even, f.knee) for f in followed(setup, rec, played)}
 
 
-def predictor_of(setup: Setup, result, rec: Record, exp: Experiment, played: Plan, others=()):
+def predictor_of(
+    setup: Setup, result, rec: Record, exp: Experiment, played: Plan, others=(), earlier=()
+):
     """The identified model as the agent's sizing sees it: its surfaces' linkage measured
     against what `played` commanded, its trim the record's, checked against `others` (the
-    earlier calibration runs' records, as the agent's `Identifier.recent`)."""
+    earlier calibration runs' records, as the agent's `Identifier.recent`) and `earlier`
+    (their models, fitted records and what they flew: the linear range)."""
     linkage = _linkage(setup, rec, played)
     trim = dict(zip(Record.outputs, rec.y[:TRIM_SAMPLES].mean(0), strict=True))
     return sizing.predictor(
@@ -369,6 +372,8 @@ def predictor_of(setup: Setup, result, rec: Record, exp: Experiment, played: Pla
         source="the previous run's model",
         linkage=linkage,
         others=others,
+        fitted=result.fitted,
+        earlier=earlier,
     )
 
 
@@ -379,7 +384,7 @@ def calibrate(setup: Setup, plan: Plan, settings: Settings = OURS):
     identification's of the calibration runs."""
     timeline = render(plan, CONFIG.rate_hz)
     sized = sizing.size(plan, timeline, None, CONFIG.sizing, setup.surfaces, setup.envelope)
-    predictor, runs, flown, records = None, [], None, []
+    predictor, runs, flown, records, earlier = None, [], None, [], []
     for step in range(CALIBRATION_RUNS):
         rec = setup.fly(sized.plan, CALIBRATION_SEED + step)
         runs.append((sized, excursions(rec)))
@@ -404,9 +409,20 @@ def calibrate(setup: Setup, plan: Plan, settings: Settings = OURS):
             and has_its_modes(candidate)
         )
         predictor = (
-            predictor_of(setup, result, rec, exp, sized.plan, others=records) if usable else None
+            predictor_of(setup, result, rec, exp, sized.plan, others=records, earlier=earlier)
+            if usable
+            else None
         )
         records.append((exp.u, exp.y))
+        document = result.document()
+        linkage = _linkage(setup, rec, sized.plan)
+        earlier.append(
+            (
+                document,
+                result.fitted,
+                sizing.deflections(document, [(exp.u, exp.y)], Channels(), setup.surfaces, linkage),
+            )
+        )
         flown = None
         if predictor is None:  # the build-up grows from what this run flew, as the agent's
             linkage = _linkage(setup, rec, sized.plan)

@@ -147,6 +147,9 @@ class Outcome:
     """With a `window`: the experiment made of it (u, y), trim removed."""
     trim: dict | None = None
     """With a `window`: the trim removed, by channel (`window_and_trim`)."""
+    fitted: object | None = None
+    """Method "aircraft", one record: the axes as fitted to it (`Identification.fitted`), which
+    the sizing prices other records' models on (agent.ident.aircraft.linearity)."""
 
 
 def run(job: Job) -> Outcome:
@@ -201,6 +204,8 @@ def run(job: Job) -> Outcome:
     notes = tuple(e.air_angles.note() for e in experiments if e.air_angles is not None)
     if notes:
         result = replace(result, warnings=(*dict.fromkeys(notes), *result.warnings))
+    if len(experiments) == 1:  # a batch's fit is of several records: no one amplitude
+        extra["fitted"] = result.fitted
     return Outcome(model_id=job.model_id, ok=True, axes=job.axes, result=result.document(), **extra)
 
 

@@ -257,7 +257,7 @@ def identify(
             present=present,
             settings=settings,
         )
-        return aircraft.identify(fitted, settings)
+        return replace(aircraft.identify(fitted, settings), fitted=fitted)
     batch, prep = preprocess(
         raw,
         dt,

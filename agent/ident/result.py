@@ -4,7 +4,7 @@ gives it as the one serialised form (agent.ident.document)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -68,6 +68,10 @@ class Identification:
     (agent.ident.naming.missing_modes)."""
     left_out: tuple[str, ...] = ()
     """The model's poles that are no mode, each with why (agent.ident.modal.left_out)."""
+    fitted: object | None = field(default=None, compare=False, repr=False)
+    """Method "aircraft": the axes as fitted to the record (agent.ident.aircraft.model.Fitted),
+    which another record's model is priced on (agent.ident.aircraft.linearity); not part of
+    the document."""
 
     @property
     def order(self) -> int:

@@ -431,6 +431,7 @@ class Identifier:
             ),
             record_s=len(outcome.experiment[0]) * dt,
             trim=outcome.trim,
+            fitted=outcome.fitted,
         )
         # Step 3's repeat test takes the axes' last model that has every mode they must have,
         # where its record is not also this one's (a batch holds the earlier records: not
