@@ -22,7 +22,9 @@ sensor noise, small enough to stay linear and inside the envelope. Here:
 3. Limits: a control never exceeds its `max_amplitude`, nor `max_factor` times the plan's own
    amplitude (1 by default: the targets only take amplitude away), nor `max_growth` times the
    largest deflection in the data its model was identified from (a model is trusted near what
-   it has seen; amplitude build-up, as in flight test).
+   it has seen; amplitude build-up, as in flight test), nor the linear range the flight's
+   records at other amplitudes show (`linear_range`: the larger record's model priced on the
+   smaller record, agent.ident.aircraft.linearity).
 4. With no model, the plan flies at `build_up` of its amplitudes: the first run is the
    calibration, and its identification sizes the next.
 5. The targets never reach past the envelope ([excitation.envelope], from the flight state

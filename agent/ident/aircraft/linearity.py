@@ -5,11 +5,11 @@ A linear model identified at a large amplitude is the aircraft's best linear app
 there; where the aircraft is not linear over the span, that model explains a record flown at
 a smaller amplitude worse than the smaller record's own model does, beyond what the
 estimation explains. The test runs in the data, where the fit itself runs: each axis of the
-smaller record's fit (`Fitted`) is evaluated at the larger record's A and B, the parameters
-the model does not give refitted (its transients, the known inputs' gains, the engine's
-lags: `bound.nuisance`), and its weighted cost compared with the cost at the record's own
-model, refitted the same way. A mode poorly determined by the small record cannot pass for a
-nonlinearity here, as it could when the two models' modes were compared against their
+smaller record's fit (`Fitted`) is evaluated at the larger record's dynamics (its A), the
+rest refitted (the transients, the engine's lags and every gain of a control or known input:
+`bound.nuisance`), and its weighted cost compared with the cost at the record's own
+dynamics, refitted the same way. A mode poorly determined by the small record cannot pass
+for a nonlinearity here, as it could when the two models' modes were compared against their
 standard errors: a record that does not determine a mode does not care where the other model
 puts it (benchmarks/README.md, *Off the benchmark: the PC-7*). The direction matters for the
 same reason: the larger record's model on the smaller record, never the reverse.
@@ -26,41 +26,39 @@ from agent.ident.aircraft.fit import weighted_cost
 from agent.ident.aircraft.model import Fitted
 
 
-def assembled(fitted: Fitted) -> tuple[np.ndarray, np.ndarray]:
-    """The fits' A (m × m, the record's outputs) and B (m × inputs, NaN for an input through
-    the engine's lags: its gains are the fit's own nuisance), `bound.bound`'s form."""
+def assembled(fitted: Fitted) -> np.ndarray:
+    """The fits' A (m × m, the record's outputs), the other axis's states' gains among them."""
     m = len(fitted.outputs)
     width = fitted.sp.U.shape[1]
-    A, B = np.zeros((m, m)), np.full((m, width), np.nan)
+    A = np.zeros((m, m))
     for fit in fitted.fits:
         states = list(fit.states)
         A[np.ix_(states, states)] = fit.A
         for c, j in enumerate(fit.inputs):
             if j >= width:  # another axis's state: its gain is an entry of A
                 A[states, j - width] = fit.B[:, c]
-            elif j not in fit.lags:
-                B[states, j] = fit.B[:, c]
-    return A, B
+    return A
 
 
 def costs(record: Fitted, model: Fitted) -> dict[str, tuple[float, float]]:
-    """Axis → (the record's weighted cost at its own model, at `model`'s), each with the
-    nuisance parameters refitted and the record's own weights (its fit's σ per bin), for the
-    axes both fitted from the same channels; empty where the records' channels differ."""
+    """Axis → (the record's weighted cost at its own model's dynamics, at `model`'s), each
+    with the rest refitted — the transients, the engine's lags and every gain of a control or
+    known input (a gain that moves with the amplitude, a linkage's or an effectiveness's, is
+    not what moves a mode) — and the record's own weights (its fit's σ per bin), for the axes
+    both fitted from the same channels; empty where the records' channels differ."""
     if (record.inputs, record.outputs) != (model.inputs, model.outputs):
         return {}
     if record.sp.U.shape[1] != model.sp.U.shape[1]:  # different known inputs (wind, products)
         return {}
     theirs = {fit.name: fit for fit in model.fits}
-    own_A, own_B = assembled(record)
-    other_A, other_B = assembled(model)
+    gains = np.full((len(record.outputs), record.sp.U.shape[1]), np.nan)  # all nuisance
     out = {}
     for fit in record.fits:
         if fit.name not in theirs or theirs[fit.name].states != fit.states:
             continue
         pair = []
-        for A, B in ((own_A, own_B), (other_A, other_B)):
-            problem, theta, given = _at_model(record, fit, A, B)
+        for A in (assembled(record), assembled(model)):
+            problem, theta, given = _at_model(record, fit, A, gains)
             theta = nuisance(problem, theta, ~given, fit.bin_std)
             pair.append(weighted_cost(problem, theta, fit.bin_std))
         out[fit.name] = (pair[0], pair[1])
@@ -68,8 +66,8 @@ def costs(record: Fitted, model: Fitted) -> dict[str, tuple[float, float]]:
 
 
 def excess(record: Fitted, model: Fitted) -> Mapping[str, float]:
-    """Axis → how much more of the record's weighted cost `model` leaves than the record's
-    own model does, as a share of the latter (`costs`)."""
+    """Axis → how much more of the record's weighted cost `model`'s dynamics leave than the
+    record's own do, as a share of the latter (`costs`)."""
     return {
         axis: (cross - own) / own if own > 0 else np.inf
         for axis, (own, cross) in costs(record, model).items()
