@@ -1146,8 +1146,12 @@ def linear_range(
             held = [c for c in grown if any(c in MODE_CONTROLS[name] for name in apart)]
             if not held:
                 continue
-            share = linearity.excess(small[1], big[1]).get(axis)
-            if share is None or share <= LINEARITY_EXCESS:
+            try:
+                share = linearity.excess(small[1], big[1]).get(axis)
+            except (np.linalg.LinAlgError, ValueError, ArithmeticError):
+                continue  # a refit that fails tells nothing: no limit from this pair
+            # No evidence either where a model's dynamics are not numbers (a diverged fit).
+            if share is None or not math.isfinite(share) or share <= LINEARITY_EXCESS:
                 continue
             modes = ", ".join(f"{name} {100 * d:.0f} %" for name, d in apart.items())
             for c in held:

@@ -53,13 +53,16 @@ class Sizer:
         if found is None:
             return None
         candidate, source = found
-        return sizing.predictor_from(
+        # Off the event loop: the model is checked on its records, and the linear range
+        # refits the records' nuisance parameters (seconds on a flight computer).
+        return await asyncio.to_thread(
+            sizing.predictor_from,
             candidate,
             self.config.identification.channels,
             self.config.excitation.surfaces,
             source,
             flight=self.flight(),
-            linkage=self.linkage,
+            linkage=dict(self.linkage),
             others=tuple(self.identification.recent.get(candidate.axes, ())),
         )
 

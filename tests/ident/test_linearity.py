@@ -10,6 +10,7 @@ control up and another down (no span), no fitted record."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import numpy as np
@@ -136,3 +137,19 @@ def test_the_worker_gives_back_the_fitted_record_the_sizing_prices_models_on():
             v == pytest.approx(0.0, abs=1e-9)
             for v in linearity.excess(outcome.fitted, outcome.fitted).values()
         )
+
+
+def test_a_model_whose_dynamics_are_not_numbers_holds_nothing():
+    """Bad input tried: the larger record's model diverged (its longitudinal A NaN, as a fit
+    that ran away leaves it): no evidence of a nonlinearity, no limit, and the sizing goes on."""
+    big_doc, big_fit, big_flown = _entry(STIFFER, 1.0, 2)
+    broken = dataclasses.replace(
+        big_fit,
+        fits=[
+            dataclasses.replace(f, A=np.full_like(f.A, np.nan)) if f.name == "longitudinal" else f
+            for f in big_fit.fits
+        ],
+    )
+    small = _entry(STIFFER, SMALL, 1)
+    assert all(np.isnan(v) or v >= 0 for v in linearity.excess(small[1], broken).values())
+    assert sizing.linear_range(big_doc, broken, big_flown, [small]) == {}

@@ -52,23 +52,27 @@ def costs(record: Fitted, model: Fitted) -> dict[str, tuple[float, float]]:
         return {}
     theirs = {fit.name: fit for fit in model.fits}
     gains = np.full((len(record.outputs), record.sp.U.shape[1]), np.nan)  # all nuisance
+    own, other = assembled(record), assembled(model)
     out = {}
     for fit in record.fits:
         if fit.name not in theirs or theirs[fit.name].states != fit.states:
             continue
         pair = []
-        for A in (assembled(record), assembled(model)):
-            problem, theta, given = _at_model(record, fit, A, gains)
-            theta = nuisance(problem, theta, ~given, fit.bin_std)
-            pair.append(weighted_cost(problem, theta, fit.bin_std))
+        for A in (own, other):
+            # A model whose dynamics are not numbers (a diverged fit) costs NaN, said as such.
+            with np.errstate(all="ignore"):
+                problem, theta, given = _at_model(record, fit, A, gains)
+                theta = nuisance(problem, theta, ~given, fit.bin_std)
+                pair.append(weighted_cost(problem, theta, fit.bin_std))
         out[fit.name] = (pair[0], pair[1])
     return out
 
 
 def excess(record: Fitted, model: Fitted) -> Mapping[str, float]:
     """Axis → how much more of the record's weighted cost `model`'s dynamics leave than the
-    record's own do, as a share of the latter (`costs`)."""
+    record's own do, as a share of the latter (`costs`); NaN where it cannot be told (a cost
+    that is not a number, or none to compare with)."""
     return {
-        axis: (cross - own) / own if own > 0 else np.inf
+        axis: (cross - own) / own if own > 0 else np.nan
         for axis, (own, cross) in costs(record, model).items()
     }
