@@ -209,10 +209,6 @@ class AxisDocument(Document):
     # "prediction error": refined in the time domain with coloured process noise
     # (agent.ident.aircraft.predictor), each noisy equation's noise pole (1/s) by its output.
     estimator: Literal["output error", "filter error", "prediction error"] = "output error"
-    # A "filter error" whose noise spectra were held at the dynamics they were estimated at:
-    # the air measured still, the residual's colour the model's error, which weights the fit
-    # and tells nothing of the dynamics (agent.ident.aircraft.process).
-    process_held: bool = False
     process_share: dict[str, float] = {}
     process_poles: dict[str, float] = {}
     # Each output's Theil inequality coefficient at the bins the fit used (the controls'

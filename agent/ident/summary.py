@@ -121,9 +121,7 @@ def _method_lines(result: Identification) -> list[str]:
     predicted = [a for a in aircraft.axes if a.estimator == "prediction error"]
     estimators = "; ".join(
         [
-            f"{a.name} by filter error"
-            + (", its spectra held (the air measured still)" if a.process_held else "")
-            + " (process noise's share of the residual: "
+            f"{a.name} by filter error (process noise's share of the residual: "
             + ", ".join(f"{k} {v:.2f}" for k, v in a.process_share.items())
             + ")"
             for a in filtered

@@ -13,7 +13,7 @@ import scipy.linalg
 
 from agent.excitation.plan import Doublet, Plan, Segment, ThreeTwoOneOne, preset, render
 from agent.ident import Experiment, Identification, Settings, identify
-from agent.ident.aircraft import fit, model, predictor
+from agent.ident.aircraft import fit, predictor
 from agent.ident.aircraft.airangles import synthesise
 from agent.ident.aircraft.fit import (
     COUPLED,
@@ -1149,47 +1149,6 @@ def test_without_vanes_the_unmeasured_alpha_gust_is_process_noise_the_output_doe
         filtered.append(_longitudinal_error(result, A))
         output.append(_longitudinal_error(aircraft_identify(record, process_noise=False), A))
     assert np.mean(filtered) < 0.8 * np.mean(output)
-
-
-def test_in_still_air_the_filter_errors_spectra_weight_the_fit_and_tell_nothing_of_the_dynamics(
-    monkeypatch,
-):
-    # Bad input tried: still air read by noisy sensors (2 % of each channel's motion, the INS
-    # too) with an error of the model's own, a throttle whose thrust bends (curve 1) left
-    # unmodelled. The residual is coloured, so the filter error is taken; but the INS finds
-    # no gust, and the colour follows the inputs: its spectra are held at the dynamics they
-    # were estimated at (process.ProcessNoise.at), and the result says so. Left to move
-    # with the model, the noise's shape through (sI − A)⁻¹ fitted that error with the
-    # dynamics (measured worst longitudinal eigenvalue 0.0029 held against 0.038 free; on
-    # JSBSim's glider through the sweep, the short period's fast pole 7.2–12.7 for 10.0 1/s).
-    u, air, op, navigation, A = gusty_record(seed=5, gust=0.0, curve=1.0)
-    rng = np.random.default_rng(5)
-    noisy = air + rng.normal(size=air.shape) * 0.02 * air.std(axis=0)
-    scale = np.array([1e-4, *(0.02 * navigation[:, 1:].std(axis=0))])
-    record = Experiment(
-        u,
-        noisy,
-        operating_point=op,
-        navigation=navigation + rng.normal(size=navigation.shape) * scale,
-    )
-    held = aircraft_identify(record, throttle_curve=False)
-    (longitudinal,) = [a for a in held.aircraft.axes if a.name == "longitudinal"]
-    assert held.aircraft.wind.undetected == ["airspeed", "alpha", "beta"]
-    assert longitudinal.estimator == "filter error"
-    assert longitudinal.process_held
-    assert "longitudinal by filter error, its spectra held (the air measured still)" in (
-        format_text(held, 1, len(u))
-    )
-    fit_axis = fit.fit_axis
-
-    def moving(*args, **kwargs):
-        return fit_axis(*args, **{**kwargs, "still": False})
-
-    monkeypatch.setattr(model, "fit_axis", moving)
-    free = aircraft_identify(record, throttle_curve=False)
-    assert not any(a.process_held for a in free.aircraft.axes)
-    assert _longitudinal_error(held, A) < 0.01
-    assert _longitudinal_error(held, A) < 0.5 * _longitudinal_error(free, A)
 
 
 def test_white_sensor_noise_alone_keeps_output_error():

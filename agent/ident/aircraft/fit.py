@@ -50,7 +50,6 @@ SMOOTH_FLOOR = 0.3
 # Output error: passes of noise re-weighting, iterations per pass, and their stopping rules.
 PASSES = 4
 ITERATIONS = 40
-HELD_ITERATIONS = 200
 RELATIVE_DECREASE = 1e-9
 NOISE_TOLERANCE = 0.02
 # Coupling tests: the throttle or the other axis's states join an axis's inputs when, added,
@@ -140,14 +139,11 @@ def output_error(
     theta: np.ndarray,
     rows: Sequence[int] = (),
     direct: Sequence[int] = (),
-    still: bool = False,
 ):
     """Levenberg–Marquardt on the weighted residuals, re-weighting between passes; then, with
     process-noise `rows` (positions among the states), the filter-error method's passes from
     there (agent.ident.aircraft.process), its noise model re-estimated between them (`direct`:
-    the rows of synthesised air angles, process.ProcessNoise's; `still`: the air measured
-    still, the noise model's spectra held at the dynamics they were estimated at between
-    passes, process.ProcessNoise.at). Returns
+    the rows of synthesised air angles, process.ProcessNoise's). Returns
     the parameters, the output-error weights at the end (σ per bin), the noise model (or
     None), the starting cost, the iterations and whether the last pass converged."""
     X, _ = problem.response(theta)
@@ -167,18 +163,14 @@ def output_error(
         return theta, sigma, None, cost_start, iterations, converged
     start, at_start = theta, (sigma, None, cost_start, iterations, converged)
     try:
-        noise = process.estimate(problem, theta, tuple(rows), smooth_bins, tuple(direct), still)
+        noise = process.estimate(problem, theta, tuple(rows), smooth_bins, tuple(direct))
         _, width = smooth_bins(sigma, problem.s)
         if not process.significant(problem, theta, noise, width):
             return start, *at_start
-        # Held spectra make a weighted output error whose whitening (R small beside Q)
-        # conditions it badly: Levenberg–Marquardt took up to 80 steps to its minimum on
-        # JSBSim's C172R through the card (benchmarks/README.md).
-        limit = HELD_ITERATIONS if still else ITERATIONS
         for _ in range(PASSES):
-            theta, its, converged = minimise(problem, theta, noise, limit)
+            theta, its, converged = minimise(problem, theta, noise)
             iterations += its
-            noise = process.estimate(problem, theta, tuple(rows), smooth_bins, tuple(direct), still)
+            noise = process.estimate(problem, theta, tuple(rows), smooth_bins, tuple(direct))
     except np.linalg.LinAlgError:  # spectra that do not converge: output error stands
         return start, *at_start
     # A filter-error fit that stopped at its iteration limit is at no minimum of its own
@@ -308,16 +300,15 @@ def _linearised(problem: AxisProblem, theta: np.ndarray, weights, state=None):
     return (problem.Y - X) / weights, -J / weights[:, :, None], None
 
 
-def minimise(problem: AxisProblem, theta: np.ndarray, weights, iterations: int | None = None):
+def minimise(problem: AxisProblem, theta: np.ndarray, weights):
     """Levenberg–Marquardt on `problem.free` at fixed weights (σ per bin and output, or the
-    filter-error method's noise model), at most `iterations` steps (ITERATIONS): the
-    parameters, the iterations taken, and whether it stopped at a minimum."""
-    iterations = ITERATIONS if iterations is None else iterations
+    filter-error method's noise model): the parameters, the iterations taken, and whether it
+    stopped at a minimum."""
     lam = 1e-3
     free = problem.free
     cost, state = _evaluate(problem, theta, weights)
     e, J, extra = _linearised(problem, theta, weights, state)
-    for iteration in range(1, iterations + 1):
+    for iteration in range(1, ITERATIONS + 1):
         Jw = _stack(J[:, :, free])
         er = np.concatenate([e.ravel().real, e.ravel().imag])
         g, H = Jw.T @ er, Jw.T @ Jw
@@ -346,7 +337,7 @@ def minimise(problem: AxisProblem, theta: np.ndarray, weights, iterations: int |
         e, J, extra = _linearised(problem, theta, weights, state)
         if decrease < RELATIVE_DECREASE:
             return theta, iteration, True
-    return theta, iterations, False
+    return theta, ITERATIONS, False
 
 
 def covariance(problem: AxisProblem, theta: np.ndarray, weights) -> np.ndarray:
@@ -422,14 +413,12 @@ def fit_axis(
     process_noise: bool = False,
     synthesised: Sequence[int] = (),
     zeros: Sequence[tuple[str, int, int]] = (),
-    still: bool = False,
 ) -> AxisFit:
     """One axis's model: `lagged` inputs reach it through fitted lags, THROTTLE_LAGS of them
     unless `powers` (input column → number) says otherwise; with `process_noise`, by the
     filter-error method, process noise on every state's equation but the kinematics'
     (agent.ident.aircraft.process), `synthesised` the states (positions in `states`) whose
-    outputs are air angles synthesised from the INS, `still` the air measured still (the
-    noise model's spectra held: `output_error`); `zeros`: entries fixed at zero
+    outputs are air angles synthesised from the INS; `zeros`: entries fixed at zero
     (AxisProblem's)."""
     powers = {j: p for j, p in (powers or {}).items() if j in lagged}
     problem = AxisProblem(
@@ -451,7 +440,7 @@ def fit_axis(
     theta = equation_error(problem)
     direct = [i for i in synthesised if i in rows]
     theta, sigma, noise_model, start, iterations, converged = output_error(
-        problem, theta, rows, direct, still
+        problem, theta, rows, direct
     )
     A, B, taus, d = problem.unpack(theta)
     if not np.all(np.isfinite(A)):

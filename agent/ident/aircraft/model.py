@@ -194,7 +194,6 @@ def fitted_axes(
         len(batch),
         process_noise=filtered,
         synthesised=synthesised,
-        still="alpha" in ready.undetected,
     )
     engine |= {j: (0, {}) for j in measured if any(j in f.inputs for f in fits)}
     couplings: dict[str, Coupling] = {}
@@ -472,13 +471,11 @@ def _fit_axes(
     experiments: int,
     process_noise: bool = True,
     synthesised: Sequence[int] = (),
-    still: bool = False,
 ) -> list[AxisFit]:
     """Each present axis fitted alone, with its controls and the known inputs that act on it;
     the throttle and the gust rates through fitted lags; the longitudinal axis by the
     filter-error method with `process_noise` (agent.ident.aircraft.process; `synthesised`:
-    its states whose air angle the INS gave, `still`: the INS measured the air still,
-    fit.fit_axis's)."""
+    its states whose air angle the INS gave, fit.fit_axis's)."""
     # The throttle's curvature joins on its own test, after the engine's order (`_curved`).
     known = {
         axis: [j for j, a in ready.extra_axes.items() if a == axis and j not in ready.curve]
@@ -506,7 +503,6 @@ def _fit_axes(
             powers=powers,
             process_noise=filtered and not engines,
             synthesised=synthesised,
-            still=still,
         )
         for j in engines:
             order, criterion = _engine_order(sp, fitted, j, experiments)
@@ -536,7 +532,6 @@ def _fit_axes(
                 powers=fitted.lag_powers,
                 process_noise=True,
                 synthesised=synthesised,
-                still=still,
             )
         fits.append(fitted)
     return fits, engine
@@ -651,7 +646,6 @@ def _coupled(
                 powers=powers,
                 process_noise=fitted.noise is not None,
                 synthesised=fitted.noise.direct if fitted.noise is not None else (),
-                still=fitted.noise is not None and fitted.noise.at is not None,
             )
     joined = []
     for k, f in enumerate(fits):
@@ -764,7 +758,6 @@ def _report(
                     if f.noise is None
                     else "filter error"
                 ),
-                process_held=f.noise is not None and f.noise.at is not None,
                 process_share=_process_share(f, outputs),
                 process_poles={outputs[c]: pole for c, pole in predicted[f.name].poles.items()}
                 if f.name in predicted

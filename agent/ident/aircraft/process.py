@@ -39,23 +39,12 @@ same way but the output does not see it: y = x + e g, and T's column for it is
 s Φ e − e (`ProcessNoise.direct`), the part through the states being the one that depends
 on θ.
 
-In still air (the INS measured α's gust and found it within the sensors' noise) the residual's
-colour is no gust but the model's own error (the airframe's nonlinearity, the engine's): it
-follows the inputs and is not noise driven through the dynamics. Its spectra then weight the
-fit and are held, between passes, at the dynamics they were estimated at (`ProcessNoise.at`):
-S does not move with θ within a pass, which makes the fit an output error weighted by the
-residual's spectral matrix, consistent whatever the noise model. Left to move with θ, the
-noise's shape through (sI − A)⁻¹ fitted the model's error with the dynamics: on JSBSim's
-glider through the sweep in calm air the short period's fast pole (−10.0 1/s) came out
-between −7.2 and −12.7 1/s over the seeds, its ωn up to 15 % off; held, within 4.7 % on
-every seed (benchmarks/README.md).
-
-Used (agent.ident.aircraft.model) wherever nothing measures α's gust: the vanes alone, or no
-vanes; and in still air, held. Only the longitudinal axis (`fit.fit_axis`): on JSBSim's
-aircraft the lateral axis's process-noise model moved the roll mode away from the truth on
-every variant tried (benchmarks/README.md, *The whole-aircraft method's terms*), where its
-output error holds it; the lateral axis's process noise (the rolling gust) is modelled in the
-time domain instead (agent.ident.aircraft.predictor).
+Used (agent.ident.aircraft.model) wherever nothing measures α's gust: the vanes alone, or
+no vanes. Only the longitudinal axis (`fit.fit_axis`): on JSBSim's aircraft the lateral axis's
+process-noise model moved the roll mode away from the truth on every variant tried
+(benchmarks/README.md, *The whole-aircraft method's terms*), where its output error holds it;
+the lateral axis's process noise (the rolling gust) is modelled in the time domain instead
+(agent.ident.aircraft.predictor).
 """
 
 from __future__ import annotations
@@ -77,17 +66,13 @@ class ProcessNoise:
     """The residual's spectral model: process noise Q (F, m) on the states `rows` (positions
     among the axis's states) and white sensor noise R (n,), at the fit's bins s (F,).
     `direct`: the rows whose noise is the gust of an air angle synthesised from the INS (no
-    vanes), which the state feels and its output does not see (`transfer`). `at`: the
-    dynamics the spectra are shaped by, held whatever the model's (still air: the residual's
-    colour weights the fit and tells nothing of A; module docstring), or None: the model's own
-    (turbulence)."""
+    vanes), which the state feels and its output does not see (`transfer`)."""
 
     rows: tuple[int, ...]
     Q: np.ndarray
     R: np.ndarray
     s: np.ndarray
     direct: tuple[int, ...] = ()
-    at: np.ndarray | None = None
 
     def gain(self, s: np.ndarray) -> np.ndarray:
         """(F, m): what forces each row per unit of its noise (`transfer`)."""
@@ -95,8 +80,7 @@ class ProcessNoise:
 
     def spectrum(self, s: np.ndarray, A: np.ndarray):
         """S (F, n, n), T (F, n, m), T's part through the states and Φ = (sI − A)⁻¹ (F, n, n)
-        at the model A (at `at` where the spectra are held)."""
-        A = A if self.at is None else self.at
+        at the model A."""
         n = A.shape[0]
         phi = np.linalg.inv(s[:, None, None] * np.eye(n) - A)
         T, through = transfer(self.rows, self.direct, s, phi)
@@ -140,17 +124,11 @@ def whiten(S: np.ndarray):
 
 
 def estimate(
-    problem,
-    theta: np.ndarray,
-    rows: tuple[int, ...],
-    smooth,
-    direct: tuple[int, ...] = (),
-    held: bool = False,
+    problem, theta: np.ndarray, rows: tuple[int, ...], smooth, direct: tuple[int, ...] = ()
 ) -> ProcessNoise:
     """Q and R from the residuals at `theta` (module docstring): Fisher scoring from the
     output-error weights (Q = 0, R each output's mean residual power). `smooth`: the fit's
-    average over neighbouring bins (`fit.smooth_bins`); `direct` as ProcessNoise's; `held`:
-    the spectra shaped by `theta`'s dynamics whatever the model's (ProcessNoise.at)."""
+    average over neighbouring bins (`fit.smooth_bins`); `direct` as ProcessNoise's."""
     A = problem.unpack(theta)[0]
     X, _ = problem.response(theta)
     e = problem.Y - X
@@ -188,7 +166,7 @@ def estimate(
         if not (np.all(np.isfinite(Q)) and np.all(np.isfinite(R))):
             raise np.linalg.LinAlgError("the process-noise spectra did not converge")
     Q, R = kept
-    return ProcessNoise(tuple(rows), Q, R, s, tuple(direct), A.copy() if held else None)
+    return ProcessNoise(tuple(rows), Q, R, s, tuple(direct))
 
 
 def significant(problem, theta: np.ndarray, noise: ProcessNoise, width: int) -> bool:
@@ -241,10 +219,6 @@ def linearised(problem, theta: np.ndarray, noise: ProcessNoise, state=None):
     if state is None:
         _, state = evaluate(problem, theta, noise)
     e, T, through, phi, W, inverse = state
-    if noise.at is not None:  # S held: a weighted output error, no path through the noise
-        _, J = problem.response(theta, jacobian=True)
-        whitened = np.einsum("fij,fj->fi", W, e), np.einsum("fij,fjp->fip", W, J)
-        return *whitened, np.zeros(theta.size)
     what = noise.Q * np.einsum("fia,fi->fa", T.conj(), np.einsum("fij,fj->fi", inverse, e))
     forcing = np.zeros_like(e)
     forcing[:, list(noise.rows)] = what * noise.gain(problem.s)
