@@ -151,5 +151,22 @@ def test_a_model_whose_dynamics_are_not_numbers_holds_nothing():
         ],
     )
     small = _entry(STIFFER, SMALL, 1)
-    assert all(np.isnan(v) or v >= 0 for v in linearity.excess(small[1], broken).values())
+    # the broken model's response is not a number: its cost, and the excess, are not finite
+    assert not np.isfinite(linearity.excess(small[1], broken)["longitudinal"])
     assert sizing.linear_range(big_doc, broken, big_flown, [small]) == {}
+
+
+def test_a_refit_that_fails_holds_nothing(monkeypatch):
+    """Bad input tried: the refit of the smaller record at the larger model's dynamics fails
+    (a singular normal matrix, as a record that does not move a state gives): that pair is no
+    evidence, no limit, and the sizing goes on; the same pair holds the elevator when the
+    refit runs."""
+    big = _entry(STIFFER, 1.0, 2)
+    small = _entry(STIFFER, SMALL, 1)
+    assert "elevator" in sizing.linear_range(*big, [small])
+
+    def singular(*args, **kwargs):
+        raise np.linalg.LinAlgError("Singular matrix")
+
+    monkeypatch.setattr(linearity, "excess", singular)
+    assert sizing.linear_range(*big, [small]) == {}

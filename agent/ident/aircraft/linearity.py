@@ -59,7 +59,7 @@ def costs(record: Fitted, model: Fitted) -> dict[str, tuple[float, float]]:
             continue
         pair = []
         for A in (own, other):
-            # A model whose dynamics are not numbers (a diverged fit) costs NaN, said as such.
+            # A model whose dynamics are not numbers (a diverged fit) costs inf or NaN, said so.
             with np.errstate(all="ignore"):
                 problem, theta, given = _at_model(record, fit, A, gains)
                 theta = nuisance(problem, theta, ~given, fit.bin_std)
@@ -70,8 +70,9 @@ def costs(record: Fitted, model: Fitted) -> dict[str, tuple[float, float]]:
 
 def excess(record: Fitted, model: Fitted) -> Mapping[str, float]:
     """Axis → how much more of the record's weighted cost `model`'s dynamics leave than the
-    record's own do, as a share of the latter (`costs`); NaN where it cannot be told (a cost
-    that is not a number, or none to compare with)."""
+    record's own do, as a share of the latter (`costs`); not finite where it cannot be told
+    (a model with no finite response costs inf, a cost that is not a number NaN, and NaN
+    where the record's own cost is none to compare with)."""
     return {
         axis: (cross - own) / own if own > 0 else np.nan
         for axis, (own, cross) in costs(record, model).items()
