@@ -16,10 +16,16 @@ import dataclasses
 import numpy as np
 import pytest
 
-from agent.ident import Settings
 from agent.ident import job as jobs
 from agent.ident.aircraft.airangles import Sources, fill, synthesise
-from tests.ident.test_aircraft import DT, INPUTS, _body_to_ned, gusty_record
+from tests.ident.test_aircraft import (
+    DT,
+    INPUTS,
+    RECORDED,
+    _body_to_ned,
+    gusty_record,
+    window_job,
+)
 from tests.test_cli_identify import run_json, write
 
 RATE = 50.0
@@ -163,26 +169,13 @@ def test_an_onboard_window_without_vanes_is_identified_with_synthesised_angles()
     # the job synthesises them and its result says so.
     u, air, op, navigation, _ = gusty_record(seed=6, scale=0.015)
     x = air + op
-    outputs = ("Vt", "alpha", "q", "theta", "beta", "p", "r", "phi")
-    window = dict(zip(INPUTS, u.T, strict=True)) | dict(zip(outputs, x.T, strict=True))
+    window = dict(zip(INPUTS, u.T, strict=True)) | dict(zip(RECORDED, x.T, strict=True))
     window["alpha"] = np.full(len(u), np.nan)
     window["beta"] = np.full(len(u), np.nan)
     window |= dict(zip(NAV, navigation.T, strict=True))
     window["vn"] = window["vn"].copy()
     window["vn"][:5] = np.nan
-    job = jobs.Job(
-        model_id="1",
-        axes="full",
-        record_dt=DT,
-        inputs=INPUTS,
-        outputs=outputs,
-        roles=("airspeed", "alpha", "q", "theta", "beta", "p", "r", "phi"),
-        experiments=(),
-        settings=Settings(held_inputs=False),
-        window=window,
-        navigation=NAV,
-        air_angles=Sources(),
-    )
+    job = window_job(window, navigation=NAV, air_angles=Sources())
     outcome = jobs.run(job)
     assert outcome.ok, outcome.reason
     assert outcome.result.aircraft.wind.air_angles == "synthesised"

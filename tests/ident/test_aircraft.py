@@ -13,6 +13,7 @@ import scipy.linalg
 
 from agent.excitation.plan import Doublet, Plan, Segment, ThreeTwoOneOne, preset, render
 from agent.ident import Experiment, Identification, Settings, identify
+from agent.ident import job as jobs
 from agent.ident.aircraft import fit, predictor
 from agent.ident.aircraft.airangles import synthesise
 from agent.ident.aircraft.fit import (
@@ -40,6 +41,25 @@ DT = 0.01
 TAU = 0.4  # the throttle's two lags, s
 INPUTS = ("throttle", "elevator", "aileron", "rudder")
 OUTPUTS = ("airspeed", "alpha", "q", "theta", "beta", "p", "r", "phi")
+# OUTPUTS as the recorder names them
+RECORDED = ("Vt", "alpha", "q", "theta", "beta", "p", "r", "phi")
+
+
+def window_job(window: dict, **extra) -> jobs.Job:
+    """The agent's whole-aircraft job on one recorded window (columns by name: the inputs,
+    RECORDED, and any the `extra` fields name, e.g. the INS's)."""
+    return jobs.Job(
+        model_id="1",
+        axes="full",
+        record_dt=DT,
+        inputs=INPUTS,
+        outputs=RECORDED,
+        roles=OUTPUTS,
+        experiments=(),
+        settings=Settings(held_inputs=False),
+        window=window,
+        **extra,
+    )
 
 
 def aircraft_with_engine_lag():

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from agent import sizing
-from agent.ident import Experiment, Settings
+from agent.ident import Experiment
 from agent.ident import job as jobs
 from agent.ident.aircraft import linearity
 from agent.ident.convert import discretize_foh
@@ -25,9 +25,12 @@ from agent.ident.fit import simulate
 from agent.runtime.worker import new_worker
 from tests.ident.test_aircraft import (
     DT,
+    INPUTS,
+    RECORDED,
     aircraft_identify,
     aircraft_with_engine_lag,
     full_preset_record,
+    window_job,
 )
 
 NOISE = 0.05  # of each output's rms
@@ -112,23 +115,11 @@ def test_the_worker_gives_back_the_fitted_record_the_sizing_prices_models_on():
     """The agent's job in its real worker process (spawned, as onboard): a window of one
     record comes back with its fitted axes, which price its own model at no excess."""
     record = _record(*aircraft_with_engine_lag(), SMALL, 1)
-    outputs = ("Vt", "alpha", "q", "theta", "beta", "p", "r", "phi")
-    inputs = ("throttle", "elevator", "aileron", "rudder")
     trim = np.array([25.0, 0.05, 0.0, 0.05, 0.0, 0.0, 0.0, 0.0])  # a flight state to be about
-    window = dict(zip(inputs, record.u.T, strict=True)) | dict(
-        zip(outputs, (record.y + trim).T, strict=True)
+    window = dict(zip(INPUTS, record.u.T, strict=True)) | dict(
+        zip(RECORDED, (record.y + trim).T, strict=True)
     )
-    job = jobs.Job(
-        model_id="1",
-        axes="full",
-        record_dt=DT,
-        inputs=inputs,
-        outputs=outputs,
-        roles=("airspeed", "alpha", "q", "theta", "beta", "p", "r", "phi"),
-        experiments=(),
-        settings=Settings(held_inputs=False),
-        window=window,
-    )
+    job = window_job(window)
     with new_worker() as worker:
         outcome = worker.submit(jobs.run, job).result(timeout=600)
         assert outcome.ok, outcome.reason
