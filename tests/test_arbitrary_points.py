@@ -42,7 +42,11 @@ DEADLOCK_S = 60.0
 # The whole logging run may take longer than a per-test timeout allows on a loaded machine,
 # while every collection still ends: the test's own bound (pytest-timeout's marker).
 LOGGING_RUN_S = 600
-LINES = 3
+# One line each way: the deadlock this guards against (the callback logging inside the queue's
+# put, whose mutex its own thread holds) comes on the first line the library thread logs, and
+# each line costs dozens of full collections of the worker's whole heap (about 35 s late in
+# the suite, 113 s for three).
+LINES = 1
 
 
 def _collect_at_every_call(frame, event, arg):
