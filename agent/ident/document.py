@@ -172,10 +172,6 @@ class Wind(Document):
     # Gusts the INS measured no larger than the sensors' noise (calm air): not inputs; their
     # outputs are still the inertial ones.
     undetected: list[str] = []
-    # The longitudinal gusts the INS measured (the airspeed's, and α's with vanes) were all
-    # within the sensors' noise: still air, no process noise in open loop
-    # (agent.ident.aircraft.model).
-    still: bool = False
     # "vanes": α and β as recorded; "synthesised": from the INS and an estimated wind (no
     # vanes), one entry per record in `synthesised`, and then only the airspeed's gust measured.
     air_angles: Literal["vanes", "synthesised"] = "vanes"

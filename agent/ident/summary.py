@@ -151,18 +151,8 @@ def _method_lines(result: Identification) -> list[str]:
             if wind.undetected
             else ""
         )
-        + (_still(aircraft) if wind.still else "")
         + _air_angles(wind),
     ]
-
-
-def _still(aircraft) -> str:
-    """Still air (the INS found the longitudinal gusts within the sensors' noise) in words: no
-    process noise in open loop; the filter error where the loops were closed (the surfaces
-    answer the model's error as they answer a gust; agent.ident.aircraft.model)."""
-    if any(a.estimator == "filter error" for a in aircraft.axes):
-        return "; still air, the filter error kept (loops closed)"
-    return "; still air: no process noise"
 
 
 def _air_angles(wind) -> str:

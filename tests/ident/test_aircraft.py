@@ -615,9 +615,9 @@ def test_the_throttles_curvature_is_a_known_input_of_the_longitudinal_axis():
     gain = report.throttle_curve["throttle²"]["airspeed"]
     assert set(report.throttle_curve["throttle²"]) == {"airspeed"}  # V̇ alone
     # V̇'s other one-equation input, sideslip drag (none on this aircraft), is its own, and
-    # its standard error says the record cannot tell it (a record without sideslip; fitted
-    # by the filter error, as still air was before it kept output error, its whitened normal
-    # equations' condition was 4e15, and their pseudo-inverse had the drag at 0.68 ± 4e-7).
+    # its standard error says the record cannot tell it (a record without sideslip, fitted
+    # by the filter error: its whitened normal equations' condition 4e15, whose
+    # pseudo-inverse had the drag at 0.68 ± 4e-7).
     drag = report.sideslip_drag
     assert drag.gain != gain.gain
     assert abs(drag.gain) < 3 * drag.std
@@ -1181,42 +1181,6 @@ def test_white_sensor_noise_alone_keeps_output_error():
     assert {a.estimator for a in result.aircraft.axes} == {"output error"}
     assert all(a.process_share == {} for a in result.aircraft.axes)
     assert _longitudinal_error(result, A) < 0.05
-
-
-def test_air_the_ins_measured_still_keeps_output_error_whatever_the_residuals_colour():
-    # Bad input tried: still air (the INS and the air data agree) around a model that is
-    # wrong, a throttle whose thrust bends about the trim fitted without its square: the
-    # residual is coloured, as on every JSBSim record, and without the INS nothing tells that
-    # colour from turbulence, so the filter error takes it as process noise. With the air
-    # measured still there is no process noise: the colour is the model's own error, which
-    # the filter error had traded the dynamics for (JSBSim's glider in calm air: its short
-    # period's fast pole 6.2 for 10.0 1/s on one seed; benchmarks/README.md). Output error
-    # is kept and the gusts are said to be within the sensors' noise, in open loop.
-    u, air, op, navigation, A = gusty_record(
-        seed=5, gust=0.0, scale=0.03, plan=classic_card(), curve=-0.3
-    )
-    still = aircraft_identify(
-        Experiment(u, air, operating_point=op, navigation=navigation), throttle_curve=False
-    )
-    assert {a.estimator for a in still.aircraft.axes} == {"output error"}
-    assert still.aircraft.wind.undetected == ["airspeed", "alpha", "beta"]
-    assert still.aircraft.wind.still
-    assert "still air: no process noise" in format_text(still, 1, len(u))
-    unknown = aircraft_identify(Experiment(u, air), throttle_curve=False)
-    (longitudinal,) = [a for a in unknown.aircraft.axes if a.name == "longitudinal"]
-    assert longitudinal.estimator == "filter error"
-    assert _longitudinal_error(still, A) < 0.05
-    # With the loops closed the surfaces would answer the model's error as they answer a
-    # gust: the filter error stays there, still air or not.
-    looped = aircraft_identify(
-        Experiment(u, air, operating_point=op, navigation=navigation),
-        throttle_curve=False,
-        closed_loop=True,
-    )
-    (longitudinal,) = [a for a in looped.aircraft.axes if a.name == "longitudinal"]
-    assert looped.aircraft.wind.still
-    assert longitudinal.estimator == "filter error"
-    assert "still air, the filter error kept (loops closed)" in format_text(looped, 1, len(u))
 
 
 def test_process_noise_spectra_that_do_not_converge_leave_output_error(monkeypatch):

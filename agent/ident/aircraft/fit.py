@@ -177,9 +177,8 @@ def output_error(
             noise = process.estimate(problem, theta, tuple(rows), smooth_bins, tuple(direct))
         # The passes end at the minimum under the spectra before the last ones. Under the
         # final spectra, the minimum from there and the one from output error's estimate: the
-        # lower (JSBSim's glider, calm sweep with the INS, when still air went to the filter
-        # error too, seed 5: the passes ended where output error's dynamics scored 94 better
-        # in −log L under the spectra they ended with), where it
+        # lower (JSBSim's glider, calm sweep, seed 5: the passes ended where output error's
+        # dynamics scored 94 better in −log L under the spectra they ended with), where it
         # keeps to output error's dynamics (`consistent`); else the passes' end stands
         # (tests' gusty_record seed 7: both minima put the phugoid unstable).
         if RESTART:

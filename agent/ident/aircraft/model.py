@@ -180,23 +180,11 @@ def fitted_axes(
     # with the vanes, the air-relative V and α feel the gust's rate row by row; with α
     # synthesised from the INS (no vanes) the state feels it too and the output, the inertial
     # α, does not see it (the noise's direct path). With the wind measured the residual is
-    # the sensors' and output error holds. A measured gust within its sensors' noise (still
-    # air; prepare) is no input, and in open loop no process noise either: the residual's
-    # colour there is the model's own error (the nonlinearity's, the engine's), not a
-    # disturbance, and output error's per-band weights follow it. The filter error, which
-    # reads it as process noise driving the states, traded the dynamics for it: JSBSim's
-    # glider in calm air with the INS, its short period's fast real pole (−10.0 1/s) at −6.2
-    # to −11.9 1/s over the card's and the sweep's seeds, 17 of 20 within 10 %, by output
-    # error −8.4 to −10.9, 20 of 20. With the loops closed the laws feed that error back
-    # into the surfaces, which then answer it as they answer a gust, and output error, taking
-    # them as independent of it, is biased (as on the lateral axis, below): the filter error
-    # stays (the Cub's calm closed-loop phugoid 2.0–2.9 % off by it, 4.3–10.8 % by output
-    # error; the T-6's 7.0–7.9 against 15.7–16.2 %; benchmarks/README.md).
-    filtered = (
-        settings.process_noise
-        and "alpha" not in ready.gusts
-        and (not ready.still or settings.closed_loop)
-    )
+    # the sensors' and output error holds. A measured α gust within its sensors' noise (calm
+    # air; prepare) is no input: the axis is fitted as if nothing measured it, the filter error
+    # used where the residual shows process noise (the nonlinearity's and the engine's, which
+    # the gust's free gains had fitted instead).
+    filtered = settings.process_noise and "alpha" not in ready.gusts
     synthesised = (LONGITUDINAL[0].index("alpha"),) if ready.air_angles else ()
     fits, engine = _fit_axes(
         sp,
@@ -752,7 +740,6 @@ def _report(
             measured=bool(ready.gusts),
             gust_rms=ready.gust_rms,
             undetected=list(ready.undetected),
-            still=ready.still,
             air_angles="synthesised" if ready.air_angles else "vanes",
             synthesised=[_air_angles(a) for a in ready.air_angles],
         ),

@@ -40,10 +40,7 @@ s Φ e − e (`ProcessNoise.direct`), the part through the states being the one 
 on θ.
 
 Used (agent.ident.aircraft.model) wherever nothing measures α's gust: the vanes alone, or
-no vanes; in open loop not where the INS measured the air still (its gusts within their
-sensors' noise), where the residual's colour is the model's own error, not a disturbance
-(with the loops closed the surfaces answer that error as they answer a gust). Only the
-longitudinal axis (`fit.fit_axis`): on JSBSim's aircraft the lateral axis's
+no vanes. Only the longitudinal axis (`fit.fit_axis`): on JSBSim's aircraft the lateral axis's
 process-noise model moved the roll mode away from the truth on every variant tried
 (benchmarks/README.md, *The whole-aircraft method's terms*), where its output error holds it;
 the lateral axis's process noise (the rolling gust) is modelled in the time domain instead
