@@ -1183,6 +1183,33 @@ def test_white_sensor_noise_alone_keeps_output_error():
     assert _longitudinal_error(result, A) < 0.05
 
 
+def test_in_still_air_the_filter_errors_standard_errors_hold_its_distance_from_output_error():
+    # Bad input tried: still air (the INS and the air data agree) around a model that is
+    # wrong, a throttle whose thrust bends about the trim fitted without its square. The
+    # residual's colour is the model's error, which the filter error reads as process noise
+    # and output error as error to weight: two estimates, and nothing in the record to choose
+    # between them (JSBSim's glider and PC-7 each lose to one of them; benchmarks/README.md).
+    # Half the square of their distance joins the variance, so each longitudinal mode's
+    # standard error covers that distance over √2 (before: the phugoid's imaginary part
+    # 0.0028 for 0.0054/√2, the short period's 0.0065 for 0.025/√2).
+    u, air, op, navigation, _ = gusty_record(
+        seed=5, gust=0.0, scale=0.03, plan=classic_card(), curve=-0.3
+    )
+    record = Experiment(u, air, operating_point=op, navigation=navigation)
+    filtered = aircraft_identify(record, throttle_curve=False)
+    output = aircraft_identify(record, throttle_curve=False, process_noise=False)
+    (longitudinal,) = [a for a in filtered.aircraft.axes if a.name == "longitudinal"]
+    assert longitudinal.estimator == "filter error"
+    assert filtered.aircraft.wind.undetected == ["airspeed", "alpha", "beta"]
+    for name in ("phugoid", "short period"):
+        (mine,) = [m for m in filtered.modes if m.name == name and complex(m.eigenvalue).imag > 0]
+        (other,) = [m for m in output.modes if m.name == name and complex(m.eigenvalue).imag > 0]
+        gap = complex(mine.eigenvalue) - complex(other.eigenvalue)
+        assert abs(gap) > 0
+        assert mine.uncertainty.real >= 0.9 * abs(gap.real) / np.sqrt(2)
+        assert mine.uncertainty.imag >= 0.9 * abs(gap.imag) / np.sqrt(2)
+
+
 def test_process_noise_spectra_that_do_not_converge_leave_output_error(monkeypatch):
     # Bad input tried: a record whose process-noise spectra do not converge (on JSBSim's T-6
     # through the classic card, vanes alone, the Fisher scoring's spectra went non-finite and

@@ -99,6 +99,7 @@ class AxisFit:
     tic_excited: np.ndarray = field(default_factory=lambda: np.zeros(0))
     # Each bin's share of a [vec A, vec B] contrast's variance (`sandwich`), or None.
     spread: np.ndarray | None = None
+    still: bool = False
 
     @property
     def weights(self) -> np.ndarray | ProcessNoise:
@@ -164,8 +165,8 @@ def output_error(
         if settled:
             break
     if not rows:
-        return theta, sigma, None, cost_start, iterations, converged
-    start, at_start = theta, (sigma, None, cost_start, iterations, converged)
+        return theta, sigma, None, cost_start, iterations, converged, theta
+    start, at_start = theta, (sigma, None, cost_start, iterations, converged, theta)
     try:
         noise = process.estimate(problem, theta, tuple(rows), smooth_bins, tuple(direct))
         _, width = smooth_bins(sigma, problem.s)
@@ -207,7 +208,7 @@ def output_error(
         return start, *at_start
     X, _ = problem.response(theta)
     sigma = bin_sigma(problem.Y - X, problem.s)
-    return theta, sigma, noise, cost_start, iterations, converged
+    return theta, sigma, noise, cost_start, iterations, converged, start
 
 
 def consistent(output: np.ndarray, filtered: np.ndarray) -> bool:
@@ -436,13 +437,15 @@ def fit_axis(
     process_noise: bool = False,
     synthesised: Sequence[int] = (),
     zeros: Sequence[tuple[str, int, int]] = (),
+    still: bool = False,
 ) -> AxisFit:
     """One axis's model: `lagged` inputs reach it through fitted lags, THROTTLE_LAGS of them
     unless `powers` (input column → number) says otherwise; with `process_noise`, by the
     filter-error method, process noise on every state's equation but the kinematics'
     (agent.ident.aircraft.process), `synthesised` the states (positions in `states`) whose
     outputs are air angles synthesised from the INS; `zeros`: entries fixed at zero
-    (AxisProblem's)."""
+    (AxisProblem's); `still`: the INS found the air still, and a filter-error fit's covariance
+    takes what choosing it over output error costs (below)."""
     powers = {j: p for j, p in (powers or {}).items() if j in lagged}
     problem = AxisProblem(
         sp,
@@ -462,7 +465,7 @@ def fit_axis(
     rows = [i for i in range(problem.n) if not problem.fixed_A[i].all()] if process_noise else []
     theta = equation_error(problem)
     direct = [i for i in synthesised if i in rows]
-    theta, sigma, noise_model, start, iterations, converged = output_error(
+    theta, sigma, noise_model, start, iterations, converged, output = output_error(
         problem, theta, rows, direct
     )
     A, B, taus, d = problem.unpack(theta)
@@ -471,6 +474,16 @@ def fit_axis(
     weights = sigma if noise_model is None else noise_model
     cov, spread = sandwich(problem, theta, weights)
     k = problem.n * problem.n + problem.n * problem.r
+    if still and noise_model is not None:
+        # Still air: the residual's colour is the model's error, read two ways (process
+        # noise, the filter error's; error to weight, output error's), and the record cannot
+        # choose (JSBSim's glider's calm short period is nearer by output error, the PC-7's
+        # phugoid by the filter error; benchmarks/README.md). What the choice costs joins the
+        # variance: half the outer product of the two estimates' distance, a choice between
+        # them at equal odds.
+        A_o, B_o = problem.unpack(output)[:2]
+        gap = np.concatenate([(A - A_o).ravel(), (B - B_o).ravel()])
+        cov[:k, :k] += 0.5 * np.outer(gap, gap)
     lags = {list(inputs)[j]: float(abs(taus[i])) for i, j in enumerate(problem.lagged)}
     noise = np.sqrt(np.mean(sigma**2, axis=0))
     return AxisFit(
@@ -494,6 +507,7 @@ def fit_axis(
         noise=noise_model,
         zeros=tuple(zeros),
         tic_excited=excited_tic(problem, theta),
+        still=still,
     )
 
 

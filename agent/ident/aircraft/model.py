@@ -194,6 +194,7 @@ def fitted_axes(
         len(batch),
         process_noise=filtered,
         synthesised=synthesised,
+        still=ready.still,
     )
     engine |= {j: (0, {}) for j in measured if any(j in f.inputs for f in fits)}
     couplings: dict[str, Coupling] = {}
@@ -471,6 +472,7 @@ def _fit_axes(
     experiments: int,
     process_noise: bool = True,
     synthesised: Sequence[int] = (),
+    still: bool = False,
 ) -> list[AxisFit]:
     """Each present axis fitted alone, with its controls and the known inputs that act on it;
     the throttle and the gust rates through fitted lags; the longitudinal axis by the
@@ -503,6 +505,7 @@ def _fit_axes(
             powers=powers,
             process_noise=filtered and not engines,
             synthesised=synthesised,
+            still=still,
         )
         for j in engines:
             order, criterion = _engine_order(sp, fitted, j, experiments)
@@ -532,6 +535,7 @@ def _fit_axes(
                 powers=fitted.lag_powers,
                 process_noise=True,
                 synthesised=synthesised,
+                still=still,
             )
         fits.append(fitted)
     return fits, engine
@@ -646,6 +650,7 @@ def _coupled(
                 powers=powers,
                 process_noise=fitted.noise is not None,
                 synthesised=fitted.noise.direct if fitted.noise is not None else (),
+                still=fitted.still,
             )
     joined = []
     for k, f in enumerate(fits):

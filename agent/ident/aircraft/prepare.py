@@ -114,6 +114,9 @@ class Prepared:
     # Gusts measured but no larger than the sensors' noise: not inputs, their outputs still
     # the inertial ones.
     undetected: tuple[str, ...] = ()
+    # The INS measured the longitudinal gusts (airspeed and, with vanes, α) and found them
+    # within the sensors' noise: still air.
+    still: bool = False
     extra_names: tuple[str, ...] = ()  # the known inputs' names ("gust alpha", "beta²", ...)
     extra_axes: dict[int, str] = field(default_factory=dict)  # known input → its axis
     gust_rms: dict[str, float] = field(default_factory=dict)
@@ -214,6 +217,7 @@ def prepare(
         known=known,
         gusts=gusts,
         undetected=tuple(role for role in terms.inertial if role not in gusts),
+        still=still,
         extra_names=names,
         extra_axes=axes,
         gust_rms={role: float(np.sqrt(v / count)) for role, v in squares.items()},
