@@ -150,7 +150,8 @@ def output_error(
     the likelihood's minima under the final spectra from the passes' end and from output
     error's estimate. Returns
     the parameters, the output-error weights at the end (σ per bin), the noise model (or
-    None), the starting cost, the iterations and whether the last pass converged."""
+    None), the starting cost, the iterations, whether the last pass converged, and output
+    error's estimate (the parameters themselves where the filter error was not kept)."""
     X, _ = problem.response(theta)
     sigma = bin_sigma(problem.Y - X, problem.s)
     cost_start = _cost(problem.Y - X, sigma)
@@ -480,7 +481,8 @@ def fit_axis(
         # choose (JSBSim's glider's calm short period is nearer by output error, the PC-7's
         # phugoid by the filter error; benchmarks/README.md). What the choice costs joins the
         # variance: half the outer product of the two estimates' distance, a choice between
-        # them at equal odds.
+        # them at equal odds (the modes' few-bins factor, agent.ident.refine.dof_factor,
+        # scales it with the rest; `selected` judges it too).
         A_o, B_o = problem.unpack(output)[:2]
         gap = np.concatenate([(A - A_o).ravel(), (B - B_o).ravel()])
         cov[:k, :k] += 0.5 * np.outer(gap, gap)
