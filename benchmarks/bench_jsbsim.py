@@ -779,6 +779,7 @@ ABLATIONS = {
     "sideslip-drag": "sideslip_drag",
     "process-noise": "process_noise",
     "throttle-curve": "throttle_curve",
+    "density": "density",
 }
 
 

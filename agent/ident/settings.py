@@ -45,6 +45,10 @@ class Settings:
     # The throttle's curvature: its square (about the trim) a known input of the longitudinal
     # axis (agent.ident.aircraft.prepare), where no rpm or thrust is measured.
     throttle_curve: bool = True
+    # The lift's change with the air's density along the trim's own climb or descent (a
+    # glider's steady glide), a known forcing of α̇'s equation (agent.ident.aircraft.prepare).
+    # Off only to measure what it does.
+    density: bool = True
     # The longitudinal axis fitted by the filter-error method, the turbulence the record does
     # not measure modelled as process noise (agent.ident.aircraft.process); off, output error.
     process_noise: bool = True

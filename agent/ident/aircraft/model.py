@@ -151,6 +151,7 @@ def fitted_axes(
         sideslip_drag=settings.sideslip_drag,
         alpha_products=settings.alpha_products,
         throttles=curved,
+        density=settings.density,
     )
     sp = transforms(
         ready.batch,
