@@ -248,6 +248,10 @@ class AircraftDocument(Document):
     # "throttle²" → output → gain: the throttle's square over its record's largest deviation,
     # in the throttle's units (agent.ident.aircraft.prepare).
     throttle_curve: dict[str, dict[str, Gain]] = {}
+    # Per record whose trim climbed or descended through LEVEL_M or more, the INS's climb rate
+    # over its trim (m/s, down negative) that the density's forcing of α̇ used
+    # (agent.ident.aircraft.prepare); empty in level flight or without the INS.
+    density_climb_mps: list[float] = []
 
 
 class PreprocessingDocument(Document):

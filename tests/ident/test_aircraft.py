@@ -677,14 +677,18 @@ def test_a_descending_trims_density_is_a_known_forcing_of_the_angle_of_attack():
         seeds of ten, benchmarks/README.md). In level flight the forcing is nought: nothing
         changes: a trim that climbs or descends through less than LEVEL_M over the record is level
     (the J-3 Cub's in light turbulence, ±0.05 m/s of v_D over its trim's half second)."""
-    error, _ = _glide_phugoid(-1.2)
+    error, forced = _glide_phugoid(-1.2)
     blind, _ = _glide_phugoid(-1.2, density=False)
+    # The result says which climb it forced: the INS's over the trim.
+    (climb,) = forced.aircraft.density_climb_mps
+    assert climb == pytest.approx(-1.2, abs=0.01)
     # Measured: 0.014 % with the forcing, 0.27 % without (this record's phugoid is well
     # determined; the drift's share grows with the record's length and the sink rate).
     assert error < 0.0005
     assert blind > 5 * error
     level, with_term = _glide_phugoid(0.0)
     same, without_term = _glide_phugoid(0.0, density=False)
+    assert with_term.aircraft.density_climb_mps == []
     assert level == same
     np.testing.assert_array_equal(with_term.continuous.A, without_term.continuous.A)
 

@@ -799,6 +799,7 @@ def _report(
         sideslip_drag=drag,
         alpha_products=products,
         throttle_curve=curve,
+        density_climb_mps=list(ready.climbs),
     )
 
 

@@ -159,6 +159,8 @@ class Prepared:
     curve: tuple[int, ...] = ()  # known input columns of the throttles' squares
     # Per experiment whose α and β were synthesised (no vanes), how (else empty).
     air_angles: tuple[Synthesised, ...] = ()
+    # Per experiment whose trim the density's forcing took as climbing, its climb rate (m/s).
+    climbs: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -220,7 +222,7 @@ def prepare(
         curve=_curves(batch, throttles or {}, trim_samples) if "airspeed" in index else {},
         density=density and "alpha" in index and all(e.navigation is not None for e in batch),
     )
-    out, known, jacobians, squares, motion, count, heard = _assemble(
+    out, known, jacobians, squares, motion, count, heard, climbs = _assemble(
         batch, index, terms, trim_samples, dt
     )
     # A gust the air data and the INS agree on to the last digits (calm air without sensor
@@ -241,7 +243,7 @@ def prepare(
             rated=tuple(g for g in terms.rated if g in gusts),
             curve=terms.curve if still else {},
         )
-        out, known, jacobians, squares, motion, count, _ = _assemble(
+        out, known, jacobians, squares, motion, count, _, climbs = _assemble(
             batch, index, terms, trim_samples, dt
         )
     r, m = batch[0].u.shape[1], batch[0].y.shape[1]
@@ -262,6 +264,7 @@ def prepare(
         bilinear=products,
         curve=curve,
         air_angles=tuple(e.air_angles for e in batch if e.air_angles is not None),
+        climbs=tuple(climbs),
     )
 
 
@@ -286,7 +289,7 @@ def _assemble(batch, index: dict[str, int], terms: _Terms, trim_samples: int, dt
     kinematics' Jacobians; per gust its sum of squares about its mean and its air-data
     channel's, over the batch, and the samples counted; and the measured gusts that stand
     above their sensors' noise in some experiment (`noise.detected`)."""
-    out, known, jacobians = [], [], []
+    out, known, jacobians, climbs = [], [], [], []
     squares, motion, count = dict.fromkeys(terms.gusts, 0.0), dict.fromkeys(terms.gusts, 0.0), 0
     heard: set[str] = set()
     for e in batch:
@@ -302,9 +305,12 @@ def _assemble(batch, index: dict[str, int], terms: _Terms, trim_samples: int, dt
         out.append(Experiment(u, y))
         forcing = _attitude_forcing(x, trim, index, y.shape)
         if terms.density:
-            forcing += _density_forcing(e.navigation, trim, index, y.shape, trim_samples, dt)
+            climb = _climb(e.navigation, y.shape[0], trim_samples, dt)
+            if climb:
+                forcing += _density_forcing(climb, trim, index, y.shape, trim_samples, dt)
+                climbs.append(climb)
         known.append(forcing)
-    return out, known, jacobians, squares, motion, count, heard
+    return out, known, jacobians, squares, motion, count, heard, climbs
 
 
 def _columns(terms: _Terms, index: dict[str, int], r: int):
@@ -386,19 +392,23 @@ def _known_inputs(e: Experiment, index: dict[str, int], terms: _Terms, trim_samp
     return u, y, x, air, gusts, raw
 
 
+def _climb(navigation: np.ndarray, length: int, trim_samples: int, dt: float) -> float:
+    """The trim's climb rate (m/s, the INS's −v_D over the trim), or 0 where the record takes it
+    through less than LEVEL_M (level)."""
+    climb = -float(np.mean(navigation[:trim_samples, 3]))
+    return climb if abs(climb) * length * dt >= LEVEL_M else 0.0
+
+
 def _density_forcing(
-    navigation: np.ndarray, trim: np.ndarray, index: dict[str, int], shape, trim_samples: int, dt
+    climb: float, trim: np.ndarray, index: dict[str, int], shape, trim_samples: int, dt
 ) -> np.ndarray:
-    """The lift's change with the air's density along the trim's own climb or descent, in α̇'s
-    equation (zero elsewhere; module docstring): the INS's climb rate over the trim, the height
-    it takes the trim to from the trim's middle, and α̇'s −(1/ρ dρ/dh) g cos γ₀ / V₀ per metre
-    (the lift at the trim, m g cos γ₀, in proportion to the density)."""
+    """The lift's change with the air's density along the trim's own climb or descent (m/s), in
+    α̇'s equation (zero elsewhere; module docstring): the height it takes the trim to from the
+    trim's middle, and α̇'s −(1/ρ dρ/dh) g cos γ₀ / V₀ per metre (the lift at the trim,
+    m g cos γ₀, in proportion to the density)."""
     forcing = np.zeros(shape)
     airspeed = trim[KINEMATIC_STATES.index("airspeed")]
     if airspeed <= 0:
-        return forcing
-    climb = -float(np.mean(navigation[:trim_samples, 3]))
-    if abs(climb) * shape[0] * dt < LEVEL_M:
         return forcing
     gamma = np.arcsin(np.clip(climb / airspeed, -1.0, 1.0))
     height = climb * (np.arange(shape[0]) - (trim_samples - 1) / 2) * dt
